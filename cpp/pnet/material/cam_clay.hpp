@@ -1,0 +1,63 @@
+#pragma once
+// Non-associative Cam-Clay plasticity for snow with the neo-Hookean snow
+// elasticity (Wolper et al. 2019, CD-MPM; paper appendix A.2.2, eq. 17-20;
+// DESIGN.md §3). Hardening state a = log of the plastic volume ratio (a < 0
+// hardens); the networks see h = min(a, 0).
+#include <string>
+
+#include "pnet/material/elasticity.hpp"
+#include "pnet/material/return_branch.hpp"
+
+namespace pnet {
+
+enum class CamClayVariant {
+    /// Keep J (hence p) and project the deviatoric stress exactly onto the
+    /// ellipse: the result lies on the yield surface and Z is idempotent.
+    Exact,
+    /// The paper's eq. 20 (as in Ziran): keeps tr(b) instead of J, on the
+    /// surface only to first order, not idempotent.
+    Paper,
+};
+
+std::string to_string(CamClayVariant variant);
+CamClayVariant cam_clay_variant_from_string(const std::string& name);
+
+struct CamClayParams {
+    double friction_angle_deg = 45.0;  // phi_f, degrees, in (0, 90)
+    double xi = 0.5;                   // hardening factor: p0 = K sinh(xi max(-a, 0))
+    double beta = 0.3;                 // cohesion: tension tip at -beta p0
+    CamClayVariant variant = CamClayVariant::Exact;
+
+    void validate() const;
+};
+
+template <int dim>
+class CamClay {
+public:
+    /// `elasticity` must be the neo-Hookean snow form (the projection keeps its
+    /// pressure p = -K/2 (J^2 - 1) and deviatoric stress s = mu J^{-2/d} dev(b)).
+    CamClay(const CamClayParams& params, const Elasticity<dim>& elasticity);
+
+    /// Z(Sigma, a) and the CD-MPM hardening update a += log(J_trial / J_x).
+    ReturnResult<dim> project(const Vec<dim>& Sigma, double a) const;
+
+    /// y = (6-d)/2 (1 + 2 beta) ||s||^2 + M^2 (p + beta p0)(p - p0), Pa^2;
+    /// the elastic region is y <= 0 with -beta p0 <= p <= p0.
+    double yield_function(const Vec<dim>& Sigma, double a) const;
+    /// (6-d)/2 (1+2 beta) ||s||^2 + M^2 (|p| + beta p0)(|p| + p0), Pa^2: the
+    /// size of the terms of y, for relative tolerances.
+    double yield_scale(const Vec<dim>& Sigma, double a) const;
+
+    /// p0 = K sinh(xi max(-a, 0)), Pa.
+    double p0(double a) const;
+    /// M = sqrt(2/3) 2 sin(phi)/(3 - sin(phi)) d / sqrt(2/(6-d)).
+    double M() const { return M_; }
+
+    const CamClayParams& params() const { return params_; }
+
+private:
+    CamClayParams params_;
+    double mu_, K_, M_;
+};
+
+}  // namespace pnet

@@ -1,0 +1,62 @@
+#include "pnet/material/drucker_prager.hpp"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace pnet {
+
+double DruckerPragerParams::alpha() const {
+    const double s = std::sin(friction_angle_deg * M_PI / 180.0);
+    return std::sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s);
+}
+
+void DruckerPragerParams::validate() const {
+    if (!std::isfinite(friction_angle_deg) || friction_angle_deg <= 0.0 || friction_angle_deg >= 90.0) {
+        std::ostringstream msg;
+        msg << "drucker_prager parameter friction_angle_deg = " << friction_angle_deg
+            << " must be in (0, 90) degrees";
+        throw std::invalid_argument(msg.str());
+    }
+}
+
+template <int dim>
+DruckerPrager<dim>::DruckerPrager(const DruckerPragerParams& params, const Elasticity<dim>& elasticity)
+    : params_(params), mu_(elasticity.mu()), lambda_(elasticity.lambda()) {
+    params_.validate();
+    if (elasticity.model() != ElasticityModel::StvkHencky)
+        throw std::invalid_argument("plasticity 'drucker_prager' requires elasticity 'stvk_hencky', got '" +
+                                    to_string(elasticity.model()) + "'");
+    alpha_ = params_.alpha();
+}
+
+template <int dim>
+ReturnResult<dim> DruckerPrager<dim>::project(const Vec<dim>& Sigma, double hardening) const {
+    const Vec<dim> eps = Sigma.array().log().matrix();
+    const double tr_eps = eps.sum();
+    if (tr_eps > 0.0) return {Vec<dim>::Ones(), hardening, ReturnBranch::Apex};
+    const Vec<dim> eps_hat = eps - tr_eps / dim * Vec<dim>::Ones();
+    const double eps_hat_norm = eps_hat.norm();
+    const double dgamma = eps_hat_norm + alpha_ * (dim * lambda_ + 2.0 * mu_) * tr_eps / (2.0 * mu_);
+    if (dgamma <= 0.0) return {Sigma, hardening, ReturnBranch::Elastic};
+    // dgamma > 0 implies eps_hat_norm > 0 because tr_eps <= 0 here.
+    const Vec<dim> Z = (eps - dgamma / eps_hat_norm * eps_hat).array().exp().matrix();
+    return {Z, hardening, ReturnBranch::Cone};
+}
+
+template <int dim>
+double DruckerPrager<dim>::yield_function(const Vec<dim>& tau) const {
+    const double tr = tau.sum();
+    return (tau - tr / dim * Vec<dim>::Ones()).norm() + alpha_ * tr;
+}
+
+template <int dim>
+double DruckerPrager<dim>::yield_scale(const Vec<dim>& tau) const {
+    const double tr = tau.sum();
+    return (tau - tr / dim * Vec<dim>::Ones()).norm() + alpha_ * std::abs(tr);
+}
+
+template class DruckerPrager<2>;
+template class DruckerPrager<3>;
+
+}  // namespace pnet

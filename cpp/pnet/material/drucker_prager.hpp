@@ -1,0 +1,43 @@
+#pragma once
+// Drucker-Prager plasticity for sand with StVK-Hencky elasticity (Klar et al.
+// 2016; paper appendix A.2.1, eq. 15-16; DESIGN.md §3). No hardening.
+#include "pnet/material/elasticity.hpp"
+#include "pnet/material/return_branch.hpp"
+
+namespace pnet {
+
+struct DruckerPragerParams {
+    double friction_angle_deg = 30.0;  // phi_f, degrees, in (0, 90)
+
+    /// alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)) (Klar et al.; the paper's
+    /// typeset formula puts the square root over the whole product).
+    double alpha() const;
+    void validate() const;
+};
+
+template <int dim>
+class DruckerPrager {
+public:
+    /// `elasticity` must be StVK-Hencky: the projection is exact in Hencky strain.
+    DruckerPrager(const DruckerPragerParams& params, const Elasticity<dim>& elasticity);
+
+    /// Z(Sigma): tr(eps) > 0 -> Z = 1 (apex); otherwise
+    /// dgamma = ||dev eps|| + alpha (d lambda + 2 mu) tr(eps) / (2 mu) and
+    /// Z = exp(eps - dgamma dev(eps)/||dev eps||) when dgamma > 0 (cone).
+    /// The hardening argument is passed through unchanged.
+    ReturnResult<dim> project(const Vec<dim>& Sigma, double hardening) const;
+
+    /// y(tau) = ||dev tau|| + alpha tr(tau), Pa; <= 0 inside the elastic cone.
+    double yield_function(const Vec<dim>& tau) const;
+    /// ||dev tau|| + alpha |tr tau|: the size of the terms that cancel on the
+    /// surface, for relative tolerances on yield_function().
+    double yield_scale(const Vec<dim>& tau) const;
+
+    const DruckerPragerParams& params() const { return params_; }
+
+private:
+    DruckerPragerParams params_;
+    double alpha_, mu_, lambda_;
+};
+
+}  // namespace pnet

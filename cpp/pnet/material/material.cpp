@@ -1,0 +1,187 @@
+#include "pnet/material/material.hpp"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace pnet {
+
+std::string to_string(PlasticityModel model) {
+    switch (model) {
+        case PlasticityModel::None: return "none";
+        case PlasticityModel::DruckerPrager: return "drucker_prager";
+        case PlasticityModel::CamClay: return "cam_clay";
+        case PlasticityModel::VonMises: return "von_mises";
+    }
+    return "unknown";
+}
+
+PlasticityModel plasticity_model_from_string(const std::string& name) {
+    if (name == "none") return PlasticityModel::None;
+    if (name == "drucker_prager") return PlasticityModel::DruckerPrager;
+    if (name == "cam_clay") return PlasticityModel::CamClay;
+    if (name == "von_mises") return PlasticityModel::VonMises;
+    throw std::invalid_argument("unknown plasticity model '" + name +
+                                "' (expected none, drucker_prager, cam_clay or von_mises)");
+}
+
+void MaterialDescription::validate() const {
+    try {
+        auto fail = [](const char* field, double value, const char* expected) {
+            std::ostringstream msg;
+            msg << field << " = " << value << " must be " << expected;
+            throw std::invalid_argument(msg.str());
+        };
+        if (!std::isfinite(density) || density <= 0.0) fail("density", density, "finite and > 0 (kg/m^3)");
+        if (!std::isfinite(initial_hardening)) fail("initial_hardening", initial_hardening, "finite");
+        elastic.validate();
+        switch (plasticity) {
+            case PlasticityModel::None: break;
+            case PlasticityModel::DruckerPrager:
+                drucker_prager.validate();
+                if (elasticity != ElasticityModel::StvkHencky)
+                    throw std::invalid_argument("plasticity 'drucker_prager' requires elasticity 'stvk_hencky', got '" +
+                                                to_string(elasticity) + "'");
+                break;
+            case PlasticityModel::CamClay:
+                cam_clay.validate();
+                if (elasticity != ElasticityModel::NeoHookeanSnow)
+                    throw std::invalid_argument(
+                        "plasticity 'cam_clay' requires elasticity 'neo_hookean_snow', got '" +
+                        to_string(elasticity) + "'");
+                break;
+            case PlasticityModel::VonMises:
+                von_mises.validate();
+                if (initial_hardening < 0.0)
+                    fail("initial_hardening", initial_hardening, ">= 0 for von_mises (h = tau_Y / (2 mu))");
+                break;
+        }
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument("material '" + name + "': " + e.what());
+    }
+}
+
+MaterialDescription material_preset(const std::string& name) {
+    MaterialDescription m;
+    m.name = name;
+    if (name == "sand") {  // DESIGN.md §5, sand_column
+        m.density = 2200.0;
+        m.elasticity = ElasticityModel::StvkHencky;
+        m.elastic = {3.537e5, 0.3};
+        m.plasticity = PlasticityModel::DruckerPrager;
+        m.drucker_prager.friction_angle_deg = 30.0;
+    } else if (name == "snow") {  // DESIGN.md §5, snowball
+        m.density = 400.0;
+        m.initial_hardening = -0.1;
+        m.elasticity = ElasticityModel::NeoHookeanSnow;
+        m.elastic = {1.4e5, 0.2};
+        m.plasticity = PlasticityModel::CamClay;
+        m.cam_clay = CamClayParams{45.0, 0.5, 0.3, CamClayVariant::Exact};
+    } else if (name == "metal" || name == "metal_nh") {
+        m.density = 7800.0;
+        m.initial_hardening = 0.05;  // yield at 5% deviatoric Hencky strain
+        m.elasticity = name == "metal" ? ElasticityModel::StvkHencky : ElasticityModel::NeoHookeanMetal;
+        m.elastic = {1e7, 0.3};
+        m.plasticity = PlasticityModel::VonMises;
+        m.von_mises.hardening_coefficient = 0.1;
+    } else {
+        throw std::invalid_argument("unknown material preset '" + name + "' (expected sand, snow, metal or metal_nh)");
+    }
+    return m;
+}
+
+std::vector<std::string> material_preset_names() { return {"sand", "snow", "metal", "metal_nh"}; }
+
+namespace {
+
+template <int dim>
+Elasticity<dim> make_elasticity(const MaterialDescription& d) {
+    d.validate();
+    return Elasticity<dim>(d.elasticity, d.elastic);
+}
+
+}  // namespace
+
+template <int dim>
+Material<dim>::Material(const MaterialDescription& description)
+    : description_(description), elasticity_(make_elasticity<dim>(description)) {
+    switch (description_.plasticity) {
+        case PlasticityModel::None: break;
+        case PlasticityModel::DruckerPrager:
+            plasticity_.template emplace<DruckerPrager<dim>>(description_.drucker_prager, elasticity_);
+            break;
+        case PlasticityModel::CamClay:
+            plasticity_.template emplace<CamClay<dim>>(description_.cam_clay, elasticity_);
+            break;
+        case PlasticityModel::VonMises:
+            plasticity_.template emplace<VonMises<dim>>(description_.von_mises, elasticity_);
+            break;
+    }
+}
+
+template <int dim>
+ReturnResult<dim> Material<dim>::return_map(const Vec<dim>& Sigma, double hardening) const {
+    if (!std::isfinite(hardening)) {
+        std::ostringstream msg;
+        msg << "material '" << description_.name << "': hardening state is not finite: " << hardening;
+        throw std::invalid_argument(msg.str());
+    }
+    return std::visit(
+        [&](const auto& model) -> ReturnResult<dim> {
+            using Model = std::decay_t<decltype(model)>;
+            if constexpr (std::is_same_v<Model, std::monostate>)
+                return {Sigma, hardening, ReturnBranch::Elastic};
+            else
+                return model.project(Sigma, hardening);
+        },
+        plasticity_);
+}
+
+template <int dim>
+double Material<dim>::yield_function(const Vec<dim>& Sigma, double hardening) const {
+    return std::visit(
+        [&](const auto& model) -> double {
+            using Model = std::decay_t<decltype(model)>;
+            if constexpr (std::is_same_v<Model, std::monostate>)
+                return 0.0;
+            else if constexpr (std::is_same_v<Model, DruckerPrager<dim>>)
+                return model.yield_function(elasticity_.tau(Sigma));
+            else
+                return model.yield_function(Sigma, hardening);
+        },
+        plasticity_);
+}
+
+template <int dim>
+double Material<dim>::yield_scale(const Vec<dim>& Sigma, double hardening) const {
+    return std::visit(
+        [&](const auto& model) -> double {
+            using Model = std::decay_t<decltype(model)>;
+            if constexpr (std::is_same_v<Model, std::monostate>)
+                return 0.0;
+            else if constexpr (std::is_same_v<Model, DruckerPrager<dim>>)
+                return model.yield_scale(elasticity_.tau(Sigma));
+            else
+                return model.yield_scale(Sigma, hardening);
+        },
+        plasticity_);
+}
+
+template <int dim>
+Mat<dim> Material<dim>::elastoplastic_stress(const Mat<dim>& F, double hardening) const {
+    const PolarSVD<dim> svd = clamped_svd<dim>(F);
+    const ReturnResult<dim> Z = return_map(svd.Sigma, hardening);
+    return svd.compose(elasticity_.tau(Z.Sigma).cwiseQuotient(svd.Sigma));
+}
+
+template <int dim>
+typename Material<dim>::Projection Material<dim>::project(const Mat<dim>& F, double hardening) const {
+    const PolarSVD<dim> svd = clamped_svd<dim>(F);
+    const ReturnResult<dim> Z = return_map(svd.Sigma, hardening);
+    return {svd.compose(Z.Sigma), Z.hardening, Z.branch};
+}
+
+template class Material<2>;
+template class Material<3>;
+
+}  // namespace pnet

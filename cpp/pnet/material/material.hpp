@@ -1,0 +1,80 @@
+#pragma once
+// A material = an elasticity model + a plastic return mapping + its hardening
+// state, with the elastoplastic stress Ptilde(F, h) = tau(Z(F, h)) F^{-T}
+// (paper eq. 5-6; DESIGN.md §3).
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "pnet/material/cam_clay.hpp"
+#include "pnet/material/drucker_prager.hpp"
+#include "pnet/material/elasticity.hpp"
+#include "pnet/material/von_mises.hpp"
+
+namespace pnet {
+
+enum class PlasticityModel { None, DruckerPrager, CamClay, VonMises };
+
+/// "none", "drucker_prager", "cam_clay", "von_mises".
+std::string to_string(PlasticityModel model);
+PlasticityModel plasticity_model_from_string(const std::string& name);
+
+/// Everything that defines a material; the same fields as the JSON description
+/// (material_json.hpp) used by scenes, test vectors and model metadata.
+struct MaterialDescription {
+    std::string name = "custom";
+    double density = 1000.0;          // kg/m^3
+    double initial_hardening = 0.0;   // a (Cam-Clay) or h = tau_Y/(2 mu) (von Mises)
+    ElasticityModel elasticity = ElasticityModel::StvkHencky;
+    ElasticParams elastic;
+    PlasticityModel plasticity = PlasticityModel::None;
+    DruckerPragerParams drucker_prager;
+    CamClayParams cam_clay;
+    VonMisesParams von_mises;
+
+    /// Throws std::invalid_argument naming the field and the problem.
+    void validate() const;
+};
+
+/// The materials of DESIGN.md §3: "sand", "snow", "metal", "metal_nh".
+MaterialDescription material_preset(const std::string& name);
+std::vector<std::string> material_preset_names();
+
+template <int dim>
+class Material {
+public:
+    explicit Material(const MaterialDescription& description);
+
+    const MaterialDescription& description() const { return description_; }
+    const Elasticity<dim>& elasticity() const { return elasticity_; }
+
+    /// Z(Sigma, h) on clamped singular values. Throws std::invalid_argument for
+    /// a non-finite hardening state (or a negative von Mises one).
+    ReturnResult<dim> return_map(const Vec<dim>& Sigma, double hardening) const;
+
+    /// The yield function of the plasticity model at (Sigma, h); <= 0 inside
+    /// the elastic region. Units: Pa (Drucker-Prager), Pa^2 (Cam-Clay, von
+    /// Mises). Zero for plasticity "none".
+    double yield_function(const Vec<dim>& Sigma, double hardening) const;
+    /// Size of the terms of yield_function() (same units), so that
+    /// |y| / yield_scale is a relative distance to the surface.
+    double yield_scale(const Vec<dim>& Sigma, double hardening) const;
+
+    /// Ptilde(F, h) = U diag(tau(Z)_i / Sigma_i) V^T.
+    Mat<dim> elastoplastic_stress(const Mat<dim>& F, double hardening) const;
+
+    /// The return mapping in F space: F_elastic = U diag(Z) V^T.
+    struct Projection {
+        Mat<dim> F_elastic;
+        double hardening;
+        ReturnBranch branch;
+    };
+    Projection project(const Mat<dim>& F, double hardening) const;
+
+private:
+    MaterialDescription description_;
+    Elasticity<dim> elasticity_;
+    std::variant<std::monostate, DruckerPrager<dim>, CamClay<dim>, VonMises<dim>> plasticity_;
+};
+
+}  // namespace pnet

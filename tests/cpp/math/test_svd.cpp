@@ -1,0 +1,60 @@
+#include <gtest/gtest.h>
+
+#include "pnet/math/svd.hpp"
+#include "support/random.hpp"
+
+namespace pnet {
+namespace {
+
+template <typename T>
+class PolarSvdTest : public ::testing::Test {};
+using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
+TYPED_TEST_SUITE(PolarSvdTest, Dims);
+
+template <int dim>
+void expect_polar(const Mat<dim>& F) {
+    const PolarSVD<dim> svd = polar_svd<dim>(F);
+    const double scale = std::max(1.0, F.norm());
+    EXPECT_LT((svd.compose(svd.Sigma) - F).norm(), 1e-13 * scale) << "F =\n" << F;
+    EXPECT_LT((svd.U.transpose() * svd.U - Mat<dim>::Identity()).norm(), 1e-13);
+    EXPECT_LT((svd.V.transpose() * svd.V - Mat<dim>::Identity()).norm(), 1e-13);
+    EXPECT_NEAR(svd.U.determinant(), 1.0, 1e-13);
+    EXPECT_NEAR(svd.V.determinant(), 1.0, 1e-13);
+    for (int i = 0; i + 1 < dim; ++i) EXPECT_GE(svd.Sigma[i], std::abs(svd.Sigma[i + 1]) - 1e-14 * scale);
+    for (int i = 0; i + 1 < dim; ++i) EXPECT_GE(svd.Sigma[i], 0.0);
+    // The sign of det F sits on the last singular value.
+    if (std::abs(F.determinant()) > 1e-12 * std::pow(scale, dim)) {
+        EXPECT_EQ(svd.Sigma[dim - 1] < 0, F.determinant() < 0);
+    }
+}
+
+TYPED_TEST(PolarSvdTest, ReconstructsRandomAndReflectedMatrices) {
+    constexpr int dim = TypeParam::value;
+    test::Random rng(7);
+    Mat<dim> reflect = Mat<dim>::Identity();
+    reflect(0, 0) = -1.0;
+    for (int k = 0; k < 200; ++k) {
+        const Mat<dim> F = rng.template deformation<dim>(1.5);
+        expect_polar<dim>(F);
+        expect_polar<dim>(reflect * F);
+    }
+}
+
+TYPED_TEST(PolarSvdTest, HandlesDegenerateMatrices) {
+    constexpr int dim = TypeParam::value;
+    test::Random rng(8);
+    expect_polar<dim>(Mat<dim>::Identity());
+    expect_polar<dim>(Mat<dim>::Zero());
+    expect_polar<dim>(-Mat<dim>::Identity());
+    expect_polar<dim>(2.0 * rng.template rotation<dim>());  // all singular values equal
+    Mat<dim> rank_one = Mat<dim>::Zero();
+    rank_one(0, dim - 1) = 3.0;
+    expect_polar<dim>(rank_one);
+    const Mat<dim> Q = rng.template rotation<dim>();
+    Vec<dim> Sigma = Vec<dim>::Ones();
+    Sigma[0] = 1.0 + 1e-12;  // nearly repeated
+    expect_polar<dim>(Q * Sigma.asDiagonal() * rng.template rotation<dim>());
+}
+
+}  // namespace
+}  // namespace pnet
