@@ -67,14 +67,21 @@ double Elasticity<dim>::psi(const Vec<dim>& Sigma) const {
         case ElasticityModel::StvkHencky:
             return mu_ * eps.squaredNorm() + 0.5 * lambda_ * log_J * log_J;
         case ElasticityModel::NeoHookeanSnow: {
-            // mu/2 (J^{-2/d} tr(b) - d) + K/4 (J^2 - 1) - K/2 log J
-            const double J = std::exp(log_J);
-            const double iso = std::exp(-2.0 / dim * log_J) * Sigma.squaredNorm();
-            return 0.5 * mu_ * (iso - dim) + 0.25 * K_ * (J * J - 1.0) - 0.5 * K_ * log_J;
+            // mu/2 (J^{-2/d} tr(b) - d) + K/4 (J^2 - 1) - K/2 log J, written with
+            // J^{-2/d} b_i = exp(2 dev(eps)_i) and expm1 so that nothing cancels
+            // near F = I.
+            const Vec<dim> dev_eps = eps - log_J / dim * Vec<dim>::Ones();
+            double iso = 0.0;
+            for (int i = 0; i < dim; ++i) iso += std::expm1(2.0 * dev_eps[i]);
+            return 0.5 * mu_ * iso + 0.25 * K_ * (std::expm1(2.0 * log_J) - 2.0 * log_J);
         }
-        case ElasticityModel::NeoHookeanMetal:
-            // mu/2 (tr(b) - d) - mu log J + lambda/2 (log J)^2
-            return 0.5 * mu_ * (Sigma.squaredNorm() - dim) - mu_ * log_J + 0.5 * lambda_ * log_J * log_J;
+        case ElasticityModel::NeoHookeanMetal: {
+            // mu/2 (tr(b) - d) - mu log J + lambda/2 (log J)^2, with
+            // tr(b) - d - 2 log J = sum_i (expm1(2 eps_i) - 2 eps_i).
+            double iso = 0.0;
+            for (int i = 0; i < dim; ++i) iso += std::expm1(2.0 * eps[i]) - 2.0 * eps[i];
+            return 0.5 * mu_ * iso + 0.5 * lambda_ * log_J * log_J;
+        }
     }
     return 0.0;
 }
@@ -87,15 +94,17 @@ Vec<dim> Elasticity<dim>::tau(const Vec<dim>& Sigma) const {
     switch (model_) {
         case ElasticityModel::StvkHencky:  // eq. 14: 2 mu eps + lambda tr(eps) 1
             return 2.0 * mu_ * eps + lambda_ * log_J * ones;
-        case ElasticityModel::NeoHookeanSnow: {  // eq. 17: mu J^{-2/d} dev(b) + K/2 (J^2 - 1) 1
-            const Vec<dim> b = Sigma.cwiseProduct(Sigma);
-            const double J = std::exp(log_J);
-            const Vec<dim> dev_b = b - b.sum() / dim * ones;
-            return mu_ * std::exp(-2.0 / dim * log_J) * dev_b + 0.5 * K_ * (J * J - 1.0) * ones;
+        case ElasticityModel::NeoHookeanSnow: {
+            // eq. 17: mu J^{-2/d} dev(b) + K/2 (J^2 - 1) 1, with
+            // J^{-2/d} b_i = exp(2 dev(eps)_i) (expm1: accurate near F = I).
+            Vec<dim> bbar_m1;  // J^{-2/d} b - 1
+            for (int i = 0; i < dim; ++i) bbar_m1[i] = std::expm1(2.0 * (eps[i] - log_J / dim));
+            return mu_ * (bbar_m1 - bbar_m1.sum() / dim * ones) + 0.5 * K_ * std::expm1(2.0 * log_J) * ones;
         }
         case ElasticityModel::NeoHookeanMetal: {  // eq. 24: mu (b - 1) + lambda log(J) 1
-            const Vec<dim> b = Sigma.cwiseProduct(Sigma);
-            return mu_ * (b - ones) + lambda_ * log_J * ones;
+            Vec<dim> b_m1;
+            for (int i = 0; i < dim; ++i) b_m1[i] = std::expm1(2.0 * eps[i]);
+            return mu_ * b_m1 + lambda_ * log_J * ones;
         }
     }
     return Vec<dim>::Zero();
