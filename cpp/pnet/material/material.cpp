@@ -139,30 +139,27 @@ ReturnResult<dim> Material<dim>::return_map(const Vec<dim>& Sigma, double harden
 
 template <int dim>
 double Material<dim>::yield_function(const Vec<dim>& Sigma, double hardening) const {
-    return std::visit(
-        [&](const auto& model) -> double {
-            using Model = std::decay_t<decltype(model)>;
-            if constexpr (std::is_same_v<Model, std::monostate>)
-                return 0.0;
-            else if constexpr (std::is_same_v<Model, DruckerPrager<dim>>)
-                return model.yield_function(elasticity_.tau(Sigma));
-            else
-                return model.yield_function(Sigma, hardening);
-        },
-        plasticity_);
+    return yield(Sigma, hardening, false);
 }
 
 template <int dim>
 double Material<dim>::yield_scale(const Vec<dim>& Sigma, double hardening) const {
+    return yield(Sigma, hardening, true);
+}
+
+template <int dim>
+double Material<dim>::yield(const Vec<dim>& Sigma, double hardening, bool scale) const {
     return std::visit(
         [&](const auto& model) -> double {
             using Model = std::decay_t<decltype(model)>;
-            if constexpr (std::is_same_v<Model, std::monostate>)
+            if constexpr (std::is_same_v<Model, std::monostate>) {
                 return 0.0;
-            else if constexpr (std::is_same_v<Model, DruckerPrager<dim>>)
-                return model.yield_scale(elasticity_.tau(Sigma));
-            else
-                return model.yield_scale(Sigma, hardening);
+            } else if constexpr (std::is_same_v<Model, DruckerPrager<dim>>) {  // a function of tau alone
+                const Vec<dim> tau = elasticity_.tau(Sigma);
+                return scale ? model.yield_scale(tau) : model.yield_function(tau);
+            } else {
+                return scale ? model.yield_scale(Sigma, hardening) : model.yield_function(Sigma, hardening);
+            }
         },
         plasticity_);
 }

@@ -72,6 +72,9 @@ public:
     Projection project(const Mat<dim>& F, double hardening) const;
 
 private:
+    /// yield_function() or, with scale, yield_scale().
+    double yield(const Vec<dim>& Sigma, double hardening, bool scale) const;
+
     MaterialDescription description_;
     Elasticity<dim> elasticity_;
     std::variant<std::monostate, DruckerPrager<dim>, CamClay<dim>, VonMises<dim>> plasticity_;
