@@ -206,13 +206,14 @@ def cam_clay_variant_drift(dim: int, strain: float, n: int = 2000, seed: int = 1
         B = material.yield_function(J.pow(1.0 / dim).expand(-1, dim), h)
         # B >= 0 means the projection moved the pressure outside the tips [-beta p0, p0].
         inside = B < 0
-        q_error = ((y - B)[inside] / -B[inside]).sqrt().sub(1).abs().max()
+        q_error = ((y - B)[inside] / -B[inside]).sqrt().sub(1).abs()
+        q_error = (float(q_error.median()), float(q_error.max()))
         outside = int((~inside).sum())
         again = Z
         for _ in range(100):
             again = material.return_map(again, h)[0]
         creep = ((again - Z).norm(dim=1) / Z.norm(dim=1)).max()
-        out[variant] = (int(mask.sum()), float(surface), float(q_error), outside, float(creep))
+        out[variant] = (int(mask.sum()), float(surface), q_error, outside, float(creep))
     return out
 
 
@@ -246,12 +247,12 @@ def main(argv: list[str] | None = None) -> int:
 
     drift_lines = ["## Cam-Clay: exact vs paper variant (eq. 20) on the ellipse branch", "",
                    "| dim | log-strain | variant | ellipse cases | max |y|/scale after projection "
-                   "| max |q/q_surface - 1| | pressure pushed past a tip | max rel. change of Z after 100 re-projections |",
+                   "| |q/q_surface - 1| median, max | pressure pushed past a tip | max rel. change of Z after 100 re-projections |",
                    "|---|---|---|---|---|---|---|---|"]
     for dim in args.dims:
         for strain in (0.1, 0.3):
             for variant, (n, surface, q_error, outside, creep) in cam_clay_variant_drift(dim, strain).items():
-                drift_lines.append(f"| {dim} | {strain} | {variant} | {n} | {surface:.2e} | {q_error:.2e} | {outside} "
+                drift_lines.append(f"| {dim} | {strain} | {variant} | {n} | {surface:.2e} | {q_error[0]:.2e}, {q_error[1]:.2e} | {outside} "
                                    f"| {creep:.2e} |")
     print("\n".join(drift_lines), flush=True)
     lines += drift_lines + [""]
