@@ -19,6 +19,9 @@ packages=(
   libeigen3-dev libsuitesparse-dev nlohmann-json3-dev pybind11-dev libgtest-dev libtorch-dev
   python3 python3-dev python3-venv python3-pip python3-setuptools python3-wheel
   python3-torch python3-numpy python3-matplotlib python3-tqdm python3-pytest
+  # Debian's torch calls the system libblas.so.3; without OpenBLAS that is the
+  # reference BLAS, and training runs 4-5x slower (scripts/bench_training.py).
+  libopenblas0-openmp
 )
 missing=()
 for p in "${packages[@]}"; do

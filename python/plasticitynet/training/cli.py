@@ -1,0 +1,164 @@
+"""Command line of the repository's train.py:
+
+    python train.py --material {sand,snow,metal,metal_nh,metal_nh_rm} --dim {2,3}
+                    [--epochs --batch --lr --lr-decay --decay-steps --seed --sampling --out --resume
+                     --return-map FILE --checkpoint-every N --eval-every N --eval-samples N --threads N]
+
+Defaults are the paper's recipe (Adam, lr 0.01 x0.95 every 1000 steps, batch 2^16, 20000 epochs).
+metal_nh_rm trains the learned return mapping of metal_nh; metal_nh trains the energy whose target
+stress uses that learned mapping (--return-map, default models/metal_nh_rm_{dim}d.pt). Bad arguments
+exit with code 2 and a message.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from .evaluate import format_errors
+from .sampling import SAMPLINGS
+from .trainer import MATERIALS, RETURN_MAP_MATERIAL, TrainConfig, Trainer
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{value} must be > 0")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} must be >= 0")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"{value} must be finite and > 0")
+    return value
+
+
+def _decay(text: str) -> float:
+    value = _positive_float(text)
+    if value > 1:
+        raise argparse.ArgumentTypeError(f"{value} must be in (0, 1]")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="train.py",
+        description="Train a PlasticityNet energy (or the learned metal_nh return mapping), export it as TorchScript.",
+    )
+    p.add_argument("--material", required=True, choices=MATERIALS, help="what to train")
+    p.add_argument("--dim", required=True, type=int, choices=(2, 3), help="dimension")
+    p.add_argument("--epochs", type=_positive_int, default=20000, help="training steps, one fresh batch each (20000)")
+    p.add_argument("--batch", type=_positive_int, default=1 << 16, help="samples per step (65536)")
+    p.add_argument("--lr", type=_positive_float, default=0.01, help="Adam learning rate (0.01)")
+    p.add_argument("--lr-decay", type=_decay, default=0.95, help="learning-rate factor per decay period (0.95)")
+    p.add_argument("--decay-steps", type=_positive_int, default=1000, help="steps per decay period (1000)")
+    p.add_argument("--seed", type=_non_negative_int, default=0, help="seed of the initialisation and batches (0)")
+    p.add_argument("--sampling", choices=SAMPLINGS, default="paper", help="(F, F0) distribution (paper)")
+    p.add_argument("--out", default=None, help="model file (default models/{material}_{dim}d.pt)")
+    p.add_argument("--resume", action="store_true", help="continue from the checkpoint OUT.ckpt")
+    p.add_argument(
+        "--return-map", default=None, help="metal_nh: the learned return-map model (models/metal_nh_rm_{dim}d.pt)"
+    )
+    p.add_argument("--checkpoint-every", type=_positive_int, default=500, help="steps between checkpoints (500)")
+    p.add_argument(
+        "--eval-every", type=_non_negative_int, default=0, help="steps between held-out error points (0: off)"
+    )
+    p.add_argument(
+        "--eval-samples", type=_non_negative_int, default=100_000, help="final held-out samples (1e5; 0: skip)"
+    )
+    p.add_argument("--threads", type=_non_negative_int, default=0, help="torch threads (0: torch's default)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv=None, root: str | Path | None = None) -> int:
+    """Parse, train, export, print. `root`: folder the default paths are relative to (the repository)."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    base = Path(root) if root is not None else Path.cwd()
+    out = Path(args.out) if args.out else base / "models" / f"{args.material}_{args.dim}d.pt"
+    if out.suffix != ".pt":
+        parser.error(f"--out {out}: the model file name must end in .pt")
+    return_map = ""
+    if args.material == "metal_nh":
+        rm = Path(args.return_map) if args.return_map else base / "models" / f"metal_nh_rm_{args.dim}d.pt"
+        if not rm.is_file():
+            parser.error(
+                f"--return-map {rm}: no such file "
+                f"(train it first: python train.py --material metal_nh_rm --dim {args.dim})"
+            )
+        return_map = str(rm)
+    elif args.return_map:
+        parser.error(f"--return-map applies to --material metal_nh only, not {args.material}")
+    if args.resume and not out.with_suffix(".ckpt").is_file():
+        parser.error(f"--resume: no checkpoint {out.with_suffix('.ckpt')}")
+    argv_list = sys.argv[1:] if argv is None else list(argv)
+    config = TrainConfig(
+        material=args.material,
+        dim=args.dim,
+        epochs=args.epochs,
+        batch=args.batch,
+        lr=args.lr,
+        lr_decay=args.lr_decay,
+        decay_steps=args.decay_steps,
+        seed=args.seed,
+        sampling=args.sampling,
+        out=str(out),
+        checkpoint_every=args.checkpoint_every,
+        resume=args.resume,
+        return_map=return_map,
+        eval_every=args.eval_every,
+        eval_samples=args.eval_samples,
+        progress=not args.no_progress,
+        threads=args.threads,
+        command="python train.py " + shlex.join(argv_list),
+    )
+    try:
+        trainer = Trainer(config)
+    except ValueError as err:  # unreadable or mismatched checkpoint / return-map model
+        parser.error(str(err))
+    kind = "return mapping" if args.material == RETURN_MAP_MATERIAL else "energy"
+    print(
+        f"training the {args.dim}D {args.material} {kind}: {config.epochs} steps of batch {config.batch}, "
+        f"lr {config.lr} x{config.lr_decay} every {config.decay_steps}, sampling {config.sampling}, seed {config.seed}"
+        + (f" (resuming at step {trainer.step})" if args.resume else "")
+    )
+    try:
+        result = trainer.run()
+    except KeyboardInterrupt:
+        print(
+            f"\ninterrupted; the last checkpoint is {config.paths['checkpoint']} "
+            f"(continue with the same arguments and --resume)",
+            file=sys.stderr,
+        )
+        return 130
+    paths = result.paths
+    print(f"trained {result.steps} steps in {result.wall_seconds:.1f} s, final loss {result.final_loss:.4e}")
+    print(f"wrote model:      {paths['model']}")
+    print(f"      loss log:   {paths['log']}")
+    if config.eval_every:
+        print(f"      error log:  {paths['eval_log']}")
+    print(f"      loss curve: {paths['plot']}")
+    print(f"      checkpoint: {paths['checkpoint']}")
+    if result.errors:
+        print(format_errors(result.errors, title="evaluation:"))
+    return 0

@@ -1,0 +1,108 @@
+"""The PlasticityNet energy (paper eqs. 8, 9, 11; DESIGN.md §3) around an MLP N(x), x = [vec F, vec F0, h]:
+
+    Psi(F, F0, h) = N(F, F0, h) - c : F + w mu/2 ||F - F0||^2,
+    c = grad_F N(F0, F0, h) - Ptilde(F0, h),                                            (eq. 8, 11)
+
+so that grad_F Psi(F0, F0, h) = Ptilde(F0, h) exactly, whatever N is:
+    grad_F Psi = grad_F N(F, F0, h) - c + w mu (F - F0),
+    Hess_F Psi = Hess_F N(F, F0, h) + w mu I.
+c is a constant of F (the simulator computes it once per optimization); grad_F N means the
+derivative with respect to the first d^2 inputs only. The regularizer weight w is 0 in training
+(eq. 9 has none); eq. 11 adds it at simulation time, with w = 1 in the paper.
+
+Training loss (eq. 9): L = mean_batch ||grad_F Psi(F, F0, h) - Ptilde(F, h)||_F^2, with grad_F N
+taken by autograd and kept in the graph (create_graph=True): the loss is differentiated with respect
+to the network's parameters through the input gradient (double backward).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .nets import energy_input
+
+
+def _frob_inner(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
+    """A : B = sum_ij A_ij B_ij per batch entry, (B,)."""
+    return (A * B).sum((-2, -1))
+
+
+def network_gradient(
+    net: nn.Module, F: torch.Tensor, F0: torch.Tensor, h: torch.Tensor | None, create_graph: bool = False
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(N(F, F0, h) (B,), grad_F N(F, F0, h) (B, d, d)): the derivative in the first argument only.
+    With create_graph=True and an F that requires grad, grad_F N stays differentiable in F (Hessian)."""
+    with torch.enable_grad():
+        if not F.requires_grad:
+            F = F.detach().requires_grad_(True)
+        N = net(energy_input(F, F0, h))[:, 0]
+        (dN,) = torch.autograd.grad(N.sum(), F, create_graph=create_graph)
+    return N, dN
+
+
+def correction(
+    net: nn.Module, F0: torch.Tensor, h: torch.Tensor | None, Ptilde0: torch.Tensor, create_graph: bool = False
+) -> torch.Tensor:
+    """c = grad_F N(F0, F0, h) - Ptilde(F0, h), (B, d, d) (a constant of F)."""
+    F0 = F0.detach()
+    return network_gradient(net, F0, F0, h, create_graph)[1] - Ptilde0
+
+
+def psi(
+    net: nn.Module,
+    F: torch.Tensor,
+    F0: torch.Tensor,
+    h: torch.Tensor | None,
+    Ptilde0: torch.Tensor,
+    w: float = 0.0,
+    mu: float = 0.0,
+) -> torch.Tensor:
+    """Psi(F, F0, h) (eq. 8; eq. 11 with w != 0), (B,). Differentiable in F."""
+    c = correction(net, F0, h, Ptilde0).detach()
+    value = net(energy_input(F, F0, h))[:, 0] - _frob_inner(c, F)
+    if w != 0.0:
+        D = F - F0
+        value = value + 0.5 * w * mu * _frob_inner(D, D)
+    return value
+
+
+def psi_gradient(
+    net: nn.Module,
+    F: torch.Tensor,
+    F0: torch.Tensor,
+    h: torch.Tensor | None,
+    Ptilde0: torch.Tensor,
+    w: float = 0.0,
+    mu: float = 0.0,
+    create_graph: bool = False,
+) -> torch.Tensor:
+    """grad_F Psi(F, F0, h) = grad_F N(F, F0, h) - c + w mu (F - F0), (B, d, d)."""
+    _, dN = network_gradient(net, F, F0, h, create_graph)
+    g = dN - correction(net, F0, h, Ptilde0, create_graph)
+    if w != 0.0:
+        g = g + w * mu * (F - F0)
+    return g
+
+
+def energy_loss(
+    net: nn.Module,
+    F: torch.Tensor,
+    F0: torch.Tensor,
+    h: torch.Tensor | None,
+    Ptilde: torch.Tensor,
+    Ptilde0: torch.Tensor,
+) -> torch.Tensor:
+    """Eq. 9: mean ||grad_F Psi(F, F0, h) - Ptilde(F, h)||_F^2 with
+    grad_F Psi = grad_F N(F, F0, h) - grad_F N(F0, F0, h) + Ptilde(F0, h).
+    Both input gradients come from one forward/backward pass over the 2B inputs
+    [F, F0, h] and [F0, F0, h], kept in the graph for the parameter gradient."""
+    B = F.shape[0]
+    first = torch.cat([F, F0]).detach().requires_grad_(True)
+    second = torch.cat([F0, F0])
+    hh = None if h is None else torch.cat([h, h])
+    N = net(energy_input(first, second, hh))
+    (dN,) = torch.autograd.grad(N.sum(), first, create_graph=True)
+    grad_psi = dN[:B] - dN[B:] + Ptilde0
+    residual = grad_psi - Ptilde
+    return _frob_inner(residual, residual).mean()

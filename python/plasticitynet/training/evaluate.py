@@ -1,0 +1,186 @@
+"""Accuracy of a trained model on held-out samples (DESIGN.md §6; issue 3 item 5).
+
+    python -m plasticitynet.evaluate MODEL [--samples N] [--seed S] [--json]
+
+Energy models: the relative RMS gradient error
+    e = sqrt( E||grad_F Psi(F, F0, h) - Ptilde(F, h)||^2 / E||Ptilde(F, h)||^2 )
+on `samples` held-out triples (the "eval" random stream, disjoint from every training batch), for
+"paper" and "near" sampling at 0.5x, 1x and 2x the training perturbation deps; Ptilde comes from the
+library through its polar SVD (not the SVD-free path used in training). Also the error exactly at
+F = F0, max ||grad Psi(F0, F0, h) - Ptilde(F0, h)|| / max(||Ptilde(F0, h)||, 1e-3 mu) in float64,
+which the correction of eq. 8 makes round-off (~1e-12 or less; the floor 1e-3 mu only matters where
+Ptilde(F0) = 0, the sand apex). An energy trained with a learned return mapping is measured against
+the stress of that mapping (its training target) and, in addition, against the library's root find.
+
+Return-map models, on Sigma = e^eps, eps ~ U[-1, 1]^d, h ~ U[0, 1], yielding samples only:
+mean |y(Z_theta, h)| / (2 mu h)^2 over the samples with h >= 0.05 (the ratio is unbounded as h -> 0,
+where the yield surface shrinks to the diagonal), its median over all; the fraction of projected
+points within 1e-3 of the surface, |y(Z_theta)| / (||dev tau(Z_theta)||^2 + (2 mu h)^2) <= 1e-3 (the
+library's relative surface distance, = |y| / (2 (2 mu h)^2) on the surface); and mean/max
+|dgamma_theta - dgamma_exact| against the library's root find.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+import torch
+
+from ..materials import Material
+from . import return_map_net
+from .sampling import sample_batch, sample_return_map_states, sampling_spec
+from .targets import ElastoplasticStress
+
+#: Seed of the held-out samples (with the "eval" stream: disjoint from training whatever its seed).
+EVAL_SEED = 20240
+DEPS_SCALES = (0.5, 1.0, 2.0)
+SAMPLINGS = ("paper", "near")
+CHUNK = 1 << 14
+
+
+def _scale_key(scale: float) -> str:
+    return f"{scale:g}x"
+
+
+def relative_rms_error(model, sampling: str, deps_scale: float, samples: int, seed: int, stress=None) -> float:
+    """sqrt(sum ||grad Psi - Ptilde||^2 / sum ||Ptilde||^2) over `samples` held-out triples (chunked)."""
+    spec = sampling_spec(model.training_material, sampling, deps_scale)
+    stress = stress or model.stress_nd
+    num = den = 0.0
+    for k, start in enumerate(range(0, samples, CHUNK)):
+        b = sample_batch(spec, min(CHUNK, samples - start), seed, step=k, stream="eval")
+        g = model.gradient(b.F, b.F0, b.h) / model.E
+        with torch.no_grad():
+            P = stress(b.F, b.h)
+        num += float(((g - P) ** 2).sum())
+        den += float((P**2).sum())
+    return (num / den) ** 0.5
+
+
+def error_at_F0(model, samples: int, seed: int) -> float:
+    """max ||grad Psi(F0, F0, h) - Ptilde(F0, h)|| / max(||Ptilde(F0, h)||, 1e-3 mu) (float64)."""
+    spec = sampling_spec(model.training_material, "paper")
+    worst = 0.0
+    floor = 1e-3 * model.training_material.mu
+    for k, start in enumerate(range(0, samples, CHUNK)):
+        b = sample_batch(spec, min(CHUNK, samples - start), seed, step=k, stream="eval")
+        g = model.gradient(b.F0, b.F0, b.h) / model.E
+        with torch.no_grad():
+            P0 = model.stress_nd(b.F0, b.h)
+        err = torch.linalg.matrix_norm(g - P0) / torch.clamp(torch.linalg.matrix_norm(P0), min=floor)
+        worst = max(worst, float(err.max()))
+    return worst
+
+
+def evaluate_energy(model, samples: int = 100_000, seed: int = EVAL_SEED) -> dict:
+    """The errors of an energy model (a LearnedEnergy) as a JSON-ready dict."""
+    t0 = time.perf_counter()
+    out = {"samples": samples, "seed": seed, "target": "library return mapping"}
+    out["rel_rms"] = {
+        s: {_scale_key(c): relative_rms_error(model, s, c, samples, seed) for c in DEPS_SCALES} for s in SAMPLINGS
+    }
+    if model.return_map is not None:
+        out["target"] = "learned return mapping (the training target)"
+        exact = ElastoplasticStress(model.training_material)
+        out["rel_rms_vs_exact_return_map"] = {
+            s: {_scale_key(1.0): relative_rms_error(model, s, 1.0, samples, seed, stress=exact)} for s in SAMPLINGS
+        }
+    out["at_F0_max_rel"] = error_at_F0(model, samples, seed)
+    out["wall_seconds"] = round(time.perf_counter() - t0, 2)
+    return out
+
+
+def evaluate_return_map(model, samples: int = 100_000, seed: int = EVAL_SEED) -> dict:
+    """The errors of a learned return mapping (a LearnedReturnMap) as a JSON-ready dict."""
+    t0 = time.perf_counter()
+    material: Material = model.material
+    Sigma, h = sample_return_map_states(model.dim, samples, seed, stream="eval")
+    with torch.no_grad():
+        mask = return_map_net.yielding(material, Sigma, h)
+        Sigma, h = Sigma[mask], h[mask]
+        Z = model.project(Sigma, h)
+        y = material.yield_function(Z, h)
+        rel_y = y.abs() / (2.0 * material.mu * h) ** 2
+        surface = y.abs() / material.yield_scale(Z, h)
+        eps, _, n = return_map_net.flow_path(Sigma)
+        Z_exact = material.return_map(Sigma, h)[0]
+        dg_exact = ((eps - torch.log(Z_exact)) * n).sum(-1)
+        dg_err = (model.dgamma(Sigma, h) - dg_exact).abs()
+    big_h = h >= 0.05
+    return {
+        "samples": samples,
+        "seed": seed,
+        "yielding": int(mask.sum()),
+        "mean_abs_y_rel": float(rel_y[big_h].mean()),
+        "median_abs_y_rel": float(rel_y.median()),
+        "frac_within_1e-3": float((surface <= 1e-3).double().mean()),
+        "mean_abs_dgamma_error": float(dg_err.mean()),
+        "max_abs_dgamma_error": float(dg_err.max()),
+        "wall_seconds": round(time.perf_counter() - t0, 2),
+    }
+
+
+def evaluate(model, samples: int = 100_000, seed: int = EVAL_SEED) -> dict:
+    """evaluate_energy or evaluate_return_map, by the model's kind."""
+    if model.metadata["kind"] == "return_map":
+        return evaluate_return_map(model, samples, seed)
+    return evaluate_energy(model, samples, seed)
+
+
+def format_errors(errors: dict, title: str = "") -> str:
+    """A plain-text table of `evaluate`'s result."""
+    lines = [title] if title else []
+    if "rel_rms" in errors:
+        lines.append(f"relative RMS gradient error on {errors['samples']} held-out samples ({errors['target']}):")
+        lines.append(f"  {'sampling':<10}" + "".join(f"{'deps x' + k[:-1]:>12}" for k in errors["rel_rms"]["paper"]))
+        for s, row in errors["rel_rms"].items():
+            lines.append(f"  {s:<10}" + "".join(f"{100 * v:>11.3f}%" for v in row.values()))
+        if "rel_rms_vs_exact_return_map" in errors:
+            vs = errors["rel_rms_vs_exact_return_map"]
+            lines.append(
+                "  against the library's root-find return mapping (deps x1): "
+                + ", ".join(f"{s} {100 * v['1x']:.3f}%" for s, v in vs.items())
+            )
+        lines.append(f"  at F = F0 (max relative, float64): {errors['at_F0_max_rel']:.3e}")
+    else:
+        lines.append(f"learned return mapping on {errors['yielding']} yielding of {errors['samples']} samples:")
+        lines.append(f"  mean |y(Z)| / (2 mu h)^2 (h >= 0.05):   {errors['mean_abs_y_rel']:.3e}")
+        lines.append(f"  median |y(Z)| / (2 mu h)^2:            {errors['median_abs_y_rel']:.3e}")
+        lines.append(f"  fraction within 1e-3 of the surface:   {errors['frac_within_1e-3']:.4f}")
+        lines.append(
+            f"  |dgamma - dgamma_exact| mean / max:    {errors['mean_abs_dgamma_error']:.3e} / "
+            f"{errors['max_abs_dgamma_error']:.3e}"
+        )
+    lines.append(f"  ({errors['wall_seconds']} s)")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    from ..model import load_model
+
+    parser = argparse.ArgumentParser(prog="python -m plasticitynet.evaluate", description=__doc__.split("\n\n")[0])
+    parser.add_argument("model", help="model file (.pt)")
+    parser.add_argument("--samples", type=int, default=100_000, help="held-out samples (default 1e5)")
+    parser.add_argument("--seed", type=int, default=EVAL_SEED, help=f"held-out seed (default {EVAL_SEED})")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument("--threads", type=int, default=None, help="torch threads")
+    args = parser.parse_args(argv)
+    if args.samples <= 0:
+        parser.error(f"--samples {args.samples}: must be > 0")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    try:
+        model = load_model(args.model)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    errors = evaluate(model, args.samples, args.seed)
+    print(json.dumps(errors, indent=2) if args.json else format_errors(errors, title=args.model))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

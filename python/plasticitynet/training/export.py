@@ -1,0 +1,141 @@
+"""Export of a trained network as a TorchScript file for the C++ simulator (and `load_model`).
+
+The file's forward(x: Tensor) -> Tensor is the raw MLP N(x), shape (B, 1), in float64; the
+consumer applies the rest: for kind "energy" the correction of eq. 8 (c = grad_F N(F0, F0, h) -
+Ptilde(F0, h)), the regularizer of eq. 11 and the scale E; for kind "return_map" the clamp
+dgamma = min(N, ||dev eps||) of eq. 12. A JSON metadata entry "metadata.json" in `_extra_files`
+describes the model (FORMAT_VERSION 1; fields in `energy_metadata` / `return_map_metadata`).
+
+Model files are executable code to LibTorch: load only trusted files (the shipped ones are pinned by
+sha256 in models/MANIFEST).
+"""
+
+from __future__ import annotations
+
+import copy
+import datetime
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from ..materials import Material
+from .nets import MLP
+from .targets import TRAINING_E
+
+FORMAT = "plasticitynet-model"
+FORMAT_VERSION = 1
+METADATA_KEY = "metadata.json"
+KINDS = ("energy", "return_map")
+
+ENERGY_RESCALE = (
+    "multiply Psi, grad Psi and Hess Psi by the scene's Young's modulus E in Pa; "
+    "the network input is dimensionless"
+)
+RETURN_MAP_RESCALE = "none: the return mapping is independent of E (Sigma and h = tau_Y / (2 mu) are dimensionless)"
+
+
+def sha256_of(path: str | os.PathLike) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def script_network(net: MLP) -> torch.jit.ScriptModule:
+    """A float64 TorchScript copy of `net` (forward(x) -> N(x), (B, 1)), in eval mode."""
+    net64 = copy.deepcopy(net).to(torch.float64).eval()
+    for p in net64.parameters():
+        p.requires_grad_(True)
+    return torch.jit.script(net64)
+
+
+def _layer_parameters(net: nn.Module) -> list[list[str]]:
+    """[[weight name, bias name], ...] per linear layer, in order (for a C++ reader of the weights)."""
+    names = [name for name, _ in net.named_parameters()]
+    return [[w, b] for w, b in zip(names[0::2], names[1::2])]
+
+
+def _common(kind: str, material: Material, net: MLP, recipe: dict, errors: dict | None) -> dict:
+    if material.elasticity.params.E != TRAINING_E:
+        raise ValueError(f"material E = {material.elasticity.params.E}: models are trained and exported with E = 1")
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "kind": kind,
+        "material": material.to_dict(),
+        "training_E": TRAINING_E,
+        "dim": material.dim,
+        "widths": list(net.widths),
+        "input_width": net.widths[0],
+        "activation": "silu",
+        "output": "N(x)",
+        "layer_parameters": _layer_parameters(net),
+        "recipe": dict(recipe),
+        "errors": dict(errors or {}),
+        "torch_version": torch.__version__,
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def energy_metadata(
+    material: Material,
+    net: MLP,
+    has_hardening: bool,
+    recipe: dict,
+    errors: dict | None = None,
+    return_map: dict | None = None,
+) -> dict:
+    """Metadata of an energy model. `return_map`: {"type": "analytic"} (default) or
+    {"type": "learned", "file": path relative to the model's folder, "sha256": ...}."""
+    d = material.dim
+    layout = [f"F (row-major, {d * d})", f"F0 (row-major, {d * d})"] + (["h"] if has_hardening else [])
+    meta = _common("energy", material, net, recipe, errors)
+    meta.update(
+        rescale=ENERGY_RESCALE,
+        input_layout=layout,
+        has_hardening=has_hardening,
+        energy=(
+            "Psi(F, F0, h) = E [N(F, F0, h) - (grad_F N(F0, F0, h) - Ptilde(F0, h)) : F + w mu/2 ||F - F0||^2] "
+            "(paper eqs. 8, 11; N, Ptilde and mu at E = 1; grad_F: derivative in the first d*d inputs)"
+        ),
+        return_map=dict(return_map or {"type": "analytic"}),
+    )
+    return meta
+
+
+def return_map_metadata(material: Material, net: MLP, recipe: dict, errors: dict | None = None) -> dict:
+    d = material.dim
+    meta = _common("return_map", material, net, recipe, errors)
+    meta.update(
+        rescale=RETURN_MAP_RESCALE,
+        input_layout=[f"Sigma (singular values clamped to >= 1e-4, {d})", "h"],
+        dgamma=(
+            "dgamma = min(N(x), ||dev eps||), eps = log(Sigma_c); where y(Sigma_c, h) > 0: "
+            "Z = exp(eps - dgamma dev(eps) / ||dev eps||), else Z = Sigma_c (paper eq. 12)"
+        ),
+    )
+    return meta
+
+
+def export_model(path: str | os.PathLike, net: MLP, metadata: dict) -> Path:
+    """Write the float64 TorchScript of `net` with `metadata` to `path` atomically (a temporary file in the
+    same folder, then rename): a reader never sees a half-written model. Returns the path."""
+    if metadata.get("kind") not in KINDS:
+        raise ValueError(f"metadata.kind = {metadata.get('kind')!r}: expected one of {', '.join(KINDS)}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scripted = script_network(net)
+    text = json.dumps(metadata, indent=2, sort_keys=False)
+    tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+    try:
+        torch.jit.save(scripted, str(tmp), _extra_files={METADATA_KEY: text})
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path

@@ -1,0 +1,221 @@
+"""Training and evaluation samples (F, F0, h) of PlasticityNet (paper sec. 5.1, appendix A.2;
+DESIGN.md §3).
+
+"paper" sampling (sec. 5.1), with Haar-random rotations R1..R4:
+    F0 = R1 diag(e^eps) R2,   F = R3 diag(e^(eps + deps)) R4,
+    eps ~ U[-1, 1]^d,  deps ~ U[-r, r]^d  (r = 0.1 sand and metal, 0.2 snow).
+F shares only its singular values' neighbourhood with F0; as matrices they are far apart.
+
+"near" sampling (DESIGN.md §3, beyond the paper): F close to F0 as a matrix, the regime the
+simulator visits (within a step F differs from F0 by dt grad v):
+    F0 = R1 diag(e^eps) R2,   F = R1 Qa diag(e^(eps + deps)) Qb R2,
+with Qa, Qb small random rotations of angle <= 0.1 rad.
+
+Hardening h ~ U[h_lo, h_hi] (appendix A.2): Cam-Clay (snow) h = min(a, 0) in [-0.5, 0] (2D) or
+[-1, 0] (3D); von Mises (metal) h = tau_Y / (2 mu) in [0, 1]; Drucker-Prager (sand) has none.
+
+Every draw comes from a torch.Generator seeded from (seed, step, stream), so that a batch is fully
+determined by those three integers (resumed training sees the same batches; evaluation uses a
+stream disjoint from training). Samples are drawn in float64 and cast at the end.
+
+Because F = U diag(Sigma) V^T is built from its own rotations, the batch carries these factors:
+the targets Ptilde = U diag(tau(Z(Sigma)) / Sigma) V^T then need no SVD (see targets.py).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import torch
+
+from ..materials import Material
+
+SAMPLINGS = ("paper", "near")
+
+#: Independent random streams: training batches never share a seed with evaluation samples.
+STREAMS = {"train": 0, "eval": 1, "test": 2}
+
+#: Log-singular values eps ~ U[-EPS_RANGE, EPS_RANGE]^d (sec. 5.1).
+EPS_RANGE = 1.0
+#: Largest rotation angle (rad) of Qa, Qb in "near" sampling (DESIGN.md §3).
+NEAR_MAX_ANGLE = 0.1
+
+
+@dataclass(frozen=True)
+class SamplingSpec:
+    """What to sample for one material: deps ~ U[-deps_scale deps, deps_scale deps]^d and h ~ U[h_range]
+    (h_range None: the material has no hardening input)."""
+
+    dim: int
+    deps: float
+    h_range: tuple[float, float] | None
+    sampling: str = "paper"
+    deps_scale: float = 1.0
+
+    def __post_init__(self):
+        if self.sampling not in SAMPLINGS:
+            raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(SAMPLINGS)}")
+        if not (self.deps_scale > 0 and math.isfinite(self.deps_scale)):
+            raise ValueError(f"deps_scale = {self.deps_scale!r}: must be finite and > 0")
+
+    @property
+    def has_hardening(self) -> bool:
+        return self.h_range is not None
+
+    def with_(self, **changes) -> "SamplingSpec":
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return {
+            "sampling": self.sampling,
+            "eps_range": [-EPS_RANGE, EPS_RANGE],
+            "deps_range": [-self.deps * self.deps_scale, self.deps * self.deps_scale],
+            "h_range": None if self.h_range is None else list(self.h_range),
+            "near_max_angle": NEAR_MAX_ANGLE if self.sampling == "near" else None,
+        }
+
+
+def sampling_spec(material: Material, sampling: str = "paper", deps_scale: float = 1.0) -> SamplingSpec:
+    """The sec. 5.1 / appendix A.2 ranges for `material`, chosen by its plasticity model."""
+    plasticity = material.plasticity.name
+    d = material.dim
+    if plasticity == "cam_clay":  # snow: deps in [-0.2, 0.2], h = min(a, 0)
+        return SamplingSpec(d, 0.2, (-0.5, 0.0) if d == 2 else (-1.0, 0.0), sampling, deps_scale)
+    if plasticity == "von_mises":  # metal, metal_nh: h = tau_Y / (2 mu)
+        return SamplingSpec(d, 0.1, (0.0, 1.0), sampling, deps_scale)
+    if plasticity in ("drucker_prager", "none"):  # sand: no hardening
+        return SamplingSpec(d, 0.1, None, sampling, deps_scale)
+    raise ValueError(f"plasticity.model = {plasticity!r}: no training distribution defined")
+
+
+def generator_for(seed: int, step: int, stream: str = "train") -> torch.Generator:
+    """A CPU generator whose state depends only on (seed, step, stream) (numpy SeedSequence mixing,
+    so that neighbouring seeds and steps give unrelated streams)."""
+    if stream not in STREAMS:
+        raise ValueError(f"stream = {stream!r}: expected one of {', '.join(STREAMS)}")
+    if seed < 0 or step < 0:
+        raise ValueError(f"seed = {seed}, step = {step}: must be >= 0")
+    state = np.random.SeedSequence([STREAMS[stream], int(seed), int(step)]).generate_state(2, dtype=np.uint32)
+    return torch.Generator().manual_seed((int(state[0]) << 31) ^ int(state[1]))
+
+
+def uniform(n: int, lo: float, hi: float, generator: torch.Generator, cols: int | None = None) -> torch.Tensor:
+    shape = (n,) if cols is None else (n, cols)
+    return lo + (hi - lo) * torch.rand(shape, generator=generator, dtype=torch.float64)
+
+
+def random_rotations(n: int, d: int, generator: torch.Generator) -> torch.Tensor:
+    """n Haar-random rotations, (n, d, d) float64: the QR factorisation of a Gaussian matrix A with
+    diag(R) > 0 (Q is then Haar on O(d)), made proper (det +1, Haar on SO(d)).
+
+    Done by hand because batched LAPACK QR and det cost ~80% of a batch for 2x2/3x3 matrices:
+    Gram-Schmidt on the first d-1 columns of A (this is exactly Q of the QR with diag(R) > 0;
+    projected twice for round-off), then the last column completing a right-handed frame
+    (2D: q1 rotated by +90 deg; 3D: q1 x q2), i.e. Q's last column with its sign fixed so that det Q = +1."""
+    A = torch.randn(n, d, d, generator=generator, dtype=torch.float64)
+    columns: list[torch.Tensor] = []
+    for k in range(d - 1):
+        q = A[:, :, k]
+        for _ in range(2):
+            for p in columns:
+                q = q - (p * q).sum(-1, keepdim=True) * p
+        columns.append(q / torch.linalg.vector_norm(q, dim=-1, keepdim=True))
+    if d == 2:
+        q1 = columns[0]
+        columns.append(torch.stack([-q1[:, 1], q1[:, 0]], dim=-1))
+    else:
+        columns.append(torch.linalg.cross(columns[0], columns[1], dim=-1))
+    return torch.stack(columns, dim=-1)
+
+
+def small_rotations(n: int, d: int, max_angle: float, generator: torch.Generator) -> torch.Tensor:
+    """n random rotations of angle theta ~ U[0, max_angle] (2D: either sense; 3D: about a uniformly
+    random axis k, Rodrigues: R = I + sin(theta) [k]x + (1 - cos(theta)) [k]x^2), (n, d, d) float64."""
+    if d == 2:
+        theta = uniform(n, -max_angle, max_angle, generator)
+        c, s = torch.cos(theta), torch.sin(theta)
+        return torch.stack([torch.stack([c, -s], -1), torch.stack([s, c], -1)], -2)
+    theta = uniform(n, 0.0, max_angle, generator)
+    k = torch.randn(n, 3, generator=generator, dtype=torch.float64)
+    k = k / torch.linalg.vector_norm(k, dim=-1, keepdim=True)
+    zero = torch.zeros_like(theta)
+    K = torch.stack(
+        [
+            torch.stack([zero, -k[:, 2], k[:, 1]], -1),
+            torch.stack([k[:, 2], zero, -k[:, 0]], -1),
+            torch.stack([-k[:, 1], k[:, 0], zero], -1),
+        ],
+        -2,
+    )
+    eye = torch.eye(3, dtype=torch.float64).expand(n, 3, 3)
+    return eye + torch.sin(theta)[:, None, None] * K + (1.0 - torch.cos(theta))[:, None, None] * (K @ K)
+
+
+@dataclass
+class DeformationBatch:
+    """A batch of (F, F0, h) with the factors F = U diag(Sigma) V^T, F0 = U0 diag(Sigma0) V0^T
+    (U, V, U0, V0 rotations; Sigma, Sigma0 > 0, unsorted). h is (B,) (zeros, unused, without
+    hardening)."""
+
+    F: torch.Tensor
+    F0: torch.Tensor
+    h: torch.Tensor
+    U: torch.Tensor
+    Sigma: torch.Tensor
+    V: torch.Tensor
+    U0: torch.Tensor
+    Sigma0: torch.Tensor
+    V0: torch.Tensor
+
+    def to(self, dtype: torch.dtype) -> "DeformationBatch":
+        return DeformationBatch(**{k: getattr(self, k).to(dtype) for k in self.__dataclass_fields__})
+
+    def __len__(self) -> int:
+        return self.F.shape[0]
+
+
+def sample_batch(
+    spec: SamplingSpec, n: int, seed: int, step: int = 0, stream: str = "train", dtype=torch.float64
+) -> DeformationBatch:
+    """n samples (F, F0, h) of `spec`, determined by (seed, step, stream); built in float64 and cast."""
+    if n <= 0:
+        raise ValueError(f"n = {n}: must be > 0")
+    g = generator_for(seed, step, stream)
+    d = spec.dim
+    r = spec.deps * spec.deps_scale
+    # Fixed draw order: eps, deps, h, then the rotations.
+    eps = uniform(n, -EPS_RANGE, EPS_RANGE, g, d)
+    deps = uniform(n, -r, r, g, d)
+    if spec.h_range is None:
+        h = torch.zeros(n, dtype=torch.float64)
+    else:
+        h = uniform(n, spec.h_range[0], spec.h_range[1], g)
+    Sigma0, Sigma = torch.exp(eps), torch.exp(eps + deps)
+    R1, R2 = random_rotations(n, d, g), random_rotations(n, d, g)
+    U0, V0 = R1, R2.transpose(-1, -2)
+    if spec.sampling == "paper":
+        # F = R3 diag(e^(eps+deps)) R4 with fresh R3, R4.
+        U, V = random_rotations(n, d, g), random_rotations(n, d, g).transpose(-1, -2)
+    else:
+        # F = (R1 Qa) diag(e^(eps+deps)) (Qb R2).
+        Qa, Qb = small_rotations(n, d, NEAR_MAX_ANGLE, g), small_rotations(n, d, NEAR_MAX_ANGLE, g)
+        U, V = R1 @ Qa, (Qb @ R2).transpose(-1, -2)
+
+    def compose(U_, S_, V_):
+        return (U_ * S_[:, None, :]) @ V_.transpose(-1, -2)
+
+    batch = DeformationBatch(compose(U, Sigma, V), compose(U0, Sigma0, V0), h, U, Sigma, V, U0, Sigma0, V0)
+    return batch if dtype == torch.float64 else batch.to(dtype)
+
+
+def sample_return_map_states(dim: int, n: int, seed: int, step: int = 0, stream: str = "train", dtype=torch.float64):
+    """(Sigma, h) for the learned return mapping (paper sec. 4.3, appendix A.2.4):
+    Sigma = e^eps, eps ~ U[-1, 1]^d, h ~ U[0, 1] (von Mises h = tau_Y / (2 mu))."""
+    if n <= 0:
+        raise ValueError(f"n = {n}: must be > 0")
+    g = generator_for(seed, step, stream)
+    eps = uniform(n, -EPS_RANGE, EPS_RANGE, g, dim)
+    h = uniform(n, 0.0, 1.0, g)
+    return torch.exp(eps).to(dtype), h.to(dtype)

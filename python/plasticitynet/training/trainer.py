@@ -1,0 +1,429 @@
+"""The training loop (paper sec. 5.1, appendix A.1): Adam, learning rate lr decayed by lr_decay every
+decay_steps steps (StepLR), one fresh batch of `batch` samples per epoch (= step), float32.
+The paper's recipe is the default: lr 0.01, x0.95 every 1000 steps, batch 2^16, 20000 epochs.
+
+Outputs beside the model file OUT (default models/{material}_{dim}d.pt):
+  OUT                      float64 TorchScript + metadata (export.py), written at the end;
+  OUT.csv                  loss log: step, loss, lr, wall seconds (training time, summed over resumes);
+  OUT_eval.csv             with eval_every > 0: relative RMS gradient error on 2^14 held-out samples
+                           against training step and wall time (energy models);
+  OUT_loss.png             the loss curve (log y) and, if logged, the error curve;
+  OUT.ckpt                 checkpoint (model, Adam, StepLR, step, RNG state, logs), written atomically
+                           every checkpoint_every steps and at the end.
+Batch k depends only on (seed, k) (sampling.py), so a resumed run sees the batches an uninterrupted run
+would, and reaches the same weights.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from . import return_map_net
+from .energy import energy_loss, psi_gradient
+from .export import energy_metadata, export_model, return_map_metadata, script_network, sha256_of
+from .nets import MLP, energy_widths, make_mlp, return_map_widths
+from .sampling import SAMPLINGS, sample_batch, sample_return_map_states, sampling_spec
+from .targets import ElastoplasticStress, nondimensional_material
+
+#: --material choices: the energies of the four presets and the learned return mapping of metal_nh.
+MATERIALS = ("sand", "snow", "metal", "metal_nh", "metal_nh_rm")
+RETURN_MAP_MATERIAL = "metal_nh_rm"
+
+#: Fields that must agree between a checkpoint and the run resuming it (epochs may grow).
+_RESUME_FIELDS = ("material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling")
+
+#: Held-out samples of the in-training error curve (eval_every), "eval" stream at this step index
+#: (disjoint from the final evaluation, which uses steps 0, 1, ...).
+CURVE_SAMPLES = 1 << 14
+CURVE_STEP = 1_000_000
+
+
+@dataclass
+class TrainConfig:
+    material: str
+    dim: int
+    epochs: int = 20000
+    batch: int = 1 << 16
+    lr: float = 0.01
+    lr_decay: float = 0.95
+    decay_steps: int = 1000
+    seed: int = 0
+    sampling: str = "paper"
+    out: str = ""  # model path; "" -> models/{material}_{dim}d.pt
+    checkpoint_every: int = 500
+    resume: bool = False
+    return_map: str = ""  # metal_nh: the learned return-map model file
+    eval_every: int = 0  # 0: no in-training error curve
+    eval_samples: int = 100_000  # final evaluation (0: skip)
+    progress: bool = True
+    threads: int = 0  # 0: torch's default
+    command: str = ""  # the command line, recorded in the metadata
+
+    def __post_init__(self):
+        if self.material not in MATERIALS:
+            raise ValueError(f"material = {self.material!r}: expected one of {', '.join(MATERIALS)}")
+        if self.dim not in (2, 3):
+            raise ValueError(f"dim = {self.dim!r}: expected 2 or 3")
+        for name in ("epochs", "batch", "decay_steps", "checkpoint_every"):
+            if int(getattr(self, name)) <= 0:
+                raise ValueError(f"{name} = {getattr(self, name)!r}: must be > 0")
+        if not (self.lr > 0 and math.isfinite(self.lr)):
+            raise ValueError(f"lr = {self.lr!r}: must be finite and > 0")
+        if not (0 < self.lr_decay <= 1):
+            raise ValueError(f"lr_decay = {self.lr_decay!r}: must be in (0, 1]")
+        if self.seed < 0:
+            raise ValueError(f"seed = {self.seed!r}: must be >= 0")
+        if self.sampling not in SAMPLINGS:
+            raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(SAMPLINGS)}")
+        if self.eval_every < 0 or self.eval_samples < 0:
+            raise ValueError("eval_every and eval_samples must be >= 0")
+        if self.material == "metal_nh" and not self.return_map:
+            raise ValueError("material metal_nh: return_map (the learned return-map model file) is required")
+        if not self.out:
+            self.out = str(Path("models") / f"{self.material}_{self.dim}d.pt")
+
+    @property
+    def paths(self) -> dict:
+        out = Path(self.out)
+        return {
+            "model": out,
+            "log": out.with_suffix(".csv"),
+            "eval_log": out.with_name(out.stem + "_eval.csv"),
+            "plot": out.with_name(out.stem + "_loss.png"),
+            "checkpoint": out.with_suffix(".ckpt"),
+        }
+
+
+# --- tasks: what is trained -------------------------------------------------------------------------
+class EnergyTask:
+    """The energy MLP of eq. 8, trained with the loss of eq. 9."""
+
+    kind = "energy"
+
+    def __init__(self, config: TrainConfig):
+        self.config = config
+        self.material = nondimensional_material(config.material, config.dim)
+        self.spec = sampling_spec(self.material, config.sampling)
+        self.return_map = None
+        self.return_map_info = None
+        if config.material == "metal_nh":
+            from ..model import LearnedReturnMap, load_model
+
+            rm = load_model(config.return_map)
+            if not isinstance(rm, LearnedReturnMap) or rm.dim != config.dim:
+                raise ValueError(f"{config.return_map}: not a {config.dim}D return-map model")
+            self.return_map = rm
+            rel = os.path.relpath(Path(config.return_map).resolve(), Path(config.out).resolve().parent)
+            self.return_map_info = {"type": "learned", "file": rel, "sha256": sha256_of(config.return_map)}
+        self.stress = ElastoplasticStress(self.material, self.return_map)
+        self.net = make_mlp(energy_widths(config.dim, self.spec.has_hardening), config.seed)
+
+    def _h(self, h: torch.Tensor):
+        return h if self.spec.has_hardening else None
+
+    def loss(self, step: int) -> torch.Tensor:
+        """Eq. 9 on batch `step`: samples and targets in float64 (no grad), the network in float32."""
+        b = sample_batch(self.spec, self.config.batch, self.config.seed, step)
+        with torch.no_grad():
+            P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h)
+            P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
+        b32 = b.to(torch.float32)
+        return energy_loss(self.net, b32.F, b32.F0, self._h(b32.h), P.float(), P0.float())
+
+    def curve_error(self) -> dict:
+        """Relative RMS gradient error of the float32 net on CURVE_SAMPLES held-out samples, per sampling."""
+        out = {}
+        for s in SAMPLINGS:
+            b = sample_batch(self.spec.with_(sampling=s), CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
+            with torch.no_grad():
+                P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).float()
+                P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).float()
+            b32 = b.to(torch.float32)
+            g = psi_gradient(self.net, b32.F, b32.F0, self._h(b32.h), P0).detach()
+            out[s] = float(((g - P) ** 2).sum() / (P**2).sum()) ** 0.5
+        return out
+
+    def metadata(self, recipe: dict, errors=None) -> dict:
+        return energy_metadata(self.material, self.net, self.spec.has_hardening, recipe, errors, self.return_map_info)
+
+    def in_memory_model(self, metadata: dict):
+        from ..model import LearnedEnergy
+
+        return LearnedEnergy(script_network(self.net), metadata, return_map=self.return_map)
+
+
+class ReturnMapTask:
+    """The dgamma MLP of eq. 12, trained with the loss of eq. 13 (return_map_net.py)."""
+
+    kind = "return_map"
+
+    def __init__(self, config: TrainConfig):
+        self.config = config
+        self.material = nondimensional_material("metal_nh", config.dim)
+        self.net = make_mlp(return_map_widths(config.dim), config.seed)
+
+    def loss(self, step: int) -> torch.Tensor:
+        Sigma, h = sample_return_map_states(self.config.dim, self.config.batch, self.config.seed, step)
+        return return_map_net.return_map_loss(self.net, self.material, Sigma.float(), h.float())
+
+    def curve_error(self) -> dict:
+        Sigma, h = sample_return_map_states(self.config.dim, CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
+        with torch.no_grad():
+            loss = return_map_net.return_map_loss(self.net, self.material, Sigma.float(), h.float())
+        return {"heldout_loss": float(loss)}
+
+    def metadata(self, recipe: dict, errors=None) -> dict:
+        return return_map_metadata(self.material, self.net, recipe, errors)
+
+    def in_memory_model(self, metadata: dict):
+        from ..model import LearnedReturnMap
+
+        return LearnedReturnMap(script_network(self.net), metadata)
+
+
+def make_task(config: TrainConfig):
+    return ReturnMapTask(config) if config.material == RETURN_MAP_MATERIAL else EnergyTask(config)
+
+
+# --- files --------------------------------------------------------------------------------------------
+def _atomic_torch_save(obj, path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def _write_csv(path: Path, header, rows) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+    with open(tmp, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(header)
+        w.writerows(rows)
+    os.replace(tmp, path)
+
+
+LOG_HEADER = ("step", "loss", "lr", "wall_seconds")
+
+
+def plot_curves(log_rows, eval_rows, eval_header, path: Path, title: str) -> None:
+    """Loss against step (log y); with an error log, the held-out error against wall time beside it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = 2 if eval_rows else 1
+    fig, axes = plt.subplots(1, panels, figsize=(6 * panels, 4), squeeze=False)
+    ax = axes[0, 0]
+    steps = [r[0] for r in log_rows]
+    ax.plot(steps, [r[1] for r in log_rows], lw=0.6, color="#1f77b4")
+    ax.set_yscale("log")
+    ax.set_xlabel("step (epoch)")
+    ax.set_ylabel("training loss")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    if eval_rows:
+        ax = axes[0, 1]
+        for j, name in enumerate(eval_header[3:], start=3):
+            ax.plot([r[2] / 60 for r in eval_rows], [r[j] for r in eval_rows], marker=".", label=name)
+        ax.set_yscale("log")
+        ax.set_xlabel("training wall time (min)")
+        ax.set_ylabel("held-out loss (eq. 13)" if eval_header[3] == "heldout_loss" else "held-out relative RMS error")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + f".{os.getpid()}.tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+# --- the loop ------------------------------------------------------------------------------------------
+@dataclass
+class TrainResult:
+    paths: dict
+    steps: int
+    final_loss: float
+    wall_seconds: float
+    errors: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+    finished: bool = True
+
+
+class Trainer:
+    def __init__(self, config: TrainConfig):
+        self.config = config
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        self.task = make_task(config)
+        self.net: MLP = self.task.net
+        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
+        self.scheduler = torch.optim.lr_scheduler.StepLR(
+            self.optimizer, step_size=config.decay_steps, gamma=config.lr_decay
+        )
+        self.step = 0  # number of completed steps
+        self.wall = 0.0  # training seconds, summed over sessions
+        self.log_rows: list[tuple] = []
+        self.eval_rows: list[tuple] = []
+        self.eval_header: tuple = ()
+        if config.resume:
+            self._load_checkpoint()
+
+    # checkpoints
+    def _state(self) -> dict:
+        return {
+            "config": {k: getattr(self.config, k) for k in _RESUME_FIELDS},
+            "model": self.net.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "step": self.step,
+            "wall_seconds": self.wall,
+            "torch_rng_state": torch.get_rng_state(),
+            "log_rows": self.log_rows,
+            "eval_rows": self.eval_rows,
+            "eval_header": self.eval_header,
+        }
+
+    def save_checkpoint(self) -> Path:
+        path = self.config.paths["checkpoint"]
+        _atomic_torch_save(self._state(), path)
+        return path
+
+    def _load_checkpoint(self) -> None:
+        path = self.config.paths["checkpoint"]
+        if not path.is_file():
+            raise ValueError(f"{path}: no checkpoint to resume from")
+        try:
+            state = torch.load(path, map_location="cpu")
+        except Exception as err:
+            raise ValueError(f"{path}: unreadable checkpoint ({err})") from None
+        for key in _RESUME_FIELDS:
+            if state["config"][key] != getattr(self.config, key):
+                raise ValueError(
+                    f"{path}: checkpoint has {key} = {state['config'][key]!r}, this run {getattr(self.config, key)!r}"
+                )
+        self.net.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        self.step = int(state["step"])
+        self.wall = float(state["wall_seconds"])
+        torch.set_rng_state(state["torch_rng_state"])
+        self.log_rows = [tuple(r) for r in state["log_rows"]]
+        self.eval_rows = [tuple(r) for r in state["eval_rows"]]
+        self.eval_header = tuple(state["eval_header"])
+
+    # training
+    def _curve_point(self) -> None:
+        errors = self.task.curve_error()
+        if not self.eval_header:
+            self.eval_header = ("step", "loss", "wall_seconds", *errors)
+        loss = self.log_rows[-1][1] if self.log_rows else float("nan")
+        self.eval_rows.append((self.step, loss, self.wall, *errors.values()))
+        _write_csv(self.config.paths["eval_log"], self.eval_header, self.eval_rows)
+
+    def run(self, stop_at: int | None = None) -> TrainResult:
+        """Train up to config.epochs steps (or stop_at, as if interrupted there: checkpoint written, nothing
+        exported), then export, evaluate and plot."""
+        cfg = self.config
+        paths = cfg.paths
+        end = cfg.epochs if stop_at is None else min(stop_at, cfg.epochs)
+        _write_csv(paths["log"], LOG_HEADER, self.log_rows)  # (re)start the log at the checkpoint
+        log = open(paths["log"], "a", newline="", buffering=1)  # line-buffered: the log can be watched live
+        writer = csv.writer(log, lineterminator="\n")
+        bar = None
+        if cfg.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=cfg.epochs, initial=self.step, desc=f"{cfg.material} {cfg.dim}D", unit="step")
+        try:
+            self.net.train()
+            while self.step < end:
+                t0 = time.perf_counter()
+                lr = self.optimizer.param_groups[0]["lr"]
+                loss = self.task.loss(self.step)
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                self.optimizer.step()
+                self.scheduler.step()
+                self.step += 1
+                self.wall += time.perf_counter() - t0
+                value = float(loss.detach())
+                if not math.isfinite(value):
+                    raise FloatingPointError(f"loss is {value} at step {self.step}")
+                row = (self.step, value, lr, round(self.wall, 3))
+                self.log_rows.append(row)
+                writer.writerow(row)
+                if bar is not None:
+                    bar.update(1)
+                    if self.step % 10 == 0 or self.step == end:
+                        bar.set_postfix(loss=f"{value:.3e}", lr=f"{lr:.2e}")
+                if cfg.eval_every and (self.step % cfg.eval_every == 0 or self.step == cfg.epochs):
+                    self._curve_point()
+                if self.step % cfg.checkpoint_every == 0 or self.step == end:
+                    log.flush()
+                    self.save_checkpoint()
+        finally:
+            log.close()
+            if bar is not None:
+                bar.close()
+        final_loss = self.log_rows[-1][1] if self.log_rows else float("nan")
+        if self.step < cfg.epochs:
+            return TrainResult(paths, self.step, final_loss, self.wall, finished=False)
+        return self.finish()
+
+    def recipe(self) -> dict:
+        cfg = self.config
+        recipe = {
+            "epochs": self.step,
+            "batch": cfg.batch,
+            "lr": cfg.lr,
+            "decay": cfg.lr_decay,
+            "decay_steps": cfg.decay_steps,
+            "sampling": cfg.sampling,
+            "seed": cfg.seed,
+            "wall_seconds": round(self.wall, 1),
+            "optimizer": "adam",
+            "dtype": "float32",
+            "threads": torch.get_num_threads(),
+            "final_loss": self.log_rows[-1][1] if self.log_rows else None,
+        }
+        if hasattr(self.task, "spec"):
+            recipe["distribution"] = self.task.spec.to_dict()
+        else:
+            recipe["distribution"] = {"eps_range": [-1.0, 1.0], "h_range": [0.0, 1.0]}
+        if cfg.command:
+            recipe["command"] = cfg.command
+        return recipe
+
+    def finish(self) -> TrainResult:
+        """Evaluate the float64 model, export it with its errors, plot the curves."""
+        from .evaluate import evaluate
+
+        cfg = self.config
+        paths = cfg.paths
+        self.net.eval()
+        recipe = self.recipe()
+        errors = {}
+        if cfg.eval_samples:
+            errors = evaluate(self.task.in_memory_model(self.task.metadata(recipe)), cfg.eval_samples)
+        metadata = self.task.metadata(recipe, errors)
+        export_model(paths["model"], self.net, metadata)
+        plot_curves(self.log_rows, self.eval_rows, self.eval_header, paths["plot"], f"{cfg.material} {cfg.dim}D")
+        final_loss = self.log_rows[-1][1] if self.log_rows else float("nan")
+        return TrainResult(paths, self.step, final_loss, self.wall, errors, metadata, finished=True)
+
+
+def train(config: TrainConfig, stop_at: int | None = None) -> TrainResult:
+    return Trainer(config).run(stop_at)
+
+
+__all__ = ["MATERIALS", "TrainConfig", "Trainer", "TrainResult", "train", "make_task", "plot_curves"]

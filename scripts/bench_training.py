@@ -1,0 +1,120 @@
+#!/usr/bin/env python3
+"""Training throughput of the PlasticityNet energy nets (issue 3 item 6): samples per second of one
+training step (sampling + targets + loss of eq. 9 with its double backward + Adam), and of its parts,
+for the 2D net ([9, 32, 32, 32, 1]) and the 3D net ([19, 64, 64, 64, 1]), float32.
+
+    .venv/bin/python scripts/bench_training.py [--threads 2] [--batches 14 16] [--steps 5]
+        [--materials metal snow] [--dims 2 3]
+
+Timings are the median over --steps steps after one warm-up step. A benchmark, not a test: other
+jobs on the machine slow it down (the load average is printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+
+import torch
+
+from plasticitynet.training import TrainConfig
+from plasticitynet.training.energy import energy_loss
+from plasticitynet.training.sampling import sample_batch
+from plasticitynet.training.trainer import make_task
+
+
+def _median_time(fn, steps: int) -> float:
+    fn(0)  # warm-up
+    times = []
+    for k in range(1, steps + 1):
+        t0 = time.perf_counter()
+        fn(k)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def bench(material: str, dim: int, batch: int, steps: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = TrainConfig(material=material, dim=dim, batch=batch, out=os.path.join(tmp, "m.pt"), progress=False)
+        task = make_task(cfg)
+    net, spec, stress = task.net, task.spec, task.stress
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+
+    def sample(k):
+        return sample_batch(spec, batch, 0, k)
+
+    def targets(b):
+        with torch.no_grad():
+            return stress.from_factors(b.U, b.Sigma, b.V, b.h), stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
+
+    b = sample(0)
+    P, P0 = targets(b)
+    b32, P, P0 = b.to(torch.float32), P.float(), P0.float()
+    h = b32.h if spec.has_hardening else None
+
+    def network_step(k):
+        opt.zero_grad(set_to_none=True)
+        energy_loss(net, b32.F, b32.F0, h, P, P0).backward()
+        opt.step()
+
+    def full_step(k):
+        opt.zero_grad(set_to_none=True)
+        task.loss(k).backward()
+        opt.step()
+
+    t_sample = _median_time(sample, steps)
+    t_targets = _median_time(lambda k: targets(b), steps)
+    t_network = _median_time(network_step, steps)
+    t_full = _median_time(full_step, steps)
+    return {
+        "material": material, "dim": dim, "widths": net.widths, "batch": batch,
+        "sample_s": t_sample, "targets_s": t_targets, "network_s": t_network, "step_s": t_full,
+    }
+
+
+def blas_library() -> str:
+    """The BLAS shared object torch's GEMMs go to (Debian's torch uses the system libblas.so.3: the
+    reference BLAS unless an optimised one such as libopenblas0-openmp is installed, ~4x slower here)."""
+    torch.ones(2, 2) @ torch.ones(2, 2)
+    try:
+        with open("/proc/self/maps") as maps:
+            libs = {line.split()[-1] for line in maps if "blas" in line.lower() and ".so" in line}
+    except OSError:
+        return "unknown"
+    return ", ".join(sorted(os.path.realpath(lib) for lib in libs)) or "none found"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--batches", type=int, nargs="+", default=[14, 16], help="log2 of the batch sizes")
+    p.add_argument("--steps", type=int, default=5)
+    p.add_argument("--materials", nargs="+", default=["metal"], help="energy materials (hardening input: 9/19 wide)")
+    p.add_argument("--dims", type=int, nargs="+", default=[2, 3])
+    args = p.parse_args()
+    torch.set_num_threads(args.threads)
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, float32; load average {load}")
+    print(f"BLAS: {blas_library()}")
+    header = f"{'material':<9}{'dim':>4} {'widths':<20}{'batch':>7}{'step s':>9}{'samples/s':>11}" \
+             f"{'net only':>11}{'sample s':>10}{'target s':>10}{'net s':>8}"
+    print(header)
+    print("-" * len(header))
+    for material in args.materials:
+        for dim in args.dims:
+            for log2 in args.batches:
+                r = bench(material, dim, 1 << log2, args.steps)
+                print(
+                    f"{material:<9}{dim:>4} {str(r['widths']):<20}{r['batch']:>7}{r['step_s']:>9.3f}"
+                    f"{r['batch'] / r['step_s']:>11.0f}{r['batch'] / r['network_s']:>11.0f}"
+                    f"{r['sample_s']:>10.3f}{r['targets_s']:>10.3f}{r['network_s']:>8.3f}",
+                    flush=True,
+                )
+    print("samples/s: whole training step; net only: loss (double backward) + Adam on a ready batch")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,100 @@
+"""The corrected energy (eq. 8, 11), the loss (eq. 9) and the learned return mapping (eqs. 12-13)."""
+
+import pytest
+import torch
+
+from plasticitynet.training import (
+    ElastoplasticStress,
+    energy_input,
+    energy_loss,
+    energy_widths,
+    make_mlp,
+    nondimensional_material,
+    psi,
+    psi_gradient,
+    return_map_widths,
+    sample_batch,
+    sample_return_map_states,
+    sampling_spec,
+)
+from plasticitynet.training import return_map_net
+
+
+def _setup(name, dim, n=64, seed=0):
+    m = nondimensional_material(name, dim)
+    spec = sampling_spec(m, "paper")
+    net = make_mlp(energy_widths(dim, spec.has_hardening), seed).double()
+    b = sample_batch(spec, n, seed=seed)
+    stress = ElastoplasticStress(m)
+    P = stress.from_factors(b.U, b.Sigma, b.V, b.h)
+    P0 = stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
+    return m, net, b, (b.h if spec.has_hardening else None), P, P0
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_widths_and_input_layout(dim):
+    assert energy_widths(2, False) == [8, 32, 32, 32, 1] and energy_widths(2, True) == [9, 32, 32, 32, 1]
+    assert energy_widths(3, False) == [18, 64, 64, 64, 1] and energy_widths(3, True) == [19, 64, 64, 64, 1]
+    assert return_map_widths(2) == [3, 32, 32, 32, 1] and return_map_widths(3) == [4, 64, 64, 64, 1]
+    F = torch.arange(dim * dim, dtype=torch.float64).reshape(1, dim, dim)
+    x = energy_input(F, 10 + F, torch.tensor([0.5], dtype=torch.float64))
+    assert x.tolist()[0] == list(range(dim * dim)) + [10.0 + k for k in range(dim * dim)] + [0.5]
+    net = make_mlp(energy_widths(dim, True), 3)
+    assert [type(l).__name__ for l in net.layers] == ["Linear", "SiLU", "Linear", "SiLU", "Linear", "SiLU", "Linear"]
+    assert all(torch.equal(p, q) for p, q in zip(net.parameters(), make_mlp(energy_widths(dim, True), 3).parameters()))
+
+
+@pytest.mark.parametrize("name,dim", [("sand", 2), ("snow", 3), ("metal", 2)])
+def test_gradient_at_F0_is_the_target(name, dim):
+    """grad_F Psi(F0, F0, h) = Ptilde(F0, h) whatever the network (the correction of eq. 8), also with w != 0."""
+    m, net, b, h, P, P0 = _setup(name, dim)
+    for w in (0.0, 1.0):
+        g = psi_gradient(net, b.F0, b.F0, h, P0, w=w, mu=m.mu)
+        assert float((g - P0).abs().max()) <= 1e-13 * float(P0.abs().max())
+
+
+@pytest.mark.parametrize("name,dim", [("sand", 3), ("snow", 2)])
+def test_psi_gradient_is_the_derivative_of_psi(name, dim):
+    m, net, b, h, P, P0 = _setup(name, dim, n=16)
+    F = b.F.clone().requires_grad_(True)
+    (g_auto,) = torch.autograd.grad(psi(net, F, b.F0, h, P0, w=0.7, mu=m.mu).sum(), F)
+    g = psi_gradient(net, b.F, b.F0, h, P0, w=0.7, mu=m.mu)
+    assert torch.allclose(g, g_auto, rtol=1e-12, atol=1e-13)
+
+
+@pytest.mark.parametrize("name,dim", [("sand", 2), ("metal", 3)])
+def test_loss_is_eq9(name, dim):
+    """The fused 2B-input loss equals mean ||grad Psi - Ptilde||^2 computed term by term, and its parameter
+    gradient comes through the input gradient (double backward)."""
+    m, net, b, h, P, P0 = _setup(name, dim)
+    loss = energy_loss(net, b.F, b.F0, h, P, P0)
+    ref = ((psi_gradient(net, b.F, b.F0, h, P0) - P) ** 2).sum((-2, -1)).mean()
+    assert torch.allclose(loss, ref, rtol=1e-12)
+    loss.backward()
+    grads = [p.grad for p in net.parameters()]
+    # The last layer's bias does not enter grad_F N: it gets no gradient (Adam leaves it as initialised).
+    assert grads[-1] is None
+    assert all(g is not None and torch.isfinite(g).all() and float(g.abs().max()) > 0 for g in grads[:-1])
+
+
+def test_return_map_net_pieces():
+    m = nondimensional_material("metal_nh", 2)
+    net = make_mlp(return_map_widths(2), 0).double()
+    Sigma, h = sample_return_map_states(2, 2000, seed=0)
+    mask = return_map_net.yielding(m, Sigma, h)
+    assert 0.3 < float(mask.double().mean()) < 0.99
+    eps, L, n = return_map_net.flow_path(Sigma)
+    dg = return_map_net.dgamma(net, Sigma, h)
+    assert torch.all(dg <= L)
+    Z = return_map_net.project(net, m, Sigma, h)
+    # Volume preserving where projected, unchanged elsewhere.
+    assert torch.allclose(torch.log(Z).sum(-1), eps.sum(-1), atol=1e-12)
+    assert torch.equal(Z[~mask], Sigma[~mask])
+    # With the exact dgamma (the library's root find) the yield term of eq. 13 vanishes.
+    Z_exact = m.return_map(Sigma, h)[0]
+    y = m.yield_function(Z_exact[mask], h[mask]) / return_map_net.yield_unit(m)
+    assert float(y.abs().max()) < 1e-9
+    loss = return_map_net.return_map_loss(net, m, Sigma, h)
+    assert loss.ndim == 0 and float(loss) > 0
+    loss.backward()
+    assert all(p.grad is not None for p in net.parameters())
