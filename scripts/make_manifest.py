@@ -1,0 +1,88 @@
+#!/usr/bin/env python3
+"""Writes models/MANIFEST: one entry per shipped model file, pinning its sha256 and recording how it
+was trained (command line, schedule, wall time, machine) and the errors measured on held-out samples
+at export (plasticitynet.evaluate). The C++ loader and the tests check model files against it.
+
+    .venv/bin/python scripts/make_manifest.py [--models DIR]
+
+MANIFEST is JSON: {"format": "plasticitynet-manifest", "version": 1, "models": [{...}, ...]}.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+from pathlib import Path
+
+import plasticitynet
+from plasticitynet.training.export import sha256_of
+
+#: The models this release ships (issue 3), in training order.
+SHIPPED = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_rm_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d")
+
+
+def entry(path: Path) -> dict:
+    model = plasticitynet.load_model(path)
+    meta = model.metadata
+    recipe = meta.get("recipe", {})
+    stem = path.stem
+    return {
+        "file": path.name,
+        "sha256": sha256_of(path),
+        "kind": meta["kind"],
+        "material": meta["material"]["name"],
+        "dim": meta["dim"],
+        "widths": meta["widths"],
+        "command": recipe.get("command"),
+        "epochs": recipe.get("epochs"),
+        "batch": recipe.get("batch"),
+        "lr": recipe.get("lr"),
+        "lr_decay": recipe.get("decay"),
+        "decay_steps": recipe.get("decay_steps"),
+        "sampling": recipe.get("sampling"),
+        "seed": recipe.get("seed"),
+        "wall_seconds": recipe.get("wall_seconds"),
+        "threads": recipe.get("threads"),
+        "errors": meta.get("errors"),
+        "return_map": meta.get("return_map"),
+        "loss_curve": f"{stem}_loss.png" if (path.parent / f"{stem}_loss.png").exists() else None,
+        "loss_log": f"{stem}.csv" if (path.parent / f"{stem}.csv").exists() else None,
+        "torch_version": meta.get("torch_version"),
+        "created": meta.get("created"),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--models", type=Path, default=Path(__file__).resolve().parent.parent / "models")
+    args = parser.parse_args(argv)
+    entries, missing = [], []
+    for name in SHIPPED:
+        path = args.models / f"{name}.pt"
+        if path.exists():
+            entries.append(entry(path))
+        else:
+            missing.append(name)
+    manifest = {
+        "format": "plasticitynet-manifest",
+        "version": 1,
+        "machine": f"{platform.machine()} CPU, 2 threads, OpenBLAS (no GPU)",
+        "models": entries,
+    }
+    out = args.models / "MANIFEST"
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(manifest, indent=1) + "\n")
+    tmp.replace(out)
+    print(f"wrote {out}: {len(entries)} models" + (f"; not trained yet: {', '.join(missing)}" if missing else ""))
+    for e in entries:
+        errors = e["errors"] or {}
+        rms = errors.get("rel_rms", {}).get("paper", {})
+        print(f"  {e['file']:<20} {e['sha256'][:12]}  {e['wall_seconds'] or 0:7.0f} s  "
+              + ("rel RMS (paper) " + " / ".join(f"{k} {v:.2%}" for k, v in rms.items()) if rms else ""))
+    return 1 if missing else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
