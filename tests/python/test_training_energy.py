@@ -98,3 +98,18 @@ def test_return_map_net_pieces():
     assert loss.ndim == 0 and float(loss) > 0
     loss.backward()
     assert all(p.grad is not None for p in net.parameters())
+
+
+def test_return_map_residuals_share_their_zero_set_and_reject_unknown_names():
+    from plasticitynet.training.nets import make_mlp, return_map_widths
+    from plasticitynet.training.sampling import sample_return_map_states
+    from plasticitynet.training.targets import nondimensional_material
+
+    material = nondimensional_material("metal_nh", 2)
+    net = make_mlp(return_map_widths(2), seed=0).double()
+    Sigma, h = sample_return_map_states(2, 256, seed=3)
+    radius = return_map_net.return_map_loss(net, material, Sigma, h, residual="radius")
+    paper = return_map_net.return_map_loss(net, material, Sigma, h, residual="paper")
+    assert radius > 0 and paper > 0 and radius != paper
+    with pytest.raises(ValueError, match="residual"):
+        return_map_net.return_map_loss(net, material, Sigma, h, residual="relative")

