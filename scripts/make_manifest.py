@@ -76,11 +76,21 @@ def main(argv=None) -> int:
     tmp.write_text(json.dumps(manifest, indent=1) + "\n")
     tmp.replace(out)
     print(f"wrote {out}: {len(entries)} models" + (f"; not trained yet: {', '.join(missing)}" if missing else ""))
+    print("\n| model | steps x batch | wall | rel. RMS grad error, paper sampling 0.5x / 1x / 2x deps "
+          "| near sampling 0.5x / 1x / 2x | at F = F0 |")
+    print("|---|---|---|---|---|---|")
     for e in entries:
         errors = e["errors"] or {}
-        rms = errors.get("rel_rms", {}).get("paper", {})
-        print(f"  {e['file']:<20} {e['sha256'][:12]}  {e['wall_seconds'] or 0:7.0f} s  "
-              + ("rel RMS (paper) " + " / ".join(f"{k} {v:.2%}" for k, v in rms.items()) if rms else ""))
+        size = f"{e['epochs']} x {e['batch']}"
+        wall = f"{(e['wall_seconds'] or 0) / 60:.1f} min"
+        if e["kind"] == "return_map":
+            print(f"| {e['file']} | {size} | {wall} | mean abs(dgamma error) {errors['mean_abs_dgamma_error']:.2e}, "
+                  f"mean abs(y)/(2 mu h)^2 {errors['mean_abs_y_rel']:.2e} | within 1e-3 of the surface: "
+                  f"{errors['frac_within_1e-3']:.1%} | - |")
+            continue
+        rms = errors["rel_rms"]
+        row = [" / ".join(f"{rms[s][k]:.2%}" for k in ("0.5x", "1x", "2x")) for s in ("paper", "near")]
+        print(f"| {e['file']} | {size} | {wall} | {row[0]} | {row[1]} | {errors['at_F0_max_rel']:.1e} |")
     return 1 if missing else 0
 
 
