@@ -93,3 +93,12 @@ def F_sampler():
 @pytest.fixture
 def rotation_sampler():
     return random_rotations
+
+
+@pytest.fixture
+def one_thread():
+    """Tiny training batches run faster on one thread, and do not stall when other jobs hold the cores."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)

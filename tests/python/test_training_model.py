@@ -33,13 +33,7 @@ RECIPE = {"epochs": 0, "batch": 1, "lr": 0.01, "decay": 0.95, "decay_steps": 100
           "wall_seconds": 0.0}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Tiny batches run faster on one thread, and do not stall when other jobs hold the cores."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def export_energy(folder, name, dim, seed=0, return_map=None):

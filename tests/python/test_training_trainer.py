@@ -18,13 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TRAIN_PY = ROOT / "train.py"
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Tiny batches run faster on one thread, and do not stall when other jobs hold the cores."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def _config(tmp_path, **kw):
