@@ -2,8 +2,8 @@
 # Trains the models shipped in models/ with the CPU schedules recorded in
 # models/MANIFEST (2 cores, OpenBLAS, float32, the paper's (F, F0) sampling,
 # Adam from lr 0.01 decayed x0.95 per period down to 7.7e-4 at the end):
-#   sand_2d: batch 8192, 15000 steps, decay every 300 steps (~14 min);
-#   snow_2d, metal_2d, metal_nh_2d and the 3D energies: batch 8192, 5000 steps, decay
+#   sand_2d, snow_2d: batch 8192, 15000 steps, decay every 300 steps (~14 min each);
+#   metal_2d, metal_nh_2d and the 3D energies: batch 8192, 5000 steps, decay
 #   every 100 steps (~4.5 min in 2D, ~9 min in 3D);
 #   metal_nh_rm_2d (learned return mapping): batch 4096, 20000 steps, every 400.
 # The paper's full recipe (batch 2^16, 20000 steps, x0.95 every 1000) remains
@@ -18,7 +18,7 @@ for model in "${models[@]}"; do
   material=${model%_*d}; dim=${model##*_}; dim=${dim%d}
   case "$model" in
     metal_nh_rm_*)   schedule=(--batch 4096 --epochs 20000 --decay-steps 400 --eval-every 5000) ;;
-    sand_2d)         schedule=(--batch 8192 --epochs 15000 --decay-steps 300 --sampling paper --eval-every 1000) ;;
+    sand_2d|snow_2d) schedule=(--batch 8192 --epochs 15000 --decay-steps 300 --sampling paper --eval-every 1000) ;;
     *)               schedule=(--batch 8192 --epochs 5000 --decay-steps 100 --sampling paper --eval-every 1000) ;;
   esac
   echo "=== $model ($(date -u +%H:%M:%S))"
