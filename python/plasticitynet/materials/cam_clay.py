@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 
 from .branches import COMPRESSION_TIP, ELASTIC, ELLIPSE, TENSION_TIP
-from .elasticity import ElasticityModel, NeoHookeanSnow
+from .elasticity import NeoHookeanSnow
 from .params import CamClayParams
 from .plasticity import PlasticityModel
 from .svd import clamp_sigma
@@ -22,16 +22,8 @@ from .svd import clamp_sigma
 class CamClay(PlasticityModel):
     name = "cam_clay"
     BRANCHES = (ELASTIC, COMPRESSION_TIP, TENSION_TIP, ELLIPSE)
-
-    def __init__(self, params: CamClayParams, elasticity: ElasticityModel):
-        if not isinstance(params, CamClayParams):
-            raise ValueError(f"plasticity: expected CamClayParams, got {type(params).__name__}")
-        if not isinstance(elasticity, NeoHookeanSnow):
-            raise ValueError(
-                f"plasticity.model = 'cam_clay' requires elasticity.model = 'neo_hookean_snow', "
-                f"got {elasticity.name!r}"
-            )
-        super().__init__(params, elasticity)
+    PARAMS = CamClayParams
+    REQUIRED_ELASTICITY = NeoHookeanSnow
 
     def _state(self, Sigma: torch.Tensor, a: torch.Tensor):
         """J, b, p, p0, s, M for clamped Sigma."""

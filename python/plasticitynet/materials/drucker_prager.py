@@ -14,15 +14,10 @@ from .plasticity import PlasticityModel
 class DruckerPrager(PlasticityModel):
     name = "drucker_prager"
     BRANCHES = (ELASTIC, APEX, CONE)
+    PARAMS = DruckerPragerParams
+    REQUIRED_ELASTICITY = StVKHencky
 
     def __init__(self, params: DruckerPragerParams, elasticity: ElasticityModel):
-        if not isinstance(params, DruckerPragerParams):
-            raise ValueError(f"plasticity: expected DruckerPragerParams, got {type(params).__name__}")
-        if not isinstance(elasticity, StVKHencky):
-            raise ValueError(
-                f"plasticity.model = 'drucker_prager' requires elasticity.model = 'stvk_hencky', "
-                f"got {elasticity.name!r}"
-            )
         super().__init__(params, elasticity)
         self.alpha = params.alpha
 

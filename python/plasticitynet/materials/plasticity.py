@@ -19,8 +19,19 @@ class PlasticityModel:
     name = ""
     #: Branch codes this model can take.
     BRANCHES: tuple[int, ...] = (ELASTIC,)
+    #: The parameter dataclass this model takes (None: no parameters).
+    PARAMS: type | None = None
+    #: The elasticity model the projection is exact for (None: any).
+    REQUIRED_ELASTICITY: type | None = None
 
     def __init__(self, params, elasticity: ElasticityModel):
+        if self.PARAMS is not None and not isinstance(params, self.PARAMS):
+            raise ValueError(f"plasticity: expected {self.PARAMS.__name__}, got {type(params).__name__}")
+        if self.REQUIRED_ELASTICITY is not None and not isinstance(elasticity, self.REQUIRED_ELASTICITY):
+            raise ValueError(
+                f"plasticity.model = {self.name!r} requires elasticity.model = {self.REQUIRED_ELASTICITY.name!r}, "
+                f"got {elasticity.name!r}"
+            )
         self.params = params
         self.elasticity = elasticity
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 
 from .branches import ELASTIC, YIELD
-from .elasticity import ElasticityModel, StVKHencky
+from .elasticity import StVKHencky
 from .params import VonMisesParams
 from .plasticity import PlasticityModel
 
@@ -23,11 +23,7 @@ MAX_BISECTION_STEPS = 80
 class VonMises(PlasticityModel):
     name = "von_mises"
     BRANCHES = (ELASTIC, YIELD)
-
-    def __init__(self, params: VonMisesParams, elasticity: ElasticityModel):
-        if not isinstance(params, VonMisesParams):
-            raise ValueError(f"plasticity: expected VonMisesParams, got {type(params).__name__}")
-        super().__init__(params, elasticity)
+    PARAMS = VonMisesParams
 
     def _checked(self, Sigma, h):
         Sigma, h = super()._checked(Sigma, h)
