@@ -1,0 +1,151 @@
+#include "pnet/energy/neural_elastoplastic.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "pnet/math/psd.hpp"
+
+namespace pnet {
+
+template <int dim>
+NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model, const Options& options)
+    : net_([&] {
+          const ModelMetadata& meta = model.metadata;
+          if (meta.kind != ModelKind::Energy)
+              throw std::invalid_argument(model.path + ": a model of kind \"" + to_string(meta.kind) +
+                                          "\", not an energy");
+          if (meta.dim != dim)
+              throw std::invalid_argument(model.path + ": a " + std::to_string(meta.dim) + "D energy where a " +
+                                          std::to_string(dim) + "D one is needed");
+          if (!FusedMlp::supports(model.weights.widths, kM))
+              throw std::invalid_argument(model.path + ": no fused kernel for this architecture; compiled: " +
+                                          FusedMlp::supported_architectures());
+          return FusedMlp(model.weights, kM);
+      }()),
+      training_material_(model.metadata.material),
+      has_hardening_(model.metadata.has_hardening),
+      input_width_(model.metadata.input_width()),
+      E_(options.youngs_modulus / model.metadata.training_E),
+      w_(options.regularizer_weight),
+      mu_train_(model.metadata.material.elastic.mu()) {
+    if (!(std::isfinite(options.youngs_modulus) && options.youngs_modulus > 0.0))
+        throw std::invalid_argument(model.path + ": Young's modulus must be a positive number of Pa, got " +
+                                    std::to_string(options.youngs_modulus));
+    if (!(std::isfinite(w_) && w_ >= 0.0))
+        throw std::invalid_argument("regularizer weight w must be >= 0, got " + std::to_string(w_));
+    if (model.metadata.learned_return_map()) {
+        if (!model.return_map)
+            throw std::invalid_argument(model.path + ": trained with the learned return mapping " +
+                                        model.metadata.return_map_file + ", which was not loaded");
+        return_map_ = std::make_shared<const LearnedReturnMap<dim>>(*model.return_map);
+    }
+}
+
+template <int dim>
+Mat<dim> NeuralElastoplasticEnergy<dim>::elastoplastic_stress(const Mat<dim>& F, double hardening) const {
+    const Mat<dim> P = return_map_ ? return_map_->elastoplastic_stress(F, hardening)
+                                   : training_material_.elastoplastic_stress(F, hardening);
+    return E_ * P;
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const double* hardening, std::size_t n) {
+    F0_.assign(F0, F0 + n);
+    c_.resize(n);
+    inputs_.assign(n * input_width_, 0.0);
+    net_value_.resize(n);
+    net_gradient_.resize(n * kM);
+    const double h0 = training_material_.description().initial_hardening;
+    auto h_of = [&](std::size_t p) { return hardening ? hardening[p] : h0; };
+    for (std::size_t p = 0; p < n; ++p) {
+        double* x = &inputs_[p * input_width_];
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) x[i * dim + j] = x[kM + i * dim + j] = F0[p](i, j);
+        if (has_hardening_) x[2 * kM] = h_of(p);
+    }
+    // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
+    net_.evaluate(inputs_.data(), n, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+#pragma omp parallel for schedule(static) if (count >= 64)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        const double h = h_of(p);
+        const Mat<dim> P = return_map_ ? return_map_->elastoplastic_stress(F0[p], h)
+                                       : training_material_.elastoplastic_stress(F0[p], h);
+        for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - P(k / dim, k % dim);
+    }
+}
+
+template <int dim>
+Mat<dim> NeuralElastoplasticEnergy<dim>::correction(std::size_t p) const {
+    Mat<dim> c;
+    for (int k = 0; k < kM; ++k) c(k / dim, k % dim) = E_ * c_.at(p)[k];
+    return c;
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::load_inputs(const Mat<dim>* F) const {
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        double* x = &inputs_[p * input_width_];
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) x[i * dim + j] = F[p](i, j);
+    }
+}
+
+/// psi = E (N - c : F + w mu/2 |F - F0|^2); gradient = E (grad N - c + w mu (F - F0)).
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
+    const double wmu = w_ * mu_train_;
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
+#pragma omp parallel for schedule(static) if (count >= 1024)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        double cF = 0.0, dF2 = 0.0;
+        for (int k = 0; k < kM; ++k) {
+            const double Fk = F[p](k / dim, k % dim), dFk = Fk - F0_[p](k / dim, k % dim);
+            cF += c_[p][k] * Fk;
+            dF2 += dFk * dFk;
+            if (gradient) (*(gradient + p))(k / dim, k % dim) = E_ * (net_gradient_[p * kM + k] - c_[p][k] + wmu * dFk);
+        }
+        psi[p] = E_ * (net_value_[p] - cF + 0.5 * wmu * dF2);
+    }
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const {
+    load_inputs(F);
+    net_.evaluate(inputs_.data(), size(), FusedMlp::Order::Value, net_value_.data());
+    finish(F, psi, nullptr);
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
+    load_inputs(F);
+    net_.evaluate(inputs_.data(), size(), FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
+    finish(F, psi, gradient);
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, double* psi, Mat<dim>* gradient,
+                                                            Tensor4<dim>* hessian, bool project_psd) const {
+    static_assert(sizeof(Tensor4<dim>) == kM * kM * sizeof(double), "Tensor4 must be a plain d^2 x d^2 array");
+    load_inputs(F);
+    // Hess_F N is symmetric, so the kernel's row-major output is also the
+    // column-major Eigen matrix.
+    net_.evaluate(inputs_.data(), size(), FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
+                  reinterpret_cast<double*>(hessian));
+    finish(F, psi, gradient);
+    const double wmu = w_ * mu_train_;
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
+#pragma omp parallel for schedule(static) if (count >= 256)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        Tensor4<dim>& H = hessian[p];
+        H.diagonal().array() += wmu;
+        H *= E_;
+        if (project_psd) H = pnet::project_psd<kM>(H);
+    }
+}
+
+template class NeuralElastoplasticEnergy<2>;
+template class NeuralElastoplasticEnergy<3>;
+
+}  // namespace pnet

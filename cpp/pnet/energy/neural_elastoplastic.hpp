@@ -1,0 +1,87 @@
+#pragma once
+// The PlasticityNet elastoplastic energy of one particle or element (paper
+// eqs. 8 and 11, DESIGN.md §3), evaluated in batches with the fused MLP kernel:
+//
+//   Psi(F; F0, h) = E [ N(F, F0, h) - c : F + w mu/2 ||F - F0||^2 ],
+//   c = grad_F N(F0, F0, h) - Ptilde(F0, h),
+//
+// so that grad_F Psi(F0) = E Ptilde(F0, h) exactly. N, Ptilde and mu are at
+// the training Young's modulus (1: the net is dimensionless) and E is the
+// scene's. c is computed once per optimization (set_reference()); within it,
+// the line search asks for values, Newton for gradients and Hessians
+//   d2 Psi / dF2 = E [ Hess_F N + w mu I ]   (d^2 x d^2, row-major vec(F) basis),
+// optionally projected to positive semi-definite (eigenvalue clamp).
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+#include "pnet/material/material.hpp"
+#include "pnet/math/types.hpp"
+#include "pnet/nn/fused_mlp.hpp"
+#include "pnet/nn/learned_return_map.hpp"
+#include "pnet/nn/model_file.hpp"
+
+namespace pnet {
+
+template <int dim>
+class NeuralElastoplasticEnergy {
+public:
+    static constexpr int kM = dim * dim;
+
+    struct Options {
+        double youngs_modulus = 1.0;     // E of the scene's material, Pa
+        double regularizer_weight = 1.0; // w of eq. 11 (0: the paper's eq. 8 alone)
+    };
+
+    /// Throws std::invalid_argument (naming the model file) unless `model` is a
+    /// dim-D energy with a compiled kernel, E > 0 and w >= 0.
+    NeuralElastoplasticEnergy(const ModelFile& model, const Options& options);
+
+    /// Starts an optimization: the reference state (F0, h) of n particles and
+    /// their constants c. h is ignored by models without hardening input.
+    void set_reference(const Mat<dim>* F0, const double* hardening, std::size_t n);
+    std::size_t size() const { return F0_.size(); }
+
+    /// Psi per particle (the line search).
+    void value(const Mat<dim>* F, double* psi) const;
+    /// Psi and grad_F Psi per particle.
+    void value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const;
+    /// Psi, grad_F Psi and the d^2 x d^2 Hessian per particle (symmetric),
+    /// projected to PSD when project_psd.
+    void value_gradient_hessian(const Mat<dim>* F, double* psi, Mat<dim>* gradient, Tensor4<dim>* hessian,
+                                bool project_psd) const;
+
+    /// E Ptilde(F, h) with the model's return mapping (analytic or learned).
+    Mat<dim> elastoplastic_stress(const Mat<dim>& F, double hardening) const;
+    /// E c of particle p (set_reference()).
+    Mat<dim> correction(std::size_t p) const;
+
+    double youngs_modulus() const { return E_; }
+    /// Shear modulus of the scene's material, Pa.
+    double mu() const { return E_ * mu_train_; }
+    const FusedMlp& network() const { return net_; }
+    bool has_hardening() const { return has_hardening_; }
+    const LearnedReturnMap<dim>* learned_return_map() const { return return_map_.get(); }
+
+private:
+    /// Writes vec(F) of every particle into the network inputs.
+    void load_inputs(const Mat<dim>* F) const;
+    void finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const;
+
+    FusedMlp net_;
+    Material<dim> training_material_;
+    std::shared_ptr<const LearnedReturnMap<dim>> return_map_;
+    bool has_hardening_;
+    int input_width_;
+    double E_;          // scene E / training E
+    double w_;
+    double mu_train_;   // shear modulus at the training E
+
+    std::vector<Mat<dim>> F0_;
+    std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)
+    // Work arrays, sized by set_reference(): one evaluation at a time per object
+    // (each evaluation is itself threaded).
+    mutable std::vector<double> inputs_, net_value_, net_gradient_;
+};
+
+}  // namespace pnet

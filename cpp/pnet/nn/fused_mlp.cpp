@@ -1,0 +1,291 @@
+#include "pnet/nn/fused_mlp.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "pnet/nn/simd.hpp"
+
+namespace pnet {
+
+namespace {
+
+using simd::kLanes;
+using simd::Vd;
+
+/// Largest of 4, 3, 2, 1 dividing n: rows per register block.
+constexpr int row_block(int n) { return n % 4 == 0 ? 4 : n % 3 == 0 ? 3 : n % 2 == 0 ? 2 : 1; }
+
+/// out[j] = bias[j] + sum_i A[j][i] v[i] for j < Rows (bias may be null), with
+/// the rows in register blocks so that each v[i] is loaded once per block.
+template <int Rows, int Cols>
+inline void gemv(const double (&A)[Rows][Cols], const double* bias, const Vd* v, Vd* out) {
+    constexpr int R = row_block(Rows);
+    for (int j = 0; j < Rows; j += R) {
+        Vd acc[R];
+        for (int r = 0; r < R; ++r) acc[r] = simd::splat(bias ? bias[j + r] : 0.0);
+        for (int i = 0; i < Cols; ++i) {
+            const Vd vi = v[i];
+#pragma GCC unroll 4
+            for (int r = 0; r < R; ++r) acc[r] += A[j + r][i] * vi;
+        }
+        for (int r = 0; r < R; ++r) out[j + r] = acc[r];
+    }
+}
+
+/// Rows of the tangent product J = A T (A: W x W scalars, T: W x M lanes),
+/// handed to row(j, J[j]) as they are formed; R rows share each load of T[i].
+template <int W, int M, class RowFn>
+inline void tangent_rows(const double (&A)[W][W], const Vd (*T)[M], RowFn&& row) {
+    constexpr int R = M <= 4 ? 2 : 1;
+    static_assert(W % R == 0);
+    for (int j = 0; j < W; j += R) {
+        Vd acc[R][M];
+        for (int r = 0; r < R; ++r)
+            for (int c = 0; c < M; ++c) acc[r][c] = simd::splat(0.0);
+        for (int i = 0; i < W; ++i) {
+#pragma GCC unroll 16
+            for (int c = 0; c < M; ++c) {
+                const Vd t = T[i][c];
+#pragma GCC unroll 4
+                for (int r = 0; r < R; ++r) acc[r][c] += A[j + r][i] * t;
+            }
+        }
+        for (int r = 0; r < R; ++r) row(j + r, acc[r]);
+    }
+}
+
+/// H += D J J^T on the upper triangle (pairs c <= e, row by row).
+template <int M>
+inline void add_outer(Vd* H, Vd D, const Vd* J) {
+    int p = 0;
+    for (int c = 0; c < M; ++c) {
+        const Vd s = D * J[c];
+        for (int e = c; e < M; ++e) H[p++] += s * J[e];
+    }
+}
+
+/// Networks [In, W, W, W, 1] (three SiLU hidden layers of width W, Table 2),
+/// derivatives in the first M inputs.
+template <int In, int W, int M>
+class Kernel final : public FusedMlp::Kernel {
+public:
+    static constexpr int kPairs = M * (M + 1) / 2;
+    static constexpr int kM = M > 0 ? M : 1;  // array extents must be positive
+    static constexpr int kP = kPairs > 0 ? kPairs : 1;
+
+    explicit Kernel(const MlpWeights& w) {
+        for (int j = 0; j < W; ++j) {
+            for (int i = 0; i < In; ++i) W1[j][i] = w.weight[0][j * In + i];
+            b1[j] = w.bias[0][j];
+            b2[j] = w.bias[1][j];
+            b3[j] = w.bias[2][j];
+            w4[j] = w.weight[3][j];
+            for (int i = 0; i < W; ++i) {
+                W2[j][i] = w.weight[1][j * W + i];
+                W3[j][i] = w.weight[2][j * W + i];
+                W2T[i][j] = W2[j][i];
+                W3T[i][j] = W3[j][i];
+            }
+        }
+        b4 = w.bias[3][0];
+        for (int j = 0; j < W; ++j)
+            for (int c = 0; c < M; ++c) {
+                W1F[j][c] = W1[j][c];
+                W1FT[c][j] = W1[j][c];
+            }
+        for (int j = 0; j < W; ++j) {
+            int p = 0;
+            for (int c = 0; c < M; ++c)
+                for (int e = c; e < M; ++e) P1[j][p++] = W1F[j][c] * W1F[j][e];
+        }
+    }
+
+    void evaluate(const double* x, std::size_t rows, FusedMlp::Order order, double* value, double* gradient,
+                  double* hessian) const override {
+        const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((rows + kLanes - 1) / kLanes);
+#pragma omp parallel for schedule(static) if (blocks >= 16)
+        for (std::ptrdiff_t b = 0; b < blocks; ++b) {
+            const std::size_t first = static_cast<std::size_t>(b) * kLanes;
+            const int lanes = static_cast<int>(std::min<std::size_t>(kLanes, rows - first));
+            block(x + first * In, lanes, order, value + first, gradient ? gradient + first * M : nullptr,
+                  hessian ? hessian + first * M * M : nullptr);
+        }
+    }
+
+private:
+    void block(const double* x, int lanes, FusedMlp::Order order, double* value, double* gradient,
+               double* hessian) const {
+        using Order = FusedMlp::Order;
+        const bool need_gradient = M > 0 && order != Order::Value;
+        const bool need_hessian = M > 0 && order == Order::Hessian;
+
+        // Inputs, one row per lane (a short last block repeats its last row).
+        Vd in[In];
+        for (int l = 0; l < kLanes; ++l) {
+            const double* row = x + std::min(l, lanes - 1) * In;
+            for (int i = 0; i < In; ++i) in[i][l] = row[i];
+        }
+
+        // Forward: z_k, a_k = silu(z_k), d_k = silu'(z_k), dd_k = silu''(z_k).
+        Vd z[W], a1[W], a2[W], a3[W], d1[W], d2[W], d3[W], dd1[W], dd2[W], dd3[W];
+        auto activate = [&](Vd* a, Vd* d, Vd* dd) {
+            if (!need_gradient) {
+                for (int j = 0; j < W; ++j) a[j] = simd::silu(z[j]);
+                return;
+            }
+            for (int j = 0; j < W; ++j) {
+                const simd::Silu s = simd::silu_with_derivatives(z[j]);
+                a[j] = s.value;
+                d[j] = s.d1;
+                dd[j] = s.d2;
+            }
+        };
+        gemv(W1, b1, in, z);
+        activate(a1, d1, dd1);
+        gemv(W2, b2, a1, z);
+        activate(a2, d2, dd2);
+        gemv(W3, b3, a2, z);
+        activate(a3, d3, dd3);
+        Vd N = simd::splat(b4);
+        for (int j = 0; j < W; ++j) N += w4[j] * a3[j];
+        for (int l = 0; l < lanes; ++l) value[l] = N[l];
+        if (!need_gradient) return;
+
+        // Backward: g_2 = W3^T delta_3, g_1 = W2^T delta_2, grad = W1F^T delta_1.
+        Vd delta[W], g2[W], g1[W], grad[kM];
+        for (int j = 0; j < W; ++j) delta[j] = w4[j] * d3[j];
+        gemv(W3T, nullptr, delta, g2);
+        for (int j = 0; j < W; ++j) delta[j] = g2[j] * d2[j];
+        gemv(W2T, nullptr, delta, g1);
+        for (int j = 0; j < W; ++j) delta[j] = g1[j] * d1[j];
+        gemv(W1FT, nullptr, delta, grad);
+        for (int l = 0; l < lanes; ++l)
+            for (int c = 0; c < M; ++c) gradient[l * M + c] = grad[c][l];
+        if (!need_hessian) return;
+
+        // Hessian: sum over layers of J_k^T diag(g_k silu''(z_k)) J_k.
+        Vd H[kP];
+        for (int p = 0; p < kPairs; ++p) H[p] = simd::splat(0.0);
+        // Layer 1: J_1 = W1F is the same for every lane; P1 holds its products.
+        {
+            constexpr int C = 8;  // pairs per register block
+            for (int p0 = 0; p0 < kPairs; p0 += C) {
+                const int count = std::min(C, kPairs - p0);
+                Vd acc[C];
+                for (int q = 0; q < C; ++q) acc[q] = simd::splat(0.0);
+                for (int j = 0; j < W; ++j) {
+                    const Vd D = g1[j] * dd1[j];
+#pragma GCC unroll 8
+                    for (int q = 0; q < C; ++q)
+                        if (q < count) acc[q] += D * P1[j][p0 + q];
+                }
+                for (int q = 0; q < count; ++q) H[p0 + q] += acc[q];
+            }
+        }
+        // Layers 2 and 3: tangents T_k = diag(d_k) J_k of the previous layer.
+        Vd T1[W][kM], T2[W][kM];
+        for (int i = 0; i < W; ++i)
+            for (int c = 0; c < M; ++c) T1[i][c] = d1[i] * W1F[i][c];
+        tangent_rows<W, kM>(W2, T1, [&](int j, const Vd* J) {
+            add_outer<M>(H, g2[j] * dd2[j], J);
+            for (int c = 0; c < M; ++c) T2[j][c] = d2[j] * J[c];
+        });
+        tangent_rows<W, kM>(W3, T2, [&](int j, const Vd* J) { add_outer<M>(H, w4[j] * dd3[j], J); });
+
+        for (int l = 0; l < lanes; ++l) {
+            double* out = hessian + l * M * M;
+            int p = 0;
+            for (int c = 0; c < M; ++c)
+                for (int e = c; e < M; ++e, ++p) out[c * M + e] = out[e * M + c] = H[p][l];
+        }
+    }
+
+    double W1[W][In], b1[W], W2[W][W], b2[W], W3[W][W], b3[W], w4[W], b4;
+    double W2T[W][W], W3T[W][W];
+    double W1F[W][kM], W1FT[kM][W], P1[W][kP];
+};
+
+using KernelFactory = std::shared_ptr<const FusedMlp::Kernel> (*)(const MlpWeights&);
+
+struct Architecture {
+    int input_width, hidden_width, derivative_inputs;
+    KernelFactory make;
+};
+
+template <int In, int W, int M>
+std::shared_ptr<const FusedMlp::Kernel> make_kernel(const MlpWeights& w) {
+    return std::make_shared<const Kernel<In, W, M>>(w);
+}
+
+// The shapes of Table 2: energy nets [2d^2 (+1 for h), W, W, W, 1] with
+// derivatives in the d^2 entries of F, and return-mapping nets [d + 1, W, W, W, 1].
+constexpr Architecture kArchitectures[] = {
+    {8, 32, 4, make_kernel<8, 32, 4>},    {9, 32, 4, make_kernel<9, 32, 4>},
+    {18, 64, 9, make_kernel<18, 64, 9>},  {19, 64, 9, make_kernel<19, 64, 9>},
+    {3, 32, 0, make_kernel<3, 32, 0>},    {4, 64, 0, make_kernel<4, 64, 0>},
+};
+
+const Architecture* find_architecture(const std::vector<int>& widths, int derivative_inputs) {
+    if (widths.size() != 5 || widths[1] != widths[2] || widths[2] != widths[3] || widths[4] != 1) return nullptr;
+    for (const Architecture& a : kArchitectures)
+        if (a.input_width == widths[0] && a.hidden_width == widths[1] && a.derivative_inputs == derivative_inputs)
+            return &a;
+    return nullptr;
+}
+
+}  // namespace
+
+FusedMlp::FusedMlp(const MlpWeights& weights, int derivative_inputs)
+    : widths_(weights.widths), input_width_(weights.input_width()), derivative_inputs_(derivative_inputs) {
+    weights.validate("FusedMlp");
+    const Architecture* a = find_architecture(weights.widths, derivative_inputs);
+    if (!a) {
+        std::string shape = "[";
+        for (std::size_t k = 0; k < widths_.size(); ++k) shape += (k ? ", " : "") + std::to_string(widths_[k]);
+        throw std::invalid_argument("no fused kernel for widths " + shape + "] with derivatives in " +
+                                    std::to_string(derivative_inputs) + " inputs; compiled: " +
+                                    supported_architectures());
+    }
+    kernel_ = a->make(weights);
+}
+
+std::string FusedMlp::supported_architectures() {
+    std::string s;
+    for (const Architecture& a : kArchitectures) {
+        if (!s.empty()) s += ", ";
+        s += "[" + std::to_string(a.input_width);
+        for (int k = 0; k < 3; ++k) s += ", " + std::to_string(a.hidden_width);
+        s += ", 1] (m = " + std::to_string(a.derivative_inputs) + ")";
+    }
+    return s;
+}
+
+bool FusedMlp::supports(const std::vector<int>& widths, int derivative_inputs) {
+    return find_architecture(widths, derivative_inputs) != nullptr;
+}
+
+void FusedMlp::evaluate(const double* x, std::size_t rows, Order order, double* value, double* gradient,
+                        double* hessian) const {
+    if (rows == 0) return;
+    if (!x || !value) throw std::invalid_argument("FusedMlp::evaluate: null input or value array");
+    if (order != Order::Value && derivative_inputs_ > 0 && !gradient)
+        throw std::invalid_argument("FusedMlp::evaluate: the gradient array is required for this order");
+    if (order == Order::Hessian && derivative_inputs_ > 0 && !hessian)
+        throw std::invalid_argument("FusedMlp::evaluate: the Hessian array is required for Order::Hessian");
+    kernel_->evaluate(x, rows, order, value, gradient, hessian);
+}
+
+double FusedMlp::flops_per_row(Order order) const {
+    const double in = input_width_, W = widths_[1], m = derivative_inputs_;
+    const double pairs = m * (m + 1) / 2;
+    double fma = in * W + 2 * W * W + W;  // forward
+    if (order != Order::Value && m > 0) fma += 2 * W * W + m * W;  // backward
+    if (order == Order::Hessian && m > 0)
+        fma += W * pairs                     // layer 1
+               + 2 * (W * W * m)             // tangents J_2, J_3
+               + 2 * W * (m + pairs)         // outer products of layers 2, 3
+               + 2 * W * m;                  // T_1, T_2 scaling
+    return 2 * fma;
+}
+
+}  // namespace pnet

@@ -1,0 +1,176 @@
+#include "pnet/nn/model_file.hpp"
+
+#include <filesystem>
+#include <fstream>
+
+#include "pnet/material/material_json.hpp"
+
+namespace pnet {
+
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr const char* kFormat = "plasticitynet-model";
+constexpr int kFormatVersion = 1;
+constexpr const char* kManifestFormat = "plasticitynet-manifest";
+
+[[noreturn]] void fail(const std::string& context, const std::string& field, const std::string& problem) {
+    throw std::invalid_argument(context + ": metadata." + field + ": " + problem);
+}
+
+const json& field(const json& j, const std::string& key, const std::string& context) {
+    if (!j.contains(key)) fail(context, key, "missing");
+    return j.at(key);
+}
+
+int integer(const json& j, const std::string& key, const std::string& context) {
+    const json& v = field(j, key, context);
+    if (!v.is_number_integer()) fail(context, key, std::string("expected an integer, got ") + v.dump());
+    return v.get<int>();
+}
+
+std::string text(const json& j, const std::string& key, const std::string& context) {
+    const json& v = field(j, key, context);
+    if (!v.is_string()) fail(context, key, std::string("expected a string, got ") + v.dump());
+    return v.get<std::string>();
+}
+
+std::string widths_string(const std::vector<int>& widths) {
+    std::string s = "[";
+    for (std::size_t k = 0; k < widths.size(); ++k) s += (k ? ", " : "") + std::to_string(widths[k]);
+    return s + "]";
+}
+
+}  // namespace
+
+std::string to_string(ModelKind kind) { return kind == ModelKind::Energy ? "energy" : "return_map"; }
+
+ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
+    if (!j.is_object()) throw std::invalid_argument(context + ": metadata.json is not a JSON object");
+    ModelMetadata meta;
+    meta.json = j;
+
+    const std::string format = text(j, "format", context);
+    if (format != kFormat) fail(context, "format", "\"" + format + "\" is not \"" + kFormat + "\"");
+    const int version = integer(j, "format_version", context);
+    if (version != kFormatVersion)
+        fail(context, "format_version",
+             std::to_string(version) + " is not supported (this build reads version " +
+                 std::to_string(kFormatVersion) + ")");
+
+    const std::string kind = text(j, "kind", context);
+    if (kind == "energy")
+        meta.kind = ModelKind::Energy;
+    else if (kind == "return_map")
+        meta.kind = ModelKind::ReturnMap;
+    else
+        fail(context, "kind", "\"" + kind + "\" is not \"energy\" or \"return_map\"");
+
+    meta.dim = integer(j, "dim", context);
+    if (meta.dim != 2 && meta.dim != 3) fail(context, "dim", std::to_string(meta.dim) + " is not 2 or 3");
+    const int d = meta.dim;
+
+    const json& widths = field(j, "widths", context);
+    if (!widths.is_array() || widths.size() < 2) fail(context, "widths", "expected a list of at least 2 widths");
+    for (const json& w : widths) {
+        if (!w.is_number_integer() || w.get<int>() <= 0) fail(context, "widths", "expected positive integers");
+        meta.widths.push_back(w.get<int>());
+    }
+    if (meta.widths.back() != 1) fail(context, "widths", widths_string(meta.widths) + " must end in 1");
+    const int input_width = integer(j, "input_width", context);
+    if (input_width != meta.widths.front())
+        fail(context, "input_width",
+             std::to_string(input_width) + " differs from widths " + widths_string(meta.widths));
+
+    if (meta.kind == ModelKind::Energy) {
+        const json& h = field(j, "has_hardening", context);
+        if (!h.is_boolean()) fail(context, "has_hardening", "expected true or false");
+        meta.has_hardening = h.get<bool>();
+        const int expected = 2 * d * d + (meta.has_hardening ? 1 : 0);
+        if (input_width != expected)
+            fail(context, "input_width",
+                 std::to_string(input_width) + ": a " + std::to_string(d) + "D energy " +
+                     (meta.has_hardening ? "with" : "without") + " hardening takes [vec F, vec F0" +
+                     (meta.has_hardening ? ", h" : "") + "], " + std::to_string(expected) + " inputs");
+    } else if (input_width != d + 1) {
+        fail(context, "input_width",
+             std::to_string(input_width) + ": a " + std::to_string(d) + "D return map takes [Sigma, h], " +
+                 std::to_string(d + 1) + " inputs");
+    }
+
+    const std::string activation = text(j, "activation", context);
+    if (activation != "silu") fail(context, "activation", "\"" + activation + "\" is not supported (only \"silu\")");
+
+    const json& params = field(j, "layer_parameters", context);
+    if (!params.is_array() || params.size() != meta.widths.size() - 1)
+        fail(context, "layer_parameters",
+             "expected " + std::to_string(meta.widths.size() - 1) + " [weight, bias] name pairs");
+    for (const json& pair : params)
+        if (!pair.is_array() || pair.size() != 2 || !pair[0].is_string() || !pair[1].is_string())
+            fail(context, "layer_parameters", "expected [weight name, bias name] pairs, got " + pair.dump());
+
+    const json& E = field(j, "training_E", context);
+    if (!E.is_number() || !(E.get<double>() > 0.0)) fail(context, "training_E", "expected a positive number");
+    meta.training_E = E.get<double>();
+
+    const json& material = field(j, "material", context);
+    try {
+        meta.material = material_from_json(material, "metadata.material");
+        meta.material.validate();
+        if (d == 2)
+            Material<2>{meta.material};
+        else
+            Material<3>{meta.material};
+    } catch (const std::invalid_argument& e) {
+        throw std::invalid_argument(context + ": " + e.what());
+    }
+    if (meta.material.elastic.E != meta.training_E)
+        fail(context, "material.elasticity.E", "differs from training_E");
+
+    if (meta.kind == ModelKind::Energy && j.contains("return_map")) {
+        const json& rm = j.at("return_map");
+        if (!rm.is_object() || !rm.contains("type") || !rm.at("type").is_string())
+            fail(context, "return_map", "expected {\"type\": \"analytic\"} or {\"type\": \"learned\", ...}");
+        const std::string type = rm.at("type").get<std::string>();
+        if (type == "learned") {
+            meta.return_map_file = text(rm, "file", context + ": metadata.return_map");
+            meta.return_map_sha256 = text(rm, "sha256", context + ": metadata.return_map");
+            if (meta.return_map_file.empty()) fail(context, "return_map.file", "empty");
+        } else if (type != "analytic") {
+            fail(context, "return_map.type", "\"" + type + "\" is not \"analytic\" or \"learned\"");
+        }
+    }
+    return meta;
+}
+
+std::optional<std::string> manifest_sha256(const std::string& model_path) {
+    const fs::path path(model_path);
+    const fs::path manifest = path.parent_path().empty() ? fs::path("MANIFEST") : path.parent_path() / "MANIFEST";
+    if (!fs::is_regular_file(manifest)) return std::nullopt;
+    std::ifstream in(manifest);
+    json j;
+    try {
+        j = json::parse(in);
+    } catch (const json::exception& e) {
+        throw std::invalid_argument(manifest.string() + ": not valid JSON (" + e.what() + ")");
+    }
+    auto bad = [&](const std::string& problem) {
+        throw std::invalid_argument(manifest.string() + ": " + problem);
+    };
+    if (!j.is_object() || j.value("format", "") != kManifestFormat)
+        bad(std::string("expected an object with \"format\": \"") + kManifestFormat + "\"");
+    if (!j.contains("models") || !j.at("models").is_array()) bad("\"models\": expected a list");
+    const std::string name = path.filename().string();
+    for (std::size_t i = 0; i < j.at("models").size(); ++i) {
+        const json& entry = j.at("models")[i];
+        if (!entry.is_object() || !entry.contains("file") || !entry.at("file").is_string() ||
+            !entry.contains("sha256") || !entry.at("sha256").is_string())
+            bad("models[" + std::to_string(i) + "]: expected {\"file\": ..., \"sha256\": ...}");
+        if (entry.at("file").get<std::string>() == name) return entry.at("sha256").get<std::string>();
+    }
+    return std::nullopt;
+}
+
+}  // namespace pnet

@@ -1,0 +1,105 @@
+#pragma once
+// PlasticityNet model files: the TorchScript archives written by
+// python/plasticitynet/training/export.py, with a JSON entry "metadata.json" in
+// `_extra_files` (format "plasticitynet-model", version 1). A file's forward(x)
+// is the raw MLP N(x); the consumer applies the energy of DESIGN.md §3 or the
+// return-mapping clamp of eq. 12.
+//
+// TorchScript archives are code to LibTorch, so a file is read only if it is
+// pinned by sha256 in a MANIFEST beside it (models/MANIFEST) or the caller
+// says it trusts it. Reading the archive itself is in torchscript.cpp, the one
+// translation unit that includes LibTorch headers; this part has none.
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "pnet/material/material.hpp"
+#include "pnet/nn/mlp_weights.hpp"
+
+namespace pnet {
+
+/// A file that does not exist (FileNotFoundError in Python).
+class FileNotFoundError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+/// A model file neither pinned by a MANIFEST nor trusted by the caller.
+class UntrustedModelError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+enum class ModelKind { Energy, ReturnMap };
+
+/// "energy" or "return_map".
+std::string to_string(ModelKind kind);
+
+struct ModelMetadata {
+    ModelKind kind = ModelKind::Energy;
+    int dim = 2;
+    std::vector<int> widths;
+    bool has_hardening = false;         // energy: the input ends with h
+    double training_E = 1.0;            // Pa; the net is dimensionless, scaled by the scene's E
+    MaterialDescription material;       // at the training E
+    /// Energy models trained with the learned return mapping name its file
+    /// (relative to the model's folder) and pin its sha256.
+    std::string return_map_file, return_map_sha256;
+    nlohmann::json json;                // the whole metadata entry
+
+    int input_width() const { return widths.empty() ? 0 : widths.front(); }
+    /// Inputs the simulator differentiates in: d^2 (F) for an energy, 0 otherwise.
+    int derivative_inputs() const { return kind == ModelKind::Energy ? dim * dim : 0; }
+    bool learned_return_map() const { return !return_map_file.empty(); }
+};
+
+/// Parses and validates the metadata entry; std::invalid_argument naming
+/// `context` (the file) and the field on any problem: unknown format or
+/// version, kind, dim, widths (input width 2d^2 or 2d^2+1 for an energy, d+1
+/// for a return map; output 1), activation other than "silu", layer parameter
+/// names, material (validated as a material description of this dimension),
+/// training_E, return_map reference.
+ModelMetadata parse_model_metadata(const nlohmann::json& j, const std::string& context);
+
+struct LoadOptions {
+    /// Load a file that no MANIFEST pins (only files whose origin you trust:
+    /// LibTorch runs the code inside).
+    bool trusted = false;
+    /// Reject a model of another dimension (0: any).
+    int expected_dim = 0;
+    /// Reject a model of another kind.
+    std::optional<ModelKind> expected_kind;
+};
+
+/// A loaded, validated model: metadata and the layer weights (float64).
+struct ModelFile {
+    std::string path;
+    std::string sha256;
+    bool pinned = false;  // sha256 matched a MANIFEST entry
+    ModelMetadata metadata;
+    MlpWeights weights;
+    /// An energy's learned return mapping (loaded beside it, pinned by the
+    /// sha256 in the energy's metadata); null for the analytic one.
+    std::shared_ptr<const ModelFile> return_map;
+};
+
+/// The sha256 that a MANIFEST in the model's folder pins for its file name, if
+/// any. Throws std::invalid_argument naming the MANIFEST if it is malformed.
+std::optional<std::string> manifest_sha256(const std::string& model_path);
+
+/// Reads a model file (torchscript.cpp): checks trust (MANIFEST sha256 or
+/// options.trusted), loads the archive with torch::jit::load, validates the
+/// metadata, extracts the weights of the named layer parameters (shapes must
+/// chain as the widths say, values finite; float32 weights are widened), and
+/// checks that the module's forward() computes the MLP those weights describe
+/// on probe inputs (so a module with another activation or extra terms is
+/// refused). An energy with a learned return mapping loads that file too.
+/// Errors: FileNotFoundError, UntrustedModelError, std::invalid_argument; each
+/// message starts with the path.
+ModelFile load_model_file(const std::string& path, const LoadOptions& options = {});
+
+}  // namespace pnet

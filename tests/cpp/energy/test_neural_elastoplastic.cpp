@@ -1,0 +1,265 @@
+// The PlasticityNet energy on the shipped models: grad Psi(F0) = E Ptilde(F0)
+// by construction, derivatives against finite differences, the PSD
+// projection, and the Python implementation (tests/data/energy_vectors_python.json,
+// written by scripts/gen_energy_vectors.py) to 1e-10.
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "pnet/energy/neural_elastoplastic.hpp"
+#include "pnet/math/psd.hpp"
+#include "pnet/nn/learned_return_map.hpp"
+#include "pnet/nn/model_file.hpp"
+#include "support/finite_difference.hpp"
+#include "support/random.hpp"
+
+namespace pnet {
+namespace {
+
+const std::string kModels = PNET_MODELS_DIR;
+
+template <int dim>
+struct Batch {
+    std::vector<Mat<dim>> F, F0;
+    std::vector<double> h;
+};
+
+/// Particles near a reference: F0 = R1 diag(e^eps) R2 (|eps| <= 0.4), F = F0 + 0.03 G.
+template <int dim>
+Batch<dim> make_batch(const ModelMetadata& meta, std::size_t n, unsigned seed) {
+    test::Random random(seed);
+    Batch<dim> b;
+    for (std::size_t p = 0; p < n; ++p) {
+        b.F0.push_back(random.deformation<dim>(0.4));
+        Mat<dim> G;
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) G(i, j) = random.uniform(-1.0, 1.0);
+        b.F.push_back(b.F0.back() + 0.03 * G);
+        const auto plasticity = meta.material.plasticity;
+        b.h.push_back(plasticity == PlasticityModel::VonMises  ? random.uniform(0.02, 0.5)
+                      : plasticity == PlasticityModel::CamClay ? random.uniform(-0.5, 0.0)
+                                                               : 0.0);
+    }
+    return b;
+}
+
+template <int dim>
+Eigen::Matrix<double, dim * dim, 1> as_vec(const Mat<dim>& A) {
+    return flatten<dim>(A);
+}
+
+template <int dim>
+void check_model(const std::string& file) {
+    SCOPED_TRACE(file);
+    constexpr int m = dim * dim;
+    const ModelFile model = load_model_file(kModels + "/" + file);
+    const double E = 3.0e5;
+    NeuralElastoplasticEnergy<dim> energy(model, {E, 1.0});
+    const std::size_t n = 9;
+    Batch<dim> b = make_batch<dim>(model.metadata, n, 17);
+    energy.set_reference(b.F0.data(), b.h.data(), n);
+
+    // grad Psi(F0) = E Ptilde(F0, h), exactly up to round-off.
+    std::vector<double> psi(n);
+    std::vector<Mat<dim>> grad(n);
+    energy.value_gradient(b.F0.data(), psi.data(), grad.data());
+    for (std::size_t p = 0; p < n; ++p) {
+        const Mat<dim> P = energy.elastoplastic_stress(b.F0[p], b.h[p]);
+        EXPECT_LE((grad[p] - P).cwiseAbs().maxCoeff(), 1e-10 * P.cwiseAbs().maxCoeff()) << "particle " << p;
+    }
+
+    // Value, gradient and Hessian of the three entry points agree.
+    std::vector<Tensor4<dim>> hess(n), hess_psd(n);
+    std::vector<double> psi1(n), psi2(n);
+    std::vector<Mat<dim>> grad2(n);
+    energy.value(b.F.data(), psi.data());
+    energy.value_gradient(b.F.data(), psi1.data(), grad.data());
+    energy.value_gradient_hessian(b.F.data(), psi2.data(), grad2.data(), hess.data(), false);
+    EXPECT_EQ(psi, psi1);
+    EXPECT_EQ(psi, psi2);
+    EXPECT_EQ(grad, grad2);
+
+    // Finite differences, particle by particle (the other particles fixed).
+    test::FdStats stats;
+    for (std::size_t p = 0; p < n; ++p) {
+        auto at = [&](const Eigen::VectorXd& v) {
+            std::vector<Mat<dim>> F = b.F;
+            F[p] = unflatten<dim>(v);
+            return F;
+        };
+        auto value = [&](const Eigen::VectorXd& v) {
+            std::vector<double> out(n);
+            energy.value(at(v).data(), out.data());
+            return out[p];
+        };
+        auto gradient = [&](const Eigen::VectorXd& v) {
+            std::vector<double> out(n);
+            std::vector<Mat<dim>> g(n);
+            energy.value_gradient(at(v).data(), out.data(), g.data());
+            return Eigen::VectorXd(as_vec<dim>(g[p]));
+        };
+        const Eigen::VectorXd x = as_vec<dim>(b.F[p]);
+        EXPECT_TRUE(test::check_gradient(value, as_vec<dim>(grad[p]), x, stats, 1e-6, 1e-6, 1e-3 * E));
+        EXPECT_TRUE(test::check_jacobian(gradient, Eigen::MatrixXd(hess[p]), x, stats, 1e-6, 1e-6, 1e-3 * E));
+    }
+    EXPECT_EQ(stats.checks, static_cast<int>(n) * (m + m * m));
+
+    // PSD projection: no negative eigenvalue; a PSD Hessian is left as it is.
+    energy.value_gradient_hessian(b.F.data(), psi2.data(), grad2.data(), hess_psd.data(), true);
+    for (std::size_t p = 0; p < n; ++p) {
+        const double scale = hess[p].cwiseAbs().maxCoeff();
+        Eigen::SelfAdjointEigenSolver<Tensor4<dim>> raw(hess[p]), projected(hess_psd[p]);
+        EXPECT_GE(projected.eigenvalues().minCoeff(), -1e-12 * scale) << "particle " << p;
+        if (raw.eigenvalues().minCoeff() >= 0.0) {
+            EXPECT_LE((hess_psd[p] - hess[p]).cwiseAbs().maxCoeff(), 1e-12 * scale) << "particle " << p;
+        }
+        // Projecting again changes nothing.
+        const Tensor4<dim> twice = project_psd<m>(hess_psd[p]);
+        EXPECT_LE((twice - hess_psd[p]).cwiseAbs().maxCoeff(), 1e-12 * scale) << "particle " << p;
+    }
+}
+
+TEST(NeuralElastoplasticEnergy, Sand2d) { check_model<2>("sand_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, Snow2d) { check_model<2>("snow_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, Metal2d) { check_model<2>("metal_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, MetalNeoHookeanLearnedReturnMap2d) { check_model<2>("metal_nh_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, Sand3d) { check_model<3>("sand_3d.pt"); }
+TEST(NeuralElastoplasticEnergy, Snow3d) { check_model<3>("snow_3d.pt"); }
+TEST(NeuralElastoplasticEnergy, Metal3d) { check_model<3>("metal_3d.pt"); }
+
+TEST(NeuralElastoplasticEnergy, ProjectionClampsNegativeEigenvalues) {
+    // Strong compression makes the learned Hessian indefinite for some particles;
+    // count them so that the clamp is known to have been exercised.
+    const ModelFile model = load_model_file(kModels + "/sand_2d.pt");
+    NeuralElastoplasticEnergy<2> energy(model, {1.0, 0.0});
+    test::Random random(5);
+    const std::size_t n = 200;
+    std::vector<Mat<2>> F(n), F0(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        F0[p] = random.deformation<2>(1.0);
+        F[p] = random.deformation<2>(1.0);
+    }
+    std::vector<double> h(n, 0.0), psi(n);
+    energy.set_reference(F0.data(), h.data(), n);
+    std::vector<Mat<2>> grad(n);
+    std::vector<Tensor4<2>> raw(n), psd(n);
+    energy.value_gradient_hessian(F.data(), psi.data(), grad.data(), raw.data(), false);
+    energy.value_gradient_hessian(F.data(), psi.data(), grad.data(), psd.data(), true);
+    int indefinite = 0;
+    for (std::size_t p = 0; p < n; ++p) {
+        Eigen::SelfAdjointEigenSolver<Tensor4<2>> a(raw[p]), b(psd[p]);
+        const double scale = raw[p].cwiseAbs().maxCoeff();
+        if (a.eigenvalues().minCoeff() < -1e-8 * scale) {
+            ++indefinite;
+            // Eigenvalues: the negative ones become 0, the others stay.
+            for (int k = 0; k < 4; ++k)
+                EXPECT_NEAR(b.eigenvalues()[k], std::max(0.0, a.eigenvalues()[k]), 1e-10 * scale);
+        }
+        EXPECT_GE(b.eigenvalues().minCoeff(), -1e-12 * scale);
+    }
+    EXPECT_GT(indefinite, 0) << "no indefinite Hessian among " << n << " far-from-reference particles";
+}
+
+TEST(NeuralElastoplasticEnergy, RejectsBadConfiguration) {
+    const ModelFile model = load_model_file(kModels + "/sand_2d.pt");
+    EXPECT_THROW((NeuralElastoplasticEnergy<3>(model, {1.0, 1.0})), std::invalid_argument);
+    EXPECT_THROW((NeuralElastoplasticEnergy<2>(model, {-1.0, 1.0})), std::invalid_argument);
+    EXPECT_THROW((NeuralElastoplasticEnergy<2>(model, {1.0, -1.0})), std::invalid_argument);
+    const ModelFile rm = load_model_file(kModels + "/metal_nh_rm_2d.pt");
+    EXPECT_THROW((NeuralElastoplasticEnergy<2>(rm, {1.0, 1.0})), std::invalid_argument);
+}
+
+// --- Python cross-check ----------------------------------------------------------
+
+template <int dim>
+Mat<dim> mat_from(const nlohmann::json& j) {
+    Mat<dim> A;
+    for (int i = 0; i < dim; ++i)
+        for (int k = 0; k < dim; ++k) A(i, k) = j[i][k].get<double>();
+    return A;
+}
+
+template <int dim>
+int check_python_energy_case(const nlohmann::json& c) {
+    constexpr int m = dim * dim;
+    const std::string file = c["file"];
+    SCOPED_TRACE(file);
+    const ModelFile model = load_model_file(kModels + "/" + file);
+    NeuralElastoplasticEnergy<dim> energy(model, {c["E"].get<double>(), c["w"].get<double>()});
+    const std::size_t n = c["F"].size();
+    std::vector<Mat<dim>> F(n), F0(n), grad(n);
+    std::vector<double> h = c["hardening"].get<std::vector<double>>(), psi(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        F[p] = mat_from<dim>(c["F"][p]);
+        F0[p] = mat_from<dim>(c["F0"][p]);
+    }
+    energy.set_reference(F0.data(), h.data(), n);
+    std::vector<Tensor4<dim>> hess(n);
+    energy.value_gradient_hessian(F.data(), psi.data(), grad.data(), hess.data(), false);
+    int checks = 0;
+    const nlohmann::json& expect = c["expect"];
+    for (std::size_t p = 0; p < n; ++p) {
+        const double psi_ref = expect["psi"][p];
+        EXPECT_NEAR(psi[p], psi_ref, 1e-10 * std::abs(psi_ref)) << "psi " << p;
+        const Mat<dim> g_ref = mat_from<dim>(expect["gradient"][p]);
+        EXPECT_LE((grad[p] - g_ref).cwiseAbs().maxCoeff(), 1e-10 * g_ref.cwiseAbs().maxCoeff()) << "grad " << p;
+        Tensor4<dim> H_ref;
+        for (int a = 0; a < m; ++a)
+            for (int b = 0; b < m; ++b)
+                H_ref(a, b) = expect["hessian"][p][a][b].get<double>();  // row-major vec(F) basis
+        EXPECT_LE((hess[p] - H_ref).cwiseAbs().maxCoeff(), 1e-10 * H_ref.cwiseAbs().maxCoeff()) << "hess " << p;
+        const Mat<dim> P_ref = mat_from<dim>(expect["Ptilde_F0"][p]);
+        const Mat<dim> P = energy.elastoplastic_stress(F0[p], h[p]);
+        EXPECT_LE((P - P_ref).cwiseAbs().maxCoeff(), 1e-10 * P_ref.cwiseAbs().maxCoeff()) << "Ptilde " << p;
+        checks += 4;
+    }
+    return checks;
+}
+
+template <int dim>
+int check_python_return_map_case(const nlohmann::json& c) {
+    const std::string file = c["file"];
+    SCOPED_TRACE(file);
+    const LearnedReturnMap<dim> rm(load_model_file(kModels + "/" + file));
+    int checks = 0;
+    for (std::size_t p = 0; p < c["Sigma"].size(); ++p) {
+        Vec<dim> Sigma, Z_ref;
+        for (int i = 0; i < dim; ++i) {
+            Sigma[i] = c["Sigma"][p][i];
+            Z_ref[i] = c["expect"]["Z"][p][i];
+        }
+        const double h = c["hardening"][p];
+        const ReturnResult<dim> r = rm.return_map(Sigma, h);
+        EXPECT_LE((r.Sigma - Z_ref).cwiseAbs().maxCoeff(), 1e-10) << "Z " << p;
+        EXPECT_NEAR(r.hardening, c["expect"]["hardening_new"][p].get<double>(), 1e-10) << "h " << p;
+        EXPECT_EQ(r.branch == ReturnBranch::Yield, c["expect"]["yielding"][p].get<bool>()) << "branch " << p;
+        checks += 3;
+    }
+    return checks;
+}
+
+TEST(NeuralElastoplasticEnergy, MatchesPythonVectors) {
+    std::ifstream in(std::string(PNET_TEST_DATA_DIR) + "/energy_vectors_python.json");
+    ASSERT_TRUE(in) << "tests/data/energy_vectors_python.json (scripts/gen_energy_vectors.py)";
+    const nlohmann::json j = nlohmann::json::parse(in);
+    ASSERT_EQ(j["format"], "plasticitynet-energy-vectors");
+    int checks = 0, models = 0, yielding = 0;
+    for (const nlohmann::json& c : j["cases"]) {
+        const int dim = c["dim"];
+        ++models;
+        if (c["kind"] == "energy")
+            checks += dim == 2 ? check_python_energy_case<2>(c) : check_python_energy_case<3>(c);
+        else {
+            checks += dim == 2 ? check_python_return_map_case<2>(c) : check_python_return_map_case<3>(c);
+            for (const auto& y : c["expect"]["yielding"]) yielding += y.get<bool>();
+        }
+    }
+    EXPECT_EQ(models, 8);
+    EXPECT_GT(yielding, 0) << "no yielding return-map case: the learned projection was not exercised";
+    EXPECT_GT(checks, 100);
+}
+
+}  // namespace
+}  // namespace pnet

@@ -1,0 +1,206 @@
+// The fused MLP kernel against LibTorch autograd (1e-10 relative), the scalar
+// reference, finite differences, and itself across thread counts.
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "pnet/nn/fused_mlp.hpp"
+#include "pnet/nn/torchscript.hpp"
+#include "support/finite_difference.hpp"
+
+namespace pnet {
+namespace {
+
+struct Architecture {
+    std::vector<int> widths;
+    int m;
+};
+
+std::vector<double> random_inputs(int input_width, std::size_t rows, unsigned seed, double spread = 1.5) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> uniform(-spread, spread);
+    std::vector<double> x(rows * input_width);
+    for (double& v : x) v = uniform(rng);
+    return x;
+}
+
+/// max_r |a_r - b_r|_inf / |b_r|_inf over the rows of a per-row quantity of `size` entries.
+double max_relative_difference(const std::vector<double>& a, const std::vector<double>& b, std::size_t size) {
+    double worst = 0.0;
+    for (std::size_t r = 0; r * size < a.size(); ++r) {
+        double diff = 0.0, scale = 0.0;
+        for (std::size_t k = r * size; k < (r + 1) * size; ++k) {
+            diff = std::max(diff, std::abs(a[k] - b[k]));
+            scale = std::max(scale, std::abs(b[k]));
+        }
+        worst = std::max(worst, diff / std::max(scale, 1e-300));
+    }
+    return worst;
+}
+
+class FusedMlpTest : public ::testing::TestWithParam<std::tuple<Architecture, double>> {};
+
+// Weight scales 1 (PyTorch's initialisation) and 3 (saturating SiLUs, large
+// second derivatives); 37 rows: nine full blocks of four and a short one.
+TEST_P(FusedMlpTest, MatchesLibTorchAutograd) {
+    const auto& [arch, scale] = GetParam();
+    const MlpWeights weights = random_mlp(arch.widths, 11, scale);
+    const FusedMlp fused(weights, arch.m);
+    const TorchAutograd reference = TorchAutograd::from_weights(weights);
+    const std::size_t rows = 37;
+    const int m = arch.m, in = arch.widths[0];
+    const std::vector<double> x = random_inputs(in, rows, 5);
+    std::vector<double> v(rows), g(rows * m), H(rows * m * m), rv(rows), rg(rows * m), rH(rows * m * m);
+    fused.evaluate(x.data(), rows, FusedMlp::Order::Hessian, v.data(), g.data(), H.data());
+    reference.evaluate(x.data(), rows, m, FusedMlp::Order::Hessian, rv.data(), rg.data(), rH.data());
+    EXPECT_LT(max_relative_difference(v, rv, 1), 1e-10);
+    if (m == 0) return;
+    EXPECT_LT(max_relative_difference(g, rg, m), 1e-10);
+    EXPECT_LT(max_relative_difference(H, rH, m * m), 1e-10);
+    // The lower orders give the same numbers.
+    std::vector<double> v1(rows), g1(rows * m), v0(rows);
+    fused.evaluate(x.data(), rows, FusedMlp::Order::Gradient, v1.data(), g1.data());
+    fused.evaluate(x.data(), rows, FusedMlp::Order::Value, v0.data());
+    EXPECT_EQ(v1, v);
+    EXPECT_EQ(v0, v);
+    EXPECT_EQ(g1, g);
+}
+
+TEST_P(FusedMlpTest, ValueMatchesScalarReference) {
+    const auto& [arch, scale] = GetParam();
+    const MlpWeights weights = random_mlp(arch.widths, 12, scale);
+    const FusedMlp fused(weights, arch.m);
+    const std::size_t rows = 13;
+    const std::vector<double> x = random_inputs(arch.widths[0], rows, 6);
+    std::vector<double> v(rows);
+    fused.evaluate(x.data(), rows, FusedMlp::Order::Value, v.data());
+    for (std::size_t r = 0; r < rows; ++r) {
+        const double expected = weights.evaluate_reference(&x[r * arch.widths[0]]);
+        EXPECT_NEAR(v[r], expected, 1e-12 * (1.0 + std::abs(expected))) << "row " << r;
+    }
+}
+
+// Only the architectures with derivatives (the energy nets).
+class FusedMlpDerivativeTest : public FusedMlpTest {};
+
+TEST_P(FusedMlpDerivativeTest, DerivativesMatchFiniteDifferences) {
+    const auto& [arch, scale] = GetParam();
+    ASSERT_GT(arch.m, 0);
+    const MlpWeights weights = random_mlp(arch.widths, 13, scale);
+    const FusedMlp fused(weights, arch.m);
+    const int in = arch.widths[0], m = arch.m;
+    const std::vector<double> x = random_inputs(in, 3, 7);
+    test::FdStats stats;
+    for (int r = 0; r < 3; ++r) {
+        const Eigen::VectorXd x0 = Eigen::Map<const Eigen::VectorXd>(&x[r * in], in);
+        auto eval = [&](const Eigen::VectorXd& F, FusedMlp::Order order, double& value, Eigen::VectorXd& grad,
+                        Eigen::MatrixXd& hess) {
+            Eigen::VectorXd row = x0;
+            row.head(m) = F;
+            grad.resize(m);
+            hess.resize(m, m);
+            fused.evaluate(row.data(), 1, order, &value, grad.data(), hess.data());
+        };
+        double value;
+        Eigen::VectorXd grad;
+        Eigen::MatrixXd hess;
+        eval(x0.head(m), FusedMlp::Order::Hessian, value, grad, hess);
+        auto f = [&](const Eigen::VectorXd& F) {
+            double v;
+            Eigen::VectorXd g;
+            Eigen::MatrixXd h;
+            eval(F, FusedMlp::Order::Value, v, g, h);
+            return v;
+        };
+        auto gradient = [&](const Eigen::VectorXd& F) {
+            double v;
+            Eigen::VectorXd g;
+            Eigen::MatrixXd h;
+            eval(F, FusedMlp::Order::Gradient, v, g, h);
+            return g;
+        };
+        EXPECT_TRUE(test::check_gradient(f, grad, x0.head(m), stats, 1e-6, 1e-6, 1e-3));
+        EXPECT_TRUE(test::check_jacobian(gradient, hess, x0.head(m), stats, 1e-6, 1e-6, 1e-3));
+    }
+    EXPECT_EQ(stats.checks, 3 * (m + m * m));
+}
+
+TEST_P(FusedMlpTest, ThreadCountDoesNotChangeResults) {
+    const auto& [arch, scale] = GetParam();
+    const MlpWeights weights = random_mlp(arch.widths, 14, scale);
+    const FusedMlp fused(weights, arch.m);
+    const int m = arch.m;
+    const std::size_t rows = 1001;
+    const std::vector<double> x = random_inputs(arch.widths[0], rows, 8);
+    std::vector<double> results[2][3];
+    for (int threads : {1, 2}) {
+        omp_set_num_threads(threads);
+        auto& out = results[threads - 1];
+        out[0].resize(rows);
+        out[1].resize(rows * m);
+        out[2].resize(rows * m * m);
+        fused.evaluate(x.data(), rows, FusedMlp::Order::Hessian, out[0].data(), out[1].data(), out[2].data());
+    }
+    omp_set_num_threads(omp_get_num_procs());
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(results[0][k], results[1][k]);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Architectures, FusedMlpTest,
+    ::testing::Combine(::testing::Values(Architecture{{8, 32, 32, 32, 1}, 4}, Architecture{{9, 32, 32, 32, 1}, 4},
+                                         Architecture{{18, 64, 64, 64, 1}, 9},
+                                         Architecture{{19, 64, 64, 64, 1}, 9}, Architecture{{3, 32, 32, 32, 1}, 0},
+                                         Architecture{{4, 64, 64, 64, 1}, 0}),
+                       ::testing::Values(1.0, 3.0)));
+
+INSTANTIATE_TEST_SUITE_P(
+    EnergyArchitectures, FusedMlpDerivativeTest,
+    ::testing::Combine(::testing::Values(Architecture{{8, 32, 32, 32, 1}, 4}, Architecture{{9, 32, 32, 32, 1}, 4},
+                                         Architecture{{18, 64, 64, 64, 1}, 9},
+                                         Architecture{{19, 64, 64, 64, 1}, 9}),
+                       ::testing::Values(1.0, 3.0)));
+
+TEST(FusedMlp, RejectsArchitecturesWithoutAKernel) {
+    EXPECT_FALSE(FusedMlp::supports({9, 16, 16, 16, 1}, 4));
+    EXPECT_FALSE(FusedMlp::supports({9, 32, 32, 1}, 4));
+    EXPECT_FALSE(FusedMlp::supports({9, 32, 32, 32, 1}, 9));
+    try {
+        FusedMlp(random_mlp({9, 16, 16, 16, 1}, 1), 4);
+        FAIL() << "expected std::invalid_argument";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("[9, 16, 16, 16, 1]"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("compiled"), std::string::npos) << e.what();
+    }
+}
+
+TEST(FusedMlp, RequiresTheOutputArraysOfTheOrder) {
+    const FusedMlp fused(random_mlp({9, 32, 32, 32, 1}, 1), 4);
+    const std::vector<double> x(9, 0.1);
+    double v, g[4];
+    EXPECT_THROW(fused.evaluate(x.data(), 1, FusedMlp::Order::Gradient, &v), std::invalid_argument);
+    EXPECT_THROW(fused.evaluate(x.data(), 1, FusedMlp::Order::Hessian, &v, g), std::invalid_argument);
+    EXPECT_NO_THROW(fused.evaluate(x.data(), 1, FusedMlp::Order::Value, &v));
+}
+
+TEST(MlpWeights, ValidateNamesTheProblem) {
+    MlpWeights w = random_mlp({9, 32, 32, 32, 1}, 1);
+    w.weight[1][5] = std::nan("");
+    try {
+        w.validate("net.pt");
+        FAIL() << "expected std::invalid_argument";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_EQ(std::string(e.what()), "net.pt: layer 1 weight entry (0, 5) is not finite");
+    }
+    w = random_mlp({9, 32, 32, 32, 1}, 1);
+    w.bias[2].pop_back();
+    EXPECT_THROW(w.validate("net.pt"), std::invalid_argument);
+    w = random_mlp({9, 32, 32, 32, 1}, 1);
+    w.widths.back() = 2;
+    EXPECT_THROW(w.validate("net.pt"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace pnet
