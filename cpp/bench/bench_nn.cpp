@@ -33,12 +33,13 @@ namespace {
 using pnet::FusedMlp;
 using Clock = std::chrono::steady_clock;
 
-/// Seconds per call of `fn`: the best of 3 rounds, each repeating fn for at
-/// least `seconds` / 3 (at least once).
+/// Seconds per call of `fn`: the best of 5 rounds, each repeating fn for at
+/// least `seconds` / 5 (at least once). The best, not the mean: other load on
+/// the machine only ever slows a round down.
 double time_per_call(const std::function<void()>& fn, double seconds) {
     double best = 1e300;
     fn();  // warm up
-    for (int round = 0; round < 3; ++round) {
+    for (int round = 0; round < 5; ++round) {
         const auto start = Clock::now();
         int calls = 0;
         double elapsed = 0.0;
@@ -46,7 +47,7 @@ double time_per_call(const std::function<void()>& fn, double seconds) {
             fn();
             ++calls;
             elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-        } while (elapsed < seconds / 3.0);
+        } while (elapsed < seconds / 5.0);
         best = std::min(best, elapsed / calls);
     }
     return best;
@@ -164,7 +165,7 @@ int main(int argc, char** argv) {
 
     const double peak[3] = {0.0, fma_peak_gflops(1, seconds), fma_peak_gflops(2, seconds)};
     std::printf("FP64 FMA peak measured: %.1f GFLOP/s (1 thread), %.1f GFLOP/s (2 threads)\n", peak[1], peak[2]);
-    std::printf("batch: %zu particles; times are the best of 3 rounds of >= %.2f s\n\n", particles, seconds / 3);
+    std::printf("batch: %zu particles; times are the best of 5 rounds of >= %.2f s\n\n", particles, seconds / 5);
     std::printf("| net | quantity | threads | fused ns/particle | LibTorch ns/particle | LibTorch / fused | fused "
                 "GFLOP/s | %% of peak | max rel. diff |\n|---|---|---|---|---|---|---|---|---|\n");
 

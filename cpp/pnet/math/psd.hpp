@@ -2,6 +2,7 @@
 // Projection of a small symmetric matrix onto the positive semi-definite cone
 // (eigenvalues clamped at zero), as used by projected Newton (Teran et al. 2005).
 #include <Eigen/Core>
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 
 namespace pnet {
@@ -10,6 +11,9 @@ namespace pnet {
 template <int n>
 Eigen::Matrix<double, n, n> project_psd(const Eigen::Matrix<double, n, n>& A) {
     const Eigen::Matrix<double, n, n> S = 0.5 * (A + A.transpose());
+    // Most Hessians near the reference state are positive definite: a Cholesky
+    // factorization (n^3/6 flops) proves it far cheaper than the eigensolver.
+    if (Eigen::LLT<Eigen::Matrix<double, n, n>>(S).info() == Eigen::Success) return S;
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, n, n>> eig(S);
     Eigen::Matrix<double, n, 1> lambda = eig.eigenvalues();
     if (lambda.minCoeff() >= 0.0) return S;

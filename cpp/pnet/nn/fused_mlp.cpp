@@ -12,8 +12,9 @@ namespace {
 using simd::kLanes;
 using simd::Vd;
 
-/// Largest of 4, 3, 2, 1 dividing n: rows per register block.
-constexpr int row_block(int n) { return n % 4 == 0 ? 4 : n % 3 == 0 ? 3 : n % 2 == 0 ? 2 : 1; }
+/// Rows per register block of gemv(): 8 independent accumulators cover the
+/// FMA latency (5 cycles, 2 per cycle); smaller blocks only for short outputs.
+constexpr int row_block(int n) { return n % 8 == 0 ? 8 : n % 4 == 0 ? 4 : n % 3 == 0 ? 3 : n % 2 == 0 ? 2 : 1; }
 
 /// out[j] = bias[j] + sum_i A[j][i] v[i] for j < Rows (bias may be null), with
 /// the rows in register blocks so that each v[i] is loaded once per block.
@@ -25,32 +26,45 @@ inline void gemv(const double (&A)[Rows][Cols], const double* bias, const Vd* v,
         for (int r = 0; r < R; ++r) acc[r] = simd::splat(bias ? bias[j + r] : 0.0);
         for (int i = 0; i < Cols; ++i) {
             const Vd vi = v[i];
-#pragma GCC unroll 4
+#pragma GCC unroll 8
             for (int r = 0; r < R; ++r) acc[r] += A[j + r][i] * vi;
         }
         for (int r = 0; r < R; ++r) out[j + r] = acc[r];
     }
 }
 
-/// Rows of the tangent product J = A T (A: W x W scalars, T: W x M lanes),
-/// handed to row(j, J[j]) as they are formed; R rows share each load of T[i].
-template <int W, int M, class RowFn>
-inline void tangent_rows(const double (&A)[W][W], const Vd (*T)[M], RowFn&& row) {
-    constexpr int R = M <= 4 ? 2 : 1;
-    static_assert(W % R == 0);
-    for (int j = 0; j < W; j += R) {
-        Vd acc[R][M];
-        for (int r = 0; r < R; ++r)
-            for (int c = 0; c < M; ++c) acc[r][c] = simd::splat(0.0);
-        for (int i = 0; i < W; ++i) {
-#pragma GCC unroll 16
-            for (int c = 0; c < M; ++c) {
-                const Vd t = T[i][c];
+/// J[j0 + r][c0 + c] = sum_i A[j0 + r][i] T[i][c0 + c] for r < R, c < C: R x C
+/// accumulators in registers, R broadcasts and C loads per i.
+template <int R, int C, int W, int M>
+inline void tangent_tile(const double (&A)[W][W], const Vd (*T)[M], int j0, int c0, Vd (*J)[M]) {
+    Vd acc[R][C];
+    for (int r = 0; r < R; ++r)
+        for (int c = 0; c < C; ++c) acc[r][c] = simd::splat(0.0);
+    for (int i = 0; i < W; ++i) {
+        Vd t[C];
+        for (int c = 0; c < C; ++c) t[c] = T[i][c0 + c];
+#pragma GCC unroll 8
+        for (int r = 0; r < R; ++r) {
+            const Vd a = simd::splat(A[j0 + r][i]);
 #pragma GCC unroll 4
-                for (int r = 0; r < R; ++r) acc[r][c] += A[j + r][i] * t;
-            }
+            for (int c = 0; c < C; ++c) acc[r][c] += a * t[c];
         }
-        for (int r = 0; r < R; ++r) row(j + r, acc[r]);
+    }
+    for (int r = 0; r < R; ++r)
+        for (int c = 0; c < C; ++c) J[j0 + r][c0 + c] = acc[r][c];
+}
+
+/// The tangent product J = A T (A: W x W scalars, T: W x M lanes) in tiles of
+/// R rows and C columns: R C accumulators + C loaded tangents + 1 broadcast
+/// must fit the 16 vector registers of AVX2 (5 x 2 for M = 4, 3 x 3 for M = 9).
+template <int W, int M>
+inline void tangent_product(const double (&A)[W][W], const Vd (*T)[M], Vd (*J)[M]) {
+    constexpr int C = M % 2 == 0 ? 2 : M % 3 == 0 ? 3 : 1;
+    constexpr int R = C == 2 ? 5 : C == 3 ? 3 : 8;
+    constexpr int full = W - W % R;
+    for (int c0 = 0; c0 < M; c0 += C) {
+        for (int j0 = 0; j0 < full; j0 += R) tangent_tile<R, C>(A, T, j0, c0, J);
+        if constexpr (W % R != 0) tangent_tile<W % R, C>(A, T, full, c0, J);
     }
 }
 
@@ -182,15 +196,18 @@ private:
                 for (int q = 0; q < count; ++q) H[p0 + q] += acc[q];
             }
         }
-        // Layers 2 and 3: tangents T_k = diag(d_k) J_k of the previous layer.
-        Vd T1[W][kM], T2[W][kM];
+        // Layers 2 and 3: J_2 = W2 T_1 and J_3 = W3 T_2 with the tangents
+        // T_k = diag(silu'(z_k)) J_k (T_1 = diag(d1) W1F).
+        Vd T[W][kM], J[W][kM];
         for (int i = 0; i < W; ++i)
-            for (int c = 0; c < M; ++c) T1[i][c] = d1[i] * W1F[i][c];
-        tangent_rows<W, kM>(W2, T1, [&](int j, const Vd* J) {
-            add_outer<M>(H, g2[j] * dd2[j], J);
-            for (int c = 0; c < M; ++c) T2[j][c] = d2[j] * J[c];
-        });
-        tangent_rows<W, kM>(W3, T2, [&](int j, const Vd* J) { add_outer<M>(H, w4[j] * dd3[j], J); });
+            for (int c = 0; c < M; ++c) T[i][c] = d1[i] * W1F[i][c];
+        tangent_product<W, kM>(W2, T, J);
+        for (int j = 0; j < W; ++j) {
+            add_outer<M>(H, g2[j] * dd2[j], J[j]);
+            for (int c = 0; c < M; ++c) T[j][c] = d2[j] * J[j][c];
+        }
+        tangent_product<W, kM>(W3, T, J);
+        for (int j = 0; j < W; ++j) add_outer<M>(H, w4[j] * dd3[j], J[j]);
 
         for (int l = 0; l < lanes; ++l) {
             double* out = hessian + l * M * M;
