@@ -1,0 +1,716 @@
+#include "pnet/io/render.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <numeric>
+#include <stdexcept>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>  // cross()
+
+namespace pnet {
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// 5x7 bitmap font for ASCII 32..126. Each glyph is 5 columns, left to right; bit k of a column
+// is row k, row 0 at the top. Lower-case descenders (g, j, p, q, y) use the bottom row.
+constexpr std::uint8_t kFont[95][5] = {
+    {0x00, 0x00, 0x00, 0x00, 0x00},  // ' '
+    {0x00, 0x00, 0x5F, 0x00, 0x00},  // !
+    {0x00, 0x07, 0x00, 0x07, 0x00},  // "
+    {0x14, 0x7F, 0x14, 0x7F, 0x14},  // #
+    {0x24, 0x2A, 0x7F, 0x2A, 0x12},  // $
+    {0x23, 0x13, 0x08, 0x64, 0x62},  // %
+    {0x36, 0x49, 0x55, 0x22, 0x50},  // &
+    {0x00, 0x00, 0x07, 0x00, 0x00},  // '
+    {0x00, 0x1C, 0x22, 0x41, 0x00},  // (
+    {0x00, 0x41, 0x22, 0x1C, 0x00},  // )
+    {0x14, 0x08, 0x3E, 0x08, 0x14},  // *
+    {0x08, 0x08, 0x3E, 0x08, 0x08},  // +
+    {0x00, 0x50, 0x30, 0x00, 0x00},  // ,
+    {0x08, 0x08, 0x08, 0x08, 0x08},  // -
+    {0x00, 0x60, 0x60, 0x00, 0x00},  // .
+    {0x20, 0x10, 0x08, 0x04, 0x02},  // /
+    {0x3E, 0x51, 0x49, 0x45, 0x3E},  // 0
+    {0x00, 0x42, 0x7F, 0x40, 0x00},  // 1
+    {0x42, 0x61, 0x51, 0x49, 0x46},  // 2
+    {0x21, 0x41, 0x45, 0x4B, 0x31},  // 3
+    {0x18, 0x14, 0x12, 0x7F, 0x10},  // 4
+    {0x27, 0x45, 0x45, 0x45, 0x39},  // 5
+    {0x3C, 0x4A, 0x49, 0x49, 0x30},  // 6
+    {0x01, 0x71, 0x09, 0x05, 0x03},  // 7
+    {0x36, 0x49, 0x49, 0x49, 0x36},  // 8
+    {0x06, 0x49, 0x49, 0x29, 0x1E},  // 9
+    {0x00, 0x36, 0x36, 0x00, 0x00},  // :
+    {0x00, 0x56, 0x36, 0x00, 0x00},  // ;
+    {0x08, 0x14, 0x22, 0x41, 0x00},  // <
+    {0x14, 0x14, 0x14, 0x14, 0x14},  // =
+    {0x00, 0x41, 0x22, 0x14, 0x08},  // >
+    {0x02, 0x01, 0x51, 0x09, 0x06},  // ?
+    {0x32, 0x49, 0x79, 0x41, 0x3E},  // @
+    {0x7E, 0x11, 0x11, 0x11, 0x7E},  // A
+    {0x7F, 0x49, 0x49, 0x49, 0x36},  // B
+    {0x3E, 0x41, 0x41, 0x41, 0x22},  // C
+    {0x7F, 0x41, 0x41, 0x22, 0x1C},  // D
+    {0x7F, 0x49, 0x49, 0x49, 0x41},  // E
+    {0x7F, 0x09, 0x09, 0x09, 0x01},  // F
+    {0x3E, 0x41, 0x49, 0x49, 0x7A},  // G
+    {0x7F, 0x08, 0x08, 0x08, 0x7F},  // H
+    {0x00, 0x41, 0x7F, 0x41, 0x00},  // I
+    {0x20, 0x40, 0x41, 0x3F, 0x01},  // J
+    {0x7F, 0x08, 0x14, 0x22, 0x41},  // K
+    {0x7F, 0x40, 0x40, 0x40, 0x40},  // L
+    {0x7F, 0x02, 0x0C, 0x02, 0x7F},  // M
+    {0x7F, 0x04, 0x08, 0x10, 0x7F},  // N
+    {0x3E, 0x41, 0x41, 0x41, 0x3E},  // O
+    {0x7F, 0x09, 0x09, 0x09, 0x06},  // P
+    {0x3E, 0x41, 0x51, 0x21, 0x5E},  // Q
+    {0x7F, 0x09, 0x19, 0x29, 0x46},  // R
+    {0x46, 0x49, 0x49, 0x49, 0x31},  // S
+    {0x01, 0x01, 0x7F, 0x01, 0x01},  // T
+    {0x3F, 0x40, 0x40, 0x40, 0x3F},  // U
+    {0x1F, 0x20, 0x40, 0x20, 0x1F},  // V
+    {0x3F, 0x40, 0x38, 0x40, 0x3F},  // W
+    {0x63, 0x14, 0x08, 0x14, 0x63},  // X
+    {0x07, 0x08, 0x70, 0x08, 0x07},  // Y
+    {0x61, 0x51, 0x49, 0x45, 0x43},  // Z
+    {0x00, 0x7F, 0x41, 0x41, 0x00},  // [
+    {0x02, 0x04, 0x08, 0x10, 0x20},  // backslash
+    {0x00, 0x41, 0x41, 0x7F, 0x00},  // ]
+    {0x04, 0x02, 0x01, 0x02, 0x04},  // ^
+    {0x40, 0x40, 0x40, 0x40, 0x40},  // _
+    {0x00, 0x01, 0x02, 0x04, 0x00},  // `
+    {0x20, 0x54, 0x54, 0x54, 0x78},  // a
+    {0x7F, 0x48, 0x44, 0x44, 0x38},  // b
+    {0x38, 0x44, 0x44, 0x44, 0x20},  // c
+    {0x38, 0x44, 0x44, 0x48, 0x7F},  // d
+    {0x38, 0x54, 0x54, 0x54, 0x18},  // e
+    {0x08, 0x7E, 0x09, 0x01, 0x02},  // f
+    {0x0C, 0x52, 0x52, 0x52, 0x3E},  // g
+    {0x7F, 0x08, 0x04, 0x04, 0x78},  // h
+    {0x00, 0x44, 0x7D, 0x40, 0x00},  // i
+    {0x20, 0x40, 0x44, 0x3D, 0x00},  // j
+    {0x7F, 0x10, 0x28, 0x44, 0x00},  // k
+    {0x00, 0x41, 0x7F, 0x40, 0x00},  // l
+    {0x7C, 0x04, 0x18, 0x04, 0x78},  // m
+    {0x7C, 0x08, 0x04, 0x04, 0x78},  // n
+    {0x38, 0x44, 0x44, 0x44, 0x38},  // o
+    {0x7C, 0x14, 0x14, 0x14, 0x08},  // p
+    {0x08, 0x14, 0x14, 0x18, 0x7C},  // q
+    {0x7C, 0x08, 0x04, 0x04, 0x08},  // r
+    {0x48, 0x54, 0x54, 0x54, 0x20},  // s
+    {0x04, 0x3F, 0x44, 0x40, 0x20},  // t
+    {0x3C, 0x40, 0x40, 0x20, 0x7C},  // u
+    {0x1C, 0x20, 0x40, 0x20, 0x1C},  // v
+    {0x3C, 0x40, 0x30, 0x40, 0x3C},  // w
+    {0x44, 0x28, 0x10, 0x28, 0x44},  // x
+    {0x0C, 0x50, 0x50, 0x50, 0x3C},  // y
+    {0x44, 0x64, 0x54, 0x4C, 0x44},  // z
+    {0x00, 0x08, 0x36, 0x41, 0x00},  // {
+    {0x00, 0x00, 0x7F, 0x00, 0x00},  // |
+    {0x00, 0x41, 0x36, 0x08, 0x00},  // }
+    {0x08, 0x04, 0x08, 0x10, 0x08},  // ~
+};
+
+const std::uint8_t* glyph(char c) {
+    const int code = static_cast<unsigned char>(c);
+    return kFont[(code >= 32 && code <= 126 ? code : '?') - 32];
+}
+
+// Text rotated 90 degrees counter-clockwise (reading upwards), for the y-axis label; (x, y) is
+// the bottom-left corner of the rotated text box.
+void draw_text_up(Image& img, int x, int y, const std::string& text, Rgb colour, int scale) {
+    for (std::size_t k = 0; k < text.size(); ++k) {
+        const std::uint8_t* g = glyph(text[k]);
+        for (int col = 0; col < 5; ++col)
+            for (int row = 0; row < 7; ++row) {
+                if (!((g[col] >> row) & 1)) continue;
+                const int along = int(k) * 6 * scale + col * scale;  // distance along the reading direction
+                for (int i = 0; i < scale; ++i)
+                    for (int j = 0; j < scale; ++j) img.set(x + row * scale + j, y - 1 - along - i, colour);
+            }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Anti-aliased primitives: a pixel's coverage is approximated by its centre's signed distance
+// to the shape's edge, clamp(edge distance + 1/2, 0, 1), which is exact for a straight edge
+// through the pixel at 0 or 90 degrees and close enough otherwise.
+
+struct Rect {
+    int x0, y0, x1, y1;  // inclusive pixel bounds
+};
+
+void draw_disk(Image& img, double cx, double cy, double r, Rgb colour) {
+    const int x0 = int(std::floor(cx - r - 1)), x1 = int(std::ceil(cx + r + 1));
+    const int y0 = int(std::floor(cy - r - 1)), y1 = int(std::ceil(cy + r + 1));
+    for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+            const double dx = x + 0.5 - cx, dy = y + 0.5 - cy;
+            const double d = std::sqrt(dx * dx + dy * dy);
+            img.blend(x, y, colour, std::min(1.0, r + 0.5 - d));
+        }
+}
+
+// A segment of the given width (px) with round caps, drawn only inside clip.
+void draw_segment(Image& img, double ax, double ay, double bx, double by, double width, Rgb colour, const Rect& clip,
+                  double opacity = 1.0) {
+    const double h = 0.5 * width;
+    const int x0 = std::max(clip.x0, int(std::floor(std::min(ax, bx) - h - 1)));
+    const int x1 = std::min(clip.x1, int(std::ceil(std::max(ax, bx) + h + 1)));
+    const int y0 = std::max(clip.y0, int(std::floor(std::min(ay, by) - h - 1)));
+    const int y1 = std::min(clip.y1, int(std::ceil(std::max(ay, by) + h + 1)));
+    const double ex = bx - ax, ey = by - ay, length2 = ex * ex + ey * ey;
+    for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+            const double px = x + 0.5 - ax, py = y + 0.5 - ay;
+            const double t = length2 > 0 ? std::clamp((px * ex + py * ey) / length2, 0.0, 1.0) : 0.0;
+            const double d = std::sqrt((px - t * ex) * (px - t * ex) + (py - t * ey) * (py - t * ey));
+            img.blend(x, y, colour, opacity * std::min(1.0, h + 0.5 - d));
+        }
+}
+
+// One-pixel axis-aligned rectangle outline through the given pixel bounds.
+void draw_rect(Image& img, const Rect& r, Rgb colour) {
+    for (int x = r.x0; x <= r.x1; ++x) {
+        img.set(x, r.y0, colour);
+        img.set(x, r.y1, colour);
+    }
+    for (int y = r.y0; y <= r.y1; ++y) {
+        img.set(r.x0, y, colour);
+        img.set(r.x1, y, colour);
+    }
+}
+
+void fill_rect(Image& img, const Rect& r, Rgb colour) {
+    for (int y = r.y0; y <= r.y1; ++y)
+        for (int x = r.x0; x <= r.x1; ++x) img.set(x, y, colour);
+}
+
+Rgb scaled(Rgb c, double factor) {
+    auto channel = [&](std::uint8_t v) { return std::uint8_t(std::lround(std::clamp(v * factor, 0.0, 255.0))); };
+    return {channel(c.r), channel(c.g), channel(c.b)};
+}
+
+// ---------------------------------------------------------------------------------------------
+// Particle renderers.
+
+constexpr int kMaxImageSide = 16384;
+
+int text_scale_for(int width_px) {
+    return width_px >= 600 ? 2 : 1;
+}
+
+void check_particle_input(const std::vector<double>& position, const std::vector<double>& value, int dim,
+                          const ParticleRenderOptions& options, const char* who) {
+    const std::string prefix = std::string(who) + ": ";
+    if (position.size() % std::size_t(dim) != 0) {
+        throw std::invalid_argument(prefix + "position has " + std::to_string(position.size()) +
+                                    " values, not a multiple of " + std::to_string(dim));
+    }
+    const std::size_t n = position.size() / std::size_t(dim);
+    if (!value.empty() && value.size() != n) {
+        throw std::invalid_argument(prefix + "value has " + std::to_string(value.size()) + " entries for " +
+                                    std::to_string(n) + " particles");
+    }
+    for (int k = 0; k < dim; ++k) {
+        if (!(options.domain_max[k] > options.domain_min[k]) ||
+            !std::isfinite(options.domain_max[k] - options.domain_min[k])) {
+            throw std::invalid_argument(prefix + "empty or non-finite domain along axis " + std::to_string(k));
+        }
+    }
+    if (options.width_px < 16 || options.width_px > kMaxImageSide) {
+        throw std::invalid_argument(prefix + "width_px " + std::to_string(options.width_px) + " outside [16, 16384]");
+    }
+}
+
+int image_height(double extent_px, int margin, const char* who) {
+    const double h = std::round(extent_px) + 2 * margin;
+    if (!(h >= 1 && h <= kMaxImageSide)) {
+        throw std::invalid_argument(std::string(who) + ": the domain's aspect ratio makes the image " +
+                                    std::to_string(h) + " pixels high");
+    }
+    return int(h);
+}
+
+Rgb particle_colour(const std::vector<double>& value, std::size_t i, const ParticleRenderOptions& options) {
+    if (value.empty()) return viridis(0.45);
+    const double range = options.value_max - options.value_min;
+    return viridis(range > 0 ? (value[i] - options.value_min) / range : 0.5);
+}
+
+// Typical particle spacing: the median distance to the nearest other particle over a sample of
+// up to 4096 particles, found with a hash grid whose cell h0 = (bounding volume / n)^(1/d) is the
+// spacing of a lattice filling the particles' bounding box. Particles of a body are at least
+// that dense, so their nearest neighbour lies within the 3^d surrounding cells; isolated
+// particles whose neighbour is farther than h0 are left out of the median. 0 if n < 2.
+double particle_spacing(const std::vector<double>& position, int dim) {
+    const std::size_t n = position.size() / std::size_t(dim);
+    if (n < 2) return 0.0;
+    double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+    for (int k = 0; k < dim; ++k) lo[k] = hi[k] = position[std::size_t(k)];
+    for (std::size_t i = 0; i < n; ++i)
+        for (int k = 0; k < dim; ++k) {
+            const double x = position[i * std::size_t(dim) + std::size_t(k)];
+            if (!std::isfinite(x)) continue;
+            lo[k] = std::min(lo[k], x);
+            hi[k] = std::max(hi[k], x);
+        }
+    // Axes along which all particles lie flat (a sheet or a line) do not count towards the volume.
+    const double largest = std::max({hi[0] - lo[0], hi[1] - lo[1], dim == 3 ? hi[2] - lo[2] : 0.0});
+    if (!(largest > 0)) return 0.0;
+    double volume = 1.0;
+    int spread_axes = 0;
+    for (int k = 0; k < dim; ++k) {
+        if (hi[k] - lo[k] > 1e-9 * largest) {
+            volume *= hi[k] - lo[k];
+            ++spread_axes;
+        }
+    }
+    const double h0 = std::pow(volume / double(n), 1.0 / spread_axes);
+
+    // Cell coordinates packed 21 bits per axis; wrapping can only add candidates from far cells,
+    // whose true distances are then computed, so the nearest neighbour found is still right.
+    constexpr std::uint64_t kMask = (1u << 21) - 1;
+    auto cell_of = [&](std::size_t i, int k) {
+        return std::int64_t(std::floor((position[i * std::size_t(dim) + std::size_t(k)] - lo[k]) / h0));
+    };
+    auto key_of = [&](const std::int64_t c[3]) {
+        std::uint64_t key = 0;
+        for (int k = 0; k < dim; ++k) key = (key << 21) | (std::uint64_t(c[k]) & kMask);
+        return key;
+    };
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> cells;
+    cells.reserve(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        std::int64_t c[3] = {0, 0, 0};
+        bool finite = true;
+        for (int k = 0; k < dim; ++k) {
+            finite = finite && std::isfinite(position[i * std::size_t(dim) + std::size_t(k)]);
+            if (finite) c[k] = cell_of(i, k);
+        }
+        if (finite) cells.emplace_back(key_of(c), std::uint32_t(i));
+    }
+    std::sort(cells.begin(), cells.end());
+
+    const std::size_t stride = std::max<std::size_t>(1, cells.size() / 4096);
+    std::vector<double> nearest;
+    for (std::size_t s = 0; s < cells.size(); s += stride) {
+        const std::size_t i = cells[s].second;
+        std::int64_t c[3] = {0, 0, 0};
+        for (int k = 0; k < dim; ++k) c[k] = cell_of(i, k);
+        double best2 = h0 * h0;
+        bool found = false;
+        const int neighbours = dim == 3 ? 27 : 9;
+        for (int m = 0; m < neighbours; ++m) {
+            const std::int64_t nc[3] = {c[0] + m % 3 - 1, c[1] + (m / 3) % 3 - 1, dim == 3 ? c[2] + m / 9 - 1 : 0};
+            const std::uint64_t key = key_of(nc);
+            auto it = std::lower_bound(cells.begin(), cells.end(), std::make_pair(key, std::uint32_t(0)));
+            for (; it != cells.end() && it->first == key; ++it) {
+                const std::size_t j = it->second;
+                double d2 = 0;
+                for (int k = 0; k < dim; ++k) {
+                    const double e = position[i * std::size_t(dim) + std::size_t(k)] -
+                                     position[j * std::size_t(dim) + std::size_t(k)];
+                    d2 += e * e;
+                }
+                if (j != i && d2 > 0 && d2 <= best2) {
+                    best2 = d2;
+                    found = true;
+                }
+            }
+        }
+        if (found) nearest.push_back(std::sqrt(best2));
+    }
+    if (nearest.empty()) return h0;
+    std::nth_element(nearest.begin(), nearest.begin() + std::ptrdiff_t(nearest.size() / 2), nearest.end());
+    return nearest[nearest.size() / 2];
+}
+
+// Disk radius in pixels for world-to-pixel scale s: the option, or 0.75 x the particle spacing
+// (more than half the diagonal of a square lattice cell, so that a body shows no gaps), within
+// [0.8, 1/16 of the image width].
+double disk_radius(const std::vector<double>& position, int dim, const ParticleRenderOptions& options, double s) {
+    if (options.radius_px > 0) return options.radius_px;
+    double spacing = particle_spacing(position, dim);
+    if (!(spacing > 0)) spacing = (options.domain_max[0] - options.domain_min[0]) / 100.0;
+    return std::clamp(0.75 * spacing * s, 0.8, options.width_px / 16.0);
+}
+
+void draw_caption(Image& img, const ParticleRenderOptions& options, int margin) {
+    if (options.caption.empty()) return;
+    draw_text(img, margin + 4, margin + 4, options.caption, {40, 40, 40}, text_scale_for(options.width_px));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Line plot helpers.
+
+// Ticks at multiples of a "nice" step (1, 2 or 5 x 10^k) giving at most about max_ticks ticks.
+std::vector<double> nice_ticks(double lo, double hi, int max_ticks, double& step) {
+    const double raw = (hi - lo) / std::max(1, max_ticks);
+    const double magnitude = std::pow(10.0, std::floor(std::log10(raw)));
+    const double normalized = raw / magnitude;
+    step = (normalized <= 1 ? 1 : normalized <= 2 ? 2 : normalized <= 5 ? 5 : 10) * magnitude;
+    std::vector<double> ticks;
+    const double first = std::ceil(lo / step - 1e-9), last = std::floor(hi / step + 1e-9);
+    for (double k = first; k <= last; ++k) ticks.push_back(k * step);
+    return ticks;
+}
+
+// Enough decimals to tell ticks `step` apart; exponent notation for very large or small values.
+std::string format_tick(double v, double step) {
+    if (std::abs(v) < 1e-9 * step) v = 0.0;  // no "-0" or "1e-17" at the origin
+    char buffer[32];
+    if (step >= 1e6 || step < 1e-4) {
+        std::snprintf(buffer, sizeof(buffer), "%.3g", v);
+    } else {
+        const int decimals = step >= 1 ? 0 : int(std::ceil(-std::log10(step) - 1e-9));
+        std::snprintf(buffer, sizeof(buffer), "%.*f", decimals, v);
+    }
+    return buffer;
+}
+
+// Axis range from the finite data, or the fixed ends when given; pad widens a free range by
+// that fraction each side.
+void axis_range(const std::vector<PlotSeries>& series, bool use_x, double fixed_min, double fixed_max, double pad,
+                double& lo, double& hi) {
+    lo = std::numeric_limits<double>::infinity();
+    hi = -lo;
+    for (const PlotSeries& s : series)
+        for (double v : use_x ? s.x : s.y)
+            if (std::isfinite(v)) {
+                lo = std::min(lo, v);
+                hi = std::max(hi, v);
+            }
+    if (!(lo <= hi)) {  // no finite data
+        lo = 0.0;
+        hi = 1.0;
+    } else if (lo == hi) {
+        const double half = 0.5 * std::max(1.0, std::abs(lo) * 0.1);
+        lo -= half;
+        hi += half;
+    } else {
+        const double margin = pad * (hi - lo);
+        lo -= margin;
+        hi += margin;
+    }
+    if (std::isfinite(fixed_min)) lo = fixed_min;
+    if (std::isfinite(fixed_max)) hi = fixed_max;
+    if (!(hi > lo)) hi = lo + 1.0;
+}
+
+// matplotlib's tab10 cycle: distinct hues that stay apart on white.
+constexpr Rgb kPalette[10] = {{31, 119, 180}, {255, 127, 14},  {44, 160, 44},   {214, 39, 40},  {148, 103, 189},
+                              {140, 86, 75},  {227, 119, 194}, {127, 127, 127}, {188, 189, 34}, {23, 190, 207}};
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+Rgb viridis(double t) {
+    // viridis(k / 8), k = 0..8, as listed by viridisLite::viridis(9).
+    static constexpr Rgb kStops[9] = {{68, 1, 84},    {71, 45, 123}, {59, 82, 139},  {44, 114, 142}, {33, 144, 140},
+                                      {39, 173, 129}, {93, 200, 99}, {170, 220, 50}, {253, 231, 37}};
+    if (std::isnan(t)) return {150, 150, 150};
+    t = std::clamp(t, 0.0, 1.0) * 8.0;
+    const int k = std::min(7, int(t));
+    const double f = t - k;
+    auto mix = [&](std::uint8_t a, std::uint8_t b) { return std::uint8_t(std::lround(a + f * (double(b) - a))); };
+    return {mix(kStops[k].r, kStops[k + 1].r), mix(kStops[k].g, kStops[k + 1].g), mix(kStops[k].b, kStops[k + 1].b)};
+}
+
+void draw_text(Image& img, int x, int y, const std::string& text, Rgb colour, int scale) {
+    for (std::size_t k = 0; k < text.size(); ++k) {
+        const std::uint8_t* g = glyph(text[k]);
+        const int left = x + int(k) * 6 * scale;
+        for (int col = 0; col < 5; ++col)
+            for (int row = 0; row < 7; ++row) {
+                if (!((g[col] >> row) & 1)) continue;
+                for (int i = 0; i < scale; ++i)
+                    for (int j = 0; j < scale; ++j) img.set(left + col * scale + j, y + row * scale + i, colour);
+            }
+    }
+}
+
+int text_width(const std::string& text, int scale) {
+    return text.empty() ? 0 : (6 * int(text.size()) - 1) * scale;
+}
+
+Image render_particles_2d(const std::vector<double>& position, const std::vector<double>& value,
+                          const ParticleRenderOptions& options) {
+    constexpr const char* who = "render_particles_2d";
+    check_particle_input(position, value, 2, options, who);
+    const std::size_t n = position.size() / 2;
+    const double ex = options.domain_max[0] - options.domain_min[0];
+    const double ey = options.domain_max[1] - options.domain_min[1];
+
+    // The radius sets the margin that keeps disks at the boundary whole, and the margin the
+    // scale; the automatic radius uses the scale of a 4-pixel margin (a sub-pixel difference).
+    const double radius = disk_radius(position, 2, options, (options.width_px - 8) / ex);
+    const int margin = std::max(4, int(std::ceil(radius)) + 2);
+    const double s = (options.width_px - 2 * margin) / ex;
+    if (!(s > 0)) throw std::invalid_argument(std::string(who) + ": disks too large for the image width");
+    Image img(options.width_px, image_height(ey * s, margin, who), {255, 255, 255});
+
+    // Frame just outside the domain, so that it does not cover particles lying on the boundary.
+    draw_rect(img, {margin - 1, margin - 1, margin + int(std::lround(ex * s)), margin + int(std::lround(ey * s))},
+              {170, 170, 170});
+    for (std::size_t i = 0; i < n; ++i) {
+        const double x = position[2 * i], y = position[2 * i + 1];
+        if (!std::isfinite(x) || !std::isfinite(y)) continue;
+        draw_disk(img, margin + (x - options.domain_min[0]) * s, margin + (options.domain_max[1] - y) * s, radius,
+                  particle_colour(value, i, options));
+    }
+    draw_caption(img, options, margin);
+    return img;
+}
+
+Image render_particles_3d(const std::vector<double>& position, const std::vector<double>& value,
+                          const ParticleRenderOptions& options) {
+    constexpr const char* who = "render_particles_3d";
+    check_particle_input(position, value, 3, options, who);
+    const std::size_t n = position.size() / 3;
+    using V3 = Eigen::Vector3d;
+    const V3 lo(options.domain_min[0], options.domain_min[1], options.domain_min[2]);
+    const V3 hi(options.domain_max[0], options.domain_max[1], options.domain_max[2]);
+    const V3 centre = 0.5 * (lo + hi);
+
+    // Camera frame: looking along `forward` from direction (1, 0.8, 1.5), y up on screen.
+    const V3 forward = -V3(1.0, 0.8, 1.5).normalized();
+    const V3 right = forward.cross(V3::UnitY()).normalized();
+    const V3 up = right.cross(forward);
+    auto view = [&](const V3& p) {
+        const V3 d = p - centre;
+        return V3(d.dot(right), d.dot(up), d.dot(forward));  // screen u, screen v, depth (larger = farther)
+    };
+
+    std::array<V3, 8> corners;
+    for (int c = 0; c < 8; ++c) {
+        corners[std::size_t(c)] = view(V3(c & 1 ? hi.x() : lo.x(), c & 2 ? hi.y() : lo.y(), c & 4 ? hi.z() : lo.z()));
+    }
+    V3 vlo = corners[0], vhi = corners[0];
+    for (const V3& c : corners) {
+        vlo = vlo.cwiseMin(c);
+        vhi = vhi.cwiseMax(c);
+    }
+
+    const double radius = disk_radius(position, 3, options, (options.width_px - 8) / (vhi.x() - vlo.x()));
+    const int margin = std::max(4, int(std::ceil(radius)) + 2);
+    const double s = (options.width_px - 2 * margin) / (vhi.x() - vlo.x());
+    if (!(s > 0)) throw std::invalid_argument(std::string(who) + ": disks too large for the image width");
+    Image img(options.width_px, image_height((vhi.y() - vlo.y()) * s, margin, who), {255, 255, 255});
+    auto to_px = [&](const V3& q) {
+        return Eigen::Vector2d(margin + (q.x() - vlo.x()) * s, margin + (vhi.y() - q.y()) * s);
+    };
+    const Rect whole{0, 0, img.width - 1, img.height - 1};
+
+    // Box edges: those meeting at the nearest corner pass in front of the particles and are drawn
+    // after them, faintly; the others before them.
+    const int nearest_corner =
+        int(std::min_element(corners.begin(), corners.end(), [](const V3& a, const V3& b) { return a.z() < b.z(); }) -
+            corners.begin());
+    auto draw_edges = [&](bool front) {
+        for (int a = 0; a < 8; ++a)
+            for (int bit = 1; bit < 8; bit <<= 1) {
+                const int b = a | bit;
+                if (b == a) continue;
+                if ((a == nearest_corner || b == nearest_corner) != front) continue;
+                const Eigen::Vector2d pa = to_px(corners[std::size_t(a)]), pb = to_px(corners[std::size_t(b)]);
+                draw_segment(img, pa.x(), pa.y(), pb.x(), pb.y(), 1.0, {150, 150, 150}, whole, front ? 0.5 : 1.0);
+            }
+    };
+    draw_edges(false);
+
+    // Each particle's projection and colour, gathered once so that the far-to-near pass streams
+    // through one sorted array instead of missing the cache on every particle's fields.
+    struct Splat {
+        double depth;
+        Eigen::Vector2d centre;  // pixels
+        Rgb colour;
+    };
+    std::vector<Splat> splats;
+    splats.reserve(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const V3 p(position[3 * i], position[3 * i + 1], position[3 * i + 2]);
+        if (!p.allFinite()) continue;
+        const V3 q = view(p);
+        splats.push_back({q.z(), to_px(q), particle_colour(value, i, options)});
+    }
+    // Painter's order, far to near, so that anti-aliased edges blend over what lies behind; the
+    // depth buffer of sphere-surface depths then resolves particles that interpenetrate.
+    std::sort(splats.begin(), splats.end(), [](const Splat& a, const Splat& b) { return a.depth > b.depth; });
+
+    std::vector<double> depth(std::size_t(img.width) * std::size_t(img.height),
+                              std::numeric_limits<double>::infinity());
+    const double radius_world = radius / s;
+    const double depth_range = std::max(vhi.z() - vlo.z(), 1e-300);
+    const V3 light = V3(-0.4, 0.7, -0.6).normalized();  // towards the light: upper left, camera side
+    for (const Splat& splat : splats) {
+        const Eigen::Vector2d& c = splat.centre;
+        const double fog = std::clamp((splat.depth - vlo.z()) / depth_range, 0.0, 1.0);
+        const Rgb base = splat.colour;
+        const int x0 = int(std::floor(c.x() - radius - 1)), x1 = int(std::ceil(c.x() + radius + 1));
+        const int y0 = int(std::floor(c.y() - radius - 1)), y1 = int(std::ceil(c.y() + radius + 1));
+        for (int y = std::max(0, y0); y <= std::min(img.height - 1, y1); ++y)
+            for (int x = std::max(0, x0); x <= std::min(img.width - 1, x1); ++x) {
+                const double dx = x + 0.5 - c.x(), dy = y + 0.5 - c.y();
+                const double d = std::sqrt(dx * dx + dy * dy);
+                const double coverage = std::min(1.0, radius + 0.5 - d);
+                if (coverage <= 0) continue;
+                // Unit normal of the sphere seen at this pixel (screen x right, y up, z away).
+                const double scale = std::max(radius, d);
+                const double nx = dx / scale, ny = -dy / scale;
+                const double nz = -std::sqrt(std::max(0.0, 1.0 - nx * nx - ny * ny));
+                const double z = splat.depth + nz * radius_world;
+                double& zbuf = depth[std::size_t(y) * std::size_t(img.width) + std::size_t(x)];
+                if (z >= zbuf) continue;
+                const double diffuse = std::max(0.0, nx * light.x() + ny * light.y() + nz * light.z());
+                img.blend(x, y, scaled(base, (0.45 + 0.55 * diffuse) * (1.0 - 0.4 * fog)), coverage);
+                if (coverage >= 0.5) zbuf = z;
+            }
+    }
+    draw_edges(true);
+    draw_caption(img, options, margin);
+    return img;
+}
+
+Image render_line_plot(const LinePlot& plot) {
+    const int W = plot.width_px, H = plot.height_px;
+    if (W < 64 || H < 64 || W > 8192 || H > 8192) {
+        throw std::invalid_argument("render_line_plot: size " + std::to_string(W) + " x " + std::to_string(H) +
+                                    " outside [64, 8192]");
+    }
+    for (std::size_t k = 0; k < plot.series.size(); ++k) {
+        const PlotSeries& s = plot.series[k];
+        if (s.x.size() != s.y.size()) {
+            throw std::invalid_argument("render_line_plot: series " + std::to_string(k) + " '" + s.label + "' has " +
+                                        std::to_string(s.x.size()) + " x values and " + std::to_string(s.y.size()) +
+                                        " y values");
+        }
+    }
+    const int t = (W >= 600 && H >= 360) ? 2 : 1;  // font scale
+    const int gap = 4 * t, tick = 3 * t, glyph_h = 7 * t;
+    const Rgb ink{40, 40, 40}, grid{228, 228, 228}, frame{120, 120, 120};
+    Image img(W, H, {255, 255, 255});
+
+    double xlo, xhi, ylo, yhi, xstep, ystep;
+    axis_range(plot.series, true, plot.x_min, plot.x_max, 0.0, xlo, xhi);
+    axis_range(plot.series, false, plot.y_min, plot.y_max, 0.05, ylo, yhi);
+
+    // Vertical layout first: the y ticks depend on the plot height only, and their label widths
+    // then set the left margin.
+    const int top = plot.title.empty() ? 3 * gap : glyph_h + 3 * gap;
+    const int bottom = tick + gap + glyph_h + (plot.x_label.empty() ? gap : 3 * gap + glyph_h);
+    const int plot_h = H - top - bottom;
+    const std::vector<double> yticks = nice_ticks(ylo, yhi, std::max(2, plot_h / (28 * t)), ystep);
+    int label_w = 0;
+    for (double v : yticks) label_w = std::max(label_w, text_width(format_tick(v, ystep), t));
+    const int left = tick + gap + label_w + (plot.y_label.empty() ? gap : 3 * gap + glyph_h);
+    const int right = 6 * gap;
+    const int plot_w = W - left - right;
+    if (plot_w < 16 || plot_h < 16) throw std::invalid_argument("render_line_plot: image too small for the labels");
+    const std::vector<double> xticks = nice_ticks(xlo, xhi, std::max(2, plot_w / (45 * t)), xstep);
+
+    const Rect area{left, top, left + plot_w, top + plot_h};
+    auto px = [&](double x) { return left + (x - xlo) / (xhi - xlo) * plot_w; };
+    auto py = [&](double y) { return top + (yhi - y) / (yhi - ylo) * plot_h; };
+
+    // Grid, ticks and tick labels.
+    for (double v : xticks) {
+        const int x = int(std::lround(px(v)));
+        if (x < area.x0 || x > area.x1) continue;
+        for (int y = area.y0; y <= area.y1; ++y) img.set(x, y, grid);
+        for (int y = area.y1; y <= area.y1 + tick; ++y) img.set(x, y, frame);
+        const std::string label = format_tick(v, xstep);
+        draw_text(img, x - text_width(label, t) / 2, area.y1 + tick + gap, label, ink, t);
+    }
+    for (double v : yticks) {
+        const int y = int(std::lround(py(v)));
+        if (y < area.y0 || y > area.y1) continue;
+        for (int x = area.x0; x <= area.x1; ++x) img.set(x, y, grid);
+        for (int x = area.x0 - tick; x <= area.x0; ++x) img.set(x, y, frame);
+        const std::string label = format_tick(v, ystep);
+        draw_text(img, area.x0 - tick - gap - text_width(label, t), y - glyph_h / 2, label, ink, t);
+    }
+    draw_rect(img, area, frame);
+
+    // Title, axis labels.
+    if (!plot.title.empty()) draw_text(img, (W - text_width(plot.title, t)) / 2, 2 * gap, plot.title, ink, t);
+    if (!plot.x_label.empty()) {
+        draw_text(img, left + (plot_w - text_width(plot.x_label, t)) / 2, H - gap - glyph_h, plot.x_label, ink, t);
+    }
+    if (!plot.y_label.empty()) {
+        draw_text_up(img, gap, top + (plot_h + text_width(plot.y_label, t)) / 2, plot.y_label, ink, t);
+    }
+
+    // Series, clipped to the plot area widened by the line width (so a line on the frame shows).
+    const double line_width = 1.6 * t;
+    const Rect clip{area.x0 - 2 * t, area.y0 - 2 * t, area.x1 + 2 * t, area.y1 + 2 * t};
+    for (std::size_t k = 0; k < plot.series.size(); ++k) {
+        const PlotSeries& s = plot.series[k];
+        const Rgb colour = kPalette[k % 10];
+        auto finite = [&](std::size_t i) { return i < s.x.size() && std::isfinite(s.x[i]) && std::isfinite(s.y[i]); };
+        for (std::size_t i = 0; i < s.x.size(); ++i) {
+            if (!finite(i)) continue;
+            if (finite(i + 1)) {
+                draw_segment(img, px(s.x[i]), py(s.y[i]), px(s.x[i + 1]), py(s.y[i + 1]), line_width, colour, clip);
+            } else if (i == 0 || !finite(i - 1)) {
+                // An isolated point would otherwise not show at all.
+                draw_segment(img, px(s.x[i]), py(s.y[i]), px(s.x[i]), py(s.y[i]), 3 * line_width, colour, clip);
+            }
+        }
+    }
+
+    // Legend in the inside corner that hides the fewest data points (top right on a tie).
+    std::vector<std::size_t> entries;
+    int legend_text_w = 0;
+    for (std::size_t k = 0; k < plot.series.size(); ++k) {
+        if (plot.series[k].label.empty()) continue;
+        entries.push_back(k);
+        legend_text_w = std::max(legend_text_w, text_width(plot.series[k].label, t));
+    }
+    bool any_label = !entries.empty();
+    if (any_label) {
+        const int swatch = 10 * t, row_h = glyph_h + gap, pad = 2 * t + 2;
+        const int box_w = pad + swatch + gap + legend_text_w + pad;
+        const int box_h = pad + int(entries.size()) * row_h - gap + pad;
+        const int inset = 3 * gap;
+        const Rect corners[4] = {
+            {area.x1 - inset - box_w, area.y0 + inset, area.x1 - inset, area.y0 + inset + box_h},  // top right
+            {area.x0 + inset, area.y0 + inset, area.x0 + inset + box_w, area.y0 + inset + box_h},  // top left
+            {area.x1 - inset - box_w, area.y1 - inset - box_h, area.x1 - inset, area.y1 - inset},  // bottom right
+            {area.x0 + inset, area.y1 - inset - box_h, area.x0 + inset + box_w, area.y1 - inset},  // bottom left
+        };
+        int best = 0;
+        std::size_t best_hidden = std::numeric_limits<std::size_t>::max();
+        for (int c = 0; c < 4; ++c) {
+            std::size_t hidden = 0;
+            for (const PlotSeries& s : plot.series)
+                for (std::size_t i = 0; i < s.x.size(); ++i) {
+                    const double x = px(s.x[i]), y = py(s.y[i]);
+                    hidden += x >= corners[c].x0 && x <= corners[c].x1 && y >= corners[c].y0 && y <= corners[c].y1;
+                }
+            if (hidden < best_hidden) {
+                best_hidden = hidden;
+                best = c;
+            }
+        }
+        const Rect box = corners[best];
+        fill_rect(img, box, {255, 255, 255});
+        draw_rect(img, box, {190, 190, 190});
+        for (std::size_t e = 0; e < entries.size(); ++e) {
+            const int y = box.y0 + pad + int(e) * row_h;
+            const double mid = y + glyph_h / 2.0;
+            draw_segment(img, box.x0 + pad, mid, box.x0 + pad + swatch, mid, line_width, kPalette[entries[e] % 10],
+                         box);
+            draw_text(img, box.x0 + pad + swatch + gap, y, plot.series[entries[e]].label, ink, t);
+        }
+    }
+    return img;
+}
+
+}  // namespace pnet

@@ -1,0 +1,82 @@
+#pragma once
+// Software rendering of particle frames and line plots to an Image (png.hpp),
+// for previews, videos and the reports of `pnet compare`, with no graphics
+// library: disks (2D), shaded sphere impostors (3D), polylines and a built-in
+// 5x7 bitmap font.
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "pnet/io/png.hpp"
+
+namespace pnet {
+
+/// The viridis colormap (van der Walt and Smith, matplotlib 1.5): perceptually uniform and
+/// readable in greyscale and by colour-blind viewers. t is clamped to [0, 1]; NaN gives grey.
+/// Piecewise linear through the 9 colours viridis(k / 8), k = 0..8.
+Rgb viridis(double t);
+
+/// What to draw and how; shared by the 2D and 3D particle renderers.
+struct ParticleRenderOptions {
+    // Colour scale: value_min maps to dark blue, value_max to yellow, values outside are clamped.
+    double value_min = 0.0;
+    double value_max = 1.0;
+    // The simulation box, m; it is framed and fills the image. In 2D only x and y are used.
+    double domain_min[3] = {0.0, 0.0, 0.0};
+    double domain_max[3] = {1.0, 1.0, 1.0};
+    // Image width; the height follows from the box's (projected) aspect ratio.
+    int width_px = 800;
+    // Disk radius in pixels; <= 0 chooses 0.75 x the particle spacing (median nearest-neighbour
+    // distance), so that a body of particles looks solid, with no gaps between lattice points.
+    double radius_px = 0.0;
+    // Text drawn in the top-left corner (e.g. "t = 0.50 s"), none if empty.
+    std::string caption;
+};
+
+/// 2D particles (position n x 2, row per particle, y up) as filled anti-aliased disks on white
+/// inside a thin grey frame at the domain boundary; disk i is coloured by viridis of value[i]
+/// (value may be empty: one colour for all). Domain point (x, y) is at pixel
+///     col = m + (x - min_x) s,  row = m + (max_y - y) s,  s = (width_px - 2 m) / (max_x - min_x),
+/// m = max(4, ceil(r) + 2) for disk radius r, and the image is
+/// round((max_y - min_y) s) + 2 m pixels high. Throws std::invalid_argument for mismatched
+/// sizes, an empty domain or a width outside [16, 16384].
+Image render_particles_2d(const std::vector<double>& position, const std::vector<double>& value,
+                          const ParticleRenderOptions& options);
+
+/// 3D particles (position n x 3, y up) in an orthographic view from direction (1, 0.8, 1.5)
+/// towards the domain centre: the domain box as a grey wireframe, each particle a sphere
+/// impostor (per-pixel depth against a depth buffer, so that overlapping particles intersect
+/// correctly) drawn far to near, Lambert-shaded and darkened with depth, coloured by viridis of
+/// value[i]. Same options and errors as render_particles_2d().
+Image render_particles_3d(const std::vector<double>& position, const std::vector<double>& value,
+                          const ParticleRenderOptions& options);
+
+/// One polyline of a line plot; points with a non-finite coordinate break the line.
+struct PlotSeries {
+    std::string label;  // legend entry; a plot whose labels are all empty has no legend
+    std::vector<double> x, y;
+};
+
+struct LinePlot {
+    std::string title, x_label, y_label;
+    std::vector<PlotSeries> series;  // coloured in turn from a 10-colour palette (matplotlib tab10)
+    int width_px = 800;
+    int height_px = 500;
+    // Fixed axis ranges (e.g. [0, 1] for IoU); NaN takes the range of the data.
+    double x_min = std::numeric_limits<double>::quiet_NaN(), x_max = std::numeric_limits<double>::quiet_NaN();
+    double y_min = std::numeric_limits<double>::quiet_NaN(), y_max = std::numeric_limits<double>::quiet_NaN();
+};
+
+/// A line plot: axes with "nice" (1, 2, 5 x 10^k) ticks and grid, title, axis labels, a legend
+/// and one anti-aliased polyline per series. Throws std::invalid_argument naming the series if
+/// its x and y differ in length, or if the size is outside [64, 8192] pixels.
+Image render_line_plot(const LinePlot& plot);
+
+/// Draws ASCII text (32..126; other bytes as '?') in the built-in 5x7 font, each font pixel a
+/// scale x scale block, with (x, y) the top-left corner of the first 6 x 8 character cell.
+void draw_text(Image& img, int x, int y, const std::string& text, Rgb colour, int scale = 1);
+
+/// Width in pixels of text drawn by draw_text() (6 x scale per character, no trailing gap).
+int text_width(const std::string& text, int scale = 1);
+
+}  // namespace pnet

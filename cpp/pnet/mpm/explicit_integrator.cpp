@@ -1,0 +1,129 @@
+#include "pnet/mpm/explicit_integrator.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "pnet/math/svd.hpp"
+#include "pnet/mpm/transfer.hpp"
+
+namespace pnet {
+
+template <int dim>
+double MpmSystem<dim>::max_wave_speed() const {
+    double c = 0.0;
+    for (std::size_t k = 0; k < materials.size(); ++k) {
+        const ElasticParams& e = materials[k].description().elastic;
+        c = std::max(c, std::sqrt((e.lambda() + 2.0 * e.mu()) / density[k]));
+    }
+    return c;
+}
+
+template <int dim>
+ExplicitIntegrator<dim>::ExplicitIntegrator(const MpmSystem<dim>& system)
+    : system_(system), grid_(system.origin, system.dx, system.cells) {}
+
+template <int dim>
+double ExplicitIntegrator<dim>::stable_dt(const Particles<dim>& particles, double cfl) const {
+    double v_max = 0.0;
+    for (const Vec<dim>& v : particles.v) v_max = std::max(v_max, v.norm());
+    return cfl * system_.dx / (system_.max_wave_speed() + v_max);
+}
+
+template <int dim>
+void ExplicitIntegrator<dim>::compute_stress(const Particles<dim>& particles) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+    scaled_stress_.resize(n);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        const Material<dim>& material = system_.materials[particles.object[p]];
+        const PolarSVD<dim> svd = clamped_svd<dim>(particles.F_elastic[p]);
+        const Vec<dim> tau = material.elasticity().tau(svd.Sigma);
+        scaled_stress_[p] = particles.rest_volume[p] * (svd.U * tau.asDiagonal() * svd.U.transpose());
+    }
+    stress_valid_ = true;
+}
+
+template <int dim>
+std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long step_index) {
+    std::size_t clamped = 0;
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+    std::ptrdiff_t bad = -1;
+#pragma omp parallel for schedule(static) reduction(+ : clamped)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        Vec<dim>& x = particles.x[p];
+        if (!x.allFinite() || !particles.v[p].allFinite()) {
+#pragma omp critical
+            bad = bad < 0 ? p : std::min(bad, p);
+            continue;
+        }
+        bool moved = false;
+        for (int a = 0; a < dim; ++a) {
+            const double lo = grid.lower_limit(a), hi = grid.upper_limit(a);
+            if (x[a] < lo) {
+                x[a] = lo;
+                moved = true;
+            } else if (x[a] > hi) {
+                x[a] = hi;
+                moved = true;
+            }
+        }
+        clamped += moved;
+    }
+    if (bad >= 0)
+        throw SimulationError("step " + std::to_string(step_index) + ": particle " + std::to_string(bad) +
+                              " has a non-finite position or velocity (the simulation blew up; try a smaller dt)");
+    return clamped;
+}
+
+template <int dim>
+StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
+    const auto start = std::chrono::steady_clock::now();
+    StepStats stats;
+    stats.dt = dt;
+    if (!stress_valid_ || scaled_stress_.size() != particles.size()) compute_stress(particles);
+    force_matrix_.resize(particles.size());
+
+    // P2G (race-free by block colouring, see grid.hpp) with the stress force.
+    for (std::size_t p = 0; p < particles.size(); ++p) force_matrix_[p] = -dt * scaled_stress_[p];
+    particles_to_grid(grid_, particles, &force_matrix_);
+
+    stats.max_grid_speed = grid_.update_velocity(dt, system_.gravity, system_.boundary);
+
+    // G2P, return mapping, advection.
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        Vec<dim> v;
+        Mat<dim> C, grad_v;
+        gather_velocity(grid_, particles.x[p], v, C, grad_v);
+        particles.v[p] = v;
+        particles.C[p] = C;
+
+        const Material<dim>& material = system_.materials[particles.object[p]];
+        const Mat<dim> F_trial = (Mat<dim>::Identity() + dt * grad_v) * particles.F_elastic[p];
+        if (!F_trial.allFinite()) {
+            particles.x[p].setConstant(std::nan(""));  // reported by clamp_to_grid below
+            continue;
+        }
+        const PolarSVD<dim> svd = clamped_svd<dim>(F_trial);
+        const ReturnResult<dim> Z = material.return_map(svd.Sigma, particles.hardening[p]);
+        particles.F_elastic[p] = svd.compose(Z.Sigma);
+        particles.hardening[p] = Z.hardening;
+        const Vec<dim> tau = material.elasticity().tau(Z.Sigma);
+        scaled_stress_[p] = particles.rest_volume[p] * (svd.U * tau.asDiagonal() * svd.U.transpose());
+        particles.x[p] += dt * v;
+    }
+    stats.clamped = clamp_to_grid(particles, grid_, step_index);
+    stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
+}
+
+template struct MpmSystem<2>;
+template struct MpmSystem<3>;
+template class ExplicitIntegrator<2>;
+template class ExplicitIntegrator<3>;
+template std::size_t clamp_to_grid<2>(Particles<2>&, const Grid<2>&, long);
+template std::size_t clamp_to_grid<3>(Particles<3>&, const Grid<3>&, long);
+
+}  // namespace pnet

@@ -1,0 +1,108 @@
+#pragma once
+// The MPM background grid: nodes at origin + i dx, i = 0..cells per axis,
+// stored in blocks of 4^d nodes so that a step touches only the blocks near
+// particles (clearing and updating a dense 257^2 or 65^3 grid would cost more
+// than the particles of a sand column).
+//
+// Race-free, deterministic P2G: a particle with stencil base node b writes
+// nodes b..b+2, inside its block (b >> 2) and the next one. Blocks whose
+// coordinates have the same parities (2^d colours) are >= 2 blocks apart, so
+// they never write the same node: colours run one after the other, the blocks
+// of a colour in parallel, and the particles of a block in index order. Every
+// node thus sums its contributions in the same order whatever the thread count.
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "pnet/math/types.hpp"
+#include "pnet/mpm/particles.hpp"
+
+namespace pnet {
+
+struct BoundaryConditions {
+    bool slip_walls = true;        // remove the wall-ward normal velocity within 3 nodes of a wall
+    int sticky_floor_cells = 3;    // zero velocity on the nodes within this many cells of the floor (y = min)
+};
+
+template <int dim>
+class Grid {
+public:
+    static constexpr int kBlockBits = 2;
+    static constexpr int kBlock = 1 << kBlockBits;  // nodes per block and axis
+    static constexpr int kBlockNodes = dim == 2 ? kBlock * kBlock : kBlock * kBlock * kBlock;
+    static constexpr int kColours = 1 << dim;
+    static constexpr int kWallNodes = 3;
+
+    /// Node data: mass and momentum during P2G, velocity after update_velocity().
+    struct Node {
+        double mass;
+        Vec<dim> momentum;  // kg m/s; then velocity, m/s
+    };
+
+    Grid(const Vec<dim>& origin, double dx, const std::array<int, dim>& cells);
+
+    const Vec<dim>& origin() const { return origin_; }
+    double dx() const { return dx_; }
+    double inv_dx() const { return inv_dx_; }
+    int nodes(int axis) const { return nodes_[axis]; }
+
+    /// Storage index of node (i, j[, k]).
+    std::int64_t index(const int* node) const {
+        std::int64_t block = 0, local = 0;
+        for (int a = 0; a < dim; ++a) {
+            block = block * blocks_[a] + (node[a] >> kBlockBits);
+            local = local * kBlock + (node[a] & (kBlock - 1));
+        }
+        return block * kBlockNodes + local;
+    }
+    Node& node(std::int64_t index) { return storage_[index]; }
+    const Node& node(std::int64_t index) const { return storage_[index]; }
+
+    /// Bins the particles by the block of their stencil base node (counting
+    /// sort, stable), marks the blocks they write as active and zeroes them.
+    /// Particles must lie at least one cell inside the domain (see clamp).
+    void bin_and_clear(const std::vector<Vec<dim>>& x);
+
+    /// Calls fn(p) for every particle, colour after colour, blocks of a colour
+    /// in parallel (OpenMP), particles of a block in index order.
+    template <typename Fn>
+    void for_each_particle_coloured(Fn&& fn) const {
+        for (int colour = 0; colour < kColours; ++colour) {
+            const std::vector<int>& blocks = colour_blocks_[colour];
+            const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(blocks.size());
+#pragma omp parallel for schedule(dynamic, 2)
+            for (std::ptrdiff_t b = 0; b < count; ++b) {
+                const int block = blocks[b];
+                for (int q = block_start_[block]; q < block_start_[block + 1]; ++q) fn(order_[q]);
+            }
+        }
+    }
+
+    /// v_i = momentum_i / m_i + dt g on every active node with mass (0 on the
+    /// others), then the boundary conditions. Returns the largest |v_i|.
+    double update_velocity(double dt, const Vec<dim>& gravity, const BoundaryConditions& bc);
+
+    /// Applies the boundary conditions to a velocity v of node `node`.
+    void apply_boundary(const int* node, Vec<dim>& v, const BoundaryConditions& bc) const;
+
+    /// Nodes of the active blocks, as storage indices (valid after bin_and_clear).
+    const std::vector<int>& active_blocks() const { return active_blocks_; }
+    /// Node coordinates of storage index `index`.
+    void coordinates(std::int64_t index, int* node) const;
+
+    /// The lowest and highest particle position whose stencil stays on the grid.
+    double lower_limit(int axis) const { return origin_[axis] + dx_; }
+    double upper_limit(int axis) const { return origin_[axis] + (nodes_[axis] - 2) * dx_; }
+
+private:
+    Vec<dim> origin_;
+    double dx_, inv_dx_;
+    std::array<int, dim> nodes_, blocks_;
+    std::vector<Node> storage_;
+    // Binning, rebuilt every step without reallocation once sizes settle.
+    std::vector<int> particle_block_, block_count_, block_start_, order_, active_blocks_;
+    std::vector<std::uint8_t> block_active_;
+    std::vector<int> colour_blocks_[kColours];
+};
+
+}  // namespace pnet

@@ -1,0 +1,29 @@
+#pragma once
+// What stays fixed during an MPM run: the grid geometry, gravity, boundary
+// conditions and one material per scene object. Every integrator (explicit,
+// plasticitynet, lagged) works on the same system and particles, so results
+// differ only by the time integration (DESIGN.md §4).
+#include <array>
+#include <vector>
+
+#include "pnet/material/material.hpp"
+#include "pnet/math/types.hpp"
+#include "pnet/mpm/grid.hpp"
+
+namespace pnet {
+
+template <int dim>
+struct MpmSystem {
+    Vec<dim> origin = Vec<dim>::Zero();   // domain minimum, m
+    double dx = 1.0 / 64;                 // m
+    std::array<int, dim> cells{};         // per axis
+    Vec<dim> gravity = Vec<dim>::Zero();  // m/s^2
+    BoundaryConditions boundary;
+    std::vector<Material<dim>> materials; // indexed by Particles::object
+    std::vector<double> density;          // kg/m^3, per object
+
+    /// Largest P-wave speed sqrt((lambda + 2 mu) / rho) over the materials, m/s.
+    double max_wave_speed() const;
+};
+
+}  // namespace pnet

@@ -1,0 +1,473 @@
+#include "pnet/scene/scene.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "pnet/material/material_json.hpp"
+
+namespace pnet {
+
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr const char* kAxisNames[] = {"x", "y", "z"};
+constexpr int kMinCells = 8;     // fewer cells than this cannot resolve an object 2 cells from every wall
+constexpr int kMarginCells = 2;  // quadratic B-spline stencil: base node one below the cell, three nodes wide
+
+/// A JSON value for "got ...": short, as written in the file.
+std::string show(const json& value) {
+    std::string text = value.dump();
+    if (text.size() > 60) text = text.substr(0, 57) + "...";
+    return text;
+}
+
+std::string show(double value) {
+    std::ostringstream out;
+    out.precision(10);  // enough to tell 3 dx = 0.01171875 from a rounded value in a message
+    out << value;
+    return out.str();
+}
+
+std::string show(const Eigen::VectorXd& v) {
+    std::string text = "(";
+    for (Eigen::Index i = 0; i < v.size(); ++i) text += (i ? ", " : "") + show(v[i]);
+    return text + ")";
+}
+
+std::string join(const std::string& path, const std::string& key) {
+    return path.empty() ? key : path + "." + key;
+}
+
+std::string index_path(const std::string& path, std::size_t i) {
+    return path + "[" + std::to_string(i) + "]";
+}
+
+/// Reads JSON values and fails with "<file>: <path>: <problem>".
+class Reader {
+public:
+    explicit Reader(std::string file) : file_(std::move(file)) {}
+
+    [[noreturn]] void fail(const std::string& path, const std::string& problem) const {
+        throw SceneError(file_ + ": " + path + ": " + problem);
+    }
+
+    const std::string& file() const { return file_; }
+
+    void require_object(const json& j, const std::string& path) const {
+        if (!j.is_object()) fail(path, "expected an object, got " + show(j));
+    }
+
+    /// `hint` lists the keys that are allowed, where the set depends on context (the shape).
+    void reject_unknown_keys(const json& j, const std::string& path, const std::vector<std::string>& known,
+                             const std::string& hint = "") const {
+        for (const auto& item : j.items())
+            if (std::find(known.begin(), known.end(), item.key()) == known.end())
+                fail(join(path, item.key()), "unknown field" + hint);
+    }
+
+    /// The field, or nullptr when absent.
+    static const json* find(const json& j, const std::string& key) {
+        const auto it = j.find(key);
+        return it == j.end() ? nullptr : &*it;
+    }
+
+    const json& require(const json& j, const std::string& key, const std::string& path,
+                        const std::string& expected) const {
+        const json* v = find(j, key);
+        if (!v) fail(join(path, key), "missing (expected " + expected + ")");
+        return *v;
+    }
+
+    /// A finite number (nlohmann lets NaN and infinity into JSON built in memory).
+    double number(const json& v, const std::string& path, const std::string& expected = "a number") const {
+        if (!v.is_number() || !std::isfinite(v.get<double>())) fail(path, "expected " + expected + ", got " + show(v));
+        return v.get<double>();
+    }
+
+    double positive(const json& v, const std::string& path) const {
+        const double x = number(v, path, "a positive number");
+        if (!(x > 0.0)) fail(path, "expected a positive number, got " + show(v));
+        return x;
+    }
+
+    double non_negative(const json& v, const std::string& path) const {
+        const double x = number(v, path, "a number >= 0");
+        if (x < 0.0) fail(path, "expected a number >= 0, got " + show(v));
+        return x;
+    }
+
+    /// An integer >= `least`; 2.0 is accepted (some writers emit every number as a float).
+    int integer(const json& v, const std::string& path, int least) const {
+        const std::string expected = "an integer >= " + std::to_string(least);
+        const double x = number(v, path, expected);
+        if (x != std::floor(x) || x < least || x > 1e9) fail(path, "expected " + expected + ", got " + show(v));
+        return static_cast<int>(x);
+    }
+
+    std::string text(const json& v, const std::string& path) const {
+        if (!v.is_string()) fail(path, "expected a string, got " + show(v));
+        return v.get<std::string>();
+    }
+
+    Eigen::VectorXd vector(const json& v, const std::string& path, int dim) const {
+        if (!v.is_array() || static_cast<int>(v.size()) != dim)
+            fail(path, "expected an array of " + std::to_string(dim) + " numbers (dim = " + std::to_string(dim) +
+                           "), got " + show(v));
+        Eigen::VectorXd x(dim);
+        for (int i = 0; i < dim; ++i) x[i] = number(v[i], index_path(path, i));
+        return x;
+    }
+
+private:
+    std::string file_;
+};
+
+void read_domain(const Reader& r, const json& j, Scene& scene) {
+    scene.domain_min = Eigen::VectorXd::Zero(scene.dim);
+    scene.domain_max = Eigen::VectorXd::Ones(scene.dim);
+    const json* domain = Reader::find(j, "domain");
+    if (!domain) return;
+    r.require_object(*domain, "domain");
+    r.reject_unknown_keys(*domain, "domain", {"min", "max"});
+    if (const json* v = Reader::find(*domain, "min")) scene.domain_min = r.vector(*v, "domain.min", scene.dim);
+    if (const json* v = Reader::find(*domain, "max")) scene.domain_max = r.vector(*v, "domain.max", scene.dim);
+    for (int a = 0; a < scene.dim; ++a)
+        if (!(scene.domain_max[a] > scene.domain_min[a]))
+            r.fail(index_path("domain.max", a), "must exceed domain.min[" + std::to_string(a) + "] = " +
+                                                    show(scene.domain_min[a]) + ", got " + show(scene.domain_max[a]));
+}
+
+/// The grid has nodes at domain_min + i dx up to domain_max, so the extent must
+/// be a whole number of cells; enough of them to leave room inside the margins.
+void check_cells(const Reader& r, const Scene& scene) {
+    for (int a = 0; a < scene.dim; ++a) {
+        const double extent = scene.domain_max[a] - scene.domain_min[a];
+        const double cells = extent / scene.dx;
+        const double whole = std::round(cells);
+        if (std::abs(cells - whole) > 1e-6 * std::max(1.0, whole))
+            r.fail("dx", "the domain extent along " + std::string(kAxisNames[a]) + " (" + show(extent) +
+                             " m) is not a whole number of cells of dx = " + show(scene.dx) + " m (" + show(cells) +
+                             " cells)");
+        if (whole < kMinCells)
+            r.fail("dx", "the domain must hold at least " + std::to_string(kMinCells) + " cells per axis, got " +
+                             show(whole) + " along " + kAxisNames[a] + " (extent " + show(extent) +
+                             " m, dx = " + show(scene.dx) + " m)");
+    }
+}
+
+void read_boundary(const Reader& r, const json& j, Scene& scene) {
+    const json* boundary = Reader::find(j, "boundary");
+    if (!boundary) return;
+    r.require_object(*boundary, "boundary");
+    r.reject_unknown_keys(*boundary, "boundary", {"walls", "sticky_floor_cells"});
+    if (const json* v = Reader::find(*boundary, "walls")) {
+        const std::string walls = v->is_string() ? v->get<std::string>() : "";
+        if (walls != "slip" && walls != "none")
+            r.fail("boundary.walls", "expected \"slip\" or \"none\", got " + show(*v));
+        scene.boundary.slip_walls = walls == "slip";
+    }
+    if (const json* v = Reader::find(*boundary, "sticky_floor_cells")) {
+        const int cells = r.integer(*v, "boundary.sticky_floor_cells", 0);
+        if (cells >= scene.cells(1))
+            r.fail("boundary.sticky_floor_cells", "must be less than the " + std::to_string(scene.cells(1)) +
+                                                      " cells along y, got " + std::to_string(cells));
+        scene.boundary.sticky_floor_cells = cells;
+    }
+}
+
+void read_integrator(const Reader& r, const json& j, Scene& scene) {
+    const json* integrator = Reader::find(j, "integrator");
+    if (!integrator) return;
+    r.require_object(*integrator, "integrator");
+    // A block without a name would silently mean "explicit", whose stable step is far below the implicit ones'.
+    const json& name = r.require(*integrator, "name", "integrator", "explicit, plasticitynet or lagged");
+    scene.integrator.name = r.text(name, "integrator.name");
+    if (scene.integrator.name != "explicit" && scene.integrator.name != "plasticitynet" &&
+        scene.integrator.name != "lagged")
+        r.fail("integrator.name",
+               "unknown integrator '" + scene.integrator.name + "' (expected explicit, plasticitynet or lagged)");
+    scene.integrator.options = json::object();
+    for (const auto& item : integrator->items()) {
+        const std::string path = join("integrator", item.key());
+        if (item.key() == "name") continue;
+        if (item.key() == "dt") {
+            scene.integrator.dt = r.non_negative(item.value(), path);
+        } else if (item.key() == "cfl") {
+            const double cfl = r.number(item.value(), path, "a number in (0, 1]");
+            if (!(cfl > 0.0 && cfl <= 1.0)) r.fail(path, "expected a number in (0, 1], got " + show(item.value()));
+            scene.integrator.cfl = cfl;
+        } else {
+            scene.integrator.options[item.key()] = item.value();
+        }
+    }
+}
+
+MaterialDescription read_material(const Reader& r, const json& v, const std::string& path) {
+    if (v.is_string()) {
+        try {
+            return material_preset(v.get<std::string>());
+        } catch (const std::invalid_argument& e) {
+            r.fail(path, e.what());
+        }
+    }
+    if (!v.is_object())
+        r.fail(path, "expected a material object or a preset name (sand, snow, metal, metal_nh), got " + show(v));
+    try {
+        return material_from_json(v, path);
+    } catch (const std::invalid_argument& e) {
+        throw SceneError(r.file() + ": " + e.what());  // material_from_json already names the path
+    }
+}
+
+std::string resolve_model_path(const std::string& model, const std::string& base_dir) {
+    fs::path path(model);
+    if (path.is_relative() && !base_dir.empty()) path = fs::path(base_dir) / path;
+    // Absolute, so that scene_to_json() output reads the same from any folder.
+    return fs::absolute(path).lexically_normal().string();
+}
+
+SceneObject read_object(const Reader& r, const json& v, const std::string& path, const Scene& scene,
+                        const std::string& base_dir) {
+    const int dim = scene.dim;
+    r.require_object(v, path);
+    SceneObject object;
+    object.json_path = path;
+
+    const std::string shape_path = join(path, "shape");
+    const std::string shape = r.text(r.require(v, "shape", path, "box, sphere, disk or cylinder"), shape_path);
+    std::vector<std::string> keys = {"shape", "material", "model", "velocity", "hardening"};
+    if (shape == "box") {
+        object.shape = SceneObject::Shape::Box;
+        keys.insert(keys.begin() + 1, {"min", "max"});
+    } else if (shape == "sphere" || shape == "disk") {
+        if (shape == "disk" && dim == 3) r.fail(shape_path, "'disk' is 2D only; in 3D use 'sphere'");
+        object.shape = SceneObject::Shape::Sphere;
+        keys.insert(keys.begin() + 1, {"center", "radius"});
+    } else if (shape == "cylinder") {
+        if (dim == 2) r.fail(shape_path, "'cylinder' is 3D only (axis along y); in 2D use 'box'");
+        object.shape = SceneObject::Shape::Cylinder;
+        keys.insert(keys.begin() + 1, {"center", "radius", "height"});
+    } else {
+        r.fail(shape_path, "unknown shape '" + shape + "' (expected box, sphere, disk or cylinder)");
+    }
+    std::string hint = " (a " + shape + " takes";
+    for (std::size_t i = 0; i < keys.size(); ++i) hint += (i ? ", " : " ") + keys[i];
+    r.reject_unknown_keys(v, path, keys, hint + ")");
+
+    const std::string vec_expected = "an array of " + std::to_string(dim) + " numbers";
+    switch (object.shape) {
+        case SceneObject::Shape::Box:
+            object.min = r.vector(r.require(v, "min", path, vec_expected), join(path, "min"), dim);
+            object.max = r.vector(r.require(v, "max", path, vec_expected), join(path, "max"), dim);
+            for (int a = 0; a < dim; ++a)
+                if (!(object.max[a] > object.min[a]))
+                    r.fail(index_path(join(path, "max"), a), "must exceed min[" + std::to_string(a) + "] = " +
+                                                                 show(object.min[a]) + ", got " + show(object.max[a]));
+            break;
+        case SceneObject::Shape::Sphere:
+        case SceneObject::Shape::Cylinder:
+            object.center = r.vector(r.require(v, "center", path, vec_expected), join(path, "center"), dim);
+            object.radius = r.positive(r.require(v, "radius", path, "a positive number"), join(path, "radius"));
+            if (object.shape == SceneObject::Shape::Cylinder)
+                object.height = r.positive(r.require(v, "height", path, "a positive number"), join(path, "height"));
+            break;
+    }
+
+    object.material =
+        read_material(r, r.require(v, "material", path, "a material object or a preset name"), join(path, "material"));
+    if (const json* model = Reader::find(v, "model")) {
+        const std::string file = r.text(*model, join(path, "model"));
+        if (file.empty()) r.fail(join(path, "model"), "expected a file path, got \"\"");
+        object.model = resolve_model_path(file, base_dir);
+    }
+    object.velocity = Eigen::VectorXd::Zero(dim);
+    if (const json* velocity = Reader::find(v, "velocity"))
+        object.velocity = r.vector(*velocity, join(path, "velocity"), dim);
+    if (const json* hardening = Reader::find(v, "hardening")) {
+        object.hardening = r.number(*hardening, join(path, "hardening"));
+        // The material's own check (e.g. von Mises h >= 0) applies to the state the particles start in.
+        MaterialDescription start = object.material;
+        start.initial_hardening = *object.hardening;
+        try {
+            start.validate();
+        } catch (const std::invalid_argument& e) {
+            r.fail(join(path, "hardening"), e.what());
+        }
+    }
+    return object;
+}
+
+/// Particles within 2 cells of a wall would spread onto nodes outside the grid.
+void check_inside_domain(const Reader& r, const Scene& scene, const SceneObject& object) {
+    const auto [lo, hi] = bounding_box(object);
+    const double margin = kMarginCells * scene.dx;
+    const double tolerance = 1e-9 * scene.dx;  // an object exactly 2 cells in is fine whatever the rounding
+    for (int a = 0; a < scene.dim; ++a) {
+        const double allowed_lo = scene.domain_min[a] + margin, allowed_hi = scene.domain_max[a] - margin;
+        if (lo[a] < allowed_lo - tolerance || hi[a] > allowed_hi + tolerance)
+            r.fail(object.json_path, "extends outside the domain [" + show(scene.domain_min) + ", " +
+                                         show(scene.domain_max) + "] less its 2-cell margin (2 dx = " + show(margin) +
+                                         " m, for the quadratic B-spline stencil): along " + kAxisNames[a] +
+                                         " it spans [" + show(lo[a]) + ", " + show(hi[a]) + "], allowed [" +
+                                         show(allowed_lo) + ", " + show(allowed_hi) + "]");
+    }
+}
+
+json vector_json(const Eigen::VectorXd& v) {
+    return json(std::vector<double>(v.data(), v.data() + v.size()));
+}
+
+}  // namespace
+
+std::string to_string(SceneObject::Shape shape) {
+    switch (shape) {
+        case SceneObject::Shape::Box:
+            return "box";
+        case SceneObject::Shape::Sphere:
+            return "sphere";
+        case SceneObject::Shape::Cylinder:
+            return "cylinder";
+    }
+    return "unknown";
+}
+
+std::pair<Eigen::VectorXd, Eigen::VectorXd> bounding_box(const SceneObject& object) {
+    switch (object.shape) {
+        case SceneObject::Shape::Box:
+            return {object.min, object.max};
+        case SceneObject::Shape::Sphere:
+            return {object.center.array() - object.radius, object.center.array() + object.radius};
+        case SceneObject::Shape::Cylinder: {
+            Eigen::VectorXd lo = object.center.array() - object.radius, hi = object.center.array() + object.radius;
+            lo[1] = object.center[1];
+            hi[1] = object.center[1] + object.height;
+            return {lo, hi};
+        }
+    }
+    return {};
+}
+
+int Scene::cells(int axis) const {
+    return static_cast<int>(std::lround((domain_max[axis] - domain_min[axis]) / dx));
+}
+
+Scene scene_from_json(const json& j, const std::string& file, const std::string& base_dir) {
+    const Reader r(file);
+    r.require_object(j, "(top level)");
+    r.reject_unknown_keys(j, "",
+                          {"name", "description", "dim", "domain", "dx", "gravity", "frame_dt", "frames",
+                           "particles_per_cell", "boundary", "integrator", "objects"});
+    Scene scene;
+    scene.file = file;
+
+    // dim first: it gives the sizes of every vector below.
+    const json& dim = r.require(j, "dim", "", "2 or 3");
+    if (!dim.is_number() || (dim.get<double>() != 2.0 && dim.get<double>() != 3.0))
+        r.fail("dim", "expected 2 or 3, got " + show(dim));
+    scene.dim = static_cast<int>(dim.get<double>());
+
+    const std::string stem = fs::path(file).stem().string();
+    scene.name = stem.empty() || file == "<dict>" ? "unnamed" : stem;
+    if (const json* v = Reader::find(j, "name")) scene.name = r.text(*v, "name");
+    if (const json* v = Reader::find(j, "description")) scene.description = r.text(*v, "description");
+
+    read_domain(r, j, scene);
+    scene.dx = r.positive(r.require(j, "dx", "", "a positive number, the grid spacing in m"), "dx");
+    check_cells(r, scene);
+
+    scene.gravity = Eigen::VectorXd::Zero(scene.dim);
+    scene.gravity[1] = -9.8;  // m/s^2
+    if (const json* v = Reader::find(j, "gravity")) scene.gravity = r.vector(*v, "gravity", scene.dim);
+    if (const json* v = Reader::find(j, "frame_dt")) scene.frame_dt = r.positive(*v, "frame_dt");
+    if (const json* v = Reader::find(j, "frames")) scene.frames = r.integer(*v, "frames", 1);
+    if (const json* v = Reader::find(j, "particles_per_cell"))
+        scene.particles_per_cell = r.integer(*v, "particles_per_cell", 1);
+    read_boundary(r, j, scene);
+    read_integrator(r, j, scene);
+
+    const json& objects = r.require(j, "objects", "", "a non-empty array of objects");
+    if (!objects.is_array() || objects.empty())
+        r.fail("objects", "expected a non-empty array of objects, got " + show(objects));
+    for (std::size_t k = 0; k < objects.size(); ++k) {
+        scene.objects.push_back(read_object(r, objects[k], index_path("objects", k), scene, base_dir));
+        check_inside_domain(r, scene, scene.objects.back());
+    }
+    return scene;
+}
+
+Scene load_scene(const std::string& path) {
+    std::error_code error;
+    if (!fs::exists(path, error)) throw SceneFileNotFound(path + ": no such file");
+    if (!fs::is_regular_file(path, error)) throw SceneFileNotFound(path + ": not a regular file");
+    std::ifstream in(path);
+    if (!in) throw SceneFileNotFound(path + ": cannot be opened");
+    json j;
+    try {
+        j = json::parse(in);
+    } catch (const json::parse_error& e) {
+        // Drop nlohmann's "[json.exception.parse_error.101] " tag; keep "parse error at line L, column C: ...".
+        std::string what = e.what();
+        const std::size_t tag_end = what.find("] ");
+        if (what.rfind("[json.exception", 0) == 0 && tag_end != std::string::npos) what = what.substr(tag_end + 2);
+        throw SceneError(path + ": invalid JSON: " + what);
+    }
+    return scene_from_json(j, path, fs::path(path).parent_path().string());
+}
+
+json scene_to_json(const Scene& scene) {
+    json integrator = scene.integrator.options;
+    integrator["name"] = scene.integrator.name;
+    integrator["dt"] = scene.integrator.dt;
+    integrator["cfl"] = scene.integrator.cfl;
+
+    json objects = json::array();
+    for (const SceneObject& object : scene.objects) {
+        json o;
+        switch (object.shape) {
+            case SceneObject::Shape::Box:
+                o["shape"] = "box";
+                o["min"] = vector_json(object.min);
+                o["max"] = vector_json(object.max);
+                break;
+            case SceneObject::Shape::Sphere:
+                o["shape"] = scene.dim == 2 ? "disk" : "sphere";
+                o["center"] = vector_json(object.center);
+                o["radius"] = object.radius;
+                break;
+            case SceneObject::Shape::Cylinder:
+                o["shape"] = "cylinder";
+                o["center"] = vector_json(object.center);
+                o["radius"] = object.radius;
+                o["height"] = object.height;
+                break;
+        }
+        o["material"] = material_to_json(object.material);
+        if (!object.model.empty()) o["model"] = object.model;
+        o["velocity"] = vector_json(object.velocity);
+        if (object.hardening) o["hardening"] = *object.hardening;
+        objects.push_back(o);
+    }
+
+    json j = {{"name", scene.name},
+              {"dim", scene.dim},
+              {"domain", {{"min", vector_json(scene.domain_min)}, {"max", vector_json(scene.domain_max)}}},
+              {"dx", scene.dx},
+              {"gravity", vector_json(scene.gravity)},
+              {"frame_dt", scene.frame_dt},
+              {"frames", scene.frames},
+              {"particles_per_cell", scene.particles_per_cell},
+              {"boundary",
+               {{"walls", scene.boundary.slip_walls ? "slip" : "none"},
+                {"sticky_floor_cells", scene.boundary.sticky_floor_cells}}},
+              {"integrator", integrator},
+              {"objects", objects}};
+    if (!scene.description.empty()) j["description"] = scene.description;
+    return j;
+}
+
+}  // namespace pnet

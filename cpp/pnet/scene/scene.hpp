@@ -1,0 +1,128 @@
+#pragma once
+// The JSON scene format (DESIGN.md §5), loaded and validated. A scene is data:
+// every error names the file, the JSON path and what was expected, e.g.
+//   "scenes/x.json: objects[0].radius: expected a positive number, got -1".
+//
+//   {
+//     "name": "snowball_2d",                      // optional, default: the file's stem ("unnamed" for "<dict>")
+//     "description": "any text",                  // optional (source of the parameters, deviations)
+//     "dim": 2,                                   // required, 2 or 3
+//     "domain": {"min": [0, 0], "max": [1, 1]},   // m, optional, default [0, 1]^dim
+//     "dx": 0.00390625,                           // m, required; a whole number (>= 8) of cells per axis
+//     "gravity": [0, -9.8],                       // m/s^2, optional, default (0, -9.8[, 0])
+//     "frame_dt": 0.02, "frames": 50,             // s, optional
+//     "particles_per_cell": 2,                    // per axis, optional
+//     "boundary": {"walls": "slip", "sticky_floor_cells": 3},          // optional ("walls": "slip" | "none")
+//     "integrator": {"name": "plasticitynet", "dt": 1e-3, "cfl": 0.5, ...},
+//         // optional, default explicit with the CFL step; "name" is required when the block is given;
+//         // dt = 0 or absent: the CFL step; other keys are kept in Scene::Integrator::options
+//     "objects": [{                               // required, non-empty
+//       "shape": "disk",                          // "box" (min, max), "sphere" (center, radius; a disk in 2D),
+//                                                 // "disk" (2D only), "cylinder" (3D only, axis along y:
+//                                                 // center of the bottom face, radius, height)
+//       "center": [0.5, 0.4], "radius": 0.1,      // m
+//       "material": "snow",                       // a preset name or a material object (material_json.hpp)
+//       "model": "../models/snow_2d.pt",          // optional, relative to the scene file's folder
+//       "velocity": [0, -3],                      // m/s, optional, default 0
+//       "hardening": -0.1                         // optional, default material.initial_hardening
+//     }]
+//   }
+//
+// Unknown keys are rejected ("unknown field") everywhere except in the integrator
+// block, whose extra keys belong to the implicit solvers. Every object must lie
+// at least 2 cells inside the domain: the quadratic B-spline stencil of a
+// particle reaches the nodes one cell on either side of its cell. Objects may
+// overlap (the sampler gives a shared point to the first).
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "pnet/material/material.hpp"
+
+namespace pnet {
+
+/// A malformed scene: "<file>: <json path>: <problem>".
+class SceneError : public std::invalid_argument {
+public:
+    using std::invalid_argument::invalid_argument;
+};
+
+/// load_scene() on a path that is not a readable file: "<file>: no such file".
+class SceneFileNotFound : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+struct SceneObject {
+    enum class Shape { Box, Sphere, Cylinder };
+
+    Shape shape = Shape::Box;
+    Eigen::VectorXd min, max;  // box corners, m (size dim; empty for the other shapes)
+    Eigen::VectorXd center;    // sphere/disk centre; cylinder: centre of its bottom face (axis along y), m
+    double radius = 0.0;       // sphere/cylinder, m
+    double height = 0.0;       // cylinder, m
+    MaterialDescription material;
+    std::string model;                // energy model file, absolute and normalized; "" if none
+    Eigen::VectorXd velocity;         // initial velocity, m/s (size dim)
+    std::optional<double> hardening;  // initial hardening; unset: material.initial_hardening
+    std::string json_path;            // "objects[k]", for errors found later (e.g. loading the model)
+
+    /// The hardening state particles start with.
+    double initial_hardening() const { return hardening.value_or(material.initial_hardening); }
+};
+
+/// "box", "sphere" (also "disk" in 2D files) or "cylinder".
+std::string to_string(SceneObject::Shape shape);
+
+/// Lower and upper corners of the object's axis-aligned bounding box, m.
+std::pair<Eigen::VectorXd, Eigen::VectorXd> bounding_box(const SceneObject& object);
+
+struct Scene {
+    std::string file;  // path it was loaded from, or the name given to scene_from_json
+    std::string name;
+    std::string description;
+    int dim = 2;                             // 2 or 3
+    Eigen::VectorXd domain_min, domain_max;  // m
+    double dx = 0.0;                         // grid spacing, m
+    Eigen::VectorXd gravity;                 // m/s^2
+    double frame_dt = 0.02;                  // s
+    int frames = 50;
+    int particles_per_cell = 2;  // per axis: 2^dim particles per cell
+
+    struct Boundary {
+        bool slip_walls = true;      // "walls": "slip" | "none"
+        int sticky_floor_cells = 3;  // grid velocity zeroed within this many cells of the floor (DESIGN.md §4)
+    } boundary;
+
+    struct Integrator {
+        std::string name = "explicit";                      // "explicit" | "plasticitynet" | "lagged"
+        double dt = 0.0;                                    // s; 0: the CFL step
+        double cfl = 0.5;                                   // dt = cfl dx / (max wave speed + max |v|) when dt = 0
+        nlohmann::json options = nlohmann::json::object();  // the block's other keys, for the implicit solvers
+    } integrator;
+
+    std::vector<SceneObject> objects;
+
+    /// Grid cells along `axis`: (domain_max - domain_min) / dx, validated to be a whole number.
+    int cells(int axis) const;
+};
+
+/// Reads and validates a scene file. Throws SceneFileNotFound if it cannot be
+/// read, SceneError for invalid JSON (with the parser's line and column) or an
+/// invalid scene. Model paths are resolved relative to the file's folder.
+Scene load_scene(const std::string& path);
+
+/// Validates a scene given as JSON; `file` prefixes the error messages (e.g.
+/// "<dict>") and relative model paths are resolved against `base_dir` (the
+/// working directory if empty).
+Scene scene_from_json(const nlohmann::json& j, const std::string& file, const std::string& base_dir);
+
+/// Every field written out (materials as objects, model paths absolute), so that
+/// scene_from_json(scene_to_json(s), ...) gives back s.
+nlohmann::json scene_to_json(const Scene& scene);
+
+}  // namespace pnet

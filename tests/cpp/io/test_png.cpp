@@ -1,0 +1,198 @@
+#include <gtest/gtest.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "pnet/io/png.hpp"
+
+namespace pnet {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// A fresh directory under the system temp folder, removed at the end.
+class TempDir {
+public:
+    TempDir() {
+        path_ = fs::temp_directory_path() /
+                ("pnet_test_" + std::to_string(std::random_device{}()) + "_" + std::to_string(::getpid()));
+        fs::create_directories(path_);
+    }
+    ~TempDir() { fs::remove_all(path_); }
+    std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+private:
+    fs::path path_;
+};
+
+std::string read(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void write(const std::string& path, const std::string& bytes) {
+    std::ofstream(path, std::ios::binary) << bytes;
+}
+
+std::uint32_t be32(const std::string& s, std::size_t at) {
+    return (std::uint32_t(std::uint8_t(s[at])) << 24) | (std::uint32_t(std::uint8_t(s[at + 1])) << 16) |
+           (std::uint32_t(std::uint8_t(s[at + 2])) << 8) | std::uint32_t(std::uint8_t(s[at + 3]));
+}
+
+/// Runs fn, expecting std::runtime_error whose message starts with `path` and contains `needle`.
+template <typename Fn>
+void expect_error(Fn&& fn, const std::string& path, const std::string& needle) {
+    try {
+        fn();
+        ADD_FAILURE() << "no exception for " << path;
+    } catch (const std::runtime_error& e) {
+        const std::string what = e.what();
+        EXPECT_EQ(what.rfind(path, 0), 0u) << "message does not start with the path: " << what;
+        EXPECT_NE(what.find(needle), std::string::npos) << "expected \"" << needle << "\" in: " << what;
+    }
+}
+
+Image random_image(int width, int height, unsigned seed) {
+    std::mt19937 rng(seed);
+    Image img(width, height);
+    for (auto& byte : img.rgb) byte = std::uint8_t(rng() & 0xff);
+    return img;
+}
+
+TEST(Image, SetGetBlendFill) {
+    Image img(4, 3, {10, 20, 30});
+    EXPECT_EQ(img.rgb.size(), 36u);
+    EXPECT_EQ(img.get(3, 2), (Rgb{10, 20, 30}));
+    img.set(1, 2, {200, 100, 0});
+    EXPECT_EQ(img.get(1, 2), (Rgb{200, 100, 0}));
+    EXPECT_EQ(img.rgb[3 * (2 * 4 + 1)], 200);  // row-major, 3 bytes per pixel
+    img.set(-1, 0, {1, 1, 1});                 // outside: ignored
+    img.set(4, 0, {1, 1, 1});
+    img.blend(0, 0, {110, 220, 30}, 0.5);
+    EXPECT_EQ(img.get(0, 0), (Rgb{60, 120, 30}));
+    img.blend(0, 1, {0, 0, 0}, 0.0);
+    EXPECT_EQ(img.get(0, 1), (Rgb{10, 20, 30}));
+    img.fill({255, 255, 255});
+    for (auto byte : img.rgb) EXPECT_EQ(byte, 255);
+}
+
+TEST(Png, RoundTripAndHeader) {
+    TempDir dir;
+    const std::string path = dir.file("image.png");
+    const Image img = random_image(37, 23, 11);
+    write_png(path, img);
+
+    const std::string bytes = read(path);
+    ASSERT_GT(bytes.size(), 33u);
+    EXPECT_EQ(bytes.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
+    EXPECT_EQ(be32(bytes, 8), 13u);  // IHDR length
+    EXPECT_EQ(bytes.substr(12, 4), "IHDR");
+    EXPECT_EQ(be32(bytes, 16), 37u);
+    EXPECT_EQ(be32(bytes, 20), 23u);
+    EXPECT_EQ(bytes[24], 8);  // bit depth
+    EXPECT_EQ(bytes[25], 2);  // colour type RGB
+    EXPECT_EQ(bytes[28], 0);  // not interlaced
+    EXPECT_EQ(bytes.substr(bytes.size() - 12), std::string("\0\0\0\0IEND\xae\x42\x60\x82", 12));
+
+    const Image back = read_png_rgb(path);
+    EXPECT_EQ(back.width, 37);
+    EXPECT_EQ(back.height, 23);
+    EXPECT_EQ(back.rgb, img.rgb);
+}
+
+// A PNG written as other encoders do, with a different row filter on each row (None, Sub, Up,
+// Average, Paeth, ...) and the data split over two IDAT chunks: read_png_rgb must undo them all.
+TEST(Png, ReadsAllRowFilters) {
+    const int w = 9, h = 10;
+    const Image img = random_image(w, h, 5);
+    const int row = 3 * w;
+    std::vector<std::uint8_t> raw;
+    for (int y = 0; y < h; ++y) {
+        const int filter = y % 5;
+        raw.push_back(std::uint8_t(filter));
+        for (int i = 0; i < row; ++i) {
+            auto at = [&](int yy, int ii) { return yy < 0 || ii < 0 ? 0 : int(img.rgb[std::size_t(yy * row + ii)]); };
+            const int x = at(y, i), a = at(y, i - 3), b = at(y - 1, i), c = at(y - 1, i - 3);
+            const int p = a + b - c, pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
+            const int paeth = pa <= pb && pa <= pc ? a : pb <= pc ? b : c;
+            const int predictor[5] = {0, a, b, (a + b) / 2, paeth};
+            raw.push_back(std::uint8_t(x - predictor[filter]));
+        }
+    }
+    uLongf size = compressBound(uLong(raw.size()));
+    std::vector<std::uint8_t> z(size);
+    ASSERT_EQ(compress2(z.data(), &size, raw.data(), uLong(raw.size()), 9), Z_OK);
+
+    std::string png("\x89PNG\r\n\x1a\n", 8);
+    auto chunk = [&](const std::string& type, const std::string& data) {
+        for (int k = 3; k >= 0; --k) png.push_back(char((data.size() >> (8 * k)) & 0xff));
+        const std::string body = type + data;
+        png += body;
+        const uLong crc = crc32(0L, reinterpret_cast<const Bytef*>(body.data()), uInt(body.size()));
+        for (int k = 3; k >= 0; --k) png.push_back(char((crc >> (8 * k)) & 0xff));
+    };
+    chunk("IHDR", std::string("\0\0\0\x09\0\0\0\x0a\x08\x02\0\0\0", 13));
+    chunk("tEXt", std::string("Comment\0ancillary chunks are skipped", 36));
+    const std::string stream(reinterpret_cast<const char*>(z.data()), size);
+    chunk("IDAT", stream.substr(0, size / 2));
+    chunk("IDAT", stream.substr(size / 2));
+    chunk("IEND", "");
+
+    TempDir dir;
+    const std::string path = dir.file("filtered.png");
+    write(path, png);
+    const Image back = read_png_rgb(path);
+    EXPECT_EQ(back.width, w);
+    EXPECT_EQ(back.height, h);
+    EXPECT_EQ(back.rgb, img.rgb);
+}
+
+TEST(Png, BadFilesAreRejected) {
+    TempDir dir;
+    const std::string path = dir.file("image.png");
+    write_png(path, random_image(8, 8, 3));
+    const std::string good = read(path);
+
+    write(path, good.substr(0, good.size() - 20));
+    expect_error([&] { read_png_rgb(path); }, path, "truncated");
+
+    std::string corrupt = good;
+    corrupt[45] = char(corrupt[45] ^ 0x55);  // inside the IDAT data (which starts at byte 41)
+    write(path, corrupt);
+    expect_error([&] { read_png_rgb(path); }, path, "CRC");
+
+    std::string grey = good;
+    grey[25] = 0;  // colour type greyscale (the CRC check comes first, so fix it up)
+    const uLong crc = crc32(0L, reinterpret_cast<const Bytef*>(grey.data() + 12), 17);
+    for (int k = 0; k < 4; ++k) grey[29 + std::size_t(k)] = char((crc >> (8 * (3 - k))) & 0xff);
+    write(path, grey);
+    expect_error([&] { read_png_rgb(path); }, path, "8-bit RGB");
+
+    write(path, "GIF89a not a png");
+    expect_error([&] { read_png_rgb(path); }, path, "not a PNG file");
+
+    const std::string missing = dir.file("missing.png");
+    expect_error([&] { read_png_rgb(missing); }, missing, "cannot open");
+}
+
+TEST(Png, WriterRejectsBadImages) {
+    TempDir dir;
+    const std::string path = dir.file("image.png");
+    EXPECT_THROW(write_png(path, Image()), std::invalid_argument);
+    Image img(4, 4);
+    img.rgb.pop_back();
+    EXPECT_THROW(write_png(path, img), std::invalid_argument);
+    EXPECT_FALSE(fs::exists(path));
+}
+
+}  // namespace
+}  // namespace pnet
