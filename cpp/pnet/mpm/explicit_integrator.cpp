@@ -45,14 +45,14 @@ void ExplicitIntegrator<dim>::compute_stress(const Particles<dim>& particles) {
 }
 
 template <int dim>
-std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long step_index) {
+std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long step_index, double speed_limit) {
     std::size_t clamped = 0;
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
     std::ptrdiff_t bad = -1;
 #pragma omp parallel for schedule(static) reduction(+ : clamped)
     for (std::ptrdiff_t p = 0; p < n; ++p) {
         Vec<dim>& x = particles.x[p];
-        if (!x.allFinite() || !particles.v[p].allFinite()) {
+        if (!x.allFinite() || !particles.v[p].allFinite() || particles.v[p].norm() > speed_limit) {
 #pragma omp critical
             bad = bad < 0 ? p : std::min(bad, p);
             continue;
@@ -72,7 +72,8 @@ std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long
     }
     if (bad >= 0)
         throw SimulationError("step " + std::to_string(step_index) + ": particle " + std::to_string(bad) +
-                              " has a non-finite position or velocity (the simulation blew up; try a smaller dt)");
+                              " has a non-finite position or velocity, or moves more than a cell per step (the "
+                              "simulation blew up; try a smaller dt)");
     return clamped;
 }
 
@@ -114,7 +115,7 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         scaled_stress_[p] = particles.rest_volume[p] * (svd.U * tau.asDiagonal() * svd.U.transpose());
         particles.x[p] += dt * v;
     }
-    stats.clamped = clamp_to_grid(particles, grid_, step_index);
+    stats.clamped = clamp_to_grid(particles, grid_, step_index, system_.dx / dt);
     stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return stats;
 }
@@ -123,7 +124,7 @@ template struct MpmSystem<2>;
 template struct MpmSystem<3>;
 template class ExplicitIntegrator<2>;
 template class ExplicitIntegrator<3>;
-template std::size_t clamp_to_grid<2>(Particles<2>&, const Grid<2>&, long);
-template std::size_t clamp_to_grid<3>(Particles<3>&, const Grid<3>&, long);
+template std::size_t clamp_to_grid<2>(Particles<2>&, const Grid<2>&, long, double);
+template std::size_t clamp_to_grid<3>(Particles<3>&, const Grid<3>&, long, double);
 
 }  // namespace pnet

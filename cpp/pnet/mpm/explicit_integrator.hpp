@@ -47,12 +47,21 @@ public:
 
     const Grid<dim>& grid() const { return grid_; }
 
+    /// V0_p tau_p of the particles' current F^E (what the next step's P2G uses),
+    /// saved in checkpoints so that a resumed run is bit-identical.
+    const std::vector<Mat<dim>>& cached_stress() const { return scaled_stress_; }
+    void set_cached_stress(std::vector<Mat<dim>> stress) {
+        scaled_stress_ = std::move(stress);
+        stress_valid_ = true;
+    }
+
     /// Forget the cached stresses (after the particles were changed from outside).
     void invalidate() { stress_valid_ = false; }
 
-private:
+    /// Computes the stresses of the particles' current F^E (done by step() when needed).
     void compute_stress(const Particles<dim>& particles);
 
+private:
     const MpmSystem<dim>& system_;
     Grid<dim> grid_;
     std::vector<Mat<dim>> scaled_stress_;  // V0_p tau_p, N m
@@ -62,8 +71,10 @@ private:
 
 /// Pulls particles back inside [lower_limit, upper_limit] of the grid, so that
 /// no stencil leaves it; returns how many moved. Throws SimulationError naming
-/// the step and particle for a non-finite position or velocity.
+/// the step and particle for a non-finite position or velocity, or a speed
+/// above speed_limit (dx / dt: a particle crossing more than a cell per step
+/// has blown up).
 template <int dim>
-std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long step_index);
+std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long step_index, double speed_limit);
 
 }  // namespace pnet

@@ -1,0 +1,244 @@
+#include "simulate_command.hpp"
+
+#include <omp.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "pnet/io/atomic_file.hpp"
+#include "pnet/io/ply.hpp"
+#include "pnet/io/png.hpp"
+#include "pnet/io/render.hpp"
+#include "pnet/mpm/simulation.hpp"
+#include "pnet/nn/model_file.hpp"
+#include "pnet/scene/scene.hpp"
+
+namespace pnet::apps {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr const char* kUsage =
+    "usage: pnet simulate SCENE.json --out DIR [--integrator explicit] [--dt SECONDS] [--cfl C]\n"
+    "                     [--frames N] [--threads T] [--checkpoint-every N] [--resume] [--color speed|hardening]\n"
+    "                     [--trust-model]\n";
+
+struct Options {
+    std::string scene, out, integrator, color = "speed";
+    double dt = -1.0, cfl = -1.0;
+    int frames = -1, threads = 0, checkpoint_every = 10;
+    bool resume = false, trust_model = false;
+};
+
+class UsageError : public std::invalid_argument {
+public:
+    using std::invalid_argument::invalid_argument;
+};
+
+Options parse(int argc, char** argv) {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+        const std::string arg = argv[i];
+        auto value = [&]() -> std::string {
+            if (i + 1 >= argc) throw UsageError(arg + " needs a value");
+            return argv[++i];
+        };
+        auto number = [&](const std::string& text) {
+            std::size_t used = 0;
+            double v = 0;
+            try {
+                v = std::stod(text, &used);
+            } catch (const std::exception&) {
+                used = 0;
+            }
+            if (used != text.size()) throw UsageError(arg + ": expected a number, got \"" + text + "\"");
+            return v;
+        };
+        if (arg == "--out")
+            o.out = value();
+        else if (arg == "--integrator")
+            o.integrator = value();
+        else if (arg == "--dt")
+            o.dt = number(value());
+        else if (arg == "--cfl")
+            o.cfl = number(value());
+        else if (arg == "--frames")
+            o.frames = static_cast<int>(number(value()));
+        else if (arg == "--threads")
+            o.threads = static_cast<int>(number(value()));
+        else if (arg == "--checkpoint-every")
+            o.checkpoint_every = static_cast<int>(number(value()));
+        else if (arg == "--color")
+            o.color = value();
+        else if (arg == "--resume")
+            o.resume = true;
+        else if (arg == "--trust-model")
+            o.trust_model = true;
+        else if (!arg.empty() && arg[0] == '-')
+            throw UsageError("unknown option " + arg);
+        else if (o.scene.empty())
+            o.scene = arg;
+        else
+            throw UsageError("unexpected argument " + arg);
+    }
+    if (o.scene.empty()) throw UsageError("no scene file given");
+    if (o.out.empty()) throw UsageError("--out DIR is required");
+    if (o.color != "speed" && o.color != "hardening") throw UsageError("--color: speed or hardening");
+    if (o.frames == 0 || o.frames < -1) throw UsageError("--frames must be >= 1");
+    if (o.dt != -1.0 && !(o.dt >= 0.0)) throw UsageError("--dt must be >= 0 (0: the CFL step)");
+    return o;
+}
+
+std::string frame_name(int frame, const char* extension) {
+    char name[64];
+    std::snprintf(name, sizeof name, "frame_%05d.%s", frame, extension);
+    return name;
+}
+
+template <int dim>
+void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& o, const fs::path& out) {
+    const Particles<dim>& P = sim.particles();
+    PlyParticles ply;
+    ply.dim = dim;
+    std::vector<double> colour(P.size());
+    for (std::size_t p = 0; p < P.size(); ++p) {
+        for (int a = 0; a < dim; ++a) {
+            ply.position.push_back(P.x[p][a]);
+            ply.velocity.push_back(P.v[p][a]);
+        }
+        ply.mass.push_back(P.mass[p]);
+        ply.hardening.push_back(P.hardening[p]);
+        colour[p] = o.color == "speed" ? P.v[p].norm() : P.hardening[p];
+    }
+    write_particles_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
+    ParticleRenderOptions r;
+    r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
+    r.value_max = o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
+    for (int a = 0; a < dim; ++a) {
+        r.domain_min[a] = scene.domain_min[a];
+        r.domain_max[a] = scene.domain_max[a];
+    }
+    char caption[128];
+    std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
+    r.caption = caption;
+    r.width_px = dim == 2 ? 640 : 720;
+    const Image image = dim == 2 ? render_particles_2d(ply.position, colour, r) : render_particles_3d(ply.position, colour, r);
+    write_png((out / frame_name(sim.frame(), "png")).string(), image);
+}
+
+template <int dim>
+int run(const Scene& scene, const Options& o) {
+    const fs::path out(o.out);
+    fs::create_directories(out);
+    // The scene's dt belongs to the scene's integrator; another one starts from its own default (explicit: CFL).
+    const double dt = o.dt >= 0.0 ? o.dt : (scene.integrator.name == "explicit" ? scene.integrator.dt : 0.0);
+    const double cfl = o.cfl > 0.0 ? o.cfl : scene.integrator.cfl;
+    const int frames = o.frames > 0 ? o.frames : scene.frames;
+    Simulation<dim> sim(scene, dt, cfl);
+    const fs::path checkpoint = out / "checkpoint.bin";
+    const fs::path stats_path = out / "stats.csv";
+    if (o.resume) {
+        if (!fs::exists(checkpoint)) throw std::invalid_argument(checkpoint.string() + ": no checkpoint to resume from");
+        sim.load_checkpoint(checkpoint.string());
+        std::fprintf(stderr, "resumed at frame %d (t = %.4f s, %ld steps)\n", sim.frame(), sim.time(), sim.total_steps());
+    }
+    nlohmann::json run_json = {{"scene", fs::absolute(scene.file).string()}, {"name", scene.name}, {"dim", dim},
+                               {"integrator", "explicit"}, {"dt", dt}, {"cfl", cfl}, {"frame_dt", scene.frame_dt},
+                               {"frames", frames}, {"dx", scene.dx}, {"particles", sim.particles().size()},
+                               {"threads", omp_get_max_threads()},
+                               {"domain_min", std::vector<double>(scene.domain_min.data(), scene.domain_min.data() + dim)},
+                               {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)}};
+    write_text_atomically((out / "run.json").string(), run_json.dump(2) + "\n");
+
+    // stats.csv: one row per frame; on resume, rows after the checkpoint's frame are dropped.
+    std::string stats = "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y" +
+                        std::string(dim == 3 ? ",momentum_z" : "") + "\n";
+    if (o.resume && fs::exists(stats_path)) {
+        std::ifstream in(stats_path);
+        std::string line;
+        std::getline(in, line);
+        while (std::getline(in, line))
+            if (!line.empty() && std::stoi(line.substr(0, line.find(','))) <= sim.frame()) stats += line + "\n";
+    }
+    if (!o.resume) write_frame(sim, scene, o, out);
+
+    const auto start = std::chrono::steady_clock::now();
+    const int first = sim.frame();
+    while (sim.frame() < frames) {
+        FrameStats f;
+        try {
+            f = sim.advance_frame();
+        } catch (const SimulationError& e) {
+            write_text_atomically(stats_path.string(), stats);
+            std::fprintf(stderr, "\nerror: %s\nframes up to %d in %s are complete\n", e.what(), sim.frame(),
+                         out.string().c_str());
+            return 1;
+        }
+        write_frame(sim, scene, o, out);
+        char row[512];
+        int len = std::snprintf(row, sizeof row, "%d,%.6f,%ld,%.6g,%.6g,%.4f,%zu,%.9g,%.9g,%.9g,%.9g", f.frame, f.time,
+                                f.steps, f.dt_min, f.dt_max, f.wall_seconds, f.clamped, f.kinetic, f.potential,
+                                f.momentum[0], f.momentum[1]);
+        if (dim == 3) std::snprintf(row + len, sizeof row - len, ",%.9g", f.momentum[2]);
+        stats += std::string(row) + "\n";
+        write_text_atomically(stats_path.string(), stats);
+        if (o.checkpoint_every > 0 && sim.frame() % o.checkpoint_every == 0) sim.save_checkpoint(checkpoint.string());
+        const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        const double per_frame = elapsed / (sim.frame() - first);
+        std::fprintf(stderr, "\rframe %d/%d  steps %ld  %.2f s/frame  ETA %.0f s   ", sim.frame(), frames, f.steps,
+                     per_frame, per_frame * (frames - sim.frame()));
+    }
+    std::fprintf(stderr, "\n");
+    std::printf("wrote %d frames (PLY + PNG), stats.csv and run.json to %s\n", frames, out.string().c_str());
+    return 0;
+}
+
+}  // namespace
+
+int simulate_command(int argc, char** argv) {
+    Options o;
+    try {
+        o = parse(argc, argv);
+    } catch (const UsageError& e) {
+        std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
+        return 2;
+    }
+    if (o.threads > 0) omp_set_num_threads(o.threads);
+    try {
+        const Scene scene = load_scene(o.scene);
+        const std::string integrator = o.integrator.empty() ? scene.integrator.name : o.integrator;
+        // Every model the scene names must load and fit its dimension, whatever the integrator.
+        for (const SceneObject& object : scene.objects) {
+            if (object.model.empty()) continue;
+            LoadOptions load;
+            load.expected_dim = scene.dim;
+            load.expected_kind = ModelKind::Energy;
+            load.trusted = o.trust_model;
+            try {
+                load_model_file(object.model, load);
+            } catch (const std::exception& e) {
+                throw SceneError(scene.file + ": " + object.json_path + ".model: " + e.what());
+            }
+        }
+        if (integrator != "explicit")
+            throw SceneError(scene.file + ": integrator \"" + integrator +
+                             "\" is not available in this build yet; run with --integrator explicit");
+        return scene.dim == 2 ? run<2>(scene, o) : run<3>(scene, o);
+    } catch (const SceneFileNotFound& e) {
+        std::fprintf(stderr, "pnet simulate: %s\n", e.what());
+        return 2;
+    } catch (const std::invalid_argument& e) {
+        std::fprintf(stderr, "pnet simulate: %s\n", e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "pnet simulate: %s\n", e.what());
+        return 1;
+    }
+}
+
+}  // namespace pnet::apps
