@@ -1,0 +1,327 @@
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "compare_command.hpp"
+#include "pnet/io/ply.hpp"
+#include "pnet/io/png.hpp"
+
+namespace pnet {
+namespace {
+
+namespace fs = std::filesystem;
+
+/// A fresh directory under the system temp folder, removed at the end.
+class TempDir {
+public:
+    TempDir() {
+        path_ = fs::temp_directory_path() /
+                ("pnet_compare_test_" + std::to_string(std::random_device{}()) + "_" + std::to_string(::getpid()));
+        fs::create_directories(path_);
+    }
+    ~TempDir() { fs::remove_all(path_); }
+    std::string path(const std::string& name) const { return (path_ / name).string(); }
+
+private:
+    fs::path path_;
+};
+
+std::string read(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void write(const std::string& path, const std::string& text) {
+    std::ofstream(path, std::ios::binary) << text;
+}
+
+std::string run_json(int dim, const std::string& domain_max = "", double frame_dt = 0.02) {
+    const std::string lo = dim == 2 ? "[0, 0]" : "[0, 0, 0]";
+    const std::string hi = !domain_max.empty() ? domain_max : dim == 2 ? "[1, 1]" : "[1, 1, 1]";
+    std::ostringstream s;
+    s << "{\"dim\": " << dim << ", \"domain_min\": " << lo << ", \"domain_max\": " << hi
+      << ", \"dx\": 0.015625, \"frame_dt\": " << frame_dt
+      << ", \"scene\": \"block.json\", \"integrator\": \"explicit\", \"dt\": 1e-5}\n";
+    return s.str();
+}
+
+/// A square (cube) of 64^dim particles with lower corner (cx, cy[, cz]) and side 0.25 m: 4 per 1/64 m cell side.
+PlyParticles block(int dim, double cx, double cy, double cz = 0.25) {
+    PlyParticles p;
+    p.dim = dim;
+    const int n = 64;  // per axis
+    const double h = 0.25 / n;
+    for (int k = 0; k < (dim == 3 ? n : 1); ++k)
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+                p.position.push_back(cx + (i + 0.5) * h);
+                p.position.push_back(cy + (j + 0.5) * h);
+                if (dim == 3) p.position.push_back(cz + (k + 0.5) * h);
+                for (int a = 0; a < dim; ++a) p.velocity.push_back(0.0);
+                p.mass.push_back(1e-3);
+                p.hardening.push_back(0.0);
+            }
+    return p;
+}
+
+std::string frame_path(const std::string& dir, int frame) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%05d.ply", frame);
+    return (fs::path(dir) / name).string();
+}
+
+/// A run directory with run.json and the given frames of a block falling by 0.05 m per frame, shifted right by
+/// shift(frame) m.
+template <typename Shift>
+std::string make_run(const TempDir& tmp, const std::string& name, int dim, const std::vector<int>& frames,
+                     Shift shift) {
+    const std::string dir = tmp.path(name);
+    fs::create_directories(dir);
+    write((fs::path(dir) / "run.json").string(), run_json(dim));
+    for (int f : frames) write_particles_ply(frame_path(dir, f), block(dim, 0.3 + shift(f), 0.5 - 0.05 * f));
+    return dir;
+}
+
+std::string make_run(const TempDir& tmp, const std::string& name, int dim, const std::vector<int>& frames) {
+    return make_run(tmp, name, dim, frames, [](int) { return 0.0; });
+}
+
+struct Result {
+    int code;
+    std::string out, err;
+};
+
+/// Runs `pnet compare args...`, capturing stdout and stderr.
+Result compare(std::vector<std::string> args) {
+    args.insert(args.begin(), "compare");
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    testing::internal::CaptureStdout();
+    testing::internal::CaptureStderr();
+    const int code = apps::compare_command(static_cast<int>(args.size()), argv.data());
+    Result r{code, "", ""};
+    r.out = testing::internal::GetCapturedStdout();
+    r.err = testing::internal::GetCapturedStderr();
+    return r;
+}
+
+struct CsvRow {
+    int frame;
+    double time, soft, binary;
+};
+
+std::vector<CsvRow> read_csv(const std::string& path) {
+    std::istringstream in(read(path));
+    std::string line;
+    std::getline(in, line);
+    EXPECT_EQ(line, "frame,time_s,soft_iou,binary_iou");
+    std::vector<CsvRow> rows;
+    while (std::getline(in, line)) {
+        CsvRow r{};
+        char comma[3];
+        std::istringstream s(line);
+        s >> r.frame >> comma[0] >> r.time >> comma[1] >> r.soft >> comma[2] >> r.binary;
+        EXPECT_TRUE(s && comma[0] == ',' && comma[1] == ',' && comma[2] == ',') << line;
+        rows.push_back(r);
+    }
+    return rows;
+}
+
+TEST(CompareCommand, IdenticalRunsHaveBinaryIouOne) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "run_a", 2, {0, 1, 2});
+    const std::string b = make_run(tmp, "run_b", 2, {0, 1, 2});
+    const Result r = compare({a, b});
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(r.err, "");
+
+    // Default output: DIR_B/compare_<basename of DIR_A>.
+    const std::string out = (fs::path(b) / "compare_run_a").string();
+    const std::vector<CsvRow> rows = read_csv(out + "/iou.csv");
+    ASSERT_EQ(rows.size(), 3u);
+    for (int f = 0; f < 3; ++f) {
+        EXPECT_EQ(rows[f].frame, f);
+        EXPECT_DOUBLE_EQ(rows[f].time, 0.02 * f);
+        EXPECT_EQ(rows[f].binary, 1.0);
+        // Soft self-IoU is below 1 (the B-spline rim of the block), but a solid block is mostly full nodes.
+        EXPECT_GT(rows[f].soft, 0.8);
+        EXPECT_LE(rows[f].soft, 1.0);
+    }
+    const Image plot = read_png_rgb(out + "/iou.png");
+    EXPECT_EQ(plot.width, 800);
+    EXPECT_EQ(plot.height, 500);
+
+    EXPECT_NE(r.out.find("compared 3 frames (0-2)"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("binary IoU: min 1.0000 at frame 0"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find(out + "/iou.csv"), std::string::npos) << r.out;
+}
+
+TEST(CompareCommand, TrailingSlashAndThreeDimensions) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a3", 3, {0, 1});
+    const std::string b = make_run(tmp, "b3", 3, {0, 1});
+    const Result r = compare({a + "/", b, "--dx", "0.03125"});
+    ASSERT_EQ(r.code, 0) << r.err;
+    const std::vector<CsvRow> rows = read_csv((fs::path(b) / "compare_a3" / "iou.csv").string());
+    ASSERT_EQ(rows.size(), 2u);
+    for (const CsvRow& row : rows) EXPECT_EQ(row.binary, 1.0);
+}
+
+TEST(CompareCommand, ShiftedBlockLowersIou) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "ref", 2, {0, 1, 2, 3});
+    // B's block drifts right by 0.04 m per frame (a sixth of its side).
+    const std::string b = make_run(tmp, "drift", 2, {0, 1, 2, 3}, [](int f) { return 0.04 * f; });
+    const std::string out = tmp.path("report");
+    const Result r = compare({a, b, "--out", out, "--dx", "0.0078125"});
+    ASSERT_EQ(r.code, 0) << r.err;
+    const std::vector<CsvRow> rows = read_csv(out + "/iou.csv");
+    ASSERT_EQ(rows.size(), 4u);
+    EXPECT_EQ(rows[0].binary, 1.0);
+    for (int f = 1; f < 4; ++f) {
+        EXPECT_LT(rows[f].soft, rows[f - 1].soft) << f;
+        EXPECT_LT(rows[f].binary, rows[f - 1].binary) << f;
+    }
+    // Overlap of two 0.25 m squares offset by 0.12 m: 0.13 / 0.37 of the union, about 0.35.
+    EXPECT_NEAR(rows[3].binary, 0.13 / 0.37, 0.05);
+    EXPECT_NE(r.out.find("soft IoU:   min"), std::string::npos);
+    EXPECT_NE(r.out.find("at frame 3 (t = 0.06 s)"), std::string::npos) << r.out;
+    EXPECT_FALSE(fs::exists(fs::path(b) / "compare_ref"));
+}
+
+TEST(CompareCommand, ComparesCommonFramesAndWarnsAboutTheRest) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0, 1, 2, 3, 4});
+    const std::string b = make_run(tmp, "b", 2, {0, 1, 2, 7});
+    write(frame_path(b, 5) + ".tmp.123", "half-written");  // an interrupted atomic write is not a frame
+    const Result r = compare({a, b});
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.err.find("frames only in " + a + ", not compared: 3-4"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("frames only in " + b + ", not compared: 7"), std::string::npos) << r.err;
+    EXPECT_EQ(read_csv(b + "/compare_a/iou.csv").size(), 3u);
+}
+
+TEST(CompareCommand, MissingDirectory) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0});
+    const std::string missing = tmp.path("nope");
+    const Result r = compare({a, missing});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(missing + ": no such directory"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(missing));
+}
+
+TEST(CompareCommand, MissingOrBadRunJson) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0});
+    const std::string b = make_run(tmp, "b", 2, {0});
+    const std::string json = (fs::path(b) / "run.json").string();
+
+    fs::remove(json);
+    Result r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(json), std::string::npos) << r.err;
+
+    write(json, "{\"dim\": 2, \"domain_min\": [0, 0], \"domain_max\": [1, 1], \"dx\": 0.01}");
+    r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(json + ": missing \"frame_dt\""), std::string::npos) << r.err;
+
+    write(json, "{\"dim\": 2, \"domain_min\": [0, 0], \"domain_max\": [1], \"dx\": 0.01, \"frame_dt\": 0.02}");
+    r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(json + ": domain_max"), std::string::npos) << r.err;
+
+    write(json, "{\"dim\": 2,");
+    r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(json + ": not valid JSON"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(fs::path(b) / "compare_a"));
+}
+
+TEST(CompareCommand, MismatchedDimension) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0});
+    const std::string b = make_run(tmp, "b", 3, {0});
+    const Result r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(b + "/run.json: dim is 3 but " + a + "/run.json has 2"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(fs::path(b) / "compare_a"));
+}
+
+TEST(CompareCommand, MismatchedDomainOrFrameInterval) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0});
+    const std::string b = make_run(tmp, "b", 2, {0});
+    write(b + "/run.json", run_json(2, "[1, 2]"));
+    Result r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(b + "/run.json: domain_max is [1.0,2.0]"), std::string::npos) << r.err;
+
+    write(b + "/run.json", run_json(2, "", 0.01));
+    r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(b + "/run.json: frame_dt is 0.01"), std::string::npos) << r.err;
+}
+
+TEST(CompareCommand, NoCommonFrames) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0, 1});
+    const std::string b = make_run(tmp, "b", 2, {2, 3});
+    const Result r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find("no frame_NNNNN.ply present in both " + a + " (0-1) and " + b + " (2-3)"),
+              std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(fs::path(b) / "compare_a"));
+
+    const std::string empty = tmp.path("empty");
+    fs::create_directories(empty);
+    write(empty + "/run.json", run_json(2));
+    EXPECT_EQ(compare({a, empty}).code, 2);
+}
+
+TEST(CompareCommand, UnreadableFrame) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0, 1});
+    const std::string b = make_run(tmp, "b", 2, {0, 1});
+    write(frame_path(b, 1), "not a ply file");
+    Result r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(frame_path(b, 1) + ": "), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(fs::path(b) / "compare_a")) << "no partial result";
+
+    // A 3D frame in a 2D run contradicts run.json.
+    write_particles_ply(frame_path(b, 1), block(3, 0.3, 0.3));
+    r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(frame_path(b, 1) + ": "), std::string::npos) << r.err;
+}
+
+TEST(CompareCommand, UsageErrors) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0});
+    for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
+             {}, {a}, {a, a, a}, {a, a, "--frobnicate"}, {a, a, "--dx"}, {a, a, "--dx", "0"}, {a, a, "--dx", "x"},
+             {a, a, "--dx", "1e-3x"}, {a, a, "--out"}}) {
+        const Result r = compare(args);
+        EXPECT_EQ(r.code, 2);
+        EXPECT_NE(r.err.find("usage: pnet compare DIR_A DIR_B"), std::string::npos) << r.err;
+    }
+    // A grid too fine to hold in memory is refused before any frame is read.
+    const Result r = compare({a, a, "--dx", "1e-6"});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find("choose a coarser --dx"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace pnet
