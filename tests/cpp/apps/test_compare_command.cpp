@@ -14,34 +14,17 @@
 #include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
 
+#include "support/temp_dir.hpp"
+
 namespace pnet {
 namespace {
 
+using test::expect_error;
+using test::TempDir;
+using test::read_file;
+using test::write_file;
+
 namespace fs = std::filesystem;
-
-/// A fresh directory under the system temp folder, removed at the end.
-class TempDir {
-public:
-    TempDir() {
-        path_ = fs::temp_directory_path() /
-                ("pnet_compare_test_" + std::to_string(std::random_device{}()) + "_" + std::to_string(::getpid()));
-        fs::create_directories(path_);
-    }
-    ~TempDir() { fs::remove_all(path_); }
-    std::string path(const std::string& name) const { return (path_ / name).string(); }
-
-private:
-    fs::path path_;
-};
-
-std::string read(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write(const std::string& path, const std::string& text) {
-    std::ofstream(path, std::ios::binary) << text;
-}
 
 std::string run_json(int dim, const std::string& domain_max = "", double frame_dt = 0.02) {
     const std::string lo = dim == 2 ? "[0, 0]" : "[0, 0, 0]";
@@ -83,9 +66,9 @@ std::string frame_path(const std::string& dir, int frame) {
 template <typename Shift>
 std::string make_run(const TempDir& tmp, const std::string& name, int dim, const std::vector<int>& frames,
                      Shift shift) {
-    const std::string dir = tmp.path(name);
+    const std::string dir = tmp.file(name);
     fs::create_directories(dir);
-    write((fs::path(dir) / "run.json").string(), run_json(dim));
+    write_file((fs::path(dir) / "run.json").string(), run_json(dim));
     for (int f : frames) write_particles_ply(frame_path(dir, f), block(dim, 0.3 + shift(f), 0.5 - 0.05 * f));
     return dir;
 }
@@ -120,7 +103,7 @@ struct CsvRow {
 };
 
 std::vector<CsvRow> read_csv(const std::string& path) {
-    std::istringstream in(read(path));
+    std::istringstream in(read_file(path));
     std::string line;
     std::getline(in, line);
     EXPECT_EQ(line, "frame,time_s,soft_iou,binary_iou");
@@ -181,7 +164,7 @@ TEST(CompareCommand, ShiftedBlockLowersIou) {
     const std::string a = make_run(tmp, "ref", 2, {0, 1, 2, 3});
     // B's block drifts right by 0.04 m per frame (a sixth of its side).
     const std::string b = make_run(tmp, "drift", 2, {0, 1, 2, 3}, [](int f) { return 0.04 * f; });
-    const std::string out = tmp.path("report");
+    const std::string out = tmp.file("report");
     const Result r = compare({a, b, "--out", out, "--dx", "0.0078125"});
     ASSERT_EQ(r.code, 0) << r.err;
     const std::vector<CsvRow> rows = read_csv(out + "/iou.csv");
@@ -202,7 +185,7 @@ TEST(CompareCommand, ComparesCommonFramesAndWarnsAboutTheRest) {
     TempDir tmp;
     const std::string a = make_run(tmp, "a", 2, {0, 1, 2, 3, 4});
     const std::string b = make_run(tmp, "b", 2, {0, 1, 2, 7});
-    write(frame_path(b, 5) + ".tmp.123", "half-written");  // an interrupted atomic write is not a frame
+    write_file(frame_path(b, 5) + ".tmp.123", "half-written");  // an interrupted atomic write is not a frame
     const Result r = compare({a, b});
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_NE(r.err.find("frames only in " + a + ", not compared: 3-4"), std::string::npos) << r.err;
@@ -213,7 +196,7 @@ TEST(CompareCommand, ComparesCommonFramesAndWarnsAboutTheRest) {
 TEST(CompareCommand, MissingDirectory) {
     TempDir tmp;
     const std::string a = make_run(tmp, "a", 2, {0});
-    const std::string missing = tmp.path("nope");
+    const std::string missing = tmp.file("nope");
     const Result r = compare({a, missing});
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(missing + ": no such directory"), std::string::npos) << r.err;
@@ -231,17 +214,17 @@ TEST(CompareCommand, MissingOrBadRunJson) {
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(json), std::string::npos) << r.err;
 
-    write(json, "{\"dim\": 2, \"domain_min\": [0, 0], \"domain_max\": [1, 1], \"dx\": 0.01}");
+    write_file(json, "{\"dim\": 2, \"domain_min\": [0, 0], \"domain_max\": [1, 1], \"dx\": 0.01}");
     r = compare({a, b});
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(json + ": missing \"frame_dt\""), std::string::npos) << r.err;
 
-    write(json, "{\"dim\": 2, \"domain_min\": [0, 0], \"domain_max\": [1], \"dx\": 0.01, \"frame_dt\": 0.02}");
+    write_file(json, "{\"dim\": 2, \"domain_min\": [0, 0], \"domain_max\": [1], \"dx\": 0.01, \"frame_dt\": 0.02}");
     r = compare({a, b});
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(json + ": domain_max"), std::string::npos) << r.err;
 
-    write(json, "{\"dim\": 2,");
+    write_file(json, "{\"dim\": 2,");
     r = compare({a, b});
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(json + ": not valid JSON"), std::string::npos) << r.err;
@@ -262,12 +245,12 @@ TEST(CompareCommand, MismatchedDomainOrFrameInterval) {
     TempDir tmp;
     const std::string a = make_run(tmp, "a", 2, {0});
     const std::string b = make_run(tmp, "b", 2, {0});
-    write(b + "/run.json", run_json(2, "[1, 2]"));
+    write_file(b + "/run.json", run_json(2, "[1, 2]"));
     Result r = compare({a, b});
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(b + "/run.json: domain_max is [1.0,2.0]"), std::string::npos) << r.err;
 
-    write(b + "/run.json", run_json(2, "", 0.01));
+    write_file(b + "/run.json", run_json(2, "", 0.01));
     r = compare({a, b});
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(b + "/run.json: frame_dt is 0.01"), std::string::npos) << r.err;
@@ -284,9 +267,9 @@ TEST(CompareCommand, NoCommonFrames) {
         << r.err;
     EXPECT_FALSE(fs::exists(fs::path(b) / "compare_a"));
 
-    const std::string empty = tmp.path("empty");
+    const std::string empty = tmp.file("empty");
     fs::create_directories(empty);
-    write(empty + "/run.json", run_json(2));
+    write_file(empty + "/run.json", run_json(2));
     EXPECT_EQ(compare({a, empty}).code, 2);
 }
 
@@ -294,7 +277,7 @@ TEST(CompareCommand, UnreadableFrame) {
     TempDir tmp;
     const std::string a = make_run(tmp, "a", 2, {0, 1});
     const std::string b = make_run(tmp, "b", 2, {0, 1});
-    write(frame_path(b, 1), "not a ply file");
+    write_file(frame_path(b, 1), "not a ply file");
     Result r = compare({a, b});
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find(frame_path(b, 1) + ": "), std::string::npos) << r.err;

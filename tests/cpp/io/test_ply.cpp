@@ -15,55 +15,17 @@
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/ply.hpp"
 
+#include "support/temp_dir.hpp"
+
 namespace pnet {
 namespace {
 
+using test::expect_error;
+using test::TempDir;
+using test::read_file;
+using test::write_file;
+
 namespace fs = std::filesystem;
-
-/// A fresh directory under the system temp folder, removed at the end.
-class TempDir {
-public:
-    TempDir() {
-        path_ = fs::temp_directory_path() /
-                ("pnet_test_" + std::to_string(std::random_device{}()) + "_" + std::to_string(::getpid()));
-        fs::create_directories(path_);
-    }
-    ~TempDir() { fs::remove_all(path_); }
-    std::string file(const std::string& name) const { return (path_ / name).string(); }
-    /// Names of the entries in the directory, to see that no temporary file was left behind.
-    std::vector<std::string> entries() const {
-        std::vector<std::string> names;
-        for (const auto& e : fs::directory_iterator(path_)) names.push_back(e.path().filename().string());
-        return names;
-    }
-
-private:
-    fs::path path_;
-};
-
-std::string read(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write(const std::string& path, const std::string& bytes) {
-    std::ofstream(path, std::ios::binary) << bytes;
-}
-
-/// Runs fn, expecting an exception of type E whose message starts with `path` and contains `needle`.
-template <typename E, typename Fn>
-void expect_error(Fn&& fn, const std::string& path, const std::string& needle) {
-    try {
-        fn();
-        ADD_FAILURE() << "no exception for " << path;
-    } catch (const E& e) {
-        const std::string what = e.what();
-        EXPECT_EQ(what.rfind(path, 0), 0u) << "message does not start with the path: " << what;
-        EXPECT_NE(what.find(needle), std::string::npos) << "expected \"" << needle << "\" in: " << what;
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "wrong exception type for " << path << ": " << e.what();
-    }
-}
 
 /// n particles with seeded random fields, plus values that a lossy or text encoding would alter
 /// (a subnormal, the largest double, 1/3, -0 in the velocity).
@@ -145,7 +107,7 @@ TEST_P(PlyDim, HeaderAndLittleEndianLayout) {
         "property double mass\n"
         "property double hardening\n"
         "end_header\n";
-    const std::string bytes = read(path);
+    const std::string bytes = read_file(path);
     ASSERT_EQ(bytes.size(), header.size() + 3 * 8 * 8);
     EXPECT_EQ(bytes.substr(0, header.size()), header);
     // 1.0 is 0x3FF0000000000000: least significant byte first; mass 2.0 = 0x4000000000000000 at offset 48.
@@ -158,12 +120,12 @@ TEST_P(PlyDim, TruncatedFileIsRejected) {
     TempDir dir;
     const std::string path = dir.file("frame.ply");
     write_particles_ply(path, random_particles(dim, 10, 3));
-    const std::string bytes = read(path);
-    write(path, bytes.substr(0, bytes.size() - 5));
+    const std::string bytes = read_file(path);
+    write_file(path, bytes.substr(0, bytes.size() - 5));
     expect_error<std::runtime_error>([&] { read_particles_ply(path, 0); }, path, "truncated");
-    write(path, bytes.substr(0, bytes.size() - 10 * 64));  // header only
+    write_file(path, bytes.substr(0, bytes.size() - 10 * 64));  // header only
     expect_error<std::runtime_error>([&] { read_particles_ply(path, 0); }, path, "truncated");
-    write(path, bytes + "x");
+    write_file(path, bytes + "x");
     expect_error<std::runtime_error>([&] { read_particles_ply(path, 0); }, path, "trailing bytes");
 }
 
@@ -192,16 +154,16 @@ TEST(Ply, DimensionMismatchIsRejected) {
 TEST(Ply, NonPlyFilesAreRejected) {
     TempDir dir;
     const std::string text = dir.file("notes.txt");
-    write(text, "hello world\n");
+    write_file(text, "hello world\n");
     expect_error<std::runtime_error>([&] { read_particles_ply(text); }, text, "not a PLY file");
 
     // Binary data without any newline must not be read whole as one "line".
     const std::string binary = dir.file("noise.bin");
-    write(binary, std::string(1 << 20, '\x01'));
+    write_file(binary, std::string(1 << 20, '\x01'));
     expect_error<std::runtime_error>([&] { read_particles_ply(binary); }, binary, "not a PLY file");
 
     const std::string empty = dir.file("empty.ply");
-    write(empty, "");
+    write_file(empty, "");
     expect_error<std::runtime_error>([&] { read_particles_ply(empty); }, empty, "not a PLY file");
 
     const std::string missing = dir.file("missing.ply");
@@ -212,11 +174,11 @@ TEST(Ply, ForeignHeadersAreRejected) {
     TempDir dir;
     const std::string path = dir.file("frame.ply");
     write_particles_ply(path, random_particles(2, 2, 5));
-    const std::string good = read(path);
+    const std::string good = read_file(path);
     auto with = [&](const std::string& from, const std::string& to) {
         std::string s = good;
         s.replace(s.find(from), from.size(), to);
-        write(path, s);
+        write_file(path, s);
     };
     with("binary_little_endian", "ascii");
     expect_error<std::runtime_error>([&] { read_particles_ply(path); }, path, "binary_little_endian 1.0");
@@ -235,9 +197,9 @@ TEST(Ply, NonzeroZInA2dFileIsRejected) {
     TempDir dir;
     const std::string path = dir.file("frame.ply");
     write_particles_ply(path, random_particles(3, 4, 2));
-    std::string bytes = read(path);
+    std::string bytes = read_file(path);
     bytes.replace(bytes.find("comment dim 3"), 13, "comment dim 2");
-    write(path, bytes);
+    write_file(path, bytes);
     expect_error<std::runtime_error>([&] { read_particles_ply(path); }, path, "z or vz");
 }
 
@@ -260,7 +222,7 @@ TEST(AtomicFile, ReplacesTheFileAndLeavesNoTemporary) {
     const std::string path = dir.file("out.txt");
     write_text_atomically(path, "first");
     write_text_atomically(path, "second, longer");
-    EXPECT_EQ(read(path), "second, longer");
+    EXPECT_EQ(read_file(path), "second, longer");
     EXPECT_EQ(dir.entries(), std::vector<std::string>{"out.txt"});
 }
 
@@ -268,7 +230,7 @@ TEST(AtomicFile, ThrowingWriterLeavesTheOldFileIntact) {
     TempDir dir;
     const std::string path = dir.file("frame.ply");
     const std::string old_content = "the previous frame";
-    write(path, old_content);
+    write_file(path, old_content);
     expect_error<std::runtime_error>(
         [&] {
             write_file_atomically(path, [](std::ostream& out) {
@@ -278,7 +240,7 @@ TEST(AtomicFile, ThrowingWriterLeavesTheOldFileIntact) {
             });
         },
         path, "simulated failure");
-    EXPECT_EQ(read(path), old_content);
+    EXPECT_EQ(read_file(path), old_content);
     EXPECT_EQ(dir.entries(), std::vector<std::string>{"frame.ply"});
 
     // Without an old file, none appears.
@@ -290,7 +252,7 @@ TEST(AtomicFile, ThrowingWriterLeavesTheOldFileIntact) {
 TEST(AtomicFile, FailedStreamLeavesTheOldFileIntact) {
     TempDir dir;
     const std::string path = dir.file("out.txt");
-    write(path, "old");
+    write_file(path, "old");
     expect_error<std::runtime_error>(
         [&] {
             write_file_atomically(path, [](std::ostream& out) {
@@ -299,7 +261,7 @@ TEST(AtomicFile, FailedStreamLeavesTheOldFileIntact) {
             });
         },
         path, "failed");
-    EXPECT_EQ(read(path), "old");
+    EXPECT_EQ(read_file(path), "old");
     EXPECT_EQ(dir.entries(), std::vector<std::string>{"out.txt"});
 }
 

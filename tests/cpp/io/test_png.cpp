@@ -14,51 +14,21 @@
 
 #include "pnet/io/png.hpp"
 
+#include "support/temp_dir.hpp"
+
 namespace pnet {
 namespace {
 
+using test::expect_error;
+using test::TempDir;
+using test::read_file;
+using test::write_file;
+
 namespace fs = std::filesystem;
-
-/// A fresh directory under the system temp folder, removed at the end.
-class TempDir {
-public:
-    TempDir() {
-        path_ = fs::temp_directory_path() /
-                ("pnet_test_" + std::to_string(std::random_device{}()) + "_" + std::to_string(::getpid()));
-        fs::create_directories(path_);
-    }
-    ~TempDir() { fs::remove_all(path_); }
-    std::string file(const std::string& name) const { return (path_ / name).string(); }
-
-private:
-    fs::path path_;
-};
-
-std::string read(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write(const std::string& path, const std::string& bytes) {
-    std::ofstream(path, std::ios::binary) << bytes;
-}
 
 std::uint32_t be32(const std::string& s, std::size_t at) {
     return (std::uint32_t(std::uint8_t(s[at])) << 24) | (std::uint32_t(std::uint8_t(s[at + 1])) << 16) |
            (std::uint32_t(std::uint8_t(s[at + 2])) << 8) | std::uint32_t(std::uint8_t(s[at + 3]));
-}
-
-/// Runs fn, expecting std::runtime_error whose message starts with `path` and contains `needle`.
-template <typename Fn>
-void expect_error(Fn&& fn, const std::string& path, const std::string& needle) {
-    try {
-        fn();
-        ADD_FAILURE() << "no exception for " << path;
-    } catch (const std::runtime_error& e) {
-        const std::string what = e.what();
-        EXPECT_EQ(what.rfind(path, 0), 0u) << "message does not start with the path: " << what;
-        EXPECT_NE(what.find(needle), std::string::npos) << "expected \"" << needle << "\" in: " << what;
-    }
 }
 
 Image random_image(int width, int height, unsigned seed) {
@@ -91,7 +61,7 @@ TEST(Png, RoundTripAndHeader) {
     const Image img = random_image(37, 23, 11);
     write_png(path, img);
 
-    const std::string bytes = read(path);
+    const std::string bytes = read_file(path);
     ASSERT_GT(bytes.size(), 33u);
     EXPECT_EQ(bytes.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
     EXPECT_EQ(be32(bytes, 8), 13u);  // IHDR length
@@ -149,7 +119,7 @@ TEST(Png, ReadsAllRowFilters) {
 
     TempDir dir;
     const std::string path = dir.file("filtered.png");
-    write(path, png);
+    write_file(path, png);
     const Image back = read_png_rgb(path);
     EXPECT_EQ(back.width, w);
     EXPECT_EQ(back.height, h);
@@ -160,28 +130,28 @@ TEST(Png, BadFilesAreRejected) {
     TempDir dir;
     const std::string path = dir.file("image.png");
     write_png(path, random_image(8, 8, 3));
-    const std::string good = read(path);
+    const std::string good = read_file(path);
 
-    write(path, good.substr(0, good.size() - 20));
-    expect_error([&] { read_png_rgb(path); }, path, "truncated");
+    write_file(path, good.substr(0, good.size() - 20));
+    expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "truncated");
 
     std::string corrupt = good;
     corrupt[45] = char(corrupt[45] ^ 0x55);  // inside the IDAT data (which starts at byte 41)
-    write(path, corrupt);
-    expect_error([&] { read_png_rgb(path); }, path, "CRC");
+    write_file(path, corrupt);
+    expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "CRC");
 
     std::string grey = good;
     grey[25] = 0;  // colour type greyscale (the CRC check comes first, so fix it up)
     const uLong crc = crc32(0L, reinterpret_cast<const Bytef*>(grey.data() + 12), 17);
     for (int k = 0; k < 4; ++k) grey[29 + std::size_t(k)] = char((crc >> (8 * (3 - k))) & 0xff);
-    write(path, grey);
-    expect_error([&] { read_png_rgb(path); }, path, "8-bit RGB");
+    write_file(path, grey);
+    expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "8-bit RGB");
 
-    write(path, "GIF89a not a png");
-    expect_error([&] { read_png_rgb(path); }, path, "not a PNG file");
+    write_file(path, "GIF89a not a png");
+    expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "not a PNG file");
 
     const std::string missing = dir.file("missing.png");
-    expect_error([&] { read_png_rgb(missing); }, missing, "cannot open");
+    expect_error<std::runtime_error>([&] { read_png_rgb(missing); }, missing, "cannot open");
 }
 
 TEST(Png, WriterRejectsBadImages) {

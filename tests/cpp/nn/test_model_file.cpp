@@ -12,8 +12,15 @@
 #include "pnet/nn/model_file.hpp"
 #include "pnet/nn/torchscript.hpp"
 
+#include "support/temp_dir.hpp"
+
 namespace pnet {
 namespace {
+
+using test::expect_error;
+using test::TempDir;
+using test::read_file;
+using test::write_file;
 
 namespace fs = std::filesystem;
 
@@ -22,46 +29,6 @@ const std::string kTestModels = std::string(PNET_TEST_DATA_DIR) + "/models";
 
 const std::vector<std::string> kShipped = {"sand_2d.pt",      "snow_2d.pt",  "metal_2d.pt", "metal_nh_rm_2d.pt",
                                            "metal_nh_2d.pt",  "sand_3d.pt",  "snow_3d.pt",  "metal_3d.pt"};
-
-/// A fresh directory under the system temp folder, removed at the end.
-class TempDir {
-public:
-    TempDir() {
-        path_ = fs::temp_directory_path() /
-                ("pnet_test_" + std::to_string(std::random_device{}()) + "_" + std::to_string(::getpid()));
-        fs::create_directories(path_);
-    }
-    ~TempDir() { fs::remove_all(path_); }
-    std::string file(const std::string& name) const { return (path_ / name).string(); }
-
-private:
-    fs::path path_;
-};
-
-std::string read(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write(const std::string& path, const std::string& bytes) {
-    std::ofstream(path, std::ios::binary) << bytes;
-}
-
-/// Runs fn, expecting an exception of type E whose message starts with
-/// `path` and contains `needle`.
-template <typename E, typename Fn>
-void expect_error(Fn&& fn, const std::string& path, const std::string& needle) {
-    try {
-        fn();
-        ADD_FAILURE() << "no exception for " << path;
-    } catch (const E& e) {
-        const std::string what = e.what();
-        EXPECT_EQ(what.rfind(path, 0), 0u) << "message does not start with the path: " << what;
-        EXPECT_NE(what.find(needle), std::string::npos) << "expected \"" << needle << "\" in: " << what;
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "wrong exception type for " << path << ": " << e.what();
-    }
-}
 
 class ShippedModel : public ::testing::TestWithParam<std::string> {};
 
@@ -116,7 +83,7 @@ TEST(ModelFile, MissingFile) {
 TEST(ModelFile, UnpinnedFilesNeedTrust) {
     TempDir dir;
     const std::string path = dir.file("copy.pt");
-    write(path, read(kModels + "/sand_2d.pt"));
+    write_file(path, read_file(kModels + "/sand_2d.pt"));
     expect_error<UntrustedModelError>([&] { load_model_file(path); }, path, "not pinned by a MANIFEST");
     LoadOptions trusted;
     trusted.trusted = true;
@@ -126,18 +93,18 @@ TEST(ModelFile, UnpinnedFilesNeedTrust) {
 TEST(ModelFile, ManifestMismatchIsRefused) {
     TempDir dir;
     const std::string path = dir.file("sand_2d.pt");
-    write(path, read(kModels + "/sand_2d.pt"));
-    write(dir.file("MANIFEST"),
+    write_file(path, read_file(kModels + "/sand_2d.pt"));
+    write_file(dir.file("MANIFEST"),
           R"({"format": "plasticitynet-manifest", "models": [{"file": "sand_2d.pt", "sha256": ")" +
               std::string(64, '0') + R"("}]})");
     expect_error<UntrustedModelError>([&] { load_model_file(path); }, path, "does not match the MANIFEST");
     // With the right digest it is pinned.
-    write(dir.file("MANIFEST"),
+    write_file(dir.file("MANIFEST"),
           R"({"format": "plasticitynet-manifest", "models": [{"file": "sand_2d.pt", "sha256": ")" +
               sha256_file_hex(path) + R"("}]})");
     EXPECT_TRUE(load_model_file(path).pinned);
     // A malformed MANIFEST names itself.
-    write(dir.file("MANIFEST"), "{not json");
+    write_file(dir.file("MANIFEST"), "{not json");
     try {
         load_model_file(path);
         FAIL() << "expected std::invalid_argument";
@@ -150,10 +117,10 @@ TEST(ModelFile, TruncatedAndRandomBytes) {
     TempDir dir;
     LoadOptions trusted;
     trusted.trusted = true;  // reach the archive reader
-    const std::string bytes = read(kModels + "/snow_2d.pt");
+    const std::string bytes = read_file(kModels + "/snow_2d.pt");
     for (std::size_t keep : {std::size_t{0}, std::size_t{100}, bytes.size() / 2, bytes.size() - 30}) {
         const std::string path = dir.file("truncated_" + std::to_string(keep) + ".pt");
-        write(path, bytes.substr(0, keep));
+        write_file(path, bytes.substr(0, keep));
         expect_error<std::invalid_argument>([&] { load_model_file(path, trusted); }, path,
                                             "not a readable TorchScript archive");
     }
@@ -161,7 +128,7 @@ TEST(ModelFile, TruncatedAndRandomBytes) {
     std::string noise(4096, '\0');
     for (char& c : noise) c = static_cast<char>(rng());
     const std::string path = dir.file("noise.pt");
-    write(path, noise);
+    write_file(path, noise);
     expect_error<std::invalid_argument>([&] { load_model_file(path, trusted); }, path,
                                         "not a readable TorchScript archive");
 }
@@ -226,8 +193,8 @@ TEST(ModelFile, LearnedReturnMapIsLoadedAndPinnedByTheEnergy) {
 
     // A different return-map file under the pinned name is refused.
     TempDir dir;
-    write(dir.file("metal_nh_2d.pt"), read(kModels + "/metal_nh_2d.pt"));
-    write(dir.file("metal_nh_rm_2d.pt"), read(kTestModels + "/valid_return_map_2d.pt"));
+    write_file(dir.file("metal_nh_2d.pt"), read_file(kModels + "/metal_nh_2d.pt"));
+    write_file(dir.file("metal_nh_rm_2d.pt"), read_file(kTestModels + "/valid_return_map_2d.pt"));
     LoadOptions trusted;
     trusted.trusted = true;
     expect_error<UntrustedModelError>([&] { load_model_file(dir.file("metal_nh_2d.pt"), trusted); },
