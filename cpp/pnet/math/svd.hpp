@@ -19,7 +19,8 @@ struct PolarSVD {
     }
 };
 
-/// Polar SVD of a d x d matrix (d = 2: closed form; d = 3: Jacobi SVD + sign fix).
+/// Polar SVD of a d x d matrix (d = 2: closed form; d = 3: Jacobi eigenvectors of
+/// F^T F, then Givens QR of F V; see svd.cpp).
 template <int dim>
 PolarSVD<dim> polar_svd(const Mat<dim>& F);
 

@@ -88,8 +88,10 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     // P2G (race-free by block colouring, see grid.hpp) with the stress force.
     for (std::size_t p = 0; p < particles.size(); ++p) force_matrix_[p] = -dt * scaled_stress_[p];
     particles_to_grid(grid_, particles, &force_matrix_);
+    const auto after_p2g = std::chrono::steady_clock::now();
 
     stats.max_grid_speed = grid_.update_velocity(dt, system_.gravity, system_.boundary);
+    const auto after_grid = std::chrono::steady_clock::now();
 
     // G2P, return mapping, advection.
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
@@ -116,7 +118,11 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         particles.x[p] += dt * v;
     }
     stats.clamped = clamp_to_grid(particles, grid_, step_index, system_.dx / dt);
-    stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const auto end = std::chrono::steady_clock::now();
+    stats.p2g_seconds = std::chrono::duration<double>(after_p2g - start).count();
+    stats.grid_seconds = std::chrono::duration<double>(after_grid - after_p2g).count();
+    stats.g2p_seconds = std::chrono::duration<double>(end - after_grid).count();
+    stats.wall_seconds = std::chrono::duration<double>(end - start).count();
     return stats;
 }
 

@@ -25,6 +25,9 @@ struct StepStats {
     std::size_t clamped = 0;   // particles pulled back inside the domain
     double max_grid_speed = 0.0;
     double wall_seconds = 0.0;
+    // Phases of wall_seconds: P2G (with binning and stress forces), grid
+    // update, G2P (with return mapping, advection and clamping).
+    double p2g_seconds = 0.0, grid_seconds = 0.0, g2p_seconds = 0.0;
 };
 
 /// A NaN or a blow-up: names the step and the particle.

@@ -17,6 +17,13 @@ Grid<dim>::Grid(const Vec<dim>& origin, double dx, const std::array<int, dim>& c
         blocks_[a] = (nodes_[a] + kBlock - 1) / kBlock;
         total_blocks *= blocks_[a];
     }
+    std::int64_t block_stride = kBlockNodes, local_stride = 1;
+    for (int a = dim - 1; a >= 0; --a) {
+        block_stride_[a] = block_stride;
+        local_stride_[a] = local_stride;
+        block_stride *= blocks_[a];
+        local_stride *= kBlock;
+    }
     storage_.assign(total_blocks * kBlockNodes, Node{0.0, Vec<dim>::Zero()});
     block_count_.assign(total_blocks, 0);
     block_start_.assign(total_blocks + 1, 0);

@@ -9,22 +9,63 @@
 
 namespace pnet {
 
+/// The 3^d stencil nodes of a particle at x on `grid`, per axis a and stencil
+/// position k: weight factor w, its derivative dw (1/m), the node's offset
+/// x_i - x_p (m) and its storage-index term (Grid::axis_offset). Node
+/// (i, j[, k]) has weight w[0][i] w[1][j] (w[2][k]) and storage index
+/// index[0][i] + index[1][j] (+ index[2][k]).
+template <int dim>
+struct StencilNodes {
+    double w[dim][3], dw[dim][3], d[dim][3];
+    std::int64_t index[dim][3];
+
+    StencilNodes(const Grid<dim>& grid, const Vec<dim>& x) {
+        const BSplineStencil<dim> st(x - grid.origin(), grid.inv_dx());
+        for (int a = 0; a < dim; ++a)
+            for (int k = 0; k < 3; ++k) {
+                w[a][k] = st.w[a][k];
+                dw[a][k] = st.dw[a][k];
+                d[a][k] = (k - st.offset[a]) * grid.dx();
+                index[a][k] = grid.axis_offset(a, st.base[a] + k);
+            }
+    }
+
+    /// fn(storage index, w, grad w, x_i - x_p) for the 3^d nodes, with the
+    /// products formed once per axis pair (the loops the transfers inline).
+    template <typename Fn>
+    void for_each(Fn&& fn) const {
+        if constexpr (dim == 2) {
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j)
+                    fn(index[0][i] + index[1][j], w[0][i] * w[1][j], Vec<2>(dw[0][i] * w[1][j], w[0][i] * dw[1][j]),
+                       Vec<2>(d[0][i], d[1][j]));
+        } else {
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j) {
+                    const double wij = w[0][i] * w[1][j], gi = dw[0][i] * w[1][j], gj = w[0][i] * dw[1][j];
+                    const std::int64_t ij = index[0][i] + index[1][j];
+                    for (int k = 0; k < 3; ++k)
+                        fn(ij + index[2][k], wij * w[2][k], Vec<3>(gi * w[2][k], gj * w[2][k], wij * dw[2][k]),
+                           Vec<3>(d[0][i], d[1][j], d[2][k]));
+                }
+        }
+    }
+};
+
 /// P2G: bins the particles, then m_i = sum w_ip m_p and
 /// momentum_i = sum w_ip m_p (v_p + C_p (x_i - x_p)) + sum K_p grad w_ip,
 /// with K_p = force_matrix[p] (for explicit MPM -dt V0_p tau_p; null: none).
 template <int dim>
 void particles_to_grid(Grid<dim>& grid, const Particles<dim>& particles, const std::vector<Mat<dim>>* force_matrix) {
     grid.bin_and_clear(particles.x);
-    const double dx = grid.dx(), inv_dx = grid.inv_dx();
-    const Vec<dim> origin = grid.origin();
     grid.for_each_particle_coloured([&](int p) {
-        const BSplineStencil<dim> st(particles.x[p] - origin, inv_dx);
+        const StencilNodes<dim> st(grid, particles.x[p]);
         const double m = particles.mass[p];
         const Vec<dim> mv = m * particles.v[p];
         const Mat<dim> mC = m * particles.C[p];
         const Mat<dim> K = force_matrix ? (*force_matrix)[p] : Mat<dim>::Zero();
-        st.for_each_node(dx, [&](const int* node, double w, const Vec<dim>& grad, const Vec<dim>& dpos) {
-            typename Grid<dim>::Node& n = grid.node(grid.index(node));
+        st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Vec<dim>& dpos) {
+            typename Grid<dim>::Node& n = grid.node(node);
             n.mass += w * m;
             n.momentum += w * (mv + mC * dpos) + K * grad;
         });
@@ -36,18 +77,21 @@ void particles_to_grid(Grid<dim>& grid, const Particles<dim>& particles, const s
 /// grad v_p = sum v_i grad w_ip^T.
 template <int dim>
 inline void gather_velocity(const Grid<dim>& grid, const Vec<dim>& x, Vec<dim>& v, Mat<dim>& C, Mat<dim>& grad_v) {
-    const double dx = grid.dx(), inv_dx = grid.inv_dx();
-    const BSplineStencil<dim> st(x - grid.origin(), inv_dx);
-    v.setZero();
-    Mat<dim> B = Mat<dim>::Zero();
-    grad_v.setZero();
-    st.for_each_node(dx, [&](const int* node, double w, const Vec<dim>& grad, const Vec<dim>& dpos) {
-        const Vec<dim>& vi = grid.node(grid.index(node)).momentum;
-        v += w * vi;
-        B += (w * vi) * dpos.transpose();
-        grad_v += vi * grad.transpose();
+    const StencilNodes<dim> st(grid, x);
+    Vec<dim> sum_v = Vec<dim>::Zero();
+    Mat<dim> B = Mat<dim>::Zero(), G = Mat<dim>::Zero();
+    st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Vec<dim>& dpos) {
+        const Vec<dim> vi = grid.node(node).momentum;
+        const Vec<dim> wv = w * vi;
+        sum_v += wv;
+        for (int b = 0; b < dim; ++b) {
+            B.col(b) += dpos[b] * wv;
+            G.col(b) += grad[b] * vi;
+        }
     });
-    C = (4.0 * inv_dx * inv_dx) * B;
+    v = sum_v;
+    C = (4.0 * grid.inv_dx() * grid.inv_dx()) * B;
+    grad_v = G;
 }
 
 }  // namespace pnet

@@ -56,5 +56,27 @@ TYPED_TEST(PolarSvdTest, HandlesDegenerateMatrices) {
     expect_polar<dim>(Q * Sigma.asDiagonal() * rng.template rotation<dim>());
 }
 
+TYPED_TEST(PolarSvdTest, RecoversKnownSingularValues) {
+    // F = Q1 diag(sigma) Q2 with known sigma, including strong compression
+    // and stretch (the values a return mapping takes logarithms of).
+    constexpr int dim = TypeParam::value;
+    test::Random rng(9);
+    const double spectra[][3] = {{3.0, 1.0, 1e-5}, {1.001, 1.0, 0.999}, {1.0, 1e-3, 1e-3}, {50.0, 2.0, -0.5},
+                                 {1.0 + 1e-9, 1.0, 1.0 - 1e-9}};
+    for (const auto& values : spectra) {
+        Vec<dim> sigma;
+        for (int i = 0; i < dim; ++i) sigma[i] = values[i];
+        if (dim == 2) sigma[1] = values[2];
+        for (int k = 0; k < 20; ++k) {
+            const Mat<dim> F = rng.template rotation<dim>() * sigma.asDiagonal() * rng.template rotation<dim>();
+            const PolarSVD<dim> svd = polar_svd<dim>(F);
+            for (int i = 0; i < dim; ++i)
+                EXPECT_NEAR(svd.Sigma[i], sigma[i], 4e-15 * sigma[0] + 1e-12 * std::abs(sigma[i]))
+                    << "sigma " << sigma.transpose() << ", index " << i;
+            expect_polar<dim>(F);
+        }
+    }
+}
+
 }  // namespace
 }  // namespace pnet
