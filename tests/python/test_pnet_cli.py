@@ -1,0 +1,165 @@
+"""`pnet simulate` end to end, as a user runs it: outputs, exit codes and messages for malformed
+scenes, checkpoint/resume, blow-ups. Runs the C++ binary built by scripts/setup.sh (the build
+folder is $PNET_BUILD_DIR, default build/)."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PNET = ROOT / os.environ.get("PNET_BUILD_DIR", "build") / "cpp" / "pnet"
+TINY = ROOT / "scenes" / "tiny"
+
+
+def pnet(*args, timeout=300) -> subprocess.CompletedProcess:
+    if not PNET.exists():
+        pytest.fail(f"{PNET} is not built (run scripts/setup.sh)")
+    return subprocess.run([str(PNET), *map(str, args)], capture_output=True, text=True, timeout=timeout)
+
+
+def tiny_scene(name: str) -> dict:
+    scene = json.loads((TINY / f"{name}.json").read_text())
+    for obj in scene["objects"]:  # absolute model paths, so that the scene can be written anywhere
+        obj["model"] = str((TINY / obj["model"]).resolve())
+    return scene
+
+
+def write_scene(tmp_path: Path, scene: dict, name="scene.json") -> Path:
+    path = tmp_path / name
+    path.write_text(json.dumps(scene, indent=1))
+    return path
+
+
+@pytest.mark.parametrize("name", ["sand_column_2d", "snowball_2d", "sand_column_3d", "snowball_3d"])
+def test_tiny_scene_writes_frames_stats_and_run_json(tmp_path, name):
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / f"{name}.json", "--integrator", "explicit", "--frames", 2, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert f"wrote 2 frames" in r.stdout and str(out) in r.stdout
+    assert "frame 2/2" in r.stderr and "ETA" in r.stderr  # the progress line
+    for frame in range(3):
+        ply = (out / f"frame_{frame:05d}.ply").read_bytes()
+        assert ply.startswith(b"ply\nformat binary_little_endian 1.0\n")
+        assert (out / f"frame_{frame:05d}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rows = (out / "stats.csv").read_text().splitlines()
+    assert rows[0].startswith("frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x")
+    assert [int(r.split(",")[0]) for r in rows[1:]] == [1, 2]
+    run = json.loads((out / "run.json").read_text())
+    assert run["integrator"] == "explicit" and run["frames"] == 2 and run["dim"] == int(name[-2])
+    assert not list(out.glob("*.tmp")), "temporary files left behind"
+
+
+def test_resume_continues_bit_identically(tmp_path):
+    scene = TINY / "snowball_2d.json"
+    full, part = tmp_path / "full", tmp_path / "part"
+    assert pnet("simulate", scene, "--integrator", "explicit", "--frames", 4, "--out", full).returncode == 0
+    r = pnet("simulate", scene, "--integrator", "explicit", "--frames", 2, "--checkpoint-every", 1, "--out", part)
+    assert r.returncode == 0, r.stderr
+    r = pnet("simulate", scene, "--integrator", "explicit", "--frames", 4, "--resume", "--out", part)
+    assert r.returncode == 0, r.stderr
+    assert "resumed at frame 2" in r.stderr
+    for frame in (3, 4):
+        assert (full / f"frame_{frame:05d}.ply").read_bytes() == (part / f"frame_{frame:05d}.ply").read_bytes()
+    # stats.csv continues from the checkpoint: one row per frame, the same simulated quantities.
+    strip_wall = lambda rows: [",".join(c for i, c in enumerate(r.split(",")) if i != 5) for r in rows]
+    assert strip_wall((full / "stats.csv").read_text().splitlines()) == \
+        strip_wall((part / "stats.csv").read_text().splitlines())
+
+
+def test_resume_without_checkpoint_is_an_input_error(tmp_path):
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "explicit", "--resume", "--out", tmp_path)
+    assert r.returncode == 2
+    assert "checkpoint.bin: no checkpoint to resume from" in r.stderr
+
+
+def test_resume_refuses_a_checkpoint_of_another_scene(tmp_path):
+    out = tmp_path / "run"
+    assert pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "explicit", "--frames", 1,
+                "--checkpoint-every", 1, "--out", out).returncode == 0
+    scene = tiny_scene("sand_column_2d")
+    scene["gravity"] = [0, -5.0]
+    r = pnet("simulate", write_scene(tmp_path, scene), "--integrator", "explicit", "--frames", 2, "--resume",
+             "--out", out)
+    assert r.returncode == 2
+    assert "written for a different scene" in r.stderr
+
+
+def _malformed(scene: dict, case: str) -> tuple[dict, str]:
+    """A copy of `scene` broken in one way, and the message `pnet` must print."""
+    s = copy.deepcopy(scene)
+    if case == "missing key":
+        del s["dx"]
+        return s, "dx: missing"
+    if case == "wrong type":
+        s["frames"] = "fifty"
+        return s, "frames: expected an integer >= 1"
+    if case == "unknown material":
+        s["objects"][0]["material"]["plasticity"]["model"] = "butter"
+        return s, "objects[0].material.plasticity.model: unknown plasticity model 'butter'"
+    if case == "negative dx":
+        s["dx"] = -0.03125
+        return s, "dx: expected a positive number"
+    if case == "object outside the domain":
+        s["objects"][0]["max"] = [1.5, 0.3]
+        return s, "objects[0]: extends outside the domain"
+    if case == "model of the wrong dimension":
+        s["objects"][0]["model"] = str(ROOT / "models" / "sand_3d.pt")
+        return s, "objects[0].model: "
+    raise ValueError(case)
+
+
+@pytest.mark.parametrize("case", ["missing key", "wrong type", "unknown material", "negative dx",
+                                  "object outside the domain", "model of the wrong dimension"])
+def test_malformed_scene_exits_2_naming_file_and_path(tmp_path, case):
+    scene, expected = _malformed(tiny_scene("sand_column_2d"), case)
+    path = write_scene(tmp_path, scene, "broken.json")
+    out = tmp_path / "run"
+    r = pnet("simulate", path, "--integrator", "explicit", "--out", out)
+    assert r.returncode == 2, (case, r.stderr)
+    assert r.stderr.startswith(f"pnet simulate: {path}: "), r.stderr
+    assert expected in r.stderr, r.stderr
+    assert not out.exists() or not list(out.glob("frame_*")), "nothing is simulated for a bad scene"
+
+
+def test_wrong_dimension_model_message_says_what_was_expected(tmp_path):
+    scene, _ = _malformed(tiny_scene("sand_column_2d"), "model of the wrong dimension")
+    r = pnet("simulate", write_scene(tmp_path, scene), "--integrator", "explicit", "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert "sand_3d.pt: a 3D model where a 2D one is needed" in r.stderr
+
+
+def test_missing_scene_file_and_usage_errors(tmp_path):
+    r = pnet("simulate", tmp_path / "nope.json", "--out", tmp_path / "o")
+    assert r.returncode == 2 and "nope.json" in r.stderr
+    r = pnet("simulate", TINY / "sand_column_2d.json")
+    assert r.returncode == 2 and "--out DIR is required" in r.stderr
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", "--frames", 0)
+    assert r.returncode == 2 and "--frames" in r.stderr
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", "--integrator", "magic")
+    assert r.returncode == 2 and "magic" in r.stderr
+
+
+def test_blow_up_stops_with_step_and_particle_keeping_written_frames(tmp_path):
+    # dt far above the CFL step (~1e-3 s at dx = 1/32): the run must stop with a message naming
+    # the step and the particle, exit 1, and leave the frames already written intact.
+    scene = tiny_scene("snowball_2d")
+    scene["objects"][0]["velocity"] = [0, -30]
+    out = tmp_path / "run"
+    r = pnet("simulate", write_scene(tmp_path, scene), "--integrator", "explicit", "--dt", 0.01, "--frames", 6,
+             "--out", out)
+    assert r.returncode == 1, r.stderr
+    assert "error: step " in r.stderr and "particle " in r.stderr and "blew up" in r.stderr
+    frames = sorted(out.glob("frame_*.ply"))
+    assert frames and frames[0].name == "frame_00000.ply"
+    for ply in frames:
+        assert ply.read_bytes().startswith(b"ply\n")
+    last = int(frames[-1].stem.split("_")[1])
+    rows = (out / "stats.csv").read_text().splitlines()[1:]
+    assert len(rows) == last, "stats.csv has one row per completed frame"
+    assert not list(out.glob("*.tmp"))
