@@ -1,10 +1,39 @@
 #!/usr/bin/env bash
-# Sets up whatever is missing, then runs the default job. Until the simulator
-# exists this is the material report: return-mapping behaviour of every
-# material (2D and 3D) on sample deformations, and PNGs of the elastic regions.
-# Arguments are passed to the report (e.g. --out DIR).
+# Sets up whatever is missing, then runs the default job: the canonical
+# sand_column_2d scene (DESIGN.md §5) simulated with the explicit ground-truth
+# MPM integrator at its CFL step (the implicit `plasticitynet` integrator
+# replaces it when it lands). Writes per frame a PLY and a PNG, stats.csv and
+# run.json to out/sand_column_2d/ (or --out DIR), plus sand_column_2d.mp4 when
+# ffmpeg is installed, and prints where everything is.
+#
+# Other arguments go to `pnet simulate` (e.g. --frames 10, --threads 1, --dt 1e-5).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 "$root/scripts/setup.sh"
-exec .venv/bin/python -m plasticitynet.report "$@"
+
+build_dir="${PNET_BUILD_DIR:-build}"
+scene="scenes/sand_column_2d.json"
+out="out/sand_column_2d"
+args=()
+while (($#)); do
+  case "$1" in
+    --out) out="$2"; shift 2 ;;
+    *) args+=("$1"); shift ;;
+  esac
+done
+
+"$build_dir/cpp/pnet" simulate "$scene" --integrator explicit --out "$out" "${args[@]+"${args[@]}"}"
+
+if command -v ffmpeg >/dev/null 2>&1; then
+  video="$out/sand_column_2d.mp4"
+  # 50 frames per second of video = the scene's frame rate (frame_dt 0.02 s): real time.
+  ffmpeg -loglevel error -y -framerate 50 -i "$out/frame_%05d.png" -c:v libx264 -pix_fmt yuv420p \
+    -vf "pad=ceil(iw/2)*2:ceil(ih/2)*2" "$video.tmp.mp4"
+  mv "$video.tmp.mp4" "$video"
+  echo "video: $video"
+else
+  echo "video: skipped (ffmpeg is not installed; 'apt-get install ffmpeg' to get $out/sand_column_2d.mp4)"
+fi
+echo "frames: $out/frame_*.png and $out/frame_*.ply (open the PLYs in ParaView, Blender or Houdini)"
+echo "statistics: $out/stats.csv, run: $out/run.json"
