@@ -1,0 +1,104 @@
+#include "pnet/solver/newton.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "pnet/solver/pcg.hpp"
+
+namespace pnet {
+
+namespace {
+
+double scaled_residual(const VecX& g, const VecX& scale) {
+    if (scale.size() == 0) return g.lpNorm<Eigen::Infinity>();
+    return g.cwiseProduct(scale).lpNorm<Eigen::Infinity>();
+}
+
+std::string where(const std::string& context, int iteration, double residual) {
+    char text[160];
+    std::snprintf(text, sizeof text, "%sNewton iteration %d (residual %.3e): ",
+                  context.empty() ? "" : (context + ": ").c_str(), iteration, residual);
+    return text;
+}
+
+}  // namespace
+
+NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options, const std::string& context) {
+    const Eigen::Index n = objective.size();
+    if (x.size() != n) throw std::invalid_argument("minimize: x has the wrong size");
+    if (options.residual_scale.size() != 0 && options.residual_scale.size() != n)
+        throw std::invalid_argument("minimize: residual_scale has the wrong size");
+    NewtonStats stats;
+    VecX g(n), d(n), diagonal(n), x_trial(n);
+    double energy = objective.value_gradient(x, g);
+    double residual = scaled_residual(g, options.residual_scale);
+    stats.initial_energy = stats.energy = energy;
+    stats.initial_residual = stats.residual = residual;
+    if (!std::isfinite(energy) || !g.allFinite())
+        throw NewtonError(where(context, 0, residual) + "the energy or its gradient is not finite at the start");
+    const double g0 = std::max(g.norm(), 1e-300);
+
+    for (int it = 0; it < options.max_iterations; ++it) {
+        if (residual <= options.tolerance) {
+            stats.converged = true;
+            break;
+        }
+        objective.prepare_hessian(x);
+        objective.hessian_diagonal(diagonal);
+        for (Eigen::Index i = 0; i < n; ++i) diagonal[i] = diagonal[i] > 0.0 ? 1.0 / diagonal[i] : 1.0;
+        const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
+        const PcgResult cg = solve_pcg(objective, -g, diagonal, d, forcing, options.max_cg_iterations);
+        stats.cg_iterations += cg.iterations;
+        const double slope = g.dot(d);
+        if (!(slope < 0.0))
+            throw NewtonError(where(context, it, residual) + "the search direction is not a descent direction (g.d = " +
+                              std::to_string(slope) + "); the Hessian is not positive definite");
+
+        // Near the solution the decrease g.d falls below the round-off of E: the
+        // energy cannot rank the step any more, the gradient still can.
+        if (-slope <= 16.0 * std::numeric_limits<double>::epsilon() * std::abs(energy)) {
+            x_trial = x + d;
+            VecX g_trial(n);
+            const double e_trial = objective.value_gradient(x_trial, g_trial);
+            ++stats.line_search_steps;
+            if (!std::isfinite(e_trial) || !g_trial.allFinite() || !(g_trial.norm() < g.norm())) {
+                stats.roundoff_floor = true;  // nothing left to gain in double precision
+                break;
+            }
+            x = x_trial;
+            energy = e_trial;
+            g = g_trial;
+            residual = scaled_residual(g, options.residual_scale);
+            stats.iterations = it + 1;
+            stats.energy = energy;
+            stats.residual = residual;
+            continue;
+        }
+        double alpha = 1.0, trial = 0.0;
+        for (int halvings = 0;; ++halvings) {
+            x_trial = x + alpha * d;
+            trial = objective.value(x_trial);
+            ++stats.line_search_steps;
+            if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope) break;
+            if (halvings == options.max_line_search)
+                throw NewtonError(where(context, it, residual) + "line search stalled after " +
+                                  std::to_string(halvings) + " halvings (E = " + std::to_string(energy) +
+                                  ", last trial " + std::to_string(trial) + ")");
+            alpha *= 0.5;
+        }
+        x = x_trial;
+        energy = objective.value_gradient(x, g);
+        if (!std::isfinite(energy) || !g.allFinite())
+            throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
+        residual = scaled_residual(g, options.residual_scale);
+        stats.iterations = it + 1;
+        stats.energy = energy;
+        stats.residual = residual;
+    }
+    if (residual <= options.tolerance) stats.converged = true;
+    return stats;
+}
+
+}  // namespace pnet

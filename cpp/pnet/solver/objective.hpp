@@ -1,0 +1,38 @@
+#pragma once
+// The one face every energy shows the optimization integrators (STYLE.md
+// item 2, DESIGN.md §4): an objective E(x) on a flat vector of unknowns with
+// value, gradient and the product of a positive semi-definite approximation
+// of its Hessian with a vector. Newton (newton.hpp) only ever sees this
+// interface, so the MPM incremental potential, FEM and coupling share it.
+#include <Eigen/Core>
+
+namespace pnet {
+
+using VecX = Eigen::VectorXd;
+
+class Objective {
+public:
+    virtual ~Objective() = default;
+
+    /// Number of unknowns.
+    virtual Eigen::Index size() const = 0;
+
+    /// E(x).
+    virtual double value(const VecX& x) = 0;
+
+    /// E(x), and its gradient into `gradient` (resized by the caller to size()).
+    virtual double value_gradient(const VecX& x, VecX& gradient) = 0;
+
+    /// Prepares hessian_multiply() and hessian_diagonal() at x (for example,
+    /// per-particle PSD-projected Hessians). Called once per Newton iteration,
+    /// after value_gradient(x).
+    virtual void prepare_hessian(const VecX& x) = 0;
+
+    /// out = H d with H the PSD Hessian prepared at the last prepare_hessian().
+    virtual void hessian_multiply(const VecX& d, VecX& out) const = 0;
+
+    /// diag(H), for the Jacobi preconditioner; entries must be > 0.
+    virtual void hessian_diagonal(VecX& diagonal) const = 0;
+};
+
+}  // namespace pnet
