@@ -6,7 +6,6 @@
 // and dw/dx = (f - 1.5, -2 (f - 1), f - 0.5) / dx. Node k of the stencil sits
 // at (base + k) dx, so x_i - x_p = (k - f) dx.
 #include <cmath>
-#include <cstdint>
 
 #include "pnet/math/types.hpp"
 
@@ -32,49 +31,6 @@ struct BSplineStencil {
             dw[a][0] = (f - 1.5) * inv_dx;
             dw[a][1] = -2.0 * (f - 1.0) * inv_dx;
             dw[a][2] = (f - 0.5) * inv_dx;
-        }
-    }
-
-    /// Calls fn(index, w, grad w, x_i - x_p) for the 3^d stencil nodes of
-    /// `grid` (a Grid<dim>), index being the node's storage index.
-    template <typename GridT, typename Fn>
-    void for_each_node(const GridT& grid, Fn&& fn) const {
-        const double dx = grid.dx();
-        std::int64_t offset_of[dim][3];
-        double d[dim][3];
-        for (int a = 0; a < dim; ++a)
-            for (int k = 0; k < 3; ++k) {
-                offset_of[a][k] = grid.axis_offset(a, base[a] + k);
-                d[a][k] = (k - offset[a]) * dx;
-            }
-        Vec<dim> grad, dpos;
-        if constexpr (dim == 2) {
-            for (int i = 0; i < 3; ++i) {
-                dpos[0] = d[0][i];
-                for (int j = 0; j < 3; ++j) {
-                    dpos[1] = d[1][j];
-                    grad[0] = dw[0][i] * w[1][j];
-                    grad[1] = w[0][i] * dw[1][j];
-                    fn(offset_of[0][i] + offset_of[1][j], w[0][i] * w[1][j], grad, dpos);
-                }
-            }
-        } else {
-            for (int i = 0; i < 3; ++i) {
-                dpos[0] = d[0][i];
-                for (int j = 0; j < 3; ++j) {
-                    dpos[1] = d[1][j];
-                    const double wij = w[0][i] * w[1][j];
-                    const double gi = dw[0][i] * w[1][j], gj = w[0][i] * dw[1][j];
-                    const std::int64_t ij = offset_of[0][i] + offset_of[1][j];
-                    for (int k = 0; k < 3; ++k) {
-                        dpos[2] = d[2][k];
-                        grad[0] = gi * w[2][k];
-                        grad[1] = gj * w[2][k];
-                        grad[2] = wij * dw[2][k];
-                        fn(ij + offset_of[2][k], wij * w[2][k], grad, dpos);
-                    }
-                }
-            }
         }
     }
 

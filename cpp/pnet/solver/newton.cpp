@@ -31,7 +31,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     if (options.residual_scale.size() != 0 && options.residual_scale.size() != n)
         throw std::invalid_argument("minimize: residual_scale has the wrong size");
     NewtonStats stats;
-    VecX g(n), d(n), diagonal(n), x_trial(n);
+    VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n);
     double energy = objective.value_gradient(x, g);
     double residual = scaled_residual(g, options.residual_scale);
     stats.initial_energy = stats.energy = energy;
@@ -60,38 +60,33 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         // energy cannot rank the step any more, the gradient still can.
         if (-slope <= 16.0 * std::numeric_limits<double>::epsilon() * std::abs(energy)) {
             x_trial = x + d;
-            VecX g_trial(n);
             const double e_trial = objective.value_gradient(x_trial, g_trial);
             ++stats.line_search_steps;
             if (!std::isfinite(e_trial) || !g_trial.allFinite() || !(g_trial.norm() < g.norm())) {
                 stats.roundoff_floor = true;  // nothing left to gain in double precision
                 break;
             }
-            x = x_trial;
+            x.swap(x_trial);
+            g.swap(g_trial);
             energy = e_trial;
-            g = g_trial;
-            residual = scaled_residual(g, options.residual_scale);
-            stats.iterations = it + 1;
-            stats.energy = energy;
-            stats.residual = residual;
-            continue;
+        } else {
+            double alpha = 1.0, trial = 0.0;
+            for (int halvings = 0;; ++halvings) {
+                x_trial = x + alpha * d;
+                trial = objective.value(x_trial);
+                ++stats.line_search_steps;
+                if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope) break;
+                if (halvings == options.max_line_search)
+                    throw NewtonError(where(context, it, residual) + "line search stalled after " +
+                                      std::to_string(halvings) + " halvings (E = " + std::to_string(energy) +
+                                      ", last trial " + std::to_string(trial) + ")");
+                alpha *= 0.5;
+            }
+            x.swap(x_trial);
+            energy = objective.value_gradient(x, g);
+            if (!std::isfinite(energy) || !g.allFinite())
+                throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
         }
-        double alpha = 1.0, trial = 0.0;
-        for (int halvings = 0;; ++halvings) {
-            x_trial = x + alpha * d;
-            trial = objective.value(x_trial);
-            ++stats.line_search_steps;
-            if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope) break;
-            if (halvings == options.max_line_search)
-                throw NewtonError(where(context, it, residual) + "line search stalled after " +
-                                  std::to_string(halvings) + " halvings (E = " + std::to_string(energy) +
-                                  ", last trial " + std::to_string(trial) + ")");
-            alpha *= 0.5;
-        }
-        x = x_trial;
-        energy = objective.value_gradient(x, g);
-        if (!std::isfinite(energy) || !g.allFinite())
-            throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
         residual = scaled_residual(g, options.residual_scale);
         stats.iterations = it + 1;
         stats.energy = energy;
