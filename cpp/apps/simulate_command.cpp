@@ -24,15 +24,21 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kUsage =
-    "usage: pnet simulate SCENE.json --out DIR [--integrator explicit] [--dt SECONDS] [--cfl C]\n"
-    "                     [--frames N] [--threads T] [--checkpoint-every N] [--resume] [--color speed|hardening]\n"
-    "                     [--trust-model]\n";
+    "usage: pnet simulate SCENE.json --out DIR [--integrator explicit|plasticitynet|lagged] [--dt SECONDS]\n"
+    "                     [--cfl C] [--frames N] [--threads T] [--checkpoint-every N] [--resume]\n"
+    "                     [--color speed|hardening] [--trust-model]\n"
+    "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
+    "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
+    "                     [--fixed-point-tol T] [--regularizer W]\n";
 
 struct Options {
     std::string scene, out, integrator, color = "speed";
     double dt = -1.0, cfl = -1.0;
     int frames = -1, threads = 0, checkpoint_every = 10;
     bool resume = false, trust_model = false;
+    // Implicit solver overrides (negative: the scene's value).
+    double newton_tol = -1.0, cg_tol = -1.0, fixed_point_tol = -1.0, regularizer = -1.0;
+    int fixed_point_iterations = -1;
 };
 
 class UsageError : public std::invalid_argument {
@@ -73,6 +79,16 @@ Options parse(int argc, char** argv) {
             o.threads = static_cast<int>(number(value()));
         else if (arg == "--checkpoint-every")
             o.checkpoint_every = static_cast<int>(number(value()));
+        else if (arg == "--newton-tol")
+            o.newton_tol = number(value());
+        else if (arg == "--cg-tol")
+            o.cg_tol = number(value());
+        else if (arg == "--fixed-point-tol")
+            o.fixed_point_tol = number(value());
+        else if (arg == "--regularizer")
+            o.regularizer = number(value());
+        else if (arg == "--fixed-point-iterations")
+            o.fixed_point_iterations = static_cast<int>(number(value()));
         else if (arg == "--color")
             o.color = value();
         else if (arg == "--resume")
@@ -91,6 +107,12 @@ Options parse(int argc, char** argv) {
     if (o.color != "speed" && o.color != "hardening") throw UsageError("--color: speed or hardening");
     if (o.frames == 0 || o.frames < -1) throw UsageError("--frames must be >= 1");
     if (o.dt != -1.0 && !(o.dt >= 0.0)) throw UsageError("--dt must be >= 0 (0: the CFL step)");
+    if (o.newton_tol != -1.0 && !(o.newton_tol > 0.0)) throw UsageError("--newton-tol must be > 0");
+    if (o.cg_tol != -1.0 && !(o.cg_tol > 0.0 && o.cg_tol < 1.0)) throw UsageError("--cg-tol must be in (0, 1)");
+    if (o.fixed_point_tol != -1.0 && !(o.fixed_point_tol >= 0.0)) throw UsageError("--fixed-point-tol must be >= 0");
+    if (o.regularizer != -1.0 && !(o.regularizer >= 0.0)) throw UsageError("--regularizer must be >= 0");
+    if (o.fixed_point_iterations != -1 && o.fixed_point_iterations < 1)
+        throw UsageError("--fixed-point-iterations must be >= 1");
     return o;
 }
 
@@ -132,14 +154,12 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
 }
 
 template <int dim>
-int run(const Scene& scene, const Options& o) {
+int run(const Scene& scene, const Options& o, const IntegratorSettings& settings) {
     const fs::path out(o.out);
     fs::create_directories(out);
-    // The scene's dt belongs to the scene's integrator; another one starts from its own default (explicit: CFL).
-    const double dt = o.dt >= 0.0 ? o.dt : (scene.integrator.name == "explicit" ? scene.integrator.dt : 0.0);
-    const double cfl = o.cfl > 0.0 ? o.cfl : scene.integrator.cfl;
     const int frames = o.frames > 0 ? o.frames : scene.frames;
-    Simulation<dim> sim(scene, dt, cfl);
+    Simulation<dim> sim(scene, settings);
+    const bool implicit = settings.name != "explicit";
     const fs::path checkpoint = out / "checkpoint.bin";
     const fs::path stats_path = out / "stats.csv";
     if (o.resume) {
@@ -148,23 +168,36 @@ int run(const Scene& scene, const Options& o) {
         std::fprintf(stderr, "resumed at frame %d (t = %.4f s, %ld steps)\n", sim.frame(), sim.time(), sim.total_steps());
     }
     nlohmann::json run_json = {{"scene", fs::absolute(scene.file).string()}, {"name", scene.name}, {"dim", dim},
-                               {"integrator", "explicit"}, {"dt", dt}, {"cfl", cfl}, {"frame_dt", scene.frame_dt},
+                               {"integrator", settings.name}, {"dt", settings.dt}, {"cfl", settings.cfl},
+                               {"frame_dt", scene.frame_dt},
                                {"frames", frames}, {"dx", scene.dx}, {"particles", sim.particles().size()},
                                {"threads", omp_get_max_threads()},
                                {"domain_min", std::vector<double>(scene.domain_min.data(), scene.domain_min.data() + dim)},
                                {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)}};
+    if (implicit) run_json["solver"] = settings.implicit.to_json();
     write_text_atomically((out / "run.json").string(), run_json.dump(2) + "\n");
 
-    // stats.csv: one row per frame; on resume, rows after the checkpoint's frame are dropped.
+    // stats.csv: one row per frame; steps.csv: one row per step (implicit
+    // solver figures included). On resume, rows after the checkpoint's frame are dropped.
     std::string stats = "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y" +
-                        std::string(dim == 3 ? ",momentum_z" : "") + "\n";
-    if (o.resume && fs::exists(stats_path)) {
-        std::ifstream in(stats_path);
+                        std::string(dim == 3 ? ",momentum_z" : "") +
+                        ",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,max_residual_m_per_s,"
+                        "converged\n";
+    std::string steps_csv =
+        "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
+        "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
+        "energy_J,converged,clamped\n";
+    const fs::path steps_path = out / "steps.csv";
+    auto keep_rows = [&](const fs::path& path, std::string& text) {
+        if (!o.resume || !fs::exists(path)) return;
+        std::ifstream in(path);
         std::string line;
         std::getline(in, line);
         while (std::getline(in, line))
-            if (!line.empty() && std::stoi(line.substr(0, line.find(','))) <= sim.frame()) stats += line + "\n";
-    }
+            if (!line.empty() && std::stoi(line.substr(0, line.find(','))) <= sim.frame()) text += line + "\n";
+    };
+    keep_rows(stats_path, stats);
+    keep_rows(steps_path, steps_csv);
     if (!o.resume) write_frame(sim, scene, o, out);
 
     const auto start = std::chrono::steady_clock::now();
@@ -175,6 +208,7 @@ int run(const Scene& scene, const Options& o) {
             f = sim.advance_frame();
         } catch (const SimulationError& e) {
             write_text_atomically(stats_path.string(), stats);
+            write_text_atomically(steps_path.string(), steps_csv);
             std::fprintf(stderr, "\nerror: %s\nframes up to %d in %s are complete\n", e.what(), sim.frame(),
                          out.string().c_str());
             return 1;
@@ -184,17 +218,38 @@ int run(const Scene& scene, const Options& o) {
         int len = std::snprintf(row, sizeof row, "%d,%.6f,%ld,%.6g,%.6g,%.4f,%zu,%.9g,%.9g,%.9g,%.9g", f.frame, f.time,
                                 f.steps, f.dt_min, f.dt_max, f.wall_seconds, f.clamped, f.kinetic, f.potential,
                                 f.momentum[0], f.momentum[1]);
-        if (dim == 3) std::snprintf(row + len, sizeof row - len, ",%.9g", f.momentum[2]);
+        if (dim == 3) len += std::snprintf(row + len, sizeof row - len, ",%.9g", f.momentum[2]);
+        std::snprintf(row + len, sizeof row - len, ",%ld,%ld,%ld,%ld,%.6g,%d", f.newton_iterations, f.cg_iterations,
+                      f.line_search_steps, f.fixed_point_iterations, f.max_residual, f.converged ? 1 : 0);
         stats += std::string(row) + "\n";
+        double t = f.time;  // the frame's start time, from its step sizes
+        for (const StepStats& s : sim.last_frame_steps()) t -= s.dt;
+        long step = sim.total_steps() - static_cast<long>(sim.last_frame_steps().size());
+        for (const StepStats& s : sim.last_frame_steps()) {
+            t += s.dt;
+            std::snprintf(row, sizeof row,
+                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu\n",
+                          f.frame, step++, t, s.dt, s.wall_seconds, s.p2g_seconds, s.grid_seconds, s.g2p_seconds,
+                          s.energy_seconds, s.cg_seconds, s.newton_iterations, s.cg_iterations, s.line_search_steps,
+                          s.fixed_point_iterations, s.fixed_point_change, s.initial_residual, s.residual, s.energy,
+                          s.converged ? 1 : 0, s.clamped);
+            steps_csv += row;
+        }
         write_text_atomically(stats_path.string(), stats);
+        write_text_atomically(steps_path.string(), steps_csv);
         if (o.checkpoint_every > 0 && sim.frame() % o.checkpoint_every == 0) sim.save_checkpoint(checkpoint.string());
         const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         const double per_frame = elapsed / (sim.frame() - first);
-        std::fprintf(stderr, "\rframe %d/%d  steps %ld  %.2f s/frame  ETA %.0f s   ", sim.frame(), frames, f.steps,
-                     per_frame, per_frame * (frames - sim.frame()));
+        if (implicit)
+            std::fprintf(stderr, "\rframe %d/%d  steps %ld  Newton %.1f  CG %.0f per step  %.2f s/frame  ETA %.0f s   ",
+                         sim.frame(), frames, f.steps, static_cast<double>(f.newton_iterations) / f.steps,
+                         static_cast<double>(f.cg_iterations) / f.steps, per_frame, per_frame * (frames - sim.frame()));
+        else
+            std::fprintf(stderr, "\rframe %d/%d  steps %ld  %.2f s/frame  ETA %.0f s   ", sim.frame(), frames, f.steps,
+                         per_frame, per_frame * (frames - sim.frame()));
     }
     std::fprintf(stderr, "\n");
-    std::printf("wrote %d frames (PLY + PNG), stats.csv and run.json to %s\n", frames, out.string().c_str());
+    std::printf("wrote %d frames (PLY + PNG), stats.csv, steps.csv and run.json to %s\n", frames, out.string().c_str());
     return 0;
 }
 
@@ -211,24 +266,40 @@ int simulate_command(int argc, char** argv) {
     if (o.threads > 0) omp_set_num_threads(o.threads);
     try {
         const Scene scene = load_scene(o.scene);
-        const std::string integrator = o.integrator.empty() ? scene.integrator.name : o.integrator;
+        IntegratorSettings settings = IntegratorSettings::from_scene(scene);
+        if (!o.integrator.empty() && o.integrator != scene.integrator.name) {
+            // The scene's dt belongs to the scene's integrator; another one starts
+            // from its own default (explicit: the CFL step; implicit: 1e-3 s, DESIGN.md §5).
+            settings.name = o.integrator;
+            settings.dt = o.integrator == "explicit" ? 0.0 : 1e-3;
+        }
+        if (settings.name != "explicit" && settings.name != "plasticitynet" && settings.name != "lagged")
+            throw UsageError("--integrator: expected explicit, plasticitynet or lagged, got \"" + settings.name + "\"");
+        if (o.dt >= 0.0) settings.dt = o.dt;
+        if (o.cfl > 0.0) settings.cfl = o.cfl;
+        if (o.newton_tol > 0.0) settings.implicit.newton_tolerance = o.newton_tol;
+        if (o.cg_tol > 0.0) settings.implicit.cg_tolerance = o.cg_tol;
+        if (o.fixed_point_tol >= 0.0) settings.implicit.fixed_point_tolerance = o.fixed_point_tol;
+        if (o.regularizer >= 0.0) settings.implicit.regularizer_weight = o.regularizer;
+        if (o.fixed_point_iterations > 0) settings.implicit.max_fixed_point_iterations = o.fixed_point_iterations;
         // Every model the scene names must load and fit its dimension, whatever the integrator.
         for (const SceneObject& object : scene.objects) {
+            settings.models.emplace_back();
             if (object.model.empty()) continue;
             LoadOptions load;
             load.expected_dim = scene.dim;
             load.expected_kind = ModelKind::Energy;
             load.trusted = o.trust_model;
             try {
-                load_model_file(object.model, load);
+                settings.models.back() = std::make_shared<const ModelFile>(load_model_file(object.model, load));
             } catch (const std::exception& e) {
                 throw SceneError(scene.file + ": " + object.json_path + ".model: " + e.what());
             }
         }
-        if (integrator != "explicit")
-            throw SceneError(scene.file + ": integrator \"" + integrator +
-                             "\" is not available in this build yet; run with --integrator explicit");
-        return scene.dim == 2 ? run<2>(scene, o) : run<3>(scene, o);
+        return scene.dim == 2 ? run<2>(scene, o, settings) : run<3>(scene, o, settings);
+    } catch (const UsageError& e) {
+        std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
+        return 2;
     } catch (const SceneFileNotFound& e) {
         std::fprintf(stderr, "pnet simulate: %s\n", e.what());
         return 2;

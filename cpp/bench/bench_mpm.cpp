@@ -72,13 +72,12 @@ void bench_scene(const pnet::Scene& scene, double seconds, double warmup, double
         double t = 0.0;
         long step = 0;
         while (t < warmup) {
-            const double dt = integrator.stable_dt(particles, cfl);
+            const double dt = pnet::cfl_time_step(system, particles, cfl);
             integrator.step(particles, dt, step++);
             t += dt;
         }
     }
-    const pnet::ExplicitIntegrator<dim> probe(system);
-    const double dt = probe.stable_dt(particles, cfl);
+    const double dt = pnet::cfl_time_step(system, particles, cfl);
     Measurement m[2];
     for (int threads = 1; threads <= 2; ++threads) {
         m[threads - 1] = time_steps<dim>(system, particles, dt, threads, seconds);

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "pnet/math/svd.hpp"
+#include "pnet/mpm/grid_to_particles.hpp"
 #include "pnet/mpm/transfer.hpp"
 
 namespace pnet {
@@ -24,10 +25,10 @@ ExplicitIntegrator<dim>::ExplicitIntegrator(const MpmSystem<dim>& system)
     : system_(system), grid_(system.origin, system.dx, system.cells) {}
 
 template <int dim>
-double ExplicitIntegrator<dim>::stable_dt(const Particles<dim>& particles, double cfl) const {
+double cfl_time_step(const MpmSystem<dim>& system, const Particles<dim>& particles, double cfl) {
     double v_max = 0.0;
     for (const Vec<dim>& v : particles.v) v_max = std::max(v_max, v.norm());
-    return cfl * system_.dx / (system_.max_wave_speed() + v_max);
+    return cfl * system.dx / (system.max_wave_speed() + v_max);
 }
 
 template <int dim>
@@ -72,8 +73,8 @@ std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long
     }
     if (bad >= 0)
         throw SimulationError("step " + std::to_string(step_index) + ": particle " + std::to_string(bad) +
-                              " has a non-finite position or velocity, or moves more than a cell per step (the "
-                              "simulation blew up; try a smaller dt)");
+                              " has a non-finite position or velocity, or a speed above " + std::to_string(speed_limit) +
+                              " m/s (the simulation blew up; try a smaller dt)");
     return clamped;
 }
 
@@ -93,30 +94,13 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     stats.max_grid_speed = grid_.update_velocity(dt, system_.gravity, system_.boundary);
     const auto after_grid = std::chrono::steady_clock::now();
 
-    // G2P, return mapping, advection.
-    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t p = 0; p < n; ++p) {
-        Vec<dim> v;
-        Mat<dim> C, grad_v;
-        gather_velocity(grid_, particles.x[p], v, C, grad_v);
-        particles.v[p] = v;
-        particles.C[p] = C;
-
-        const Material<dim>& material = system_.materials[particles.object[p]];
-        const Mat<dim> F_trial = (Mat<dim>::Identity() + dt * grad_v) * particles.F_elastic[p];
-        if (!F_trial.allFinite()) {
-            particles.x[p].setConstant(std::nan(""));  // reported by clamp_to_grid below
-            continue;
-        }
-        const PolarSVD<dim> svd = clamped_svd<dim>(F_trial);
-        const ReturnResult<dim> Z = material.return_map(svd.Sigma, particles.hardening[p]);
-        particles.F_elastic[p] = svd.compose(Z.Sigma);
-        particles.hardening[p] = Z.hardening;
-        const Vec<dim> tau = material.elasticity().tau(Z.Sigma);
-        scaled_stress_[p] = particles.rest_volume[p] * (svd.U * tau.asDiagonal() * svd.U.transpose());
-        particles.x[p] += dt * v;
-    }
+    // G2P, return mapping, advection; the projection's SVD gives the next step's stress.
+    grid_to_particles(grid_, particles, dt, MaterialReturnMap<dim>{system_, particles},
+                      [&](std::ptrdiff_t p, const PolarSVD<dim>& svd, const ReturnResult<dim>& Z) {
+                          const Material<dim>& material = system_.materials[particles.object[p]];
+                          const Vec<dim> tau = material.elasticity().tau(Z.Sigma);
+                          scaled_stress_[p] = particles.rest_volume[p] * (svd.U * tau.asDiagonal() * svd.U.transpose());
+                      });
     stats.clamped = clamp_to_grid(particles, grid_, step_index, system_.dx / dt);
     const auto end = std::chrono::steady_clock::now();
     stats.p2g_seconds = std::chrono::duration<double>(after_p2g - start).count();
@@ -130,6 +114,8 @@ template struct MpmSystem<2>;
 template struct MpmSystem<3>;
 template class ExplicitIntegrator<2>;
 template class ExplicitIntegrator<3>;
+template double cfl_time_step<2>(const MpmSystem<2>&, const Particles<2>&, double);
+template double cfl_time_step<3>(const MpmSystem<3>&, const Particles<3>&, double);
 template std::size_t clamp_to_grid<2>(Particles<2>&, const Grid<2>&, long, double);
 template std::size_t clamp_to_grid<3>(Particles<3>&, const Grid<3>&, long, double);
 

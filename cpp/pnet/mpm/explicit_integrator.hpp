@@ -14,39 +14,24 @@
 #include <vector>
 
 #include "pnet/mpm/grid.hpp"
+#include "pnet/mpm/integrator.hpp"
 #include "pnet/mpm/mpm_system.hpp"
 #include "pnet/mpm/particles.hpp"
 
 namespace pnet {
 
-/// What one step did (for stats.csv and progress).
-struct StepStats {
-    double dt = 0.0;
-    std::size_t clamped = 0;   // particles pulled back inside the domain
-    double max_grid_speed = 0.0;
-    double wall_seconds = 0.0;
-    // Phases of wall_seconds: P2G (with binning and stress forces), grid
-    // update, G2P (with return mapping, advection and clamping).
-    double p2g_seconds = 0.0, grid_seconds = 0.0, g2p_seconds = 0.0;
-};
-
-/// A NaN or a blow-up: names the step and the particle.
-class SimulationError : public std::runtime_error {
-public:
-    using std::runtime_error::runtime_error;
-};
-
 template <int dim>
-class ExplicitIntegrator {
+class ExplicitIntegrator final : public MpmIntegrator<dim> {
 public:
     explicit ExplicitIntegrator(const MpmSystem<dim>& system);
 
-    /// The largest stable step: cfl dx / (c + max |v_p|) with c the largest
-    /// P-wave speed of the materials.
-    double stable_dt(const Particles<dim>& particles, double cfl) const;
+    std::string name() const override { return "explicit"; }
 
     /// Advances the particles by dt. `step_index` only names the step in errors.
-    StepStats step(Particles<dim>& particles, double dt, long step_index);
+    StepStats step(Particles<dim>& particles, double dt, long step_index) override;
+    void reset(const Particles<dim>& particles) override { compute_stress(particles); }
+    std::vector<Mat<dim>> checkpoint_state() const override { return scaled_stress_; }
+    void restore_checkpoint_state(std::vector<Mat<dim>> state) override { set_cached_stress(std::move(state)); }
 
     const Grid<dim>& grid() const { return grid_; }
 
@@ -72,10 +57,15 @@ private:
     bool stress_valid_ = false;
 };
 
+/// The largest stable explicit step: cfl dx / (c + max |v_p|) with c the
+/// largest P-wave speed of the materials.
+template <int dim>
+double cfl_time_step(const MpmSystem<dim>& system, const Particles<dim>& particles, double cfl);
+
 /// Pulls particles back inside [lower_limit, upper_limit] of the grid, so that
 /// no stencil leaves it; returns how many moved. Throws SimulationError naming
 /// the step and particle for a non-finite position or velocity, or a speed
-/// above speed_limit (dx / dt: a particle crossing more than a cell per step
+/// above speed_limit (explicit MPM: dx / dt, a particle crossing more than a cell per step
 /// has blown up).
 template <int dim>
 std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long step_index, double speed_limit);

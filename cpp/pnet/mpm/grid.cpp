@@ -119,6 +119,13 @@ void Grid<dim>::apply_boundary(const int* node, Vec<dim>& v, const BoundaryCondi
 }
 
 template <int dim>
+void Grid<dim>::constrained_components(const int* node, bool* fixed, const BoundaryConditions& bc) const {
+    const bool floor = bc.sticky_floor_cells > 0 && node[1] <= bc.sticky_floor_cells;
+    for (int a = 0; a < dim; ++a)
+        fixed[a] = floor || (bc.slip_walls && (node[a] < kWallNodes || node[a] >= nodes_[a] - kWallNodes));
+}
+
+template <int dim>
 double Grid<dim>::update_velocity(double dt, const Vec<dim>& gravity, const BoundaryConditions& bc) {
     const std::ptrdiff_t active = static_cast<std::ptrdiff_t>(active_blocks_.size());
     double max_speed = 0.0;

@@ -59,6 +59,8 @@ public:
     }
     Node& node(std::int64_t index) { return storage_[index]; }
     const Node& node(std::int64_t index) const { return storage_[index]; }
+    /// Number of storage slots (every node of every block; indices are below it).
+    std::int64_t storage_size() const { return static_cast<std::int64_t>(storage_.size()); }
 
     /// Bins the particles by the block of their stencil base node (counting
     /// sort, stable), marks the blocks they write as active and zeroes them.
@@ -87,7 +89,14 @@ public:
     /// Applies the boundary conditions to a velocity v of node `node`.
     void apply_boundary(const int* node, Vec<dim>& v, const BoundaryConditions& bc) const;
 
-    /// Nodes of the active blocks, as storage indices (valid after bin_and_clear).
+    /// The velocity components of node `node` that the boundary conditions
+    /// constrain (fixed[a] for axis a): all of them on the sticky floor, the
+    /// wall-normal one within kWallNodes of a slip wall. The implicit
+    /// integrators hold these at their apply_boundary() value.
+    void constrained_components(const int* node, bool* fixed, const BoundaryConditions& bc) const;
+
+    /// The active blocks (valid after bin_and_clear), sorted; block b holds the
+    /// storage indices [b kBlockNodes, (b + 1) kBlockNodes).
     const std::vector<int>& active_blocks() const { return active_blocks_; }
     /// Node coordinates of storage index `index`.
     void coordinates(std::int64_t index, int* node) const;

@@ -32,14 +32,54 @@ MpmSystem<dim> make_mpm_system(const Scene& scene) {
     return s;
 }
 
+IntegratorSettings IntegratorSettings::from_scene(const Scene& scene) {
+    IntegratorSettings s;
+    s.name = scene.integrator.name;
+    s.dt = scene.integrator.dt;
+    s.cfl = scene.integrator.cfl;
+    s.implicit = ImplicitOptions::from_json(scene.integrator.options, scene.file);
+    return s;
+}
+
 template <int dim>
 Simulation<dim>::Simulation(const Scene& scene, double dt, double cfl)
+    : Simulation(scene, [&] {
+          IntegratorSettings s;
+          s.dt = dt;
+          s.cfl = cfl;
+          return s;
+      }()) {}
+
+template <int dim>
+Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settings)
     : scene_(scene), scene_digest_(sha256_hex(scene_to_json(scene).dump())), system_(make_mpm_system<dim>(scene)),
-      particles_(sample_particles<dim>(scene)), dt_(dt), cfl_(cfl) {
-    if (!(dt >= 0.0) || !std::isfinite(dt)) throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
-    if (!(cfl > 0.0 && cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
-    integrator_ = std::make_unique<ExplicitIntegrator<dim>>(system_);
-    integrator_->compute_stress(particles_);
+      particles_(sample_particles<dim>(scene)), settings_(settings) {
+    if (!(settings.dt >= 0.0) || !std::isfinite(settings.dt))
+        throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
+    if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
+    if (settings.name == "explicit") {
+        integrator_ = std::make_unique<ExplicitIntegrator<dim>>(system_);
+    } else if (settings.name == "lagged") {
+        integrator_ = std::make_unique<ImplicitIntegrator<dim>>(
+            system_, ImplicitMethod::Lagged, settings.implicit,
+            std::make_unique<ElasticParticleEnergy<dim>>(system_.materials));
+    } else if (settings.name == "plasticitynet") {
+        std::vector<std::shared_ptr<const ModelFile>> models = settings.models;
+        models.resize(scene.objects.size());
+        std::vector<std::string> context;
+        for (const SceneObject& object : scene.objects) context.push_back(scene.file + ": " + object.json_path + ".model");
+        auto energy = std::make_unique<NeuralParticleEnergy<dim>>(models, system_.materials, context,
+                                                                  settings.implicit.regularizer_weight);
+        std::vector<const LearnedReturnMap<dim>*> return_maps;
+        for (std::size_t k = 0; k < scene.objects.size(); ++k)
+            return_maps.push_back(energy->object_energy(k).learned_return_map());
+        integrator_ = std::make_unique<ImplicitIntegrator<dim>>(system_, ImplicitMethod::PlasticityNet,
+                                                                settings.implicit, std::move(energy), return_maps);
+    } else {
+        throw std::invalid_argument("unknown integrator \"" + settings.name +
+                                    "\" (expected explicit, plasticitynet or lagged)");
+    }
+    integrator_->reset(particles_);
 }
 
 template <int dim>
@@ -48,8 +88,9 @@ FrameStats Simulation<dim>::advance_frame() {
     FrameStats stats;
     const double frame_end = (frame_ + 1) * scene_.frame_dt;
     stats.dt_min = 1e300;
+    frame_steps_.clear();
     while (time_ < frame_end * (1.0 - 1e-12)) {
-        double dt = dt_ > 0.0 ? dt_ : integrator_->stable_dt(particles_, cfl_);
+        double dt = settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl);
         // Land exactly on the frame (within round-off), never overshoot it.
         if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
         const StepStats s = integrator_->step(particles_, dt, steps_);
@@ -59,6 +100,13 @@ FrameStats Simulation<dim>::advance_frame() {
         stats.clamped += s.clamped;
         stats.dt_min = std::min(stats.dt_min, dt);
         stats.dt_max = std::max(stats.dt_max, dt);
+        stats.newton_iterations += s.newton_iterations;
+        stats.cg_iterations += s.cg_iterations;
+        stats.line_search_steps += s.line_search_steps;
+        stats.fixed_point_iterations += s.fixed_point_iterations;
+        stats.max_residual = std::max(stats.max_residual, s.residual);
+        stats.converged = stats.converged && s.converged;
+        frame_steps_.push_back(s);
     }
     time_ = frame_end;
     ++frame_;
@@ -76,7 +124,8 @@ FrameStats Simulation<dim>::advance_frame() {
 
 namespace {
 
-constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'K', 'P', '1'};
+constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'K', 'P', '2'};
+constexpr std::size_t kNameBytes = 16;  // integrator name, zero-padded
 
 template <typename T>
 void write_array(std::ostream& out, const std::vector<T>& a) {
@@ -100,6 +149,12 @@ void Simulation<dim>::save_checkpoint(const std::string& path) const {
         out.write(reinterpret_cast<const char*>(header), sizeof header);
         out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
         out.write(scene_digest_.data(), 64);
+        std::string name = integrator_->name();
+        name.resize(kNameBytes, '\0');
+        out.write(name.data(), kNameBytes);
+        const std::vector<Mat<dim>> state = integrator_->checkpoint_state();
+        const std::int64_t state_size = static_cast<std::int64_t>(state.size());
+        out.write(reinterpret_cast<const char*>(&state_size), sizeof state_size);
         write_array(out, particles_.x);
         write_array(out, particles_.v);
         write_array(out, particles_.C);
@@ -108,7 +163,7 @@ void Simulation<dim>::save_checkpoint(const std::string& path) const {
         write_array(out, particles_.mass);
         write_array(out, particles_.rest_volume);
         write_array(out, particles_.object);
-        write_array(out, integrator_->cached_stress());
+        write_array(out, state);
     });
 }
 
@@ -119,16 +174,24 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     char magic[8];
     std::int64_t header[4];
     double time;
-    std::string digest(64, '\0');
+    std::string digest(64, '\0'), name(kNameBytes, '\0');
+    std::int64_t state_size = 0;
     in.read(magic, sizeof magic);
     in.read(reinterpret_cast<char*>(header), sizeof header);
     in.read(reinterpret_cast<char*>(&time), sizeof time);
     in.read(digest.data(), 64);
+    in.read(name.data(), kNameBytes);
+    in.read(reinterpret_cast<char*>(&state_size), sizeof state_size);
     if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
         throw std::invalid_argument(path + ": not a PlasticityNet checkpoint");
     if (header[0] != dim) throw std::invalid_argument(path + ": a " + std::to_string(header[0]) + "D checkpoint");
     if (digest != scene_digest_)
         throw std::invalid_argument(path + ": written for a different scene (or a changed scene file)");
+    name.resize(name.find('\0') == std::string::npos ? name.size() : name.find('\0'));
+    if (name != integrator_->name())
+        throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " +
+                                    integrator_->name());
+    if (state_size < 0 || state_size > header[1]) throw std::invalid_argument(path + ": corrupt checkpoint header");
     const std::size_t n = static_cast<std::size_t>(header[1]);
     Particles<dim> p;
     read_array(in, p.x, n, path);
@@ -139,10 +202,10 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, p.mass, n, path);
     read_array(in, p.rest_volume, n, path);
     read_array(in, p.object, n, path);
-    std::vector<Mat<dim>> stress;
-    read_array(in, stress, n, path);
+    std::vector<Mat<dim>> state;
+    read_array(in, state, static_cast<std::size_t>(state_size), path);
     particles_ = std::move(p);
-    integrator_->set_cached_stress(std::move(stress));
+    integrator_->restore_checkpoint_state(std::move(state));
     frame_ = static_cast<int>(header[2]);
     steps_ = header[3];
     time_ = time;

@@ -5,10 +5,14 @@
 // integrator's cached stresses).
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "pnet/mpm/explicit_integrator.hpp"
+#include "pnet/mpm/implicit_integrator.hpp"
+#include "pnet/mpm/integrator.hpp"
 #include "pnet/mpm/mpm_system.hpp"
 #include "pnet/mpm/particles.hpp"
+#include "pnet/nn/model_file.hpp"
 #include "pnet/scene/scene.hpp"
 
 namespace pnet {
@@ -16,6 +20,23 @@ namespace pnet {
 /// The MPM system of a scene (materials per object, grid, gravity, boundary).
 template <int dim>
 MpmSystem<dim> make_mpm_system(const Scene& scene);
+
+/// Which integrator a Simulation runs and how.
+struct IntegratorSettings {
+    std::string name = "explicit";  // "explicit" | "plasticitynet" | "lagged"
+    double dt = 0.0;                // s; 0: the CFL step before every step
+    double cfl = 0.5;
+    ImplicitOptions implicit;       // plasticitynet, lagged
+    /// Energy model of each scene object (plasticitynet needs one for every
+    /// object; the others ignore them). Loading a model file needs LibTorch
+    /// (load_model_file in pnet_torch), so the caller does it.
+    std::vector<std::shared_ptr<const ModelFile>> models;
+
+    /// The scene's "integrator" block: name, dt, cfl and the implicit options
+    /// (std::invalid_argument naming the file and key on a bad value). Models
+    /// are not loaded.
+    static IntegratorSettings from_scene(const Scene& scene);
+};
 
 struct FrameStats {
     int frame = 0;        // frame reached
@@ -26,13 +47,22 @@ struct FrameStats {
     double wall_seconds = 0.0;
     double kinetic = 0.0, potential = 0.0;  // J
     double momentum[3] = {0.0, 0.0, 0.0};   // kg m/s
+    // Implicit integrators: totals over the frame's steps, the largest final
+    // Newton residual (m/s), and whether every solve converged.
+    long newton_iterations = 0, cg_iterations = 0, line_search_steps = 0, fixed_point_iterations = 0;
+    double max_residual = 0.0;
+    bool converged = true;
 };
 
 template <int dim>
 class Simulation {
 public:
-    /// dt: the step (s); 0 selects the CFL step cfl dx / (c + max |v|) before every step.
+    /// Explicit MPM; dt: the step (s); 0 selects the CFL step cfl dx / (c + max |v|) before every step.
     Simulation(const Scene& scene, double dt, double cfl);
+
+    /// Any integrator. Throws std::invalid_argument for an unknown name, a bad
+    /// dt or cfl, or missing or unfit models (naming "<scene file>: objects[k].model").
+    Simulation(const Scene& scene, const IntegratorSettings& settings);
 
     /// Advances to the end of the next frame (the last step is shortened to
     /// land on it). Throws SimulationError on a blow-up.
@@ -43,9 +73,12 @@ public:
     int frame() const { return frame_; }
     double time() const { return time_; }
     long total_steps() const { return steps_; }
+    const IntegratorSettings& settings() const { return settings_; }
+    /// Per-step statistics of the last advance_frame(), in step order.
+    const std::vector<StepStats>& last_frame_steps() const { return frame_steps_; }
 
     /// Writes the whole state atomically; load_checkpoint() refuses a file of
-    /// another scene (sha of its JSON), dimension or particle count.
+    /// another scene (sha of its JSON), integrator, dimension or particle count.
     void save_checkpoint(const std::string& path) const;
     void load_checkpoint(const std::string& path);
 
@@ -54,8 +87,9 @@ private:
     std::string scene_digest_;
     MpmSystem<dim> system_;
     Particles<dim> particles_;
-    std::unique_ptr<ExplicitIntegrator<dim>> integrator_;
-    double dt_, cfl_;
+    IntegratorSettings settings_;
+    std::unique_ptr<MpmIntegrator<dim>> integrator_;
+    std::vector<StepStats> frame_steps_;
     int frame_ = 0;
     long steps_ = 0;
     double time_ = 0.0;

@@ -71,21 +71,40 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             energy = e_trial;
         } else {
             double alpha = 1.0, trial = 0.0;
-            for (int halvings = 0;; ++halvings) {
+            bool decreased = false;
+            for (int halvings = 0; halvings <= options.max_line_search; ++halvings) {
                 x_trial = x + alpha * d;
                 trial = objective.value(x_trial);
                 ++stats.line_search_steps;
-                if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope) break;
-                if (halvings == options.max_line_search)
-                    throw NewtonError(where(context, it, residual) + "line search stalled after " +
-                                      std::to_string(halvings) + " halvings (E = " + std::to_string(energy) +
-                                      ", last trial " + std::to_string(trial) + ")");
+                if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope) {
+                    decreased = true;
+                    break;
+                }
                 alpha *= 0.5;
             }
-            x.swap(x_trial);
-            energy = objective.value_gradient(x, g);
-            if (!std::isfinite(energy) || !g.allFinite())
-                throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
+            if (decreased) {
+                x.swap(x_trial);
+                energy = objective.value_gradient(x, g);
+                if (!std::isfinite(energy) || !g.allFinite())
+                    throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
+            } else {
+                // E is a sum of large terms that may cancel (a learned energy's
+                // N - c : F), so its round-off can exceed eps |E|: when the energy
+                // cannot rank any step, the gradient decides, as above.
+                x_trial = x + d;
+                const double e_trial = objective.value_gradient(x_trial, g_trial);
+                ++stats.line_search_steps;
+                if (std::isfinite(e_trial) && g_trial.allFinite() && g_trial.norm() < g.norm() &&
+                    std::abs(e_trial - energy) <= 1e-8 * std::max(std::abs(energy), 1.0)) {
+                    x.swap(x_trial);
+                    g.swap(g_trial);
+                    energy = e_trial;
+                } else {
+                    throw NewtonError(where(context, it, residual) + "line search stalled after " +
+                                      std::to_string(options.max_line_search) + " halvings (E = " +
+                                      std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
+                }
+            }
         }
         residual = scaled_residual(g, options.residual_scale);
         stats.iterations = it + 1;

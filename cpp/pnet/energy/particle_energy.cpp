@@ -1,0 +1,134 @@
+#include "pnet/energy/particle_energy.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace pnet {
+
+template <int dim>
+void ElasticParticleEnergy<dim>::set_reference(const std::vector<Mat<dim>>&, const std::vector<double>&,
+                                               const std::vector<int>& object) {
+    object_ = object;
+}
+
+template <int dim>
+void ElasticParticleEnergy<dim>::evaluate(const std::vector<Mat<dim>>& F, typename ParticleEnergy<dim>::Order order,
+                                          double* psi, Mat<dim>* P, Tensor4<dim>* H, bool project_psd) {
+    using Order = typename ParticleEnergy<dim>::Order;
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(F.size());
+#pragma omp parallel for schedule(static) if (n >= 256)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        const Elasticity<dim>& elasticity = materials_[object_[p]].elasticity();
+        const PolarSVD<dim> svd = clamped_svd<dim>(F[p]);
+        psi[p] = elasticity.psi(svd.Sigma);
+        if (order == Order::Value) continue;
+        const Vec<dim> tau = elasticity.tau(svd.Sigma);
+        P[p] = svd.compose(tau.cwiseQuotient(svd.Sigma));
+        if (order == Order::Hessian) H[p] = elasticity.dPdF(svd, project_psd);
+    }
+}
+
+namespace {
+
+bool same_number(double a, double b) { return std::abs(a - b) <= 1e-9 * std::max(std::abs(a), std::abs(b)); }
+
+}  // namespace
+
+template <int dim>
+NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
+                                                const std::vector<Material<dim>>& materials,
+                                                const std::vector<std::string>& context, double regularizer_weight) {
+    if (models.size() != materials.size() || context.size() != materials.size())
+        throw std::invalid_argument("NeuralParticleEnergy: one model and one context per object are needed");
+    for (std::size_t k = 0; k < materials.size(); ++k) {
+        if (!models[k])
+            throw std::invalid_argument(context[k] + ": the plasticitynet integrator needs an energy model for "
+                                                     "every object (none given)");
+        const ModelFile& model = *models[k];
+        const MaterialDescription& trained = model.metadata.material;
+        const MaterialDescription& scene = materials[k].description();
+        std::string mismatch;
+        if (trained.elasticity != scene.elasticity)
+            mismatch = "elasticity " + to_string(trained.elasticity) + ", the object's is " + to_string(scene.elasticity);
+        else if (trained.plasticity != scene.plasticity)
+            mismatch = "plasticity " + to_string(trained.plasticity) + ", the object's is " + to_string(scene.plasticity);
+        else if (!same_number(trained.elastic.nu, scene.elastic.nu))
+            mismatch = "Poisson ratio " + std::to_string(trained.elastic.nu) + ", the object's is " +
+                       std::to_string(scene.elastic.nu);
+        if (!mismatch.empty())
+            throw std::invalid_argument(context[k] + ": " + model.path + " was trained for " + mismatch);
+        Group group;
+        try {
+            group.energy = std::make_unique<NeuralElastoplasticEnergy<dim>>(
+                model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight});
+        } catch (const std::invalid_argument& e) {
+            throw std::invalid_argument(context[k] + ": " + e.what());
+        }
+        objects_.push_back(std::move(group));
+    }
+}
+
+template <int dim>
+void NeuralParticleEnergy<dim>::set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
+                                              const std::vector<int>& object) {
+    if (objects_.size() == 1) {  // one object: evaluate() needs no gathering
+        objects_[0].energy->set_reference(F0.data(), hardening.data(), F0.size());
+        return;
+    }
+    for (Group& g : objects_) g.particles.clear();
+    for (std::size_t p = 0; p < object.size(); ++p) objects_.at(object[p]).particles.push_back(static_cast<int>(p));
+    std::vector<Mat<dim>> F0_group;
+    std::vector<double> h_group;
+    for (Group& g : objects_) {
+        const std::size_t n = g.particles.size();
+        F0_group.resize(n);
+        h_group.resize(n);
+        for (std::size_t q = 0; q < n; ++q) {
+            F0_group[q] = F0[g.particles[q]];
+            h_group[q] = hardening[g.particles[q]];
+        }
+        g.F.resize(n);
+        g.P.resize(n);
+        g.psi.resize(n);
+        g.H.resize(n);
+        g.energy->set_reference(F0_group.data(), h_group.data(), n);
+    }
+}
+
+template <int dim>
+void NeuralParticleEnergy<dim>::evaluate(const std::vector<Mat<dim>>& F, typename ParticleEnergy<dim>::Order order,
+                                         double* psi, Mat<dim>* P, Tensor4<dim>* H, bool project_psd) {
+    using Order = typename ParticleEnergy<dim>::Order;
+    auto run = [order, project_psd](const NeuralElastoplasticEnergy<dim>& energy, const Mat<dim>* F, double* psi, Mat<dim>* P,
+                       Tensor4<dim>* H) {
+        if (order == Order::Value)
+            energy.value(F, psi);
+        else if (order == Order::Gradient)
+            energy.value_gradient(F, psi, P);
+        else
+            energy.value_gradient_hessian(F, psi, P, H, project_psd);
+    };
+    if (objects_.size() == 1) {  // one object: no gathering
+        run(*objects_[0].energy, F.data(), psi, P, H);
+        return;
+    }
+    for (Group& g : objects_) {
+        const std::size_t n = g.particles.size();
+        if (n == 0) continue;
+        for (std::size_t q = 0; q < n; ++q) g.F[q] = F[g.particles[q]];
+        run(*g.energy, g.F.data(), g.psi.data(), g.P.data(), g.H.data());
+        for (std::size_t q = 0; q < n; ++q) {
+            const int p = g.particles[q];
+            psi[p] = g.psi[q];
+            if (order != Order::Value) P[p] = g.P[q];
+            if (order == Order::Hessian) H[p] = g.H[q];
+        }
+    }
+}
+
+template class ElasticParticleEnergy<2>;
+template class ElasticParticleEnergy<3>;
+template class NeuralParticleEnergy<2>;
+template class NeuralParticleEnergy<3>;
+
+}  // namespace pnet

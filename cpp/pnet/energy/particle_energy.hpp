@@ -1,0 +1,95 @@
+#pragma once
+// The per-particle energy density of an implicit MPM step, the one face the
+// incremental potential (mpm/incremental_potential.hpp) sees (STYLE.md item 2):
+// it never knows whether the energy is learned or analytic.
+//
+//   ElasticParticleEnergy: psi(F) of each particle's elasticity model, the
+//     `lagged` baseline (plasticity applied after the step, DESIGN.md §4).
+//   NeuralParticleEnergy:  the PlasticityNet energy Psi(F; F0, h) (paper eqs. 8
+//     and 11) of each object's model, the `plasticitynet` integrator.
+//
+// Densities are per unit rest volume (J/m^3); gradients are first Piola-type
+// stresses dpsi/dF (Pa) and Hessians d2psi/dF2 in the row-major vec(F) basis,
+// projected to positive semi-definite for Newton.
+#include <memory>
+#include <vector>
+
+#include "pnet/energy/neural_elastoplastic.hpp"
+#include "pnet/material/material.hpp"
+#include "pnet/math/types.hpp"
+#include "pnet/nn/model_file.hpp"
+
+namespace pnet {
+
+template <int dim>
+class ParticleEnergy {
+public:
+    /// What evaluate() computes: psi; psi and P; psi, P and the PSD Hessian.
+    enum class Order { Value = 0, Gradient = 1, Hessian = 2 };
+
+    virtual ~ParticleEnergy() = default;
+
+    /// Starts an optimization: particle p has object object[p], reference
+    /// deformation F0[p] and start-of-step hardening state hardening[p]. Energies
+    /// without a reference (elastic) only record the object of each particle.
+    virtual void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
+                               const std::vector<int>& object) = 0;
+
+    /// psi[p] for every particle of the last set_reference(); for Order >=
+    /// Gradient P[p] = dpsi/dF; for Order::Hessian H[p] = d2psi/dF2, projected
+    /// to PSD when project_psd (what Newton needs; raw for derivative checks).
+    /// The result does not depend on the thread count.
+    virtual void evaluate(const std::vector<Mat<dim>>& F, Order order, double* psi, Mat<dim>* P, Tensor4<dim>* H,
+                          bool project_psd = true) = 0;
+};
+
+/// psi(F) of the elasticity model of each particle's material.
+template <int dim>
+class ElasticParticleEnergy final : public ParticleEnergy<dim> {
+public:
+    explicit ElasticParticleEnergy(const std::vector<Material<dim>>& materials) : materials_(materials) {}
+
+    void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
+                       const std::vector<int>& object) override;
+    void evaluate(const std::vector<Mat<dim>>& F, typename ParticleEnergy<dim>::Order order, double* psi, Mat<dim>* P,
+                  Tensor4<dim>* H, bool project_psd = true) override;
+
+private:
+    const std::vector<Material<dim>>& materials_;
+    std::vector<int> object_;
+};
+
+/// Psi(F; F0, h) of each object's PlasticityNet model, scaled to the object's
+/// Young's modulus. Objects are evaluated in turn, each as one batch of the
+/// fused kernel.
+template <int dim>
+class NeuralParticleEnergy final : public ParticleEnergy<dim> {
+public:
+    /// models[k] is object k's energy model; materials[k] its material (the
+    /// scene's). Throws std::invalid_argument naming `context[k]` (e.g.
+    /// "scene.json: objects[0].model") when a model is missing, of another
+    /// dimension, or trained for another elasticity or plasticity model.
+    NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
+                         const std::vector<Material<dim>>& materials, const std::vector<std::string>& context,
+                         double regularizer_weight);
+
+    void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
+                       const std::vector<int>& object) override;
+    void evaluate(const std::vector<Mat<dim>>& F, typename ParticleEnergy<dim>::Order order, double* psi, Mat<dim>* P,
+                  Tensor4<dim>* H, bool project_psd = true) override;
+
+    /// Object k's energy (its learned return mapping, if any, included).
+    const NeuralElastoplasticEnergy<dim>& object_energy(std::size_t k) const { return *objects_[k].energy; }
+
+private:
+    struct Group {
+        std::unique_ptr<NeuralElastoplasticEnergy<dim>> energy;
+        std::vector<int> particles;  // indices of this object's particles
+        std::vector<Mat<dim>> F, P;  // gathered inputs and outputs
+        std::vector<double> psi;
+        std::vector<Tensor4<dim>> H;
+    };
+    std::vector<Group> objects_;
+};
+
+}  // namespace pnet

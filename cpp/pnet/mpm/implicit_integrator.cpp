@@ -1,0 +1,157 @@
+#include "pnet/mpm/implicit_integrator.hpp"
+
+#include <chrono>
+#include <cmath>
+
+#include "pnet/mpm/explicit_integrator.hpp"  // clamp_to_grid
+#include "pnet/mpm/grid_to_particles.hpp"
+#include "pnet/mpm/transfer.hpp"
+#include "pnet/solver/newton.hpp"
+
+namespace pnet {
+
+namespace {
+
+template <typename T>
+T read_option(const nlohmann::json& block, const char* key, T value, const std::string& context, T lowest,
+              const char* expected) {
+    const auto it = block.find(key);
+    if (it == block.end()) return value;
+    const bool ok = std::is_integral_v<T> ? it->is_number_integer() : it->is_number();
+    if (ok) {
+        const T v = it->get<T>();
+        if (std::isfinite(static_cast<double>(v)) && v >= lowest) return v;
+    }
+    throw std::invalid_argument(context + ": integrator." + key + ": expected " + expected + ", got " + it->dump());
+}
+
+}  // namespace
+
+ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const std::string& context) {
+    ImplicitOptions o;
+    if (!block.is_object()) return o;
+    o.newton_tolerance = read_option(block, "newton_tolerance", o.newton_tolerance, context, 1e-300, "a positive number (m/s)");
+    o.max_newton_iterations =
+        read_option(block, "max_newton_iterations", o.max_newton_iterations, context, 1, "an integer >= 1");
+    o.max_cg_iterations = read_option(block, "max_cg_iterations", o.max_cg_iterations, context, 1, "an integer >= 1");
+    o.cg_tolerance = read_option(block, "cg_tolerance", o.cg_tolerance, context, 1e-300, "a positive number");
+    if (o.cg_tolerance >= 1.0)
+        throw std::invalid_argument(context + ": integrator.cg_tolerance: expected a number in (0, 1), got " +
+                                    std::to_string(o.cg_tolerance));
+    o.fixed_point_tolerance =
+        read_option(block, "fixed_point_tolerance", o.fixed_point_tolerance, context, 0.0, "a number >= 0");
+    o.max_fixed_point_iterations =
+        read_option(block, "max_fixed_point_iterations", o.max_fixed_point_iterations, context, 1, "an integer >= 1");
+    o.regularizer_weight = read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
+    return o;
+}
+
+nlohmann::json ImplicitOptions::to_json() const {
+    return {{"newton_tolerance", newton_tolerance},
+            {"max_newton_iterations", max_newton_iterations},
+            {"max_cg_iterations", max_cg_iterations},
+            {"cg_tolerance", cg_tolerance},
+            {"fixed_point_tolerance", fixed_point_tolerance},
+            {"max_fixed_point_iterations", max_fixed_point_iterations},
+            {"regularizer_weight", regularizer_weight}};
+}
+
+template <int dim>
+ImplicitIntegrator<dim>::ImplicitIntegrator(const MpmSystem<dim>& system, ImplicitMethod method,
+                                            const ImplicitOptions& options, std::unique_ptr<ParticleEnergy<dim>> energy,
+                                            std::vector<const LearnedReturnMap<dim>*> return_maps)
+    : system_(system),
+      method_(method),
+      options_(options),
+      energy_(std::move(energy)),
+      return_maps_(std::move(return_maps)),
+      grid_(system.origin, system.dx, system.cells),
+      potential_(*energy_) {
+    if (!return_maps_.empty() && return_maps_.size() != system.materials.size())
+        throw std::invalid_argument("ImplicitIntegrator: one return map (or null) per object is needed");
+}
+
+template <int dim>
+StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
+    const auto start = std::chrono::steady_clock::now();
+    StepStats stats;
+    stats.dt = dt;
+
+    particles_to_grid<dim>(grid_, particles, nullptr);
+    const auto after_p2g = std::chrono::steady_clock::now();
+    grid_.update_velocity(dt, system_.gravity, system_.boundary);  // v*, boundary values applied
+    potential_.begin_step(grid_, particles, dt, system_.boundary);
+
+    NewtonOptions newton;
+    newton.tolerance = options_.newton_tolerance;
+    newton.max_iterations = options_.max_newton_iterations;
+    newton.max_cg_iterations = options_.max_cg_iterations;
+    newton.cg_tolerance = options_.cg_tolerance;
+    newton.residual_scale = potential_.residual_scale();
+
+    v_ = potential_.v_star();
+    const bool fixed_point = method_ == ImplicitMethod::PlasticityNet;
+    const int solves = fixed_point ? options_.max_fixed_point_iterations : 1;
+    if (fixed_point)
+        potential_.deformation(v_, F0_);  // F0^0 = F(v*)
+    else
+        F0_ = particles.F_elastic;  // unused by the elastic energy
+    for (int j = 0; j < solves; ++j) {
+        potential_.set_reference(F0_);
+        const std::string context = "step " + std::to_string(step_index) +
+                                    (fixed_point ? ", fixed-point iteration " + std::to_string(j + 1) : "");
+        NewtonStats s;
+        try {
+            s = minimize(potential_, v_, newton, context);
+        } catch (const NewtonError& e) {
+            throw SimulationError(e.what());
+        }
+        if (j == 0) stats.initial_residual = s.initial_residual;
+        stats.newton_iterations += s.iterations;
+        stats.cg_iterations += s.cg_iterations;
+        stats.line_search_steps += s.line_search_steps;
+        stats.residual = s.residual;
+        stats.energy = s.energy;
+        stats.converged = stats.converged && (s.converged || s.roundoff_floor);
+        ++stats.fixed_point_iterations;
+        if (!fixed_point) break;
+        potential_.deformation(v_, F_);
+        double change = 0.0;
+        for (std::size_t p = 0; p < F_.size(); ++p) change = std::max(change, (F_[p] - F0_[p]).norm());
+        stats.fixed_point_change = change;
+        F0_.swap(F_);  // F0^{j+1} = F(v^{j+1})
+        if (change <= options_.fixed_point_tolerance) break;
+    }
+    potential_.write_velocity(v_, grid_);
+    double max_speed = 0.0;
+    for (Eigen::Index k = 0; k < v_.size() / dim; ++k) max_speed = std::max(max_speed, v_.segment<dim>(dim * k).norm());
+    stats.max_grid_speed = max_speed;
+    stats.energy_seconds = potential_.energy_seconds();
+    stats.cg_seconds = potential_.multiply_seconds();
+    const auto after_solve = std::chrono::steady_clock::now();
+
+    auto return_map = [&](std::ptrdiff_t p, const Vec<dim>& Sigma, double hardening) {
+        const int object = particles.object[p];
+        if (!return_maps_.empty() && return_maps_[object]) return return_maps_[object]->return_map(Sigma, hardening);
+        return system_.materials[object].return_map(Sigma, hardening);
+    };
+    grid_to_particles(grid_, particles, dt, return_map,
+                      [](std::ptrdiff_t, const PolarSVD<dim>&, const ReturnResult<dim>&) {});
+    // Large steps legitimately move particles several cells; a quarter of the
+    // domain in one step only happens after a blow-up.
+    double extent = 1e300;
+    for (int a = 0; a < dim; ++a) extent = std::min(extent, system_.cells[a] * system_.dx);
+    stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
+
+    const auto end = std::chrono::steady_clock::now();
+    stats.p2g_seconds = std::chrono::duration<double>(after_p2g - start).count();
+    stats.grid_seconds = std::chrono::duration<double>(after_solve - after_p2g).count();
+    stats.g2p_seconds = std::chrono::duration<double>(end - after_solve).count();
+    stats.wall_seconds = std::chrono::duration<double>(end - start).count();
+    return stats;
+}
+
+template class ImplicitIntegrator<2>;
+template class ImplicitIntegrator<3>;
+
+}  // namespace pnet

@@ -1,0 +1,85 @@
+#pragma once
+// The optimization time integrators of implicit MPM (DESIGN.md §4, paper sec.
+// 3.1 and 4.2). A step:
+//   P2G (mass, APIC momentum), v* = momentum / m + dt g with boundary values;
+//   minimize the incremental potential E(v) (incremental_potential.hpp) by
+//   Newton (solver/newton.hpp) from v = v*;
+//   G2P with the return mapping and advection (grid_to_particles.hpp).
+//
+// `plasticitynet`: psi = the learned energy Psi(F; F0, h). F0 comes from the
+//   fixed-point loop of paper eq. 10: F0^0 = F_p(v*); after solve j,
+//   F0^{j+1} = F_p(v^{j+1}), until max_p ||F_p(v^{j+1}) - F0^j||_F is below
+//   fixed_point_tolerance or max_fixed_point_iterations solves were made (each
+//   solve starts from the previous one's v).
+// `lagged`: psi = the elastic energy of F_p(v) alone; plasticity is applied
+//   after the step by the return mapping (as in Ziran and HOT).
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "pnet/energy/particle_energy.hpp"
+#include "pnet/mpm/grid.hpp"
+#include "pnet/mpm/incremental_potential.hpp"
+#include "pnet/mpm/integrator.hpp"
+#include "pnet/mpm/mpm_system.hpp"
+#include "pnet/nn/learned_return_map.hpp"
+
+namespace pnet {
+
+enum class ImplicitMethod { PlasticityNet, Lagged };
+
+/// Solver settings of the implicit integrators. In a scene they are keys of the
+/// "integrator" block (same names); the command line can override some.
+struct ImplicitOptions {
+    double newton_tolerance = 1e-3;      // m/s: max over free components of |dE/dv_i| / m_i
+    int max_newton_iterations = 50;
+    int max_cg_iterations = 500;
+    double cg_tolerance = 0.1;           // largest relative PCG residual (inexact Newton)
+    double fixed_point_tolerance = 1e-3; // max_p ||F_p(v) - F0_p||_F (plasticitynet)
+    int max_fixed_point_iterations = 4;  // solves per step (plasticitynet; 1: F0 = F(v*) only)
+    double regularizer_weight = 1.0;     // w of eq. 11 (plasticitynet; 0: the ablation)
+
+    /// Reads the keys above from an integrator block (others are ignored: the
+    /// block also holds name, dt and cfl). Throws std::invalid_argument
+    /// "<context>: integrator.<key>: <problem>" for a wrong type or range.
+    static ImplicitOptions from_json(const nlohmann::json& block, const std::string& context);
+    nlohmann::json to_json() const;
+};
+
+template <int dim>
+class ImplicitIntegrator final : public MpmIntegrator<dim> {
+public:
+    /// `energy`: the per-particle energy (NeuralParticleEnergy for
+    /// plasticitynet, ElasticParticleEnergy for lagged). `return_maps[k]`:
+    /// object k's learned return mapping, or null for its material's analytic
+    /// one (empty: analytic for all).
+    ImplicitIntegrator(const MpmSystem<dim>& system, ImplicitMethod method, const ImplicitOptions& options,
+                       std::unique_ptr<ParticleEnergy<dim>> energy,
+                       std::vector<const LearnedReturnMap<dim>*> return_maps = {});
+
+    std::string name() const override { return method_ == ImplicitMethod::PlasticityNet ? "plasticitynet" : "lagged"; }
+
+    /// Throws SimulationError ("step N: ...") when a Newton solve fails (NaN,
+    /// non-descent direction, line-search stall: the particles are left as they
+    /// were before the step) or a particle blows up after it.
+    StepStats step(Particles<dim>& particles, double dt, long step_index) override;
+
+    const ImplicitOptions& options() const { return options_; }
+    const Grid<dim>& grid() const { return grid_; }
+    IncrementalPotential<dim>& potential() { return potential_; }
+
+private:
+    const MpmSystem<dim>& system_;
+    ImplicitMethod method_;
+    ImplicitOptions options_;
+    std::unique_ptr<ParticleEnergy<dim>> energy_;
+    std::vector<const LearnedReturnMap<dim>*> return_maps_;
+    Grid<dim> grid_;
+    IncrementalPotential<dim> potential_;
+    std::vector<Mat<dim>> F0_, F_;
+    VecX v_;
+};
+
+}  // namespace pnet

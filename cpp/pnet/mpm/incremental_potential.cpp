@@ -1,0 +1,223 @@
+#include "pnet/mpm/incremental_potential.hpp"
+
+#include <chrono>
+
+#include "pnet/mpm/transfer.hpp"
+
+namespace pnet {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+template <int dim>
+void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particles<dim>& particles, double dt,
+                                           const BoundaryConditions& bc) {
+    grid_ = &grid;
+    particles_ = &particles;
+    dt_ = dt;
+    energy_seconds_ = multiply_seconds_ = 0.0;
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+
+    // Stencils (storage indices for now) and weight gradients.
+    stencil_dof_.resize(n * kStencil);
+    stencil_grad_.resize(n * kStencil);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        const StencilNodes<dim> st(grid, particles.x[p]);
+        int s = 0;
+        st.for_each([&](std::int64_t node, double, const Vec<dim>& grad, const Vec<dim>&) {
+            stencil_dof_[p * kStencil + s] = static_cast<int>(node);
+            stencil_grad_[p * kStencil + s] = grad;
+            ++s;
+        });
+    }
+
+    // Unknowns: the nodes some stencil reaches, numbered in storage order.
+    node_dof_.assign(grid.storage_size(), -1);
+    for (int node : stencil_dof_) node_dof_[node] = 0;
+    dof_node_.clear();
+    constexpr int kBlockNodes = Grid<dim>::kBlockNodes;
+    for (int block : grid.active_blocks())
+        for (int k = 0; k < kBlockNodes; ++k) {
+            const std::int64_t node = static_cast<std::int64_t>(block) * kBlockNodes + k;
+            if (node_dof_[node] == 0) {
+                node_dof_[node] = static_cast<int>(dof_node_.size());
+                dof_node_.push_back(node);
+            }
+        }
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < n * kStencil; ++i) stencil_dof_[i] = node_dof_[stencil_dof_[i]];
+
+    const std::ptrdiff_t dofs = static_cast<std::ptrdiff_t>(dof_node_.size());
+    mass_.resize(dim * dofs);
+    v_star_.resize(dim * dofs);
+    free_.resize(dim * dofs);
+    residual_scale_.resize(dim * dofs);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t k = 0; k < dofs; ++k) {
+        const typename Grid<dim>::Node& node = grid.node(dof_node_[k]);
+        int coord[dim];
+        bool fixed[dim];
+        grid.coordinates(dof_node_[k], coord);
+        grid.constrained_components(coord, fixed, bc);
+        const bool massless = !(node.mass > 0.0);  // a stencil node with weight exactly 0
+        for (int a = 0; a < dim; ++a) {
+            const Eigen::Index i = dim * k + a;
+            mass_[i] = massless ? 1.0 : node.mass;
+            v_star_[i] = massless ? 0.0 : node.momentum[a];
+            free_[i] = (fixed[a] || massless) ? 0.0 : 1.0;
+            residual_scale_[i] = free_[i] / mass_[i];
+        }
+    }
+    F_.resize(n);
+    P_.resize(n);
+    psi_.resize(n);
+    K_.resize(n);
+    masked_.resize(dim * dofs);
+}
+
+template <int dim>
+void IncrementalPotential<dim>::deformation(const VecX& v, std::vector<Mat<dim>>& F) const {
+    const Particles<dim>& particles = *particles_;
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+    F.resize(n);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        Mat<dim> G = Mat<dim>::Zero();
+        for (int s = 0; s < kStencil; ++s) {
+            const Vec<dim> vi = v.template segment<dim>(dim * stencil_dof_[p * kStencil + s]);
+            G.noalias() += vi * stencil_grad_[p * kStencil + s].transpose();
+        }
+        F[p] = particles.F_elastic[p] + dt_ * (G * particles.F_elastic[p]);
+    }
+}
+
+template <int dim>
+void IncrementalPotential<dim>::set_reference(const std::vector<Mat<dim>>& F0) {
+    energy_.set_reference(F0, particles_->hardening, particles_->object);
+}
+
+template <int dim>
+void IncrementalPotential<dim>::write_velocity(const VecX& v, Grid<dim>& grid) const {
+    const std::ptrdiff_t dofs = static_cast<std::ptrdiff_t>(dof_node_.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t k = 0; k < dofs; ++k) grid.node(dof_node_[k]).momentum = v.template segment<dim>(dim * k);
+}
+
+template <int dim>
+double IncrementalPotential<dim>::inertia(const VecX& v) const {
+    return 0.5 * (v - v_star_).cwiseAbs2().dot(mass_.cwiseProduct(free_));
+}
+
+template <int dim>
+double IncrementalPotential<dim>::potential_sum() const {
+    // In particle order, serially: the sum must not depend on the thread count.
+    double sum = 0.0;
+    for (std::size_t p = 0; p < psi_.size(); ++p) sum += particles_->rest_volume[p] * psi_[p];
+    return sum;
+}
+
+template <int dim>
+double IncrementalPotential<dim>::value(const VecX& v) {
+    const auto start = std::chrono::steady_clock::now();
+    deformation(v, F_);
+    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Value, psi_.data(), nullptr, nullptr);
+    energy_seconds_ += seconds_since(start);
+    return inertia(v) + potential_sum();
+}
+
+template <int dim>
+double IncrementalPotential<dim>::value_gradient(const VecX& v, VecX& gradient) {
+    const auto start = std::chrono::steady_clock::now();
+    deformation(v, F_);
+    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Gradient, psi_.data(), P_.data(), nullptr);
+    energy_seconds_ += seconds_since(start);
+
+    const Particles<dim>& particles = *particles_;
+    gradient = mass_.cwiseProduct(v - v_star_);
+    double* g = gradient.data();
+    grid_->for_each_particle_coloured([&](int p) {
+        // dpsi/dG = dt P F^E^T; its product with grad w is the node force.
+        const Mat<dim> Q = (particles.rest_volume[p] * dt_) * (P_[p] * particles.F_elastic[p].transpose());
+        for (int s = 0; s < kStencil; ++s) {
+            Eigen::Map<Vec<dim>> gi(g + dim * stencil_dof_[p * kStencil + s]);
+            gi.noalias() += Q * stencil_grad_[p * kStencil + s];
+        }
+    });
+    gradient.array() *= free_.array();
+    return inertia(v) + potential_sum();
+}
+
+template <int dim>
+void IncrementalPotential<dim>::prepare_hessian(const VecX& v) {
+    const auto start = std::chrono::steady_clock::now();
+    deformation(v, F_);
+    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Hessian, psi_.data(), P_.data(), K_.data(), project_psd_);
+    // K_p = V0 dt^2 T^T H T with T the map vec(dG) -> vec(dG F^E): in the
+    // row-major basis T[(i, j), (i, k)] = F^E_kj.
+    const Particles<dim>& particles = *particles_;
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        const Mat<dim>& FE = particles.F_elastic[p];
+        Tensor4<dim> T = Tensor4<dim>::Zero();
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j)
+                for (int k = 0; k < dim; ++k) T(i * dim + j, i * dim + k) = FE(k, j);
+        const Tensor4<dim> HT = K_[p] * T;
+        K_[p].noalias() = (particles.rest_volume[p] * dt_ * dt_) * (T.transpose() * HT);
+    }
+    energy_seconds_ += seconds_since(start);
+}
+
+template <int dim>
+void IncrementalPotential<dim>::hessian_multiply(const VecX& d, VecX& out) const {
+    const auto start = std::chrono::steady_clock::now();
+    masked_ = d.cwiseProduct(free_);
+    out.setZero(d.size());
+    const double* dm = masked_.data();
+    double* o = out.data();
+    grid_->for_each_particle_coloured([&](int p) {
+        Eigen::Matrix<double, kM, 1> dG = Eigen::Matrix<double, kM, 1>::Zero();
+        const int* dof = &stencil_dof_[p * kStencil];
+        const Vec<dim>* grad = &stencil_grad_[p * kStencil];
+        for (int s = 0; s < kStencil; ++s) {
+            const Eigen::Map<const Vec<dim>> di(dm + dim * dof[s]);
+            for (int a = 0; a < dim; ++a) dG.template segment<dim>(a * dim) += di[a] * grad[s];
+        }
+        const Eigen::Matrix<double, kM, 1> y = K_[p] * dG;
+        for (int s = 0; s < kStencil; ++s) {
+            Eigen::Map<Vec<dim>> oi(o + dim * dof[s]);
+            for (int a = 0; a < dim; ++a) oi[a] += y.template segment<dim>(a * dim).dot(grad[s]);
+        }
+    });
+    out.array() = out.array() * free_.array() + mass_.array() * d.array();
+    multiply_seconds_ += seconds_since(start);
+}
+
+template <int dim>
+void IncrementalPotential<dim>::hessian_diagonal(VecX& diagonal) const {
+    diagonal.setZero(size());
+    double* diag = diagonal.data();
+    grid_->for_each_particle_coloured([&](int p) {
+        const Tensor4<dim>& K = K_[p];
+        for (int s = 0; s < kStencil; ++s) {
+            const Vec<dim>& g = stencil_grad_[p * kStencil + s];
+            double* di = diag + dim * stencil_dof_[p * kStencil + s];
+            // d = e_a at this node: dG = e_a g^T, so the entry is g^T K[(a, .), (a, .)] g.
+            for (int a = 0; a < dim; ++a)
+                di[a] += g.dot(K.template block<dim, dim>(a * dim, a * dim) * g);
+        }
+    });
+    diagonal.array() = diagonal.array() * free_.array() + mass_.array();
+}
+
+template class IncrementalPotential<2>;
+template class IncrementalPotential<3>;
+
+}  // namespace pnet

@@ -1,0 +1,106 @@
+#pragma once
+// The incremental potential of an implicit MPM step (DESIGN.md §4; Gast et al.
+// 2015; paper sec. 3.1, 4.2), minimized over the grid velocities v:
+//
+//   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_p V0_p psi_p(F_p(v)),
+//   F_p(v) = (I + dt G_p(v)) F^E_p,   G_p(v) = sum_i v_i grad w_ip^T,
+//   dE/dv_i = m_i (v_i - v*_i) + sum_p V0_p dt P_p F^E_p^T grad w_ip,
+//   H d |_i = m_i d_i + sum_p K_p[dG_p] grad w_ip,  dG_p = sum_i d_i grad w_ip^T,
+//   K_p = V0_p dt^2 T_p^T (d2psi/dF2) T_p,  T_p: dG -> dG F^E_p,
+//
+// with psi_p a ParticleEnergy (elastic for `lagged`, the PlasticityNet energy
+// for `plasticitynet`) and its Hessian projected to PSD, so H is PSD. K_p
+// (d^2 x d^2) is formed once per Newton iteration; a Hessian-vector product
+// is then a gather, a small matrix product and a scatter per particle.
+//
+// Unknowns: the velocities of the grid nodes that some particle's stencil
+// reaches (dof k, component a at index dim k + a). Boundary conditions are
+// fixed components (Grid::constrained_components) held at v*: their gradient
+// is zeroed and their Hessian rows and columns replaced by m_i, so Newton never
+// moves them. Scatters run in the grid's block-colour order, so every sum has
+// a fixed order and results do not depend on the thread count.
+#include <cstdint>
+#include <vector>
+
+#include "pnet/energy/particle_energy.hpp"
+#include "pnet/mpm/grid.hpp"
+#include "pnet/mpm/particles.hpp"
+#include "pnet/solver/objective.hpp"
+
+namespace pnet {
+
+template <int dim>
+class IncrementalPotential final : public Objective {
+public:
+    static constexpr int kStencil = dim == 2 ? 9 : 27;
+    static constexpr int kM = dim * dim;
+
+    explicit IncrementalPotential(ParticleEnergy<dim>& energy) : energy_(energy) {}
+
+    /// Sets up one step. `grid` holds this step's P2G (binning, node masses) and
+    /// v* = momentum / mass + dt g with the boundary conditions applied, in
+    /// Node::momentum (Grid::update_velocity()); both must outlive the step.
+    void begin_step(const Grid<dim>& grid, const Particles<dim>& particles, double dt, const BoundaryConditions& bc);
+
+    /// v* on the unknowns: the starting point of the solve.
+    const VecX& v_star() const { return v_star_; }
+    /// 1 / m_i on free components, 0 on fixed ones: Newton's residual is then a
+    /// velocity error (m/s).
+    const VecX& residual_scale() const { return residual_scale_; }
+    /// Nodes that are unknowns.
+    std::size_t nodes() const { return dof_node_.size(); }
+
+    /// F_p(v) of every particle.
+    void deformation(const VecX& v, std::vector<Mat<dim>>& F) const;
+
+    /// The energy's reference state (plasticitynet: F0 of eq. 10, with the
+    /// particles' start-of-step hardening).
+    void set_reference(const std::vector<Mat<dim>>& F0);
+
+    /// Writes v into the grid's Node::momentum (velocities) for G2P.
+    void write_velocity(const VecX& v, Grid<dim>& grid) const;
+
+    // Objective
+    Eigen::Index size() const override { return v_star_.size(); }
+    double value(const VecX& v) override;
+    double value_gradient(const VecX& v, VecX& gradient) override;
+    void prepare_hessian(const VecX& v) override;
+    void hessian_multiply(const VecX& d, VecX& out) const override;
+    void hessian_diagonal(VecX& diagonal) const override;
+
+    /// Project the particles' Hessians to PSD (default; false gives the exact
+    /// Hessian of E, for derivative checks).
+    void set_project_psd(bool project) { project_psd_ = project; }
+
+    /// Seconds spent in the particle energies (evaluate) and in Hessian-vector
+    /// products since the last begin_step().
+    double energy_seconds() const { return energy_seconds_; }
+    double multiply_seconds() const { return multiply_seconds_; }
+
+private:
+    double inertia(const VecX& v) const;
+    double potential_sum() const;
+
+    ParticleEnergy<dim>& energy_;
+    const Grid<dim>* grid_ = nullptr;
+    const Particles<dim>* particles_ = nullptr;
+    double dt_ = 0.0;
+
+    std::vector<int> node_dof_;             // grid storage index -> dof (-1: not an unknown)
+    std::vector<std::int64_t> dof_node_;    // dof -> grid storage index
+    VecX mass_;                             // per component (m_i, or 1 for a massless node), kg
+    VecX v_star_, free_, residual_scale_;   // free_: 1 on free components, 0 on fixed ones
+    std::vector<int> stencil_dof_;          // particle p, node s: dof of node s of p's stencil
+    std::vector<Vec<dim>> stencil_grad_;    // grad w_ip, 1/m
+
+    // Per particle, at the last evaluation.
+    std::vector<Mat<dim>> F_, P_;
+    std::vector<double> psi_;
+    std::vector<Tensor4<dim>> K_;           // the Hessian of psi, then K_p (prepare_hessian)
+    mutable VecX masked_;
+    bool project_psd_ = true;
+    double energy_seconds_ = 0.0;
+    mutable double multiply_seconds_ = 0.0;
+};
+
+}  // namespace pnet

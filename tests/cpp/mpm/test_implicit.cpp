@@ -1,0 +1,432 @@
+// The implicit MPM integrators (plasticitynet, lagged): the incremental
+// potential's gradient and Hessian-vector product against finite differences,
+// monotone Newton steps, plasticitynet = lagged without plasticity, thread-count
+// independence, checkpoint/resume, and a few steps of every tiny scene.
+//
+// The learned energies here are random or all-zero MLPs built in memory, so
+// that these tests need no model file (and no LibTorch); the shipped models run
+// in tests/python/test_pnet_cli.py.
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cstring>
+#include <filesystem>
+#include <memory>
+
+#include "pnet/mpm/implicit_integrator.hpp"
+#include "pnet/mpm/simulation.hpp"
+#include "pnet/mpm/transfer.hpp"
+#include "pnet/solver/newton.hpp"
+#include "pnet/scene/sampler.hpp"
+#include "support/finite_difference.hpp"
+#include "support/random.hpp"
+#include "support/temp_dir.hpp"
+
+namespace pnet {
+namespace {
+
+namespace fs = std::filesystem;
+
+Scene tiny_scene(const std::string& name) { return load_scene(std::string(PNET_SCENES_DIR) + "/tiny/" + name + ".json"); }
+
+/// An energy model of `material` with random weights (scale: PyTorch's default
+/// init times `scale`; 0: every weight zero, so that N = 0 and Psi is the
+/// regularized linearization of Ptilde about F0).
+template <int dim>
+std::shared_ptr<const ModelFile> memory_model(MaterialDescription material, double scale, unsigned seed = 7) {
+    auto model = std::make_shared<ModelFile>();
+    model->path = "<in-memory test model>";
+    ModelMetadata& meta = model->metadata;
+    meta.kind = ModelKind::Energy;
+    meta.dim = dim;
+    meta.has_hardening = material.plasticity == PlasticityModel::CamClay;
+    const int hidden = dim == 2 ? 32 : 64;
+    meta.widths = {2 * dim * dim + (meta.has_hardening ? 1 : 0), hidden, hidden, hidden, 1};
+    meta.training_E = 1.0;
+    material.elastic.E = 1.0;
+    meta.material = material;
+    model->weights = random_mlp(meta.widths, seed, scale == 0.0 ? 1.0 : scale);
+    if (scale == 0.0) {
+        for (auto& w : model->weights.weight) std::fill(w.begin(), w.end(), 0.0);
+        for (auto& b : model->weights.bias) std::fill(b.begin(), b.end(), 0.0);
+    }
+    return model;
+}
+
+template <int dim>
+std::string scene_name(const char* stem) {
+    return std::string(stem) + (dim == 2 ? "_2d" : "_3d");
+}
+
+/// One implicit step's potential, set up on a perturbed tiny scene: F^E and v_p
+/// randomized, P2G done, reference F0 = F(v* + noise).
+template <int dim>
+struct PotentialFixture {
+    Scene scene;
+    MpmSystem<dim> system;
+    Particles<dim> particles;
+    std::unique_ptr<ParticleEnergy<dim>> energy;
+    std::unique_ptr<Grid<dim>> grid;
+    std::unique_ptr<IncrementalPotential<dim>> potential;
+    VecX v;
+
+    PotentialFixture(const std::string& name, bool neural, double dt = 1e-3)
+        : scene(tiny_scene(name)), system(make_mpm_system<dim>(scene)), particles(sample_particles<dim>(scene)) {
+        test::Random random(11);
+        for (std::size_t p = 0; p < particles.size(); ++p) {
+            particles.F_elastic[p] = Mat<dim>::Identity() + 0.05 * Mat<dim>::NullaryExpr([&] { return random.uniform(-1, 1); });
+            particles.v[p] = random.uniform_vec<dim>(-0.5, 0.5);
+        }
+        if (neural) {
+            std::vector<std::shared_ptr<const ModelFile>> models = {memory_model<dim>(scene.objects[0].material, 0.3)};
+            energy = std::make_unique<NeuralParticleEnergy<dim>>(models, system.materials,
+                                                                 std::vector<std::string>{"test"}, 1.0);
+        } else {
+            energy = std::make_unique<ElasticParticleEnergy<dim>>(system.materials);
+        }
+        grid = std::make_unique<Grid<dim>>(system.origin, system.dx, system.cells);
+        particles_to_grid<dim>(*grid, particles, nullptr);
+        grid->update_velocity(dt, system.gravity, system.boundary);
+        potential = std::make_unique<IncrementalPotential<dim>>(*energy);
+        potential->begin_step(*grid, particles, dt, system.boundary);
+        v = potential->v_star();
+        for (Eigen::Index i = 0; i < v.size(); ++i)
+            if (potential->residual_scale()[i] > 0.0) v[i] += random.uniform(-0.3, 0.3);
+        std::vector<Mat<dim>> F0;
+        VecX v0 = v;
+        for (Eigen::Index i = 0; i < v.size(); ++i)
+            if (potential->residual_scale()[i] > 0.0) v0[i] += random.uniform(-0.1, 0.1);
+        potential->deformation(v0, F0);
+        potential->set_reference(F0);
+    }
+
+    std::vector<Eigen::Index> free_components() const {
+        std::vector<Eigen::Index> free;
+        for (Eigen::Index i = 0; i < v.size(); ++i)
+            if (potential->residual_scale()[i] > 0.0) free.push_back(i);
+        return free;
+    }
+};
+
+template <typename T>
+class ImplicitTest : public ::testing::Test {};
+using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
+TYPED_TEST_SUITE(ImplicitTest, Dims);
+
+// Gradient of E on the free components against central differences of E, and
+// H d against differences of the gradient along random directions and unit
+// vectors, for the elastic (lagged) and the neural (plasticitynet) energy.
+TYPED_TEST(ImplicitTest, GradientAndHessianMatchFiniteDifferences) {
+    constexpr int dim = TypeParam::value;
+    for (const bool neural : {false, true}) {
+        for (const char* stem : {"sand_column", "snowball"}) {
+            SCOPED_TRACE(std::string(stem) + (neural ? " (plasticitynet energy)" : " (lagged, elastic energy)"));
+            PotentialFixture<dim> f(scene_name<dim>(stem), neural);
+            IncrementalPotential<dim>& E = *f.potential;
+            E.set_project_psd(false);  // the exact Hessian (the random F^E has indefinite ones)
+            const std::vector<Eigen::Index> free = f.free_components();
+            ASSERT_GT(free.size(), 20u);
+            VecX g(E.size());
+            E.value_gradient(f.v, g);
+            // The gradient is not trivially small: the energy terms dominate the test.
+            ASSERT_GT(g.norm(), 1e-3);
+
+            // Every free component of the gradient (a reduced function of the free
+            // unknowns). E carries a large constant (the network's N scaled by the
+            // scene's E), so the step is 1e-4 m/s: round-off stays below 1e-9.
+            Eigen::VectorXd x(free.size()), g_free(free.size());
+            for (std::size_t k = 0; k < free.size(); ++k) {
+                x[k] = f.v[free[k]];
+                g_free[k] = g[free[k]];
+            }
+            auto embed = [&](const Eigen::VectorXd& y) {
+                VecX full = f.v;
+                for (std::size_t k = 0; k < free.size(); ++k) full[free[k]] = y[k];
+                return full;
+            };
+            test::FdStats stats;
+            EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return E.value(embed(y)); }, g_free, x,
+                                             stats, 1e-4, 1e-5, 1e-3 * g_free.cwiseAbs().maxCoeff()));
+            EXPECT_EQ(stats.checks, static_cast<int>(free.size()));
+
+            // H d against (g(v + h d) - g(v - h d)) / 2h on the free rows.
+            E.prepare_hessian(f.v);
+            test::Random random(5);
+            int directions = 0;
+            double worst = 0.0;
+            for (int trial = 0; trial < 8; ++trial) {
+                VecX d = VecX::Zero(E.size());
+                if (trial < 4) {
+                    for (Eigen::Index i : free) d[i] = random.uniform(-1, 1);
+                } else {
+                    d[free[(trial * 7919) % free.size()]] = 1.0;
+                }
+                VecX Hd(E.size()), gp(E.size()), gm(E.size());
+                E.hessian_multiply(d, Hd);
+                const double h = 1e-5;  // m/s: the gradient sums large cancelling terms (round-off ~1e-9 absolute)
+                E.value_gradient(f.v + h * d, gp);
+                E.value_gradient(f.v - h * d, gm);
+                E.prepare_hessian(f.v);  // value_gradient does not disturb the prepared Hessian, but be explicit
+                const VecX numeric = (gp - gm) / (2 * h);
+                double scale = 0.0;
+                for (Eigen::Index i : free) scale = std::max(scale, std::abs(Hd[i]));
+                ASSERT_GT(scale, 0.0);
+                for (Eigen::Index i : free) {
+                    const double err = std::abs(Hd[i] - numeric[i]) / std::max({std::abs(Hd[i]), std::abs(numeric[i]), 1e-3 * scale});
+                    worst = std::max(worst, err);
+                }
+                ++directions;
+            }
+            EXPECT_EQ(directions, 8);
+            EXPECT_LT(worst, 1e-5) << "largest relative error of H d";
+
+            // diag(H) equals e_i^T H e_i.
+            VecX diagonal(E.size()), e = VecX::Zero(E.size()), He(E.size());
+            E.hessian_diagonal(diagonal);
+            for (int k = 0; k < 5; ++k) {
+                const Eigen::Index i = free[(k * 104729) % free.size()];
+                e.setZero();
+                e[i] = 1.0;
+                E.hessian_multiply(e, He);
+                EXPECT_NEAR(diagonal[i], He[i], 1e-12 * std::abs(He[i]));
+            }
+        }
+    }
+}
+
+// Fixed components (sticky floor, slip walls) stay at v*: zero gradient, and a
+// Hessian that does not couple them to the free ones.
+TYPED_TEST(ImplicitTest, BoundaryComponentsAreFixed) {
+    constexpr int dim = TypeParam::value;
+    PotentialFixture<dim> f(scene_name<dim>("sand_column"), false);
+    IncrementalPotential<dim>& E = *f.potential;
+    VecX g(E.size()), Hd(E.size());
+    E.value_gradient(f.v, g);
+    E.prepare_hessian(f.v);
+    VecX d = VecX::Ones(E.size());
+    E.hessian_multiply(d, Hd);
+    int fixed = 0;
+    for (Eigen::Index i = 0; i < E.size(); ++i)
+        if (E.residual_scale()[i] == 0.0) {
+            ++fixed;
+            EXPECT_EQ(g[i], 0.0);
+            VecX e = VecX::Zero(E.size());
+            e[i] = 1.0;
+            VecX He(E.size());
+            E.hessian_multiply(e, He);
+            EXPECT_EQ((He - He[i] * e).cwiseAbs().maxCoeff(), 0.0) << "component " << i;
+            if (fixed > 30) break;
+        }
+    EXPECT_GT(fixed, 0) << "the column stands on the sticky floor";
+}
+
+/// Records E at every value_gradient() call: with the line search, the energies
+/// of accepted iterates.
+template <int dim>
+class RecordingObjective final : public Objective {
+public:
+    explicit RecordingObjective(IncrementalPotential<dim>& inner) : inner_(inner) {}
+    Eigen::Index size() const override { return inner_.size(); }
+    double value(const VecX& x) override { return inner_.value(x); }
+    double value_gradient(const VecX& x, VecX& g) override {
+        energies.push_back(inner_.value_gradient(x, g));
+        return energies.back();
+    }
+    void prepare_hessian(const VecX& x) override { inner_.prepare_hessian(x); }
+    void hessian_multiply(const VecX& d, VecX& out) const override { inner_.hessian_multiply(d, out); }
+    void hessian_diagonal(VecX& d) const override { inner_.hessian_diagonal(d); }
+    std::vector<double> energies;
+
+private:
+    IncrementalPotential<dim>& inner_;
+};
+
+TYPED_TEST(ImplicitTest, EveryNewtonStepLowersTheEnergy) {
+    constexpr int dim = TypeParam::value;
+    for (const bool neural : {false, true}) {
+        SCOPED_TRACE(neural ? "plasticitynet energy" : "elastic energy");
+        PotentialFixture<dim> f(scene_name<dim>("snowball"), neural, 2e-3);
+        RecordingObjective<dim> recorder(*f.potential);
+        NewtonOptions options;
+        options.tolerance = 1e-9;
+        options.residual_scale = f.potential->residual_scale();
+        VecX v = f.potential->v_star();
+        const NewtonStats stats = minimize(recorder, v, options, "test");
+        EXPECT_TRUE(stats.converged || stats.roundoff_floor);
+        ASSERT_GE(recorder.energies.size(), 3u) << "a few Newton steps were taken";
+        for (std::size_t k = 1; k < recorder.energies.size(); ++k)
+            EXPECT_LE(recorder.energies[k], recorder.energies[k - 1] + 1e-12 * std::abs(recorder.energies[k - 1]))
+                << "step " << k;
+    }
+}
+
+template <int dim>
+IntegratorSettings implicit_settings(const std::string& name, const Scene& scene, double model_scale) {
+    IntegratorSettings s;
+    s.name = name;
+    s.dt = 1e-3;
+    if (name == "plasticitynet") s.models = {memory_model<dim>(scene.objects[0].material, model_scale)};
+    return s;
+}
+
+// Without plasticity and with N = 0, Psi(F; F0) = Ptilde(F0) : F + w mu/2 |F - F0|^2
+// (+ const): at a converged fixed point F0 = F(v) its gradient is the elastic
+// P(F(v)), so plasticitynet must solve the same equations as lagged.
+TYPED_TEST(ImplicitTest, PlasticityNetEqualsLaggedWithoutPlasticity) {
+    constexpr int dim = TypeParam::value;
+    Scene scene = tiny_scene(scene_name<dim>("sand_column"));
+    scene.objects[0].material.plasticity = PlasticityModel::None;
+    scene.objects[0].material.elasticity = ElasticityModel::StvkHencky;
+    IntegratorSettings lagged = implicit_settings<dim>("lagged", scene, 0.0);
+    IntegratorSettings net = implicit_settings<dim>("plasticitynet", scene, 0.0);
+    for (IntegratorSettings* s : {&lagged, &net}) {
+        s->implicit.newton_tolerance = 1e-10;
+        s->implicit.fixed_point_tolerance = 1e-11;
+        s->implicit.max_fixed_point_iterations = 200;
+    }
+    Simulation<dim> a(scene, lagged), b(scene, net);
+    a.advance_frame();
+    const FrameStats fb = b.advance_frame();
+    EXPECT_GT(fb.fixed_point_iterations, fb.steps) << "the fixed point needs more than one solve per step";
+    double worst = 0.0, motion = 0.0;
+    for (std::size_t p = 0; p < a.particles().size(); ++p) {
+        worst = std::max(worst, (a.particles().x[p] - b.particles().x[p]).norm());
+        motion = std::max(motion, a.particles().v[p].norm());
+    }
+    EXPECT_GT(motion, 0.01) << "the column sags";
+    EXPECT_LT(worst, 1e-9) << "m, after a frame of 20 steps";
+    // With a real (random) network the two differ: the comparison is not vacuous.
+    IntegratorSettings random_net = implicit_settings<dim>("plasticitynet", scene, 1.0);
+    Simulation<dim> c(scene, random_net);
+    c.advance_frame();
+    double differ = 0.0;
+    for (std::size_t p = 0; p < a.particles().size(); ++p)
+        differ = std::max(differ, (a.particles().x[p] - c.particles().x[p]).norm());
+    EXPECT_GT(differ, 1e-6);
+}
+
+template <typename T>
+bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
+}
+
+template <int dim>
+bool identical(const Particles<dim>& a, const Particles<dim>& b) {
+    return same_bytes(a.x, b.x) && same_bytes(a.v, b.v) && same_bytes(a.C, b.C) &&
+           same_bytes(a.F_elastic, b.F_elastic) && same_bytes(a.hardening, b.hardening);
+}
+
+TYPED_TEST(ImplicitTest, OneAndTwoThreadsGiveIdenticalResults) {
+    constexpr int dim = TypeParam::value;
+    const int saved = omp_get_max_threads();
+    for (const char* integrator : {"plasticitynet", "lagged"}) {
+        SCOPED_TRACE(integrator);
+        const Scene scene = tiny_scene(scene_name<dim>("sand_column"));
+        const IntegratorSettings settings = implicit_settings<dim>(integrator, scene, 0.3);
+        omp_set_num_threads(1);
+        Simulation<dim> one(scene, settings);
+        const FrameStats stats = one.advance_frame();
+        omp_set_num_threads(2);
+        Simulation<dim> two(scene, settings);
+        two.advance_frame();
+        EXPECT_TRUE(identical(one.particles(), two.particles()));
+        EXPECT_GT(stats.newton_iterations, 0);
+    }
+    omp_set_num_threads(saved);
+}
+
+TYPED_TEST(ImplicitTest, CheckpointResumeEqualsAnUninterruptedRun) {
+    constexpr int dim = TypeParam::value;
+    test::TempDir dir;
+    for (const char* integrator : {"plasticitynet", "lagged"}) {
+        SCOPED_TRACE(integrator);
+        const Scene scene = tiny_scene(scene_name<dim>("sand_column"));
+        const IntegratorSettings settings = implicit_settings<dim>(integrator, scene, 0.3);
+        Simulation<dim> full(scene, settings);
+        full.advance_frame();
+        full.advance_frame();
+        Simulation<dim> first(scene, settings);
+        first.advance_frame();
+        const std::string path = dir.file(std::string(integrator) + ".bin");
+        first.save_checkpoint(path);
+        Simulation<dim> resumed(scene, settings);
+        resumed.load_checkpoint(path);
+        EXPECT_EQ(resumed.frame(), 1);
+        resumed.advance_frame();
+        EXPECT_TRUE(identical(full.particles(), resumed.particles()));
+        // A checkpoint of another integrator is refused.
+        IntegratorSettings other = settings;
+        other.name = other.name == "lagged" ? "explicit" : "lagged";
+        Simulation<dim> wrong(scene, other);
+        try {
+            wrong.load_checkpoint(path);
+            ADD_FAILURE() << "a checkpoint of another integrator was accepted";
+        } catch (const std::invalid_argument& e) {
+            EXPECT_NE(std::string(e.what()).find("written by the " + std::string(integrator)), std::string::npos)
+                << e.what();
+        }
+    }
+}
+
+TYPED_TEST(ImplicitTest, EveryTinySceneRunsWithBothIntegrators) {
+    constexpr int dim = TypeParam::value;
+    for (const char* stem : {"sand_column", "snowball"})
+        for (const char* integrator : {"plasticitynet", "lagged"}) {
+            SCOPED_TRACE(std::string(stem) + " " + integrator);
+            const Scene scene = tiny_scene(scene_name<dim>(stem));
+            Simulation<dim> sim(scene, implicit_settings<dim>(integrator, scene, 0.3));
+            const FrameStats stats = sim.advance_frame();
+            EXPECT_EQ(stats.steps, 20);
+            EXPECT_TRUE(stats.converged);
+            // The snowball falls freely in its first frame: v* is already the minimizer.
+            if (std::string(stem) == "sand_column") EXPECT_GT(stats.newton_iterations, 0);
+            EXPECT_EQ(sim.last_frame_steps().size(), 20u);
+            for (const Vec<dim>& x : sim.particles().x) ASSERT_TRUE(x.allFinite());
+        }
+}
+
+TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
+    const nlohmann::json ok = {{"name", "plasticitynet"}, {"dt", 1e-3}, {"newton_tolerance", 1e-4},
+                               {"max_fixed_point_iterations", 3}, {"regularizer_weight", 0}};
+    const ImplicitOptions o = ImplicitOptions::from_json(ok, "s.json");
+    EXPECT_EQ(o.newton_tolerance, 1e-4);
+    EXPECT_EQ(o.max_fixed_point_iterations, 3);
+    EXPECT_EQ(o.regularizer_weight, 0.0);
+    auto message = [](const nlohmann::json& block) {
+        try {
+            ImplicitOptions::from_json(block, "s.json");
+        } catch (const std::invalid_argument& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    EXPECT_EQ(message({{"newton_tolerance", -1}}), "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
+    EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),
+              "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5");
+    EXPECT_EQ(message({{"cg_tolerance", 2}}), "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2.000000");
+    EXPECT_EQ(message({{"regularizer_weight", "one"}}),
+              "s.json: integrator.regularizer_weight: expected a number >= 0, got \"one\"");
+}
+
+TEST(NeuralParticleEnergy, RefusesMissingAndMismatchedModels) {
+    const Scene scene = tiny_scene("sand_column_2d");
+    const MpmSystem<2> system = make_mpm_system<2>(scene);
+    auto message = [&](std::shared_ptr<const ModelFile> model) {
+        try {
+            NeuralParticleEnergy<2>({model}, system.materials, {"s.json: objects[0].model"}, 1.0);
+        } catch (const std::invalid_argument& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    EXPECT_EQ(message(memory_model<2>(scene.objects[0].material, 1.0)), "accepted");
+    EXPECT_NE(message(nullptr).find("s.json: objects[0].model: the plasticitynet integrator needs an energy model"),
+              std::string::npos);
+    EXPECT_NE(message(memory_model<2>(material_preset("snow"), 1.0)).find("was trained for elasticity neo_hookean_snow"),
+              std::string::npos);
+    EXPECT_NE(message(memory_model<3>(scene.objects[0].material, 1.0)).find("s.json: objects[0].model:"),
+              std::string::npos);
+}
+
+}  // namespace
+}  // namespace pnet
