@@ -221,7 +221,7 @@ GridField rasterize(const std::string& path, const PlyParticles& p, const Run& r
 
 struct FrameIou {
     int frame;
-    double time, soft, binary;
+    double time, soft, binary, plasticinelab;
 };
 
 struct Summary {
@@ -291,7 +291,7 @@ int compare(const Options& o) {
         } catch (const std::invalid_argument& e) {
             throw InputError(path_a + " vs " + path_b + ": " + e.what());
         }
-        rows.push_back({frame, frame * a.frame_dt, r.soft, r.binary});
+        rows.push_back({frame, frame * a.frame_dt, r.soft, r.binary, r.plasticinelab});
         if (progress) std::fprintf(stderr, "\rframe %d  (%zu/%zu)   ", frame, k + 1, common.size());
     }
     if (progress) std::fprintf(stderr, "\n");
@@ -301,7 +301,7 @@ int compare(const Options& o) {
                      "their mass was put at its edge\n",
                      clamped_a, a.dir.c_str(), clamped_b, b.dir.c_str());
 
-    std::string csv = "frame,time_s,soft_iou,binary_iou\n";
+    std::string csv = "frame,time_s,soft_iou,binary_iou,plasticinelab_iou\n";
     LinePlot plot;
     plot.title = "IoU: " + a.name + " vs " + b.name;
     plot.x_label = "time (s)";
@@ -311,7 +311,8 @@ int compare(const Options& o) {
     plot.series = {{"soft IoU", {}, {}}, {"binary IoU", {}, {}}};
     for (const FrameIou& r : rows) {
         char line[160];
-        std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.9g\n", r.frame, r.time, r.soft, r.binary);
+        std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.9g,%.9g\n", r.frame, r.time, r.soft, r.binary,
+                      r.plasticinelab);
         csv += line;
         plot.series[0].x.push_back(r.time);
         plot.series[0].y.push_back(r.soft);

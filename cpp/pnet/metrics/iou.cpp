@@ -250,13 +250,15 @@ IouResult iou(const GridField& a, const GridField& b) {
     constexpr std::int64_t block = 1 << 14;
     const std::int64_t n = static_cast<std::int64_t>(a.value.size());
     const std::int64_t blocks = (n + block - 1) / block;
-    std::vector<double> intersection(blocks), union_(blocks);
+    std::vector<double> intersection(blocks), union_(blocks), minimum(blocks), maximum(blocks);
     std::int64_t both = 0, either = 0;  // occupied node counts: integers, exact in any order
 #pragma omp parallel for schedule(static) reduction(+ : both, either) if (blocks > 4)
     for (std::int64_t k = 0; k < blocks; ++k) {
-        double I = 0.0, U = 0.0;
+        double I = 0.0, U = 0.0, lo = 0.0, hi = 0.0;
         for (std::int64_t i = k * block; i < std::min(n, (k + 1) * block); ++i) {
             const double A = a.value[i], B = b.value[i];
+            lo += std::min(A, B);
+            hi += std::max(A, B);
             const double ai = A / max_a, bi = B / max_b;
             const double ab = ai * bi;
             I += ab;
@@ -267,14 +269,19 @@ IouResult iou(const GridField& a, const GridField& b) {
         }
         intersection[k] = I;
         union_[k] = U;
+        minimum[k] = lo;
+        maximum[k] = hi;
     }
-    double I = 0.0, U = 0.0;
+    double I = 0.0, U = 0.0, lo = 0.0, hi = 0.0;
     for (std::int64_t k = 0; k < blocks; ++k) {
         I += intersection[k];
         U += union_[k];
+        lo += minimum[k];
+        hi += maximum[k];
     }
-    // U >= max(sum a, sum b) >= 1 (the maximum node has a = 1) and either >= 1, so both ratios are defined.
-    return {I / U, static_cast<double>(both) / static_cast<double>(either)};
+    // hi >= max A > 0, U >= max(sum a, sum b) >= 1 (the maximum node has a = 1) and
+    // either >= 1, so every ratio is defined.
+    return {lo / hi, static_cast<double>(both) / static_cast<double>(either), I / U};
 }
 
 }  // namespace pnet

@@ -50,17 +50,25 @@ GridField rasterize_mass(int dim, const std::vector<double>& position, const std
                          const double* domain_min, const double* domain_max, double dx, std::size_t* clamped = nullptr);
 
 struct IouResult {
-    double soft;    // sum(a b) / sum(a + b - a b) with a = A / max A, b = B / max B
-    double binary;  // |occ(A) ∩ occ(B)| / |occ(A) ∪ occ(B)|, occ(A) = {i : A_i > 1e-3 max A}
+    double soft;           // sum_i min(A_i, B_i) / sum_i max(A_i, B_i)
+    double binary;         // |occ(A) ∩ occ(B)| / |occ(A) ∪ occ(B)|, occ(A) = {i : A_i > 1e-3 max A}
+    double plasticinelab;  // sum(a b) / sum(a + b - a b) with a = A / max A, b = B / max B
 };
 
-/// Soft IoU (PlasticineLab's iou_kernel): normalize each field by its maximum to a, b in [0, 1],
-///   soft = sum_i a_i b_i / sum_i (a_i + b_i - a_i b_i),
-/// and binary IoU of the occupied nodes (value > 1e-3 x the field's maximum).
-/// Both are in [0, 1], symmetric, and 0 for fields without common support. binary(A, A) = 1, but
-/// soft(A, A) = sum a^2 / sum (2a - a^2) is 1 only where every node is either empty or at the maximum:
-/// a smooth field's partially filled nodes (the B-spline rim of a body, sampling noise in its interior)
-/// bring its self-IoU below 1, as in PlasticineLab, which reports it as "target_iou".
+/// IoU of two nodal mass fields A, B (DESIGN.md §6, with the project's choice
+/// of soft IoU):
+///   soft = sum_i min(A_i, B_i) / sum_i max(A_i, B_i)   (fuzzy-set Jaccard index
+///     of the mass fields: intersection = min, union = max). It is 1 exactly when
+///     A = B, drops as mass moves away, and needs no normalization: both runs
+///     carry the same total mass, so the raw fields are compared.
+///   binary = IoU of the occupied nodes (value > 1e-3 x the field's maximum).
+///   plasticinelab = the formula DESIGN.md §6 prints (PlasticineLab's iou_kernel):
+///     normalize each field by its maximum to a, b in [0, 1], sum a b / sum (a + b - a b).
+///     Kept for reference only: its self-IoU sum a^2 / sum (2a - a^2) is below 1
+///     wherever a node is partly filled (the B-spline rim of a body, a thin
+///     deposit), e.g. 0.13 for a flat sand deposit against itself, so it cannot
+///     judge accuracy.
+/// All three are in [0, 1], symmetric, and 0 for fields without common support.
 /// Throws std::invalid_argument if the fields are on different grids (dim, nodes, dx, origin), a field's
 /// value size does not match its nodes, a value is negative or not finite, or a field is all zero.
 IouResult iou(const GridField& a, const GridField& b);

@@ -132,12 +132,7 @@ double IncrementalPotential<dim>::value(const VecX& v) {
 }
 
 template <int dim>
-double IncrementalPotential<dim>::value_gradient(const VecX& v, VecX& gradient) {
-    const auto start = std::chrono::steady_clock::now();
-    deformation(v, F_);
-    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Gradient, psi_.data(), P_.data(), nullptr);
-    energy_seconds_ += seconds_since(start);
-
+void IncrementalPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient) const {
     const Particles<dim>& particles = *particles_;
     gradient = mass_.cwiseProduct(v - v_star_);
     double* g = gradient.data();
@@ -150,14 +145,10 @@ double IncrementalPotential<dim>::value_gradient(const VecX& v, VecX& gradient) 
         }
     });
     gradient.array() *= free_.array();
-    return inertia(v) + potential_sum();
 }
 
 template <int dim>
-void IncrementalPotential<dim>::prepare_hessian(const VecX& v) {
-    const auto start = std::chrono::steady_clock::now();
-    deformation(v, F_);
-    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Hessian, psi_.data(), P_.data(), K_.data(), project_psd_);
+void IncrementalPotential<dim>::transform_hessians() {
     // K_p = V0 dt^2 T^T H T with T the map vec(dG) -> vec(dG F^E): in the
     // row-major basis T[(i, j), (i, k)] = F^E_kj.
     const Particles<dim>& particles = *particles_;
@@ -172,7 +163,36 @@ void IncrementalPotential<dim>::prepare_hessian(const VecX& v) {
         const Tensor4<dim> HT = K_[p] * T;
         K_[p].noalias() = (particles.rest_volume[p] * dt_ * dt_) * (T.transpose() * HT);
     }
+}
+
+template <int dim>
+double IncrementalPotential<dim>::value_gradient(const VecX& v, VecX& gradient) {
+    const auto start = std::chrono::steady_clock::now();
+    deformation(v, F_);
+    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Gradient, psi_.data(), P_.data(), nullptr);
     energy_seconds_ += seconds_since(start);
+    assemble_gradient(v, gradient);
+    return inertia(v) + potential_sum();
+}
+
+template <int dim>
+void IncrementalPotential<dim>::prepare_hessian(const VecX& v) {
+    const auto start = std::chrono::steady_clock::now();
+    deformation(v, F_);
+    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Hessian, psi_.data(), P_.data(), K_.data(), project_psd_);
+    transform_hessians();
+    energy_seconds_ += seconds_since(start);
+}
+
+template <int dim>
+double IncrementalPotential<dim>::value_gradient_hessian(const VecX& v, VecX& gradient) {
+    const auto start = std::chrono::steady_clock::now();
+    deformation(v, F_);
+    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Hessian, psi_.data(), P_.data(), K_.data(), project_psd_);
+    transform_hessians();
+    energy_seconds_ += seconds_since(start);
+    assemble_gradient(v, gradient);
+    return inertia(v) + potential_sum();
 }
 
 template <int dim>

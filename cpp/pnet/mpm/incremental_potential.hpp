@@ -65,6 +65,7 @@ public:
     double value(const VecX& v) override;
     double value_gradient(const VecX& v, VecX& gradient) override;
     void prepare_hessian(const VecX& v) override;
+    double value_gradient_hessian(const VecX& v, VecX& gradient) override;
     void hessian_multiply(const VecX& d, VecX& out) const override;
     void hessian_diagonal(VecX& diagonal) const override;
 
@@ -79,6 +80,10 @@ public:
 
 private:
     double inertia(const VecX& v) const;
+    /// gradient = M (v - v*) + sum_p V0 dt P_p F^E_p^T grad w_ip on the free components.
+    void assemble_gradient(const VecX& v, VecX& gradient) const;
+    /// K_p = V0 dt^2 T_p^T H_p T_p in place of the Hessians H_p.
+    void transform_hessians();
     double potential_sum() const;
 
     ParticleEnergy<dim>& energy_;

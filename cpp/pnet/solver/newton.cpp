@@ -32,7 +32,9 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         throw std::invalid_argument("minimize: residual_scale has the wrong size");
     NewtonStats stats;
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n);
-    double energy = objective.value_gradient(x, g);
+    // Every accepted iterate comes with its Hessian prepared (value_gradient_hessian),
+    // so an iteration whose full step passes the line search costs one energy pass.
+    double energy = objective.value_gradient_hessian(x, g);
     double residual = scaled_residual(g, options.residual_scale);
     stats.initial_energy = stats.energy = energy;
     stats.initial_residual = stats.residual = residual;
@@ -45,7 +47,6 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             stats.converged = true;
             break;
         }
-        objective.prepare_hessian(x);
         objective.hessian_diagonal(diagonal);
         for (Eigen::Index i = 0; i < n; ++i) diagonal[i] = diagonal[i] > 0.0 ? 1.0 / diagonal[i] : 1.0;
         const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
@@ -56,23 +57,27 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             throw NewtonError(where(context, it, residual) + "the search direction is not a descent direction (g.d = " +
                               std::to_string(slope) + "); the Hessian is not positive definite");
 
+        // The full step first, with its gradient and Hessian.
+        x_trial = x + d;
+        const double e_full = objective.value_gradient_hessian(x_trial, g_trial);
+        ++stats.line_search_steps;
+        const bool full_finite = std::isfinite(e_full) && g_trial.allFinite();
         // Near the solution the decrease g.d falls below the round-off of E: the
         // energy cannot rank the step any more, the gradient still can.
-        if (-slope <= 16.0 * std::numeric_limits<double>::epsilon() * std::abs(energy)) {
-            x_trial = x + d;
-            const double e_trial = objective.value_gradient(x_trial, g_trial);
-            ++stats.line_search_steps;
-            if (!std::isfinite(e_trial) || !g_trial.allFinite() || !(g_trial.norm() < g.norm())) {
-                stats.roundoff_floor = true;  // nothing left to gain in double precision
-                break;
-            }
+        const bool roundoff = -slope <= 16.0 * std::numeric_limits<double>::epsilon() * std::abs(energy);
+        const bool lowers_gradient = full_finite && g_trial.norm() < g.norm();
+        if (roundoff && !lowers_gradient) {
+            stats.roundoff_floor = true;  // nothing left to gain in double precision
+            break;
+        }
+        if (roundoff || (full_finite && e_full <= energy + options.armijo * slope)) {
             x.swap(x_trial);
             g.swap(g_trial);
-            energy = e_trial;
+            energy = e_full;
         } else {
-            double alpha = 1.0, trial = 0.0;
+            double alpha = 0.5, trial = e_full;
             bool decreased = false;
-            for (int halvings = 0; halvings <= options.max_line_search; ++halvings) {
+            for (int halvings = 1; halvings <= options.max_line_search; ++halvings) {
                 x_trial = x + alpha * d;
                 trial = objective.value(x_trial);
                 ++stats.line_search_steps;
@@ -84,26 +89,21 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             }
             if (decreased) {
                 x.swap(x_trial);
-                energy = objective.value_gradient(x, g);
+                energy = objective.value_gradient_hessian(x, g);
                 if (!std::isfinite(energy) || !g.allFinite())
                     throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
-            } else {
+            } else if (lowers_gradient && std::abs(e_full - energy) <= 1e-8 * std::max(std::abs(energy), 1.0)) {
                 // E is a sum of large terms that may cancel (a learned energy's
                 // N - c : F), so its round-off can exceed eps |E|: when the energy
-                // cannot rank any step, the gradient decides, as above.
-                x_trial = x + d;
-                const double e_trial = objective.value_gradient(x_trial, g_trial);
-                ++stats.line_search_steps;
-                if (std::isfinite(e_trial) && g_trial.allFinite() && g_trial.norm() < g.norm() &&
-                    std::abs(e_trial - energy) <= 1e-8 * std::max(std::abs(energy), 1.0)) {
-                    x.swap(x_trial);
-                    g.swap(g_trial);
-                    energy = e_trial;
-                } else {
-                    throw NewtonError(where(context, it, residual) + "line search stalled after " +
-                                      std::to_string(options.max_line_search) + " halvings (E = " +
-                                      std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
-                }
+                // cannot rank any step, the gradient decides. The Hessian last
+                // prepared is the full step's (value() does not touch it).
+                x.noalias() = x + d;
+                g.swap(g_trial);
+                energy = e_full;
+            } else {
+                throw NewtonError(where(context, it, residual) + "line search stalled after " +
+                                  std::to_string(options.max_line_search) + " halvings (E = " +
+                                  std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
             }
         }
         residual = scaled_residual(g, options.residual_scale);

@@ -5,7 +5,9 @@
 //   g = grad E(x); stop if |g|_scaled <= tolerance;
 //   H d = -g by PCG (Jacobi) to the relative tolerance min(cg_tolerance, sqrt(|g| / |g0|))
 //   (inexact Newton: loose far from the solution, tighter as it converges);
-//   alpha = 1, halved until E(x + alpha d) <= E(x) + c alpha g.d (Armijo); once |g.d| is
+//   alpha = 1, halved until E(x + alpha d) <= E(x) + c alpha g.d (Armijo; the full step is
+//   evaluated with value_gradient_hessian(), so an accepted full step costs one energy
+//   pass and arrives with its Hessian prepared); once |g.d| is
 //   below the round-off of E, the full step is taken if it lowers |g|. If no halving
 //   lowers E, the full step is still taken when it lowers |g| and changes E by less
 //   than 1e-8 max(|E|, 1) (E's round-off exceeds eps |E| when large terms cancel);

@@ -28,6 +28,16 @@ public:
     /// after value_gradient(x).
     virtual void prepare_hessian(const VecX& x) = 0;
 
+    /// value_gradient(x) and prepare_hessian(x) in one call, for energies whose
+    /// Hessian pass also yields the value and gradient (a learned energy's fused
+    /// kernel): Newton evaluates trial points with it, so that an accepted step
+    /// costs one energy pass.
+    virtual double value_gradient_hessian(const VecX& x, VecX& gradient) {
+        const double e = value_gradient(x, gradient);
+        prepare_hessian(x);
+        return e;
+    }
+
     /// out = H d with H the PSD Hessian prepared at the last prepare_hessian().
     virtual void hessian_multiply(const VecX& d, VecX& out) const = 0;
 

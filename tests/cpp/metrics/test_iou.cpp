@@ -124,21 +124,23 @@ TYPED_TEST(IouDim, IdenticalSets) {
     const GridField b = rasterize<dim>(block<dim>(corner, 10, 1.0));
     const IouResult r = iou(a, b);
     EXPECT_EQ(r.binary, 1.0);
-    // soft(A, A) = sum a^2 / sum (2a - a^2), below 1 by the block's B-spline rim and the jitter.
+    EXPECT_EQ(r.soft, 1.0);
+    // plasticinelab(A, A) = sum a^2 / sum (2a - a^2), below 1 by the block's B-spline rim and the jitter.
     const double max = *std::max_element(a.value.begin(), a.value.end());
     double num = 0.0, den = 0.0;
     for (double v : a.value) {
         num += (v / max) * (v / max);
         den += 2.0 * (v / max) - (v / max) * (v / max);
     }
-    EXPECT_NEAR(r.soft, num / den, 1e-12);
-    EXPECT_GT(r.soft, 0.5);
-    EXPECT_LT(r.soft, 1.0);
+    EXPECT_NEAR(r.plasticinelab, num / den, 1e-12);
+    EXPECT_GT(r.plasticinelab, 0.5);
+    EXPECT_LT(r.plasticinelab, 1.0);
 
-    // An indicator field (every node empty or at the maximum) has soft self-IoU exactly 1.
+    // An indicator field (every node empty or at the maximum) has plasticinelab self-IoU exactly 1.
     GridField indicator = a;
     for (double& v : indicator.value) v = v > 0.5 * max ? 2.5 : 0.0;
     const IouResult s = iou(indicator, indicator);
+    EXPECT_EQ(s.plasticinelab, 1.0);
     EXPECT_EQ(s.soft, 1.0);
     EXPECT_EQ(s.binary, 1.0);
 }
@@ -151,6 +153,7 @@ TYPED_TEST(IouDim, DisjointSetsGiveZero) {
     const IouResult r = iou(rasterize<dim>(block<dim>(left, 8)), rasterize<dim>(block<dim>(right, 8)));
     EXPECT_EQ(r.soft, 0.0);
     EXPECT_EQ(r.binary, 0.0);
+    EXPECT_EQ(r.plasticinelab, 0.0);
 }
 
 TYPED_TEST(IouDim, SoftIouDecreasesWithTranslation) {
@@ -177,6 +180,7 @@ TYPED_TEST(IouDim, Symmetric) {
     const IouResult ab = iou(a, b), ba = iou(b, a);
     EXPECT_EQ(ab.soft, ba.soft);
     EXPECT_EQ(ab.binary, ba.binary);
+    EXPECT_EQ(ab.plasticinelab, ba.plasticinelab);
     EXPECT_GT(ab.soft, 0.0);
     EXPECT_LT(ab.soft, 1.0);
 }
@@ -243,6 +247,7 @@ TEST(Iou, HandComputedValues) {
     //   A = (0, 2, 4, 0.002) -> a = (0, 0.5, 1, 0.0005)   (0.0005 is below the 1e-3 occupancy threshold)
     //   B = (0, 4, 4, 2)     -> b = (0, 1,   1, 0.5)
     //   sum ab = 0.5 + 1 + 0.00025 = 1.50025,  sum (a + b - ab) = 1 + 1 + 0.50025 = 2.50025
+    //   sum min(A, B) = 2 + 4 + 0.002 = 6.002,  sum max(A, B) = 4 + 4 + 2 = 10
     //   occupied: A {1, 2}, B {1, 2, 3} -> binary = 2 / 3
     GridField A;
     A.dim = 2;
@@ -256,7 +261,8 @@ TEST(Iou, HandComputedValues) {
         B.value[B.index(i, 1)] = row_b[i];
     }
     const IouResult r = iou(A, B);
-    EXPECT_NEAR(r.soft, 1.50025 / 2.50025, 1e-15);
+    EXPECT_NEAR(r.soft, 0.6002, 1e-15);
+    EXPECT_NEAR(r.plasticinelab, 1.50025 / 2.50025, 1e-15);
     EXPECT_DOUBLE_EQ(r.binary, 2.0 / 3.0);
 }
 

@@ -1,0 +1,212 @@
+#!/usr/bin/python3
+"""Accuracy and speed of the implicit MPM integrators against the explicit ground truth (issue 6).
+
+For each scene it runs `pnet simulate` with
+  gt                 explicit, dt = 1e-5 s (the paper's ground truth)
+  explicit_cfl       explicit at its CFL step
+  plasticitynet_1e-3, plasticitynet_1e-4, lagged_1e-3
+and, for sand_column_2d (group "ablation"), plasticitynet at 1e-3 with the
+regularizer off (w = 0) and with 1, 2, 4 and converged fixed-point iterations on
+F0. Every run is compared with the ground truth frame by frame (`pnet compare`:
+soft IoU = sum min / sum max of the B-spline mass fields, and binary IoU).
+
+Outputs (under --results, default notebooks/results/implicit_eval):
+  summary.csv, summary.md        per scene and run: dt, seconds per frame, mean Newton /
+                                 CG / fixed-point iterations per step, min and mean IoU
+  <scene>/iou.csv, iou.png       per-frame soft IoU of every run (one curve each)
+  <scene>/<run>_stats.csv, <run>_steps.csv, <run>_final.png
+The full runs (PLY of every frame) stay in --work (default out/eval); a run whose
+directory holds all its frames from the same command is reused, not re-run.
+
+    /usr/bin/python3 scripts/evaluate_implicit.py [--scenes sand_column_2d snowball_2d]
+        [--groups main ablation] [--frames N] [--threads 2] [--force]
+"""
+import argparse
+import csv
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PNET = ROOT / "build" / "cpp" / "pnet"
+
+# name: (integrator, dt, extra pnet options, group, scenes it applies to (None: all))
+RUNS = {
+    "gt": ("explicit", 1e-5, [], "main", None),
+    "explicit_cfl": ("explicit", 0.0, [], "main", None),
+    "plasticitynet_1e-3": ("plasticitynet", 1e-3, [], "main", None),
+    "plasticitynet_1e-4": ("plasticitynet", 1e-4, [], "main", None),
+    "lagged_1e-3": ("lagged", 1e-3, [], "main", None),
+    "plasticitynet_1e-3_w0": ("plasticitynet", 1e-3, ["--regularizer", "0"], "ablation", {"sand_column_2d"}),
+    "plasticitynet_1e-3_fp1": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "1"], "ablation",
+                               {"sand_column_2d"}),
+    "plasticitynet_1e-3_fp2": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "2", "--fixed-point-tol", "0"],
+                               "ablation", {"sand_column_2d"}),
+    "plasticitynet_1e-3_fp4": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "4", "--fixed-point-tol", "0"],
+                               "ablation", {"sand_column_2d"}),
+    "plasticitynet_1e-3_fpconv": ("plasticitynet", 1e-3,
+                                  ["--fixed-point-iterations", "100", "--fixed-point-tol", "1e-6"], "ablation",
+                                  {"sand_column_2d"}),
+}
+
+
+def run_dir_complete(out: Path, command: list, frames: int) -> bool:
+    marker = out / "command.json"
+    return (marker.exists() and json.loads(marker.read_text()) == command
+            and (out / f"frame_{frames:05d}.ply").exists())
+
+
+def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force: bool) -> Path:
+    integrator, dt, extra, _, _ = RUNS[name]
+    out = work / scene / name
+    command = [str(PNET), "simulate", str(ROOT / "scenes" / f"{scene}.json"), "--integrator", integrator,
+               "--dt", repr(dt), "--frames", str(frames), "--threads", str(threads), "--out", str(out)] + extra
+    if not force and run_dir_complete(out, command, frames):
+        print(f"[{scene}/{name}] reusing {out}", flush=True)
+        return out
+    if out.exists():
+        shutil.rmtree(out)
+    print(f"[{scene}/{name}] " + " ".join(command), flush=True)
+    result = subprocess.run(command)
+    if result.returncode != 0:
+        print(f"[{scene}/{name}] pnet simulate exited with {result.returncode}; the frames it wrote are compared",
+              flush=True)
+    else:
+        (out / "command.json").write_text(json.dumps(command))
+    return out
+
+
+def compare(gt: Path, run: Path, dx: float) -> list:
+    out = run / "compare_gt"
+    subprocess.run([str(PNET), "compare", str(gt), str(run), "--out", str(out), "--dx", repr(dx)], check=True,
+                   stdout=subprocess.DEVNULL)
+    with open(out / "iou.csv") as f:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def read_csv(path: Path) -> list:
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def run_figures(run: Path) -> dict:
+    frames = read_csv(run / "stats.csv")
+    steps = read_csv(run / "steps.csv")
+    n_steps = max(len(steps), 1)
+    mean = lambda key: sum(float(s[key]) for s in steps) / n_steps
+    return {
+        "frames": len(frames),
+        "seconds_per_frame": sum(float(f["wall_s"]) for f in frames) / max(len(frames), 1),
+        "steps_per_frame": n_steps / max(len(frames), 1),
+        "newton_per_step": mean("newton_iterations"),
+        "cg_per_step": mean("cg_iterations"),
+        "fixed_point_per_step": mean("fixed_point_iterations"),
+        "line_search_per_step": mean("line_search_steps"),
+        "energy_seconds_share": sum(float(s["energy_s"]) for s in steps) / max(sum(float(s["wall_s"]) for s in steps), 1e-300),
+        "cg_seconds_share": sum(float(s["cg_s"]) for s in steps) / max(sum(float(s["wall_s"]) for s in steps), 1e-300),
+        "unconverged_steps": sum(1 for s in steps if s["converged"] == "0"),
+    }
+
+
+def plot_scene(scene: str, curves: dict, path: Path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
+    for name, rows in curves.items():
+        ax.plot([r["time_s"] for r in rows], [r["soft_iou"] for r in rows], label=name,
+                linestyle="--" if "explicit" in name else "-")
+    target = 0.9 if "sand" in scene else 0.85
+    ax.axhline(target, color="grey", linewidth=0.8, linestyle=":", label=f"target {target}")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("soft IoU vs explicit dt 1e-5")
+    ax.set_title(scene)
+    ax.set_ylim(0, 1.02)
+    ax.legend(fontsize=8, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scenes", nargs="+", default=["sand_column_2d", "snowball_2d"])
+    parser.add_argument("--groups", nargs="+", default=["main", "ablation"], choices=["main", "ablation"])
+    parser.add_argument("--runs", nargs="+", help="only these runs (names as in the summary; gt is always run)")
+    parser.add_argument("--frames", type=int, default=50)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--work", type=Path, default=ROOT / "out" / "eval")
+    parser.add_argument("--results", type=Path, default=ROOT / "notebooks" / "results" / "implicit_eval")
+    parser.add_argument("--force", action="store_true", help="re-run even when a complete run exists")
+    args = parser.parse_args()
+    if not PNET.exists():
+        sys.exit(f"{PNET} not found: build first (./scripts/setup.sh)")
+
+    args.results.mkdir(parents=True, exist_ok=True)
+    summary = []
+    for scene in args.scenes:
+        scene_json = json.loads((ROOT / "scenes" / f"{scene}.json").read_text())
+        dx = scene_json["dx"]
+        names = [n for n, (_, _, _, group, only) in RUNS.items()
+                 if group in args.groups and (only is None or scene in only)
+                 and (n == "gt" or not args.runs or n in args.runs)]
+        gt = simulate(scene, "gt", args.frames, args.threads, args.work, args.force)
+        curves = {}
+        results = args.results / scene
+        results.mkdir(parents=True, exist_ok=True)
+        for name in names:
+            run = gt if name == "gt" else simulate(scene, name, args.frames, args.threads, args.work, args.force)
+            figures = run_figures(run)
+            for f in ("stats.csv", "steps.csv"):
+                shutil.copyfile(run / f, results / f"{name}_{f}")
+            last = sorted(run.glob("frame_*.png"))[-1]
+            shutil.copyfile(last, results / f"{name}_final.png")
+            row = {"scene": scene, "run": name, "integrator": RUNS[name][0], "dt": RUNS[name][1], **figures}
+            if name != "gt":
+                rows = compare(gt, run, dx)
+                curves[name] = rows
+                soft = [r["soft_iou"] for r in rows]
+                binary = [r["binary_iou"] for r in rows]
+                row.update({"soft_iou_min": min(soft), "soft_iou_mean": sum(soft) / len(soft),
+                            "binary_iou_min": min(binary), "binary_iou_mean": sum(binary) / len(binary),
+                            "compared_frames": len(rows)})
+            summary.append(row)
+            print(json.dumps(row), flush=True)
+        if curves:
+            frames = sorted({int(r["frame"]) for rows in curves.values() for r in rows})
+            with open(results / "iou.csv", "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(["frame", "time_s"] + list(curves))
+                for frame in frames:
+                    values = []
+                    for rows in curves.values():
+                        match = [r["soft_iou"] for r in rows if int(r["frame"]) == frame]
+                        values.append(f"{match[0]:.6f}" if match else "")
+                    w.writerow([frame, f"{frame * scene_json.get('frame_dt', 0.02):.4f}"] + values)
+            plot_scene(scene, curves, results / "iou.png")
+
+    keys = ["scene", "run", "integrator", "dt", "frames", "compared_frames", "seconds_per_frame", "steps_per_frame",
+            "newton_per_step", "cg_per_step", "fixed_point_per_step", "line_search_per_step",
+            "energy_seconds_share", "cg_seconds_share", "unconverged_steps", "soft_iou_min", "soft_iou_mean",
+            "binary_iou_min", "binary_iou_mean"]
+    with open(args.results / "summary.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        w.writeheader()
+        for row in summary:
+            w.writerow(row)
+    lines = ["| scene | run | dt (s) | s/frame | Newton/step | CG/step | fixed-point/step | soft IoU min / mean | "
+             "binary IoU min / mean |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in summary:
+        iou = (f"{r['soft_iou_min']:.3f} / {r['soft_iou_mean']:.3f} | {r['binary_iou_min']:.3f} / "
+               f"{r['binary_iou_mean']:.3f}") if "soft_iou_min" in r else "(reference) | (reference)"
+        dt = "CFL" if r["dt"] == 0 else f"{r['dt']:g}"
+        lines.append(f"| {r['scene']} | {r['run']} | {dt} | {r['seconds_per_frame']:.2f} | "
+                     f"{r['newton_per_step']:.1f} | {r['cg_per_step']:.0f} | {r['fixed_point_per_step']:.2f} | {iou} |")
+    (args.results / "summary.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
