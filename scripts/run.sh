@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # Sets up whatever is missing, then runs the default job: the canonical
-# sand_column_2d scene (DESIGN.md §5) simulated with the explicit ground-truth
-# MPM integrator at its CFL step (the implicit `plasticitynet` integrator
-# replaces it when it lands). Writes per frame a PLY and a PNG, stats.csv and
-# run.json to out/sand_column_2d/ (or --out DIR), plus sand_column_2d.mp4 when
-# ffmpeg is installed, and prints where everything is.
+# sand_column_2d scene (DESIGN.md §5) simulated with the `plasticitynet`
+# implicit integrator at dt = 1e-3 s (the scene's integrator block; the learned
+# sand energy models/sand_2d.pt). Writes per frame a PLY and a PNG, stats.csv,
+# steps.csv (Newton/CG/fixed-point figures per step) and run.json to
+# out/sand_column_2d/ (or --out DIR), plus sand_column_2d.mp4 when ffmpeg is
+# installed, and prints where everything is.
 #
-# Other arguments go to `pnet simulate` (e.g. --frames 10, --threads 1, --dt 1e-5).
+# Other arguments go to `pnet simulate` (e.g. --frames 10, --threads 1,
+# --integrator explicit --dt 1e-5 for the ground truth).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -23,7 +25,7 @@ while (($#)); do
   esac
 done
 
-"$build_dir/cpp/pnet" simulate "$scene" --integrator explicit --out "$out" "${args[@]+"${args[@]}"}"
+"$build_dir/cpp/pnet" simulate "$scene" --out "$out" "${args[@]+"${args[@]}"}"
 
 if command -v ffmpeg >/dev/null 2>&1; then
   video="$out/sand_column_2d.mp4"
@@ -36,4 +38,4 @@ else
   echo "video: skipped (ffmpeg is not installed; 'apt-get install ffmpeg' to get $out/sand_column_2d.mp4)"
 fi
 echo "frames: $out/frame_*.png and $out/frame_*.ply (open the PLYs in ParaView, Blender or Houdini)"
-echo "statistics: $out/stats.csv, run: $out/run.json"
+echo "statistics: $out/stats.csv (per frame), $out/steps.csv (per step), run: $out/run.json"

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 
@@ -36,9 +37,9 @@ struct Options {
     double dt = -1.0, cfl = -1.0;
     int frames = -1, threads = 0, checkpoint_every = 10;
     bool resume = false, trust_model = false;
-    // Implicit solver overrides (negative: the scene's value).
-    double newton_tol = -1.0, cg_tol = -1.0, fixed_point_tol = -1.0, regularizer = -1.0;
-    int fixed_point_iterations = -1;
+    // Implicit solver overrides (unset: the scene's value).
+    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer;
+    std::optional<int> fixed_point_iterations;
 };
 
 class UsageError : public std::invalid_argument {
@@ -107,11 +108,11 @@ Options parse(int argc, char** argv) {
     if (o.color != "speed" && o.color != "hardening") throw UsageError("--color: speed or hardening");
     if (o.frames == 0 || o.frames < -1) throw UsageError("--frames must be >= 1");
     if (o.dt != -1.0 && !(o.dt >= 0.0)) throw UsageError("--dt must be >= 0 (0: the CFL step)");
-    if (o.newton_tol != -1.0 && !(o.newton_tol > 0.0)) throw UsageError("--newton-tol must be > 0");
-    if (o.cg_tol != -1.0 && !(o.cg_tol > 0.0 && o.cg_tol < 1.0)) throw UsageError("--cg-tol must be in (0, 1)");
-    if (o.fixed_point_tol != -1.0 && !(o.fixed_point_tol >= 0.0)) throw UsageError("--fixed-point-tol must be >= 0");
-    if (o.regularizer != -1.0 && !(o.regularizer >= 0.0)) throw UsageError("--regularizer must be >= 0");
-    if (o.fixed_point_iterations != -1 && o.fixed_point_iterations < 1)
+    if (o.newton_tol && !(*o.newton_tol > 0.0)) throw UsageError("--newton-tol must be > 0");
+    if (o.cg_tol && !(*o.cg_tol > 0.0 && *o.cg_tol < 1.0)) throw UsageError("--cg-tol must be in (0, 1)");
+    if (o.fixed_point_tol && !(*o.fixed_point_tol >= 0.0)) throw UsageError("--fixed-point-tol must be >= 0");
+    if (o.regularizer && !(*o.regularizer >= 0.0)) throw UsageError("--regularizer must be >= 0");
+    if (o.fixed_point_iterations && *o.fixed_point_iterations < 1)
         throw UsageError("--fixed-point-iterations must be >= 1");
     return o;
 }
@@ -277,11 +278,11 @@ int simulate_command(int argc, char** argv) {
             throw UsageError("--integrator: expected explicit, plasticitynet or lagged, got \"" + settings.name + "\"");
         if (o.dt >= 0.0) settings.dt = o.dt;
         if (o.cfl > 0.0) settings.cfl = o.cfl;
-        if (o.newton_tol > 0.0) settings.implicit.newton_tolerance = o.newton_tol;
-        if (o.cg_tol > 0.0) settings.implicit.cg_tolerance = o.cg_tol;
-        if (o.fixed_point_tol >= 0.0) settings.implicit.fixed_point_tolerance = o.fixed_point_tol;
-        if (o.regularizer >= 0.0) settings.implicit.regularizer_weight = o.regularizer;
-        if (o.fixed_point_iterations > 0) settings.implicit.max_fixed_point_iterations = o.fixed_point_iterations;
+        if (o.newton_tol) settings.implicit.newton_tolerance = *o.newton_tol;
+        if (o.cg_tol) settings.implicit.cg_tolerance = *o.cg_tol;
+        if (o.fixed_point_tol) settings.implicit.fixed_point_tolerance = *o.fixed_point_tol;
+        if (o.regularizer) settings.implicit.regularizer_weight = *o.regularizer;
+        if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         // Every model the scene names must load and fit its dimension, whatever the integrator.
         for (const SceneObject& object : scene.objects) {
             settings.models.emplace_back();

@@ -14,6 +14,7 @@
 // Hessian-vector products) and the mean Newton, CG and fixed-point iterations.
 #include <omp.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -34,6 +35,8 @@ struct Row {
     double seconds_per_frame = 0.0, mean_dt = 0.0;
     double newton = 0.0, cg = 0.0, fixed_point = 0.0;  // per step
     double energy_share = 0.0, cg_share = 0.0;
+    int frames = 0;             // frames completed
+    std::string failure;        // why the run stopped early ("" if it did not)
 };
 
 template <int dim>
@@ -46,7 +49,15 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
     long steps = 0, newton = 0, cg_iterations = 0, fixed_point = 0;
     for (int f = 0; f < frames; ++f) {
         const auto start = std::chrono::steady_clock::now();
-        const pnet::FrameStats s = sim.advance_frame();
+        pnet::FrameStats s;
+        try {
+            s = sim.advance_frame();
+        } catch (const pnet::SimulationError& e) {
+            row.failure = e.what();
+            std::fprintf(stderr, "\n  %s: %s\n", settings.name.c_str(), e.what());
+            break;
+        }
+        ++row.frames;
         wall += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         steps += s.steps;
         newton += s.newton_iterations;
@@ -60,8 +71,10 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
                      settings.dt > 0 ? std::to_string(settings.dt).c_str() : "CFL", f + 1, frames, wall / (f + 1));
     }
     std::fprintf(stderr, "\n");
-    row.seconds_per_frame = wall / frames;
-    row.mean_dt = frames * scene.frame_dt / steps;
+    const int done = std::max(row.frames, 1);
+    steps = std::max(steps, 1L);
+    row.seconds_per_frame = wall / done;
+    row.mean_dt = done * scene.frame_dt / steps;
     row.newton = static_cast<double>(newton) / steps;
     row.cg = static_cast<double>(cg_iterations) / steps;
     row.fixed_point = static_cast<double>(fixed_point) / steps;
@@ -171,8 +184,11 @@ int main(int argc, char** argv) {
                     std::snprintf(paper_cells, sizeof paper_cells, "%.2f | 1x", p->second.second);
             }
             const bool implicit = r.integrator != "explicit";
-            std::printf("| %s | %s | %s | %.3f | %s | %s | %s | %s | %s | %.2fx | %s |\n", name.c_str(),
-                        r.integrator.c_str(), dt, r.seconds_per_frame,
+            std::string seconds = std::to_string(r.seconds_per_frame).substr(0, 6);
+            if (!r.failure.empty())
+                seconds += " (blew up after " + std::to_string(r.frames) + " of " + std::to_string(frames) + " frames)";
+            std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %.2fx | %s |\n", name.c_str(),
+                        r.integrator.c_str(), dt, seconds.c_str(),
                         implicit ? std::to_string(r.newton).substr(0, 4).c_str() : "-",
                         implicit ? std::to_string(static_cast<int>(r.cg + 0.5)).c_str() : "-",
                         implicit ? std::to_string(r.fixed_point).substr(0, 4).c_str() : "-",

@@ -163,3 +163,76 @@ def test_blow_up_stops_with_step_and_particle_keeping_written_frames(tmp_path):
     rows = (out / "stats.csv").read_text().splitlines()[1:]
     assert len(rows) == last, "stats.csv has one row per completed frame"
     assert not list(out.glob("*.tmp"))
+
+
+# The implicit integrators with the shipped models.
+
+@pytest.mark.parametrize("integrator", ["plasticitynet", "lagged"])
+@pytest.mark.parametrize("name", ["sand_column_2d", "snowball_2d", "sand_column_3d", "snowball_3d"])
+def test_implicit_integrators_run_every_tiny_scene(tmp_path, name, integrator):
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / f"{name}.json", "--integrator", integrator, "--frames", 2, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "Newton" in r.stderr and "CG" in r.stderr  # the implicit progress line
+    run = json.loads((out / "run.json").read_text())
+    assert run["integrator"] == integrator and run["dt"] == 1e-3
+    assert run["solver"]["max_fixed_point_iterations"] >= 1 and run["solver"]["regularizer_weight"] == 1
+    frames = (out / "stats.csv").read_text().splitlines()
+    assert frames[0].endswith(",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
+                              "max_residual_m_per_s,converged")
+    assert len(frames) == 3 and all(row.endswith(",1") for row in frames[1:]), "every solve converged"
+    steps = (out / "steps.csv").read_text().splitlines()
+    header = steps[0].split(",")
+    assert len(steps) == 1 + 40, "one row per step: 2 frames of 20 steps at dt 1e-3"
+    rows = [dict(zip(header, line.split(","))) for line in steps[1:]]
+    assert [int(r["step"]) for r in rows] == list(range(40))
+    assert abs(float(rows[-1]["time_s"]) - 0.04) < 1e-12
+    if name.startswith("sand"):  # the snowball falls freely for 2 frames: v* is already the minimizer
+        assert sum(int(r["newton_iterations"]) for r in rows) > 0
+    fixed_point = {int(r["fixed_point_iterations"]) for r in rows}
+    assert fixed_point <= set(range(1, 5)) and (integrator == "plasticitynet" or fixed_point == {1})
+    assert all(float(r["residual_m_per_s"]) <= 1e-3 for r in rows)
+
+
+def test_implicit_options_override_the_scene(tmp_path):
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--fixed-point-iterations", 1,
+             "--regularizer", 0, "--newton-tol", 1e-4, "--dt", 2e-3, "--out", out)
+    assert r.returncode == 0, r.stderr
+    run = json.loads((out / "run.json").read_text())
+    assert run["integrator"] == "plasticitynet" and run["dt"] == 2e-3
+    assert run["solver"]["max_fixed_point_iterations"] == 1 and run["solver"]["regularizer_weight"] == 0
+    assert run["solver"]["newton_tolerance"] == 1e-4
+    steps = (out / "steps.csv").read_text().splitlines()[1:]
+    assert len(steps) == 10 and all(line.split(",")[13] == "1" for line in steps)
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--fixed-point-iterations", 0], "--fixed-point-iterations must be >= 1"),
+    (["--cg-tol", 1.5], "--cg-tol must be in (0, 1)"),
+    (["--regularizer", -1], "--regularizer must be >= 0"),
+    (["--integrator", "implicit"], "--integrator: expected explicit, plasticitynet or lagged"),
+])
+def test_implicit_usage_errors(tmp_path, args, expected):
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", *args)
+    assert r.returncode == 2 and expected in r.stderr, r.stderr
+
+
+def test_plasticitynet_without_a_model_names_the_object(tmp_path):
+    scene = tiny_scene("sand_column_2d")
+    del scene["objects"][0]["model"]
+    path = write_scene(tmp_path, scene)
+    r = pnet("simulate", path, "--integrator", "plasticitynet", "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert f"{path}: objects[0].model: the plasticitynet integrator needs an energy model" in r.stderr
+    # lagged needs no model
+    assert pnet("simulate", path, "--integrator", "lagged", "--frames", 1, "--out", tmp_path / "l").returncode == 0
+
+
+def test_bad_solver_option_in_the_scene_names_the_key(tmp_path):
+    scene = tiny_scene("sand_column_2d")
+    scene["integrator"]["max_fixed_point_iterations"] = 0
+    path = write_scene(tmp_path, scene)
+    r = pnet("simulate", path, "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert f"{path}: integrator.max_fixed_point_iterations: expected an integer >= 1, got 0" in r.stderr

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "pnet/mpm/explicit_integrator.hpp"  // clamp_to_grid
 #include "pnet/mpm/grid_to_particles.hpp"
@@ -88,6 +89,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.max_cg_iterations = options_.max_cg_iterations;
     newton.cg_tolerance = options_.cg_tolerance;
     newton.residual_scale = potential_.residual_scale();
+    newton.scale_by_hessian_diagonal = true;  // |g_i| / H_ii: a velocity correction, m/s
 
     v_ = potential_.v_star();
     const bool fixed_point = method_ == ImplicitMethod::PlasticityNet;
@@ -96,6 +98,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         potential_.deformation(v_, F0_);  // F0^0 = F(v*)
     else
         F0_ = particles.F_elastic;  // unused by the elastic energy
+    double best_change = std::numeric_limits<double>::infinity(), previous_change = best_change;
     for (int j = 0; j < solves; ++j) {
         potential_.set_reference(F0_);
         const std::string context = "step " + std::to_string(step_index) +
@@ -118,10 +121,19 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         potential_.deformation(v_, F_);
         double change = 0.0;
         for (std::size_t p = 0; p < F_.size(); ++p) change = std::max(change, (F_[p] - F0_[p]).norm());
-        stats.fixed_point_change = change;
+        // Keep the most self-consistent solution: far outside the regime the
+        // network was trained on (an impact at a large dt) the iteration on F0
+        // can stop contracting, and it is then stopped at its best iterate.
+        if (change < best_change) {
+            best_change = change;
+            best_v_ = v_;
+        }
+        stats.fixed_point_change = best_change;
+        if (change <= options_.fixed_point_tolerance || change > previous_change) break;
+        previous_change = change;
         F0_.swap(F_);  // F0^{j+1} = F(v^{j+1})
-        if (change <= options_.fixed_point_tolerance) break;
     }
+    if (fixed_point) v_.swap(best_v_);
     potential_.write_velocity(v_, grid_);
     double max_speed = 0.0;
     for (Eigen::Index k = 0; k < v_.size() / dim; ++k) max_speed = std::max(max_speed, v_.segment<dim>(dim * k).norm());

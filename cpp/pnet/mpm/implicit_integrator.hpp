@@ -10,7 +10,10 @@
 //   fixed-point loop of paper eq. 10: F0^0 = F_p(v*); after solve j,
 //   F0^{j+1} = F_p(v^{j+1}), until max_p ||F_p(v^{j+1}) - F0^j||_F is below
 //   fixed_point_tolerance or max_fixed_point_iterations solves were made (each
-//   solve starts from the previous one's v).
+//   solve starts from the previous one's v). If the change grows from one
+//   iteration to the next (the loop is not contracting: deformations far from
+//   the training regime), the loop stops; the step always takes the solution
+//   with the smallest change.
 // `lagged`: psi = the elastic energy of F_p(v) alone; plasticity is applied
 //   after the step by the return mapping (as in Ziran and HOT).
 #include <memory>
@@ -33,7 +36,7 @@ enum class ImplicitMethod { PlasticityNet, Lagged };
 /// Solver settings of the implicit integrators. In a scene they are keys of the
 /// "integrator" block (same names); the command line can override some.
 struct ImplicitOptions {
-    double newton_tolerance = 1e-3;      // m/s: max over free components of |dE/dv_i| / m_i
+    double newton_tolerance = 1e-3;      // m/s: max over free components of |dE/dv_i| / H_ii (a Jacobi velocity correction)
     int max_newton_iterations = 50;
     int max_cg_iterations = 500;
     double cg_tolerance = 0.1;           // largest relative PCG residual (inexact Newton)
@@ -79,7 +82,7 @@ private:
     Grid<dim> grid_;
     IncrementalPotential<dim> potential_;
     std::vector<Mat<dim>> F0_, F_;
-    VecX v_;
+    VecX v_, best_v_;
 };
 
 }  // namespace pnet

@@ -11,7 +11,15 @@ namespace pnet {
 
 namespace {
 
-double scaled_residual(const VecX& g, const VecX& scale) {
+/// |g|_scaled (NewtonOptions); `diagonal` is diag(H) at the same point.
+double scaled_residual(const VecX& g, const NewtonOptions& options, const VecX& diagonal) {
+    const VecX& scale = options.residual_scale;
+    if (options.scale_by_hessian_diagonal) {
+        double r = 0.0;
+        for (Eigen::Index i = 0; i < g.size(); ++i)
+            if (scale.size() == 0 || scale[i] > 0.0) r = std::max(r, std::abs(g[i]) / diagonal[i]);
+        return r;
+    }
     if (scale.size() == 0) return g.lpNorm<Eigen::Infinity>();
     return g.cwiseProduct(scale).lpNorm<Eigen::Infinity>();
 }
@@ -35,7 +43,8 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     // Every accepted iterate comes with its Hessian prepared (value_gradient_hessian),
     // so an iteration whose full step passes the line search costs one energy pass.
     double energy = objective.value_gradient_hessian(x, g);
-    double residual = scaled_residual(g, options.residual_scale);
+    objective.hessian_diagonal(diagonal);
+    double residual = scaled_residual(g, options, diagonal);
     stats.initial_energy = stats.energy = energy;
     stats.initial_residual = stats.residual = residual;
     if (!std::isfinite(energy) || !g.allFinite())
@@ -47,7 +56,6 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             stats.converged = true;
             break;
         }
-        objective.hessian_diagonal(diagonal);
         for (Eigen::Index i = 0; i < n; ++i) diagonal[i] = diagonal[i] > 0.0 ? 1.0 / diagonal[i] : 1.0;
         const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
         const PcgResult cg = solve_pcg(objective, -g, diagonal, d, forcing, options.max_cg_iterations);
@@ -106,7 +114,8 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                                   std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
             }
         }
-        residual = scaled_residual(g, options.residual_scale);
+        objective.hessian_diagonal(diagonal);  // at the new iterate (its Hessian is prepared)
+        residual = scaled_residual(g, options, diagonal);
         stats.iterations = it + 1;
         stats.energy = energy;
         stats.residual = residual;

@@ -29,6 +29,12 @@ struct NewtonOptions {
     /// |g|_scaled = max_i |g_i| * residual_scale_i; with residual_scale_i =
     /// 1 / m_i (MPM) the residual is a velocity error in m/s. Empty: 1.
     VecX residual_scale;
+    /// Scale by the Hessian's diagonal instead: |g|_scaled = max_i |g_i| / H_ii
+    /// over the components where residual_scale_i > 0 (all if it is empty): the
+    /// size of a Jacobi correction, which for MPM is a velocity error in m/s that
+    /// stays meaningful where stiffness, not mass, dominates H (large dt, nodes
+    /// at a body's rim holding little mass).
+    bool scale_by_hessian_diagonal = false;
 };
 
 struct NewtonStats {
