@@ -94,13 +94,11 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     v_ = potential_.v_star();
     const bool fixed_point = method_ == ImplicitMethod::PlasticityNet;
     const int solves = fixed_point ? options_.max_fixed_point_iterations : 1;
-    if (fixed_point)
-        potential_.deformation(v_, F0_);  // F0^0 = F(v*)
-    else
-        F0_ = particles.F_elastic;  // unused by the elastic energy
+    if (fixed_point) potential_.deformation(v_, F0_);  // F0^0 = F(v*)
     double best_change = std::numeric_limits<double>::infinity(), previous_change = best_change;
     for (int j = 0; j < solves; ++j) {
-        potential_.set_reference(F0_);
+        // The elastic energy has no reference state: lagged passes the particles' F^E.
+        potential_.set_reference(fixed_point ? F0_ : particles.F_elastic);
         const std::string context = "step " + std::to_string(step_index) +
                                     (fixed_point ? ", fixed-point iteration " + std::to_string(j + 1) : "");
         NewtonStats s;

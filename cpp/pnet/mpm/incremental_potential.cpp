@@ -186,11 +186,7 @@ void IncrementalPotential<dim>::prepare_hessian(const VecX& v) {
 
 template <int dim>
 double IncrementalPotential<dim>::value_gradient_hessian(const VecX& v, VecX& gradient) {
-    const auto start = std::chrono::steady_clock::now();
-    deformation(v, F_);
-    energy_.evaluate(F_, ParticleEnergy<dim>::Order::Hessian, psi_.data(), P_.data(), K_.data(), project_psd_);
-    transform_hessians();
-    energy_seconds_ += seconds_since(start);
+    prepare_hessian(v);  // the Hessian pass also leaves psi and P at v
     assemble_gradient(v, gradient);
     return inertia(v) + potential_sum();
 }
