@@ -16,13 +16,16 @@ Outputs (under --results, default notebooks/results/implicit_eval):
   <scene>/iou.csv, iou.png       per-frame soft IoU of every run (one curve each)
   <scene>/<run>_stats.csv, <run>_steps.csv, <run>_final.png
 The full runs (PLY of every frame) stay in --work (default out/eval); a run whose
-directory holds all its frames from the same command is reused, not re-run.
+directory holds all its frames from the same command, scene file and C++ sources
+(git tree of cpp/) is reused, not re-run. Each invocation rewrites the results of
+the scenes it runs; summary.csv/md gather every scene under --results.
 
     /usr/bin/python3 scripts/evaluate_implicit.py [--scenes sand_column_2d snowball_2d]
         [--groups main ablation] [--frames N] [--threads 2] [--force]
 """
 import argparse
 import csv
+import hashlib
 import json
 import shutil
 import subprocess
@@ -52,9 +55,17 @@ RUNS = {
 }
 
 
-def run_dir_complete(out: Path, command: list, frames: int) -> bool:
-    marker = out / "command.json"
-    return (marker.exists() and json.loads(marker.read_text()) == command
+def run_marker(scene: str, command: list) -> dict:
+    """What a run's result depends on: the command, the scene file and the C++ sources."""
+    scene_sha = hashlib.sha256((ROOT / "scenes" / f"{scene}.json").read_bytes()).hexdigest()
+    tree = subprocess.run(["git", "rev-parse", "HEAD:cpp"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    dirty = subprocess.run(["git", "status", "--porcelain", "cpp"], cwd=ROOT, capture_output=True, text=True).stdout
+    return {"command": command, "scene_sha256": scene_sha, "cpp_tree": tree + ("+uncommitted" if dirty else "")}
+
+
+def run_dir_complete(out: Path, marker: dict, frames: int) -> bool:
+    path = out / "command.json"
+    return (path.exists() and json.loads(path.read_text()) == marker and "uncommitted" not in marker["cpp_tree"]
             and (out / f"frame_{frames:05d}.ply").exists())
 
 
@@ -63,7 +74,8 @@ def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force
     out = work / scene / name
     command = [str(PNET), "simulate", str(ROOT / "scenes" / f"{scene}.json"), "--integrator", integrator,
                "--dt", repr(dt), "--frames", str(frames), "--threads", str(threads), "--out", str(out)] + extra
-    if not force and run_dir_complete(out, command, frames):
+    marker = run_marker(scene, command)
+    if not force and run_dir_complete(out, marker, frames):
         print(f"[{scene}/{name}] reusing {out}", flush=True)
         return out
     if out.exists():
@@ -74,7 +86,7 @@ def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force
         print(f"[{scene}/{name}] pnet simulate exited with {result.returncode}; the frames it wrote are compared",
               flush=True)
     else:
-        (out / "command.json").write_text(json.dumps(command))
+        (out / "command.json").write_text(json.dumps(marker))
     return out
 
 
@@ -186,6 +198,10 @@ def main():
                         values.append(f"{match[0]:.6f}" if match else "")
                     w.writerow([frame, f"{frame * scene_json.get('frame_dt', 0.02):.4f}"] + values)
             plot_scene(scene, curves, results / "iou.png")
+        (results / "summary.json").write_text(json.dumps([r for r in summary if r["scene"] == scene], indent=1))
+
+    # Every scene evaluated so far (this invocation or an earlier one, e.g. 3D with fewer frames).
+    summary = [r for path in sorted(args.results.glob("*/summary.json")) for r in json.loads(path.read_text())]
 
     keys = ["scene", "run", "integrator", "dt", "frames", "compared_frames", "seconds_per_frame", "steps_per_frame",
             "newton_per_step", "cg_per_step", "fixed_point_per_step", "line_search_per_step",
@@ -196,13 +212,13 @@ def main():
         w.writeheader()
         for row in summary:
             w.writerow(row)
-    lines = ["| scene | run | dt (s) | s/frame | Newton/step | CG/step | fixed-point/step | soft IoU min / mean | "
-             "binary IoU min / mean |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| scene | run | dt (s) | frames | s/frame | Newton/step | CG/step | fixed-point/step | "
+             "soft IoU min / mean | binary IoU min / mean |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in summary:
         iou = (f"{r['soft_iou_min']:.3f} / {r['soft_iou_mean']:.3f} | {r['binary_iou_min']:.3f} / "
                f"{r['binary_iou_mean']:.3f}") if "soft_iou_min" in r else "(reference) | (reference)"
         dt = "CFL" if r["dt"] == 0 else f"{r['dt']:g}"
-        lines.append(f"| {r['scene']} | {r['run']} | {dt} | {r['seconds_per_frame']:.2f} | "
+        lines.append(f"| {r['scene']} | {r['run']} | {dt} | {r['frames']} | {r['seconds_per_frame']:.2f} | "
                      f"{r['newton_per_step']:.1f} | {r['cg_per_step']:.0f} | {r['fixed_point_per_step']:.2f} | {iou} |")
     (args.results / "summary.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
