@@ -14,6 +14,7 @@
 #include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
 #include "pnet/io/render.hpp"
+#include "pnet/mpm/scene_models.hpp"
 #include "pnet/mpm/simulation.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/scene.hpp"
@@ -267,15 +268,13 @@ int simulate_command(int argc, char** argv) {
     if (o.threads > 0) omp_set_num_threads(o.threads);
     try {
         const Scene scene = load_scene(o.scene);
-        IntegratorSettings settings = IntegratorSettings::from_scene(scene);
-        if (!o.integrator.empty() && o.integrator != scene.integrator.name) {
-            // The scene's dt belongs to the scene's integrator; another one starts
-            // from its own default (explicit: the CFL step; implicit: 1e-3 s, DESIGN.md §5).
-            settings.name = o.integrator;
-            settings.dt = o.integrator == "explicit" ? 0.0 : 1e-3;
+        IntegratorSettings settings;
+        try {
+            settings = integrator_settings(scene, o.integrator);
+        } catch (const std::invalid_argument& e) {
+            if (o.integrator.empty()) throw;  // the scene's own name was checked when it was loaded
+            throw UsageError(std::string("--") + e.what());
         }
-        if (settings.name != "explicit" && settings.name != "plasticitynet" && settings.name != "lagged")
-            throw UsageError("--integrator: expected explicit, plasticitynet or lagged, got \"" + settings.name + "\"");
         if (o.dt >= 0.0) settings.dt = o.dt;
         if (o.cfl > 0.0) settings.cfl = o.cfl;
         if (o.newton_tol) settings.implicit.newton_tolerance = *o.newton_tol;
@@ -283,25 +282,18 @@ int simulate_command(int argc, char** argv) {
         if (o.fixed_point_tol) settings.implicit.fixed_point_tolerance = *o.fixed_point_tol;
         if (o.regularizer) settings.implicit.regularizer_weight = *o.regularizer;
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
-        // Every model the scene names must load and fit its dimension, whatever the integrator.
-        for (const SceneObject& object : scene.objects) {
-            settings.models.emplace_back();
-            if (object.model.empty()) continue;
-            LoadOptions load;
-            load.expected_dim = scene.dim;
-            load.expected_kind = ModelKind::Energy;
-            load.trusted = o.trust_model;
-            try {
-                settings.models.back() = std::make_shared<const ModelFile>(load_model_file(object.model, load));
-            } catch (const std::exception& e) {
-                throw SceneError(scene.file + ": " + object.json_path + ".model: " + e.what());
-            }
-        }
+        load_scene_models(scene, o.trust_model, settings);
         return scene.dim == 2 ? run<2>(scene, o, settings) : run<3>(scene, o, settings);
     } catch (const UsageError& e) {
         std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
         return 2;
     } catch (const SceneFileNotFound& e) {
+        std::fprintf(stderr, "pnet simulate: %s\n", e.what());
+        return 2;
+    } catch (const FileNotFoundError& e) {  // a model the scene names
+        std::fprintf(stderr, "pnet simulate: %s\n", e.what());
+        return 2;
+    } catch (const UntrustedModelError& e) {
         std::fprintf(stderr, "pnet simulate: %s\n", e.what());
         return 2;
     } catch (const std::invalid_argument& e) {

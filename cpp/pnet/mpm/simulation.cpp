@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 
 #include "pnet/io/atomic_file.hpp"
@@ -83,23 +84,34 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
 }
 
 template <int dim>
+StepStats Simulation<dim>::step() {
+    const double frame_end = (frame_ + 1) * scene_.frame_dt;
+    double dt = settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl);
+    // Land exactly on the frame (within round-off), never overshoot it.
+    if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
+    const StepStats s = integrator_->step(particles_, dt, steps_);
+    time_ += dt;
+    ++steps_;
+    if (time_ >= frame_end * (1.0 - 1e-12)) {
+        time_ = frame_end;
+        ++frame_;
+    }
+    return s;
+}
+
+template <int dim>
 FrameStats Simulation<dim>::advance_frame() {
     const auto start = std::chrono::steady_clock::now();
     FrameStats stats;
-    const double frame_end = (frame_ + 1) * scene_.frame_dt;
+    const int target = frame_ + 1;
     stats.dt_min = 1e300;
     frame_steps_.clear();
-    while (time_ < frame_end * (1.0 - 1e-12)) {
-        double dt = settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl);
-        // Land exactly on the frame (within round-off), never overshoot it.
-        if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
-        const StepStats s = integrator_->step(particles_, dt, steps_);
-        time_ += dt;
-        ++steps_;
+    while (frame_ < target) {
+        const StepStats s = step();
         ++stats.steps;
         stats.clamped += s.clamped;
-        stats.dt_min = std::min(stats.dt_min, dt);
-        stats.dt_max = std::max(stats.dt_max, dt);
+        stats.dt_min = std::min(stats.dt_min, s.dt);
+        stats.dt_max = std::max(stats.dt_max, s.dt);
         stats.newton_iterations += s.newton_iterations;
         stats.cg_iterations += s.cg_iterations;
         stats.line_search_steps += s.line_search_steps;
@@ -108,8 +120,6 @@ FrameStats Simulation<dim>::advance_frame() {
         stats.converged = stats.converged && s.converged;
         frame_steps_.push_back(s);
     }
-    time_ = frame_end;
-    ++frame_;
     stats.frame = frame_;
     stats.time = time_;
     for (std::size_t p = 0; p < particles_.size(); ++p) {
@@ -170,7 +180,11 @@ void Simulation<dim>::save_checkpoint(const std::string& path) const {
 template <int dim>
 void Simulation<dim>::load_checkpoint(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
-    if (!in) throw std::invalid_argument(path + ": cannot open the checkpoint");
+    if (!in) {
+        std::error_code ec;
+        if (!std::filesystem::exists(path, ec)) throw FileNotFoundError(path + ": no such checkpoint file");
+        throw std::invalid_argument(path + ": cannot open the checkpoint");
+    }
     char magic[8];
     std::int64_t header[4];
     double time;
@@ -193,6 +207,9 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
                                     integrator_->name());
     if (state_size < 0 || state_size > header[1]) throw std::invalid_argument(path + ": corrupt checkpoint header");
     const std::size_t n = static_cast<std::size_t>(header[1]);
+    if (n != particles_.size())
+        throw std::invalid_argument(path + ": holds " + std::to_string(n) + " particles, the scene has " +
+                                    std::to_string(particles_.size()));
     Particles<dim> p;
     read_array(in, p.x, n, path);
     read_array(in, p.v, n, path);
@@ -204,7 +221,7 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, p.object, n, path);
     std::vector<Mat<dim>> state;
     read_array(in, state, static_cast<std::size_t>(state_size), path);
-    particles_ = std::move(p);
+    particles_ = p;  // copy assignment keeps each array's storage (Python views of it stay valid)
     integrator_->restore_checkpoint_state(std::move(state));
     frame_ = static_cast<int>(header[2]);
     steps_ = header[3];

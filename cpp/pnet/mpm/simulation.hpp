@@ -64,10 +64,17 @@ public:
     /// dt or cfl, or missing or unfit models (naming "<scene file>: objects[k].model").
     Simulation(const Scene& scene, const IntegratorSettings& settings);
 
-    /// Advances to the end of the next frame (the last step is shortened to
-    /// land on it). Throws SimulationError on a blow-up.
+    /// One step of the integrator's dt (or the CFL step), shortened to land on
+    /// the end of the current frame; frame() advances when it does. Throws
+    /// SimulationError on a blow-up.
+    StepStats step();
+
+    /// Advances to the end of the next frame by step(). Throws SimulationError
+    /// on a blow-up.
     FrameStats advance_frame();
 
+    /// The particle arrays. Their storage never moves for the life of the
+    /// simulation (load_checkpoint copies into it), so views of it stay valid.
     const Particles<dim>& particles() const { return particles_; }
     const MpmSystem<dim>& system() const { return system_; }
     int frame() const { return frame_; }
@@ -78,7 +85,8 @@ public:
     const std::vector<StepStats>& last_frame_steps() const { return frame_steps_; }
 
     /// Writes the whole state atomically; load_checkpoint() refuses a file of
-    /// another scene (sha of its JSON), integrator, dimension or particle count.
+    /// another scene (sha of its JSON), integrator, dimension or particle count
+    /// (std::invalid_argument) and a missing file (FileNotFoundError).
     void save_checkpoint(const std::string& path) const;
     void load_checkpoint(const std::string& path);
 
