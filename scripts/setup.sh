@@ -3,7 +3,8 @@
 #   1. Debian packages (apt-get; sudo when not root),
 #   2. the C++ build (CMake + Ninja, Release) in build/,
 #   3. the Python environment .venv (from /usr/bin/python3, which sees Debian's
-#      torch and numpy) with the `plasticitynet` package installed editable.
+#      torch and numpy) with the `plasticitynet` package installed editable and
+#      the simulator module `plasticitynet_sim` linked in.
 # Environment: PNET_BUILD_DIR (default build), PNET_JOBS (default: all cores).
 set -euo pipefail
 
@@ -58,4 +59,12 @@ if ! .venv/bin/python -c 'import plasticitynet, sys; sys.exit(0 if plasticitynet
   say "installing the plasticitynet package (editable) into .venv"
   .venv/bin/python -m pip install --quiet --no-build-isolation --no-deps --no-index -e .
 fi
-.venv/bin/python -c 'import torch, numpy, plasticitynet; print("[setup] python ok: torch", torch.__version__, "numpy", numpy.__version__)'
+# The simulator's Python module (built by CMake into $build_dir/python/): a
+# symlink in .venv's site-packages, so that a rebuild is picked up at once.
+site="$(.venv/bin/python -c 'import sysconfig; print(sysconfig.get_paths()["platlib"])')"
+module=("$build_dir"/python/plasticitynet_sim*.so)
+if [[ ! -e "${module[0]}" ]]; then
+  echo "[setup] error: the build made no $build_dir/python/plasticitynet_sim*.so" >&2; exit 1
+fi
+ln -sfn "$(realpath "${module[0]}")" "$site/$(basename "${module[0]}")"
+.venv/bin/python -c 'import torch, numpy, plasticitynet, plasticitynet_sim; print("[setup] python ok: torch", torch.__version__, "numpy", numpy.__version__, "plasticitynet_sim", plasticitynet_sim.__file__)'

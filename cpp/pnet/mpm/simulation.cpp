@@ -100,7 +100,7 @@ StepStats Simulation<dim>::step() {
 }
 
 template <int dim>
-FrameStats Simulation<dim>::advance_frame() {
+FrameStats Simulation<dim>::advance_frame(const std::function<void()>& after_step) {
     const auto start = std::chrono::steady_clock::now();
     FrameStats stats;
     const int target = frame_ + 1;
@@ -119,6 +119,7 @@ FrameStats Simulation<dim>::advance_frame() {
         stats.max_residual = std::max(stats.max_residual, s.residual);
         stats.converged = stats.converged && s.converged;
         frame_steps_.push_back(s);
+        if (after_step) after_step();
     }
     stats.frame = frame_;
     stats.time = time_;

@@ -3,6 +3,7 @@
 // integrator, frame-by-frame advance, and checkpoints that resume
 // bit-identically (they hold every array a step reads, including the
 // integrator's cached stresses).
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -57,6 +58,8 @@ struct FrameStats {
 template <int dim>
 class Simulation {
 public:
+    static constexpr int kDim = dim;
+
     /// Explicit MPM; dt: the step (s); 0 selects the CFL step cfl dx / (c + max |v|) before every step.
     Simulation(const Scene& scene, double dt, double cfl);
 
@@ -70,8 +73,10 @@ public:
     StepStats step();
 
     /// Advances to the end of the next frame by step(). Throws SimulationError
-    /// on a blow-up.
-    FrameStats advance_frame();
+    /// on a blow-up. after_step, when given, runs after every step; an
+    /// exception it throws (e.g. an interrupt) stops the frame between two
+    /// steps, with a consistent state and the steps so far in last_frame_steps().
+    FrameStats advance_frame(const std::function<void()>& after_step = {});
 
     /// The particle arrays. Their storage never moves for the life of the
     /// simulation (load_checkpoint copies into it), so views of it stay valid.

@@ -1,0 +1,82 @@
+// Accuracy metrics (DESIGN.md §6): IoU of grid mass fields and the B-spline
+// rasterization behind it.
+#include "common.hpp"
+#include "pnet/metrics/iou.hpp"
+
+namespace pnet::bindings {
+
+namespace {
+
+/// A 2D or 3D float64 array as a GridField (unit spacing; iou() only needs both on the same grid).
+GridField field(const py::handle& obj, const std::string& name) {
+    if (!py::isinstance<py::array>(obj) && !py::isinstance<py::list>(obj) && !py::isinstance<py::tuple>(obj))
+        throw py::value_error(name + ": expected a float64 array of shape (nx, ny) or (nx, ny, nz), got " +
+                              py::str(py::type::of(obj)).cast<std::string>());
+    const py::array probe = py::array::ensure(obj);
+    const py::ssize_t ndim = probe ? probe.ndim() : 0;
+    if (ndim != 2 && ndim != 3)
+        throw py::value_error(name + ": expected a float64 array of shape (nx, ny) or (nx, ny, nz), got " +
+                              std::to_string(ndim) + " dimensions");
+    std::vector<py::ssize_t> tail(probe.shape() + 1, probe.shape() + ndim);
+    const auto a = batch_array(obj, name, tail);
+    GridField g;
+    g.dim = static_cast<int>(ndim);
+    g.dx = 1.0;
+    for (int k = 0; k < g.dim; ++k) g.nodes[k] = static_cast<int>(a.shape(k));
+    g.value.assign(a.data(), a.data() + a.size());
+    return g;
+}
+
+}  // namespace
+
+void define_metrics(py::module_& m) {
+    m.def(
+        "iou",
+        [](const py::object& a, const py::object& b) {
+            const GridField fa = field(a, "a"), fb = field(b, "b");
+            if (fa.nodes != fb.nodes) throw py::value_error("a and b: the mass fields have different shapes");
+            const IouResult r = iou(fa, fb);
+            py::dict d;
+            d["soft"] = r.soft;
+            d["binary"] = r.binary;
+            d["plasticinelab"] = r.plasticinelab;
+            return d;
+        },
+        py::arg("a"), py::arg("b"),
+        R"doc(IoU of two nodal mass fields of the same shape (e.g. Simulation.grid_mass()):
+a dict with soft = sum min(a, b) / sum max(a, b) (the project's accuracy metric),
+binary (occupied nodes, > 1e-3 of each field's maximum) and plasticinelab
+(DESIGN.md §6's formula, kept for reference). ValueError for negative or
+non-finite values, an all-zero field, or different shapes.)doc");
+
+    m.def(
+        "rasterize_mass",
+        [](const py::object& positions, const py::object& mass, const std::vector<double>& domain_min,
+           const std::vector<double>& domain_max, double dx) {
+            const auto x = batch_array(positions, "positions", {static_cast<py::ssize_t>(domain_min.size())});
+            const auto w = batch_array(mass, "mass", {}, x.shape(0));
+            if (domain_max.size() != domain_min.size())
+                throw py::value_error("domain_max: expected as many coordinates as domain_min");
+            std::vector<double> xs(x.data(), x.data() + x.size()), ms(w.data(), w.data() + w.size());
+            const int d = static_cast<int>(domain_min.size());
+            GridField g;
+            {
+                py::gil_scoped_release release;
+                g = rasterize_mass(d, xs, ms, domain_min.data(), domain_max.data(), dx);
+            }
+            const int n0 = g.nodes[0], n1 = g.nodes[1], n2 = g.nodes[2];
+            py::array_t<double> out = d == 2 ? py::array_t<double>({n0, n1}) : py::array_t<double>({n0, n1, n2});
+            double* data = out.mutable_data();
+            for (int i = 0; i < n0; ++i)
+                for (int j = 0; j < n1; ++j)
+                    for (int k = 0; k < n2; ++k)
+                        data[(static_cast<std::size_t>(i) * n1 + j) * n2 + k] = g.value[g.index(i, j, k)];
+            return out;
+        },
+        py::arg("positions"), py::arg("mass"), py::arg("domain_min"), py::arg("domain_max"), py::arg("dx"),
+        R"doc(Nodal mass (kg) of particles (positions (n, d) m, mass (n,) kg) with the
+quadratic B-spline on the grid of nodes domain_min + i dx: an array of shape
+(nodes_x, nodes_y[, nodes_z]), index [i, j(, k)].)doc");
+}
+
+}  // namespace pnet::bindings

@@ -1,0 +1,363 @@
+// A running MPM simulation: stepping with the GIL released, Ctrl-C between
+// steps, particle arrays as numpy views, per-step statistics, checkpoints.
+#include <omp.h>
+
+#include <memory>
+#include <variant>
+
+#include "common.hpp"
+#include "pnet/metrics/iou.hpp"
+#include "pnet/mpm/scene_models.hpp"
+#include "pnet/mpm/simulation.hpp"
+
+namespace pnet::bindings {
+
+namespace {
+
+/// Thrown from between two steps when Python has a pending signal (Ctrl-C).
+struct Interrupted {};
+
+py::dict to_dict(const StepStats& s) {
+    py::dict d;
+    d["dt"] = s.dt;
+    d["wall_s"] = s.wall_seconds;
+    d["p2g_s"] = s.p2g_seconds;
+    d["solve_s"] = s.grid_seconds;
+    d["g2p_s"] = s.g2p_seconds;
+    d["energy_s"] = s.energy_seconds;
+    d["cg_s"] = s.cg_seconds;
+    d["newton_iterations"] = s.newton_iterations;
+    d["cg_iterations"] = s.cg_iterations;
+    d["line_search_steps"] = s.line_search_steps;
+    d["fixed_point_iterations"] = s.fixed_point_iterations;
+    d["fixed_point_change"] = s.fixed_point_change;
+    d["initial_residual"] = s.initial_residual;
+    d["residual"] = s.residual;
+    d["energy"] = s.energy;
+    d["converged"] = s.converged;
+    d["clamped"] = s.clamped;
+    d["max_grid_speed"] = s.max_grid_speed;
+    return d;
+}
+
+py::dict to_dict(const FrameStats& f) {
+    py::dict d;
+    d["frame"] = f.frame;
+    d["time"] = f.time;
+    d["steps"] = f.steps;
+    d["dt_min"] = f.dt_min;
+    d["dt_max"] = f.dt_max;
+    d["wall_s"] = f.wall_seconds;
+    d["kinetic_energy"] = f.kinetic;
+    d["potential_energy"] = f.potential;
+    d["newton_iterations"] = f.newton_iterations;
+    d["cg_iterations"] = f.cg_iterations;
+    d["line_search_steps"] = f.line_search_steps;
+    d["fixed_point_iterations"] = f.fixed_point_iterations;
+    d["max_residual"] = f.max_residual;
+    d["converged"] = f.converged;
+    d["clamped"] = f.clamped;
+    return d;
+}
+
+/// One column of the step history as a numpy array.
+template <typename T, typename Field>
+py::array_t<T> column(const std::vector<StepStats>& steps, Field field) {
+    py::array_t<T> a(static_cast<py::ssize_t>(steps.size()));
+    T* out = a.mutable_data();
+    for (std::size_t k = 0; k < steps.size(); ++k) out[k] = static_cast<T>(steps[k].*field);
+    return a;
+}
+
+/// A read-only numpy view of `count` records of `record_bytes` each, whose
+/// element [p, i, j] sits at data + p record_bytes + i stride_i + j stride_j;
+/// it keeps `owner` (the Python simulation) alive.
+template <typename T>
+py::array view(const T* data, std::vector<py::ssize_t> shape, std::vector<py::ssize_t> strides,
+               const py::object& owner) {
+    py::array a(py::dtype::of<T>(), std::move(shape), std::move(strides), data, owner);
+    a.attr("setflags")(py::arg("write") = false);
+    return a;
+}
+
+class PySimulation {
+public:
+    PySimulation(const py::object& scene, const py::object& integrator, const py::object& dt, const py::object& cfl,
+                 const py::object& solver, bool trust_models)
+        : scene_(to_scene(scene)) {
+        IntegratorSettings settings =
+            integrator_settings(scene_, integrator.is_none() ? std::string() : integrator.cast<std::string>());
+        if (!dt.is_none()) settings.dt = dt.cast<double>();
+        if (!cfl.is_none()) settings.cfl = cfl.cast<double>();
+        if (!solver.is_none()) {
+            nlohmann::json options = settings.implicit.to_json();
+            const nlohmann::json given = to_json(solver, "solver");
+            if (!given.is_object()) throw py::value_error("solver: expected a dict of implicit solver options");
+            for (const auto& [key, value] : given.items()) {
+                if (!options.contains(key))
+                    throw py::value_error("solver: unknown option \"" + key + "\" (known: " + key_list(options) + ")");
+                options[key] = value;
+            }
+            settings.implicit = ImplicitOptions::from_json(options, "solver");
+        }
+        load_scene_models(scene_, trust_models, settings);
+        py::gil_scoped_release release;
+        if (scene_.dim == 2)
+            sim_ = std::make_unique<Simulation<2>>(scene_, settings);
+        else
+            sim_ = std::make_unique<Simulation<3>>(scene_, settings);
+    }
+
+    const Scene& scene() const { return scene_; }
+    int dim() const { return scene_.dim; }
+    template <typename Fn>
+    decltype(auto) visit(Fn&& fn) const {
+        if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
+        return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
+    }
+    template <typename Fn>
+    decltype(auto) visit(Fn&& fn) {
+        if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
+        return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
+    }
+
+    py::dict step() {
+        StepStats s;
+        {
+            py::gil_scoped_release release;
+            s = visit([](auto& sim) { return sim.step(); });
+        }
+        history_.push_back(s);
+        return to_dict(s);
+    }
+
+    py::list advance(const py::object& self, int frames, const py::object& callback) {
+        if (frames < 0) throw py::value_error("frames: expected a number >= 0, got " + std::to_string(frames));
+        py::list out;
+        for (int f = 0; f < frames; ++f) {
+            FrameStats stats;
+            bool interrupted = false;
+            try {
+                py::gil_scoped_release release;
+                stats = visit([](auto& sim) {
+                    return sim.advance_frame([] {
+                        py::gil_scoped_acquire acquire;
+                        if (PyErr_CheckSignals() != 0) throw Interrupted{};
+                    });
+                });
+            } catch (const Interrupted&) {
+                interrupted = true;
+            } catch (...) {
+                record_frame_steps();
+                throw;
+            }
+            record_frame_steps();
+            if (interrupted) throw py::error_already_set();  // KeyboardInterrupt, between two steps
+            py::dict d = to_dict(stats);
+            out.append(d);
+            if (!callback.is_none()) {
+                const py::object keep_going = callback(self, d);
+                if (!keep_going.is_none() && !keep_going.cast<bool>()) break;
+            }
+        }
+        return out;
+    }
+
+    py::dict step_stats() const {
+        py::dict d;
+        d["dt"] = column<double>(history_, &StepStats::dt);
+        d["wall_s"] = column<double>(history_, &StepStats::wall_seconds);
+        d["p2g_s"] = column<double>(history_, &StepStats::p2g_seconds);
+        d["solve_s"] = column<double>(history_, &StepStats::grid_seconds);
+        d["g2p_s"] = column<double>(history_, &StepStats::g2p_seconds);
+        d["energy_s"] = column<double>(history_, &StepStats::energy_seconds);
+        d["cg_s"] = column<double>(history_, &StepStats::cg_seconds);
+        d["newton_iterations"] = column<std::int64_t>(history_, &StepStats::newton_iterations);
+        d["cg_iterations"] = column<std::int64_t>(history_, &StepStats::cg_iterations);
+        d["line_search_steps"] = column<std::int64_t>(history_, &StepStats::line_search_steps);
+        d["fixed_point_iterations"] = column<std::int64_t>(history_, &StepStats::fixed_point_iterations);
+        d["fixed_point_change"] = column<double>(history_, &StepStats::fixed_point_change);
+        d["initial_residual"] = column<double>(history_, &StepStats::initial_residual);
+        d["residual"] = column<double>(history_, &StepStats::residual);
+        d["energy"] = column<double>(history_, &StepStats::energy);
+        d["converged"] = column<bool>(history_, &StepStats::converged);
+        d["clamped"] = column<std::int64_t>(history_, &StepStats::clamped);
+        d["max_grid_speed"] = column<double>(history_, &StepStats::max_grid_speed);
+        return d;
+    }
+
+    void save_checkpoint(const py::object& path) const {
+        const std::string file = path_string(path);
+        py::gil_scoped_release release;
+        visit([&](const auto& sim) { sim.save_checkpoint(file); });
+    }
+
+    void load_checkpoint(const py::object& path) {
+        const std::string file = path_string(path);
+        {
+            py::gil_scoped_release release;
+            visit([&](auto& sim) { sim.load_checkpoint(file); });
+        }
+        history_.clear();  // the statistics of the steps since construction no longer describe this state
+    }
+
+    py::array grid_mass() const {
+        GridField g = visit([&](const auto& sim) {
+            constexpr int d = std::decay_t<decltype(sim)>::kDim;
+            const auto& p = sim.particles();
+            std::vector<double> x(p.size() * d);
+            for (std::size_t k = 0; k < p.size(); ++k)
+                for (int a = 0; a < d; ++a) x[k * d + a] = p.x[k][a];
+            py::gil_scoped_release release;
+            return rasterize_mass(d, x, p.mass, scene_.domain_min.data(), scene_.domain_max.data(), scene_.dx);
+        });
+        // Index [i, j(, k)] = node (i, j, k): x first.
+        const int n0 = g.nodes[0], n1 = g.nodes[1], n2 = g.nodes[2];
+        py::array_t<double> out = dim() == 2 ? py::array_t<double>({n0, n1}) : py::array_t<double>({n0, n1, n2});
+        double* data = out.mutable_data();
+        for (int i = 0; i < n0; ++i)
+            for (int j = 0; j < n1; ++j)
+                for (int k = 0; k < n2; ++k) data[(static_cast<std::size_t>(i) * n1 + j) * n2 + k] = g.value[g.index(i, j, k)];
+        return std::move(out);
+    }
+
+private:
+    static Scene to_scene(const py::object& scene) {
+        if (py::isinstance<Scene>(scene)) return scene.cast<Scene>();
+        if (py::isinstance<py::dict>(scene)) return scene_from_json(to_json(scene, "<dict>"), "<dict>", "");
+        return load_scene(path_string(scene));
+    }
+
+    static std::string key_list(const nlohmann::json& options) {
+        std::string s;
+        for (const auto& [key, value] : options.items()) s += (s.empty() ? "" : ", ") + key;
+        return s;
+    }
+
+    void record_frame_steps() {
+        visit([&](const auto& sim) {
+            const auto& steps = sim.last_frame_steps();
+            history_.insert(history_.end(), steps.begin(), steps.end());
+        });
+    }
+
+    Scene scene_;
+    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>> sim_;
+    std::vector<StepStats> history_;  // every step since construction or the last load_checkpoint()
+};
+
+/// A live read-only view of a particle array (see the Simulation docstring).
+template <typename Member>
+py::array particle_view(const py::object& self, Member member) {
+    const PySimulation& s = self.cast<const PySimulation&>();
+    return s.visit([&](const auto& sim) -> py::array {
+        constexpr int d = std::decay_t<decltype(sim)>::kDim;
+        const auto& array = member(sim.particles());
+        using Element = typename std::decay_t<decltype(array)>::value_type;
+        const py::ssize_t n = static_cast<py::ssize_t>(array.size());
+        const py::ssize_t record = sizeof(Element);
+        if constexpr (std::is_same_v<Element, Vec<d>>) {
+            return view(array.data()->data(), {n, d}, {record, sizeof(double)}, self);
+        } else if constexpr (std::is_same_v<Element, Mat<d>>) {
+            // Eigen matrices are column-major: (i, j) sits at (i + j d) doubles.
+            return view(array.data()->data(), {n, d, d}, {record, sizeof(double), d * sizeof(double)}, self);
+        } else {
+            return view(array.data(), {n}, {record}, self);
+        }
+    });
+}
+
+}  // namespace
+
+void define_simulation(py::module_& m) {
+    py::class_<PySimulation>(m, "Simulation", R"doc(An MPM simulation of a scene with one of the integrators.
+
+    sim = pns.Simulation("scenes/snowball_2d.json", integrator="plasticitynet", dt=1e-3)
+    sim.advance(10, callback=lambda sim, frame: print(frame["frame"], frame["wall_s"]))
+
+Stepping releases the GIL; Ctrl-C (KeyboardInterrupt) stops advance() between
+two steps with a consistent state. A failed step raises SimulationError.
+
+Particle arrays (positions, velocities, F_elastic, hardening, mass,
+rest_volume, object) are zero-copy, read-only numpy views of the simulator's
+storage: they stay valid as long as the array (which keeps the simulation
+alive) and always show the current state, so take .copy() to keep a
+snapshot. grid_mass() and step_stats() return new arrays.)doc")
+        .def(py::init<const py::object&, const py::object&, const py::object&, const py::object&, const py::object&,
+                      bool>(),
+             py::arg("scene"), py::arg("integrator") = py::none(), py::arg("dt") = py::none(),
+             py::arg("cfl") = py::none(), py::arg("solver") = py::none(), py::arg("trust_models") = false,
+             R"doc(scene: a Scene, a scene file path, or a scene dict (relative model paths
+resolved against the working directory).
+integrator: "explicit", "plasticitynet" or "lagged" (default: the scene's); another
+integrator than the scene's starts from its own default dt (explicit: the CFL
+step; implicit: 1e-3 s).
+dt: time step, s (0: the CFL step); cfl: the CFL number of that step.
+solver: implicit solver options overriding the scene's integrator block, e.g.
+{"newton_tolerance": 1e-3, "max_fixed_point_iterations": 2, "regularizer_weight": 1}.
+trust_models: load model files that no MANIFEST pins (they are code to LibTorch).
+Every model the scene names is loaded and checked.)doc")
+        .def_property_readonly("scene", &PySimulation::scene)
+        .def_property_readonly("dim", &PySimulation::dim)
+        .def_property_readonly("integrator", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.settings().name; }); })
+        .def_property_readonly("dt", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.settings().dt; }); },
+                               "Time step, s (0: the CFL step).")
+        .def_property_readonly("solver", [](const PySimulation& s) {
+            return to_python(s.visit([](const auto& sim) { return sim.settings().implicit.to_json(); }));
+        }, "The implicit solver options in use.")
+        .def_property_readonly("frame", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.frame(); }); },
+                               "Frames completed.")
+        .def_property_readonly("time", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.time(); }); }, "s.")
+        .def_property_readonly("total_steps", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.total_steps(); }); })
+        .def_property_readonly("num_particles", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.particles().size(); }); })
+        .def("step", &PySimulation::step,
+             "One time step (shortened to land on the end of the frame); returns its statistics as a dict.")
+        .def("advance",
+             [](const py::object& self, int frames, const py::object& callback) {
+                 return self.cast<PySimulation&>().advance(self, frames, callback);
+             },
+             py::arg("frames") = 1, py::arg("callback") = py::none(),
+             R"doc(Advance by whole frames; returns one dict per frame (frame, time, steps,
+dt_min, dt_max, wall_s, kinetic_energy and potential_energy in J, Newton / CG /
+line-search / fixed-point totals, max_residual in m/s, converged, clamped).
+
+callback(sim, frame_stats) runs after every frame; returning False stops early.
+Ctrl-C raises KeyboardInterrupt between two steps (the state stays consistent;
+a later advance finishes the frame).)doc")
+        .def("step_stats", &PySimulation::step_stats,
+             R"doc(Per-step statistics of every step since construction (or the last
+load_checkpoint) as a dict of arrays: dt, wall_s, p2g_s, solve_s, g2p_s, energy_s,
+cg_s (seconds), newton_iterations, cg_iterations, line_search_steps,
+fixed_point_iterations, fixed_point_change, initial_residual and residual (m/s),
+energy (J), converged, clamped, max_grid_speed (m/s).)doc")
+        .def("save_checkpoint", &PySimulation::save_checkpoint, py::arg("path"),
+             "Write the whole state to a file atomically (what is there is replaced only when the write succeeds).")
+        .def("load_checkpoint", &PySimulation::load_checkpoint, py::arg("path"),
+             "Restore a state saved by save_checkpoint for the same scene and integrator (ValueError otherwise, "
+             "FileNotFoundError for a missing file). Resuming gives the same results as an uninterrupted run.")
+        .def("grid_mass", &PySimulation::grid_mass,
+             "Nodal mass of the particles on the scene's grid (quadratic B-spline), kg: a new array of shape "
+             "(nodes_x, nodes_y[, nodes_z]), index [i, j(, k)] = node at domain_min + (i, j, k) dx.")
+        .def_property_readonly("positions", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.x; }); }, "(n, d) float64, m.")
+        .def_property_readonly("velocities", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.v; }); }, "(n, d) float64, m/s.")
+        .def_property_readonly("F_elastic", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.F_elastic; }); }, "(n, d, d) float64: the elastic deformation gradients.")
+        .def_property_readonly("affine", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.C; }); }, "(n, d, d) float64, 1/s: the APIC affine velocity matrices.")
+        .def_property_readonly("hardening", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.hardening; }); }, "(n,) float64: Cam-Clay a, von Mises h; 0 for sand.")
+        .def_property_readonly("mass", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.mass; }); }, "(n,) float64, kg.")
+        .def_property_readonly("rest_volume", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.rest_volume; }); }, "(n,) float64, m^d.")
+        .def_property_readonly("object", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.object; }); }, "(n,) int32: the scene object of each particle.")
+        .def("__repr__", [](const PySimulation& s) {
+            return s.visit([&](const auto& sim) {
+                return "<plasticitynet_sim.Simulation " + s.scene().name + ": " + sim.settings().name + ", frame " +
+                       std::to_string(sim.frame()) + ", " + std::to_string(sim.particles().size()) + " particles>";
+            });
+        });
+
+    m.def("set_threads", [](int n) {
+        if (n < 1) throw py::value_error("threads: expected a number >= 1, got " + std::to_string(n));
+        omp_set_num_threads(n);
+    }, py::arg("n"), "Number of OpenMP threads the simulator uses (all cores by default). Results do not depend on it.");
+    m.def("threads", [] { return omp_get_max_threads(); }, "Number of OpenMP threads the simulator uses.");
+}
+
+}  // namespace pnet::bindings

@@ -1,0 +1,385 @@
+"""The Python module plasticitynet_sim (bindings/): every public function, its shapes and dtypes, its
+errors, and its consistency with the torch model reader and with `pnet simulate`."""
+
+from __future__ import annotations
+
+import _thread
+import json
+import os
+import shutil
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import plasticitynet
+import plasticitynet_sim as pns
+from plasticitynet.materials import Material as TorchMaterial
+
+ROOT = Path(__file__).resolve().parents[2]
+MODELS = ROOT / "models"
+TINY = ROOT / "scenes" / "tiny"
+PNET = ROOT / os.environ.get("PNET_BUILD_DIR", "build") / "cpp" / "pnet"
+
+
+def tiny_dict(name: str) -> dict:
+    """A tiny scene as a dict, model paths made absolute (dicts resolve them against the working directory)."""
+    scene = json.loads((TINY / f"{name}.json").read_text())
+    for obj in scene["objects"]:
+        if "model" in obj:
+            obj["model"] = str((TINY / obj["model"]).resolve())
+    return scene
+
+
+def random_F(n: int, dim: int, seed: int, spread: float = 0.15) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.eye(dim) + spread * rng.standard_normal((n, dim, dim))
+
+
+def read_ply(path: Path) -> dict:
+    """The binary PLY frames of pnet simulate (cpp/pnet/io/ply.hpp): x y z vx vy vz mass hardening, doubles."""
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode()
+    n = int(header.split("element vertex ")[1].split()[0])
+    dim = int(header.split("comment dim ")[1].split()[0])
+    v = np.frombuffer(data[end:], dtype="<f8").reshape(n, 8)
+    return {"x": v[:, :dim], "v": v[:, 3:3 + dim], "mass": v[:, 6], "hardening": v[:, 7]}
+
+
+# --- scenes ---------------------------------------------------------------------------------------
+
+
+def test_load_scene_and_dict_round_trip():
+    scene = pns.load_scene(TINY / "sand_column_2d.json")
+    assert scene.dim == 2 and scene.dx > 0 and scene.integrator in ("explicit", "plasticitynet", "lagged")
+    assert len(scene.cells) == 2 and scene.domain_min == [0.0, 0.0]
+    again = pns.Scene.from_dict(scene.to_dict())
+    assert again.to_dict() == scene.to_dict()
+    assert "Scene" in repr(scene)
+
+
+def test_bad_scene_dict_names_the_field():
+    scene = tiny_dict("snowball_2d")
+    scene["objects"][0]["radius"] = -1
+    with pytest.raises(ValueError, match=r"<dict>: objects\[0\]\.radius: expected a positive number, got -1"):
+        pns.Scene.from_dict(scene)
+    with pytest.raises(ValueError, match="<dict>"):
+        pns.Simulation({"dim": 2})
+    with pytest.raises(ValueError, match="not JSON-serializable"):
+        pns.Scene.from_dict({"dim": object()})
+
+
+def test_missing_files_raise_file_not_found(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.json"):
+        pns.load_scene(tmp_path / "nope.json")
+    with pytest.raises(FileNotFoundError, match="nope.pt"):
+        pns.load_model(tmp_path / "nope.pt")
+    scene = tiny_dict("sand_column_2d")
+    scene["objects"][0]["model"] = str(tmp_path / "missing.pt")
+    with pytest.raises(FileNotFoundError, match=r"objects\[0\]\.model: .*missing\.pt"):
+        pns.Simulation(scene)
+
+
+# --- simulation -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("integrator", ["explicit", "plasticitynet", "lagged"])
+@pytest.mark.parametrize("name", ["sand_column_2d", "snowball_3d"])
+def test_simulation_arrays_and_stats(name, integrator):
+    sim = pns.Simulation(TINY / f"{name}.json", integrator=integrator)
+    d, n = sim.dim, sim.num_particles
+    assert sim.integrator == integrator and n > 0
+    x = sim.positions
+    views = {"positions": (n, d), "velocities": (n, d), "F_elastic": (n, d, d), "affine": (n, d, d),
+             "hardening": (n,), "mass": (n,), "rest_volume": (n,)}
+    for attr, shape in views.items():
+        a = getattr(sim, attr)
+        assert a.shape == shape and a.dtype == np.float64 and not a.flags.writeable, attr
+    assert sim.object.shape == (n,) and sim.object.dtype == np.int32
+    assert np.allclose(sim.F_elastic, np.eye(d))
+    start = x.copy()
+
+    step = sim.step()
+    assert step["dt"] > 0 and step["wall_s"] >= 0 and sim.total_steps == 1
+    assert (step["newton_iterations"] > 0) == (integrator != "explicit") or step["newton_iterations"] == 0
+    frames = sim.advance(1)
+    assert len(frames) == 1 and frames[0]["frame"] == 1 and sim.frame == 1
+    assert np.isclose(sim.time, sim.scene.frame_dt)
+    assert not np.array_equal(x, start), "the view shows the current state"
+    stats = sim.step_stats()
+    assert all(len(v) == sim.total_steps for v in stats.values())
+    assert stats["newton_iterations"].dtype == np.int64 and stats["converged"].dtype == bool
+    assert np.isclose(stats["dt"].sum(), sim.time)
+    if integrator != "explicit":
+        assert stats["converged"].all() and (stats["newton_iterations"] >= 0).all()
+
+    mass = sim.grid_mass()
+    assert mass.shape == tuple(c + 1 for c in sim.scene.cells)
+    assert np.isclose(mass.sum(), sim.mass.sum(), rtol=1e-12)
+    assert np.array_equal(mass, pns.rasterize_mass(sim.positions, sim.mass, sim.scene.domain_min,
+                                                   sim.scene.domain_max, sim.scene.dx))
+
+
+def test_views_keep_the_simulation_alive():
+    sim = pns.Simulation(TINY / "sand_column_2d.json", integrator="explicit")
+    x = sim.positions
+    expected = x.copy()
+    del sim
+    assert np.array_equal(x, expected)
+
+
+def test_simulation_options_and_errors():
+    path = TINY / "sand_column_2d.json"
+    sim = pns.Simulation(path, integrator="plasticitynet", dt=5e-4,
+                         solver={"max_fixed_point_iterations": 3, "regularizer_weight": 0.5})
+    assert sim.dt == 5e-4
+    assert sim.solver["max_fixed_point_iterations"] == 3 and sim.solver["regularizer_weight"] == 0.5
+    assert pns.Simulation(pns.load_scene(path)).integrator == pns.load_scene(path).integrator
+    with pytest.raises(ValueError, match='expected explicit, plasticitynet or lagged, got "rk4"'):
+        pns.Simulation(path, integrator="rk4")
+    with pytest.raises(ValueError, match='solver: unknown option "newton_tol"'):
+        pns.Simulation(path, integrator="lagged", solver={"newton_tol": 1e-3})
+    with pytest.raises(ValueError, match="solver: integrator.cg_tolerance"):
+        pns.Simulation(path, integrator="lagged", solver={"cg_tolerance": 2})
+    with pytest.raises(ValueError, match="dt must be >= 0"):
+        pns.Simulation(path, dt=-1.0)
+    with pytest.raises(ValueError, match="frames"):
+        sim.advance(-1)
+    with pytest.raises(ValueError, match="threads"):
+        pns.set_threads(0)
+
+
+def test_advance_callback_can_stop():
+    sim = pns.Simulation(TINY / "sand_column_2d.json", integrator="lagged")
+    seen = []
+
+    def callback(s, frame):
+        assert s is sim
+        seen.append(frame["frame"])
+        return frame["frame"] < 2
+
+    frames = sim.advance(5, callback=callback)
+    assert seen == [1, 2] and len(frames) == 2 and sim.frame == 2
+
+
+def test_blow_up_raises_simulation_error():
+    sim = pns.Simulation(TINY / "snowball_2d.json", integrator="explicit", dt=5e-3)  # far above its CFL step
+    with pytest.raises(pns.SimulationError, match=r"step \d+: particle \d+ .* blew up") as info:
+        sim.advance(10)
+    assert isinstance(info.value, RuntimeError)
+    assert len(sim.step_stats()["dt"]) == sim.total_steps  # the steps before the failure are recorded
+
+
+def test_ctrl_c_interrupts_between_steps():
+    sim = pns.Simulation(TINY / "sand_column_2d.json", integrator="explicit", dt=1e-6)
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            sim.advance(1000)  # 20000 steps per frame: far longer than the timer
+    finally:
+        timer.cancel()
+    interrupted_at = sim.total_steps
+    assert 0 < interrupted_at and sim.frame < 1000
+    assert len(sim.step_stats()["dt"]) == interrupted_at
+    assert np.isfinite(sim.positions).all()
+    sim.step()  # the state is consistent: it goes on
+    assert sim.total_steps == interrupted_at + 1
+
+
+def test_checkpoint_round_trip(tmp_path):
+    path = TINY / "snowball_2d.json"
+    sim = pns.Simulation(path, integrator="plasticitynet")
+    sim.advance(1)
+    sim.save_checkpoint(tmp_path / "c.bin")
+    sim.advance(1)
+    expected = {a: getattr(sim, a).copy() for a in ("positions", "velocities", "F_elastic", "hardening")}
+    x = sim.positions
+    resumed = pns.Simulation(path, integrator="plasticitynet")
+    resumed.load_checkpoint(tmp_path / "c.bin")
+    assert resumed.frame == 1 and len(resumed.step_stats()["dt"]) == 0
+    resumed.advance(1)
+    for attr, value in expected.items():
+        assert np.array_equal(getattr(resumed, attr), value), attr
+    sim.load_checkpoint(tmp_path / "c.bin")  # views of sim stay valid and show the loaded state
+    assert sim.frame == 1 and not np.array_equal(x, expected["positions"])
+    with pytest.raises(FileNotFoundError, match="nope.bin"):
+        sim.load_checkpoint(tmp_path / "nope.bin")
+    with pytest.raises(ValueError, match="written by the plasticitynet integrator, this run uses lagged"):
+        pns.Simulation(path, integrator="lagged").load_checkpoint(tmp_path / "c.bin")
+
+
+@pytest.mark.parametrize("name,integrator", [("snowball_2d", "plasticitynet"), ("sand_column_3d", "explicit")])
+def test_python_stepping_equals_pnet_simulate(tmp_path, name, integrator):
+    if not PNET.exists():
+        pytest.fail(f"{PNET} is not built (run scripts/setup.sh)")
+    out = tmp_path / "run"
+    r = subprocess.run([str(PNET), "simulate", str(TINY / f"{name}.json"), "--integrator", integrator,
+                        "--frames", "2", "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    sim = pns.Simulation(TINY / f"{name}.json", integrator=integrator)
+    sim.advance(2)
+    frame = read_ply(out / "frame_00002.ply")
+    assert np.array_equal(sim.positions, frame["x"])
+    assert np.array_equal(sim.velocities, frame["v"])
+    assert np.array_equal(sim.hardening, frame["hardening"])
+
+
+# --- models ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("model_name,dim,E", [("sand_2d", 2, 3.537e5), ("snow_2d", 2, 1.4e5), ("snow_3d", 3, None),
+                                              ("metal_nh_2d", 2, 2e9)])
+def test_model_matches_torch(model_name, dim, E):
+    path = MODELS / f"{model_name}.pt"
+    model = pns.load_model(path, E=E)
+    reference = plasticitynet.load_model(path, E=E)
+    assert model.kind == "energy" and model.dim == dim and model.pinned and len(model.sha256) == 64
+    assert model.metadata["dim"] == dim and model.widths[-1] == 1
+    F0 = random_F(16, dim, seed=1)
+    F = F0 + 0.05 * np.random.default_rng(2).standard_normal((16, dim, dim))
+    h = -0.1 - 0.2 * np.random.default_rng(3).random(16)
+    for w in (0.0, 1.0):
+        tF, tF0, th = (torch.from_numpy(a) for a in (F, F0, h))
+        scale = abs(model.E)
+        psi = model.psi(F, F0, h, w=w)
+        assert psi.shape == (16,)
+        assert np.allclose(psi, reference.psi(tF, tF0, th, w=w).detach().numpy(), rtol=0, atol=1e-10 * scale)
+        grad = model.gradient(F, F0, h, w=w)
+        assert grad.shape == (16, dim, dim)
+        assert np.allclose(grad, reference.gradient(tF, tF0, th, w=w).detach().numpy(), rtol=0, atol=1e-10 * scale)
+        hess = model.hessian(F, F0, h, w=w)
+        assert hess.shape == (16, dim * dim, dim * dim)
+        assert np.allclose(hess, reference.hessian(tF, tF0, th, w=w).detach().numpy(), rtol=0, atol=1e-10 * scale)
+    psd = model.hessian(F, F0, h, w=0.0, project_psd=True)
+    assert (np.linalg.eigvalsh(psd) >= -1e-9 * np.abs(psd).max()).all()
+    # grad Psi(F0; F0, h) = E Ptilde(F0, h), by construction of c
+    assert np.allclose(model.gradient(F0, F0, h), model.stress(F0, h), rtol=0, atol=1e-9 * scale)
+    assert np.allclose(model.stress(F0, h), reference.Ptilde(torch.from_numpy(F0), torch.from_numpy(h)).numpy(),
+                       rtol=0, atol=1e-10 * scale)
+
+
+def test_return_map_model_matches_torch():
+    path = MODELS / "metal_nh_rm_2d.pt"
+    model = pns.load_model(path)
+    reference = plasticitynet.load_model(path)
+    assert model.kind == "return_map"
+    Sigma = 1.0 + 0.02 * np.random.default_rng(4).standard_normal((32, 2))
+    h = 1e-3 * np.random.default_rng(5).random(32)
+    out = model.project(Sigma, h)
+    assert out["Sigma"].shape == (32, 2) and out["hardening"].shape == (32,)
+    expected = reference.project(torch.from_numpy(Sigma), torch.from_numpy(h)).numpy()
+    assert np.allclose(out["Sigma"], expected, rtol=0, atol=1e-10)
+    with pytest.raises(ValueError, match="has no energy"):
+        model.psi(np.eye(2)[None], np.eye(2)[None])
+    with pytest.raises(ValueError, match="no return mapping of its own"):
+        pns.load_model(MODELS / "sand_2d.pt").project(Sigma)
+
+
+def test_model_input_checks():
+    model = pns.load_model(MODELS / "sand_2d.pt")
+    F = random_F(4, 2, seed=0)
+    with pytest.raises(ValueError, match=r"F: expected a float64 array of shape \(n, 2, 2\), got shape \(4, 3, 3\)"):
+        model.psi(random_F(4, 3, seed=0), F)
+    with pytest.raises(ValueError, match=r"F0: expected a float64 array of shape \(4, 2, 2\), got shape \(3, 2, 2\)"):
+        model.psi(F, F[:3])
+    with pytest.raises(ValueError, match=r"F: expected a float64 array of shape \(n, 2, 2\), got dtype float32"):
+        model.psi(F.astype(np.float32), F)
+    with pytest.raises(ValueError, match=r"h: expected a float64 array of shape \(4,\), got shape \(5,\)"):
+        model.psi(F, F, np.zeros(5))
+    with pytest.raises(ValueError, match="w: expected a regularizer weight >= 0"):
+        model.psi(F, F, w=-1.0)
+    with pytest.raises(ValueError, match="E: expected a positive Young's modulus"):
+        pns.load_model(MODELS / "sand_2d.pt", E=-1.0)
+    # lists are taken as float64; a strided numpy array is copied
+    assert np.allclose(model.psi(F.tolist(), F[:, :, :]), model.psi(F, F))
+    assert np.allclose(model.psi(np.asfortranarray(F), F), model.psi(F, F))
+
+
+def test_untrusted_model_is_refused(tmp_path):
+    copy = tmp_path / "sand_2d.pt"
+    shutil.copyfile(MODELS / "sand_2d.pt", copy)
+    with pytest.raises(pns.UntrustedModelError, match="sand_2d.pt") as info:
+        pns.load_model(copy)
+    assert isinstance(info.value, ValueError)
+    model = pns.load_model(copy, trusted=True)
+    assert not model.pinned and model.kind == "energy"
+    scene = tiny_dict("sand_column_2d")
+    scene["objects"][0]["model"] = str(copy)
+    with pytest.raises(pns.UntrustedModelError, match=r"objects\[0\]\.model"):
+        pns.Simulation(scene)
+    assert pns.Simulation(scene, trust_models=True).num_particles > 0
+
+
+# --- materials and metrics -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name,dim", [("sand", 2), ("snow", 3), ("metal", 2)])
+def test_material_matches_torch(name, dim):
+    material = pns.Material(name, dim)
+    F = random_F(32, dim, seed=7, spread=0.2)
+    h = np.full(32, material.to_dict().get("initial_hardening", 0.0))
+    P = material.stress(F, h)
+    r = material.return_map(F, h)
+    assert P.shape == (32, dim, dim) and r["F_elastic"].shape == (32, dim, dim) and r["hardening"].shape == (32,)
+    assert r["branch"].dtype == np.int32 and set(r["branch"]) <= set(range(len(pns.BRANCHES)))
+    assert pns.Material(material.to_dict(), dim).to_dict() == material.to_dict()
+    reference = TorchMaterial.from_dict(material.to_dict(), dim)
+    tF, th = torch.from_numpy(F), torch.from_numpy(h)
+    assert np.allclose(P, reference.elastoplastic_stress(tF, th).numpy(), rtol=1e-9, atol=1e-9 * np.abs(P).max())
+    Fe, h_new = reference.elastic_part(tF, th)
+    assert np.allclose(r["F_elastic"], Fe.numpy(), rtol=0, atol=1e-10)
+    assert np.allclose(r["hardening"], h_new.numpy(), rtol=1e-10, atol=1e-12)
+    assert name in pns.material_presets()
+
+
+def test_material_errors():
+    with pytest.raises(ValueError, match="granite"):
+        pns.Material("granite", 2)
+    with pytest.raises(ValueError, match="dim: expected 2 or 3"):
+        pns.Material("sand", 4)
+    with pytest.raises(ValueError, match=r"F: expected a float64 array of shape \(n, 2, 2\)"):
+        pns.Material("sand", 2).stress(np.eye(2))
+
+
+def test_iou():
+    a = np.zeros((8, 8))
+    a[2:5, 2:5] = 1.0
+    b = np.roll(a, 1, axis=0)
+    same = pns.iou(a, a)
+    assert same["soft"] == 1.0 and same["binary"] == 1.0
+    shifted = pns.iou(a, b)
+    assert np.isclose(shifted["soft"], 6 / 12) and np.isclose(shifted["binary"], 6 / 12)
+    assert 0 < pns.iou(np.ones((3, 3, 3)), np.ones((3, 3, 3)))["plasticinelab"] <= 1
+    with pytest.raises(ValueError, match="different shapes"):
+        pns.iou(a, np.zeros((8, 9)))
+    with pytest.raises(ValueError, match="a: expected a float64 array"):
+        pns.iou(np.zeros(8), a)
+    with pytest.raises(ValueError, match="must be finite and >= 0"):
+        pns.iou(-a, a)
+
+
+def test_module_docstrings():
+    public = [n for n in dir(pns) if not n.startswith("_")]
+    for name in public:
+        obj = getattr(pns, name)
+        if callable(obj):
+            assert obj.__doc__, name
+    for cls in (pns.Simulation, pns.Model, pns.Material, pns.Scene):
+        for name, member in vars(cls).items():
+            if not name.startswith("_") and callable(member):
+                assert member.__doc__ and len(member.__doc__.splitlines()[-1]) >= 0, f"{cls.__name__}.{name}"
+
+
+def test_example_script(tmp_path):
+    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "example_sand.py"), "--tiny", "--frames", "2",
+                        "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    for name in ("particles.png", "iou.png"):
+        assert (tmp_path / name).stat().st_size > 1000, name
+    assert "soft IoU" in r.stdout
