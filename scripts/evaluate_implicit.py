@@ -16,8 +16,8 @@ Outputs (under --results, default notebooks/results/implicit_eval):
   <scene>/iou.csv, iou.png       per-frame soft IoU of every run (one curve each)
   <scene>/<run>_stats.csv, <run>_steps.csv, <run>_final.png
 The full runs (PLY of every frame) stay in --work (default out/eval); a run whose
-directory holds all its frames from the same command, scene file and committed C++
-sources (git tree of cpp/ at HEAD) is reused, not re-run. Each invocation rewrites the results of
+directory holds all its frames from the same command and scene file is reused, not
+re-run (pass --force after changing the simulator; command.json records the commit). Each invocation rewrites the results of
 the scenes it runs; summary.csv/md gather every scene under --results.
 
     /usr/bin/python3 scripts/evaluate_implicit.py [--scenes sand_column_2d snowball_2d]
@@ -56,16 +56,18 @@ RUNS = {
 
 
 def run_marker(scene: str, command: list) -> dict:
-    """What a run's result depends on: the command, the scene file and the C++ sources."""
+    """What a run's result depends on besides the simulator: the command and the scene file."""
     scene_sha = hashlib.sha256((ROOT / "scenes" / f"{scene}.json").read_bytes()).hexdigest()
-    # The committed C++ sources: evaluate from a build of a clean checkout.
-    tree = subprocess.run(["git", "rev-parse", "HEAD:cpp"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    return {"command": command, "scene_sha256": scene_sha, "cpp_tree": tree}
+    commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    return {"command": command, "scene_sha256": scene_sha, "commit": commit}  # commit: for the record only
 
 
 def run_dir_complete(out: Path, marker: dict, frames: int) -> bool:
     path = out / "command.json"
-    return path.exists() and json.loads(path.read_text()) == marker and (out / f"frame_{frames:05d}.ply").exists()
+    if not path.exists() or not (out / f"frame_{frames:05d}.ply").exists():
+        return False
+    old = json.loads(path.read_text())
+    return isinstance(old, dict) and all(old.get(k) == marker[k] for k in ("command", "scene_sha256"))
 
 
 def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force: bool) -> Path:
