@@ -17,8 +17,9 @@ Outputs (under --results, default notebooks/results/implicit_eval):
   <scene>/<run>_stats.csv, <run>_steps.csv, <run>_final.png
 The full runs (PLY of every frame) stay in --work (default out/eval); a run whose
 directory holds all its frames from the same command and scene file is reused, not
-re-run (pass --force after changing the simulator; command.json records the commit). Each invocation rewrites the results of
-the scenes it runs; summary.csv/md gather every scene under --results.
+re-run (pass --force after changing the simulator; command.json records the commit).
+Each invocation rewrites the results of the scenes it runs; summary.csv/md gather
+every scene under --results.
 
     /usr/bin/python3 scripts/evaluate_implicit.py [--scenes sand_column_2d snowball_2d]
         [--groups main ablation] [--frames N] [--threads 2] [--force]
