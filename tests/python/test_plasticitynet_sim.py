@@ -383,3 +383,23 @@ def test_example_script(tmp_path):
     for name in ("particles.png", "iou.png"):
         assert (tmp_path / name).stat().st_size > 1000, name
     assert "soft IoU" in r.stdout
+
+
+def test_readme_example_runs():
+    """The README's Python example, on the tiny sand column (the full one takes longer)."""
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("## From Python"):]
+    code = section[section.index("```python\n") + len("```python\n"):]
+    code = code[:code.index("```")]
+    assert len(code.strip().splitlines()) <= 13
+    code = code.replace("scenes/sand_column_2d.json", "scenes/tiny/sand_column_2d.json")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("soft IoU") == 5 and "hessian (1, 4, 4)" in r.stdout
+
+
+def test_imports_beside_torch_in_either_order():
+    for code in ("import plasticitynet_sim, torch; print(torch.ones(2).sum().item())",
+                 "import torch, plasticitynet_sim; print(torch.ones(2).sum().item())"):
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0 and r.stdout.strip() == "2.0", r.stderr
