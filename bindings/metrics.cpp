@@ -1,7 +1,11 @@
-// Accuracy metrics (DESIGN.md §6): IoU of grid mass fields and the B-spline
-// rasterization behind it.
+// Accuracy metrics (DESIGN.md §6): IoU of grid mass fields, the B-spline
+// rasterization behind it, and the frame-by-frame comparison of two runs.
+#include <filesystem>
+
 #include "common.hpp"
 #include "pnet/metrics/iou.hpp"
+#include "pnet/metrics/run_comparison.hpp"
+#include "pnet/nn/model_file.hpp"  // FileNotFoundError
 
 namespace pnet::bindings {
 
@@ -77,6 +81,51 @@ non-finite values, an all-zero field, or different shapes.)doc");
         R"doc(Nodal mass (kg) of particles (positions (n, d) m, mass (n,) kg) with the
 quadratic B-spline on the grid of nodes domain_min + i dx: an array of shape
 (nodes_x, nodes_y[, nodes_z]), index [i, j(, k)].)doc");
+
+    m.def(
+        "compare_runs",
+        [](const py::object& dir_a, const py::object& dir_b, double dx) {
+            const std::string a = path_string(dir_a), b = path_string(dir_b);
+            for (const std::string& dir : {a, b})
+                if (!std::filesystem::exists(dir))
+                    throw FileNotFoundError(dir + ": no such directory");
+            RunComparison c;
+            try {
+                py::gil_scoped_release release;
+                c = compare_runs(a, b, dx);
+            } catch (const RunInputError& e) {
+                throw py::value_error(e.what());
+            }
+            const py::ssize_t n = static_cast<py::ssize_t>(c.frames.size());
+            py::array_t<std::int64_t> frame(n);
+            py::array_t<double> time(n), soft(n), binary(n), plasticinelab(n);
+            for (py::ssize_t k = 0; k < n; ++k) {
+                frame.mutable_data()[k] = c.frames[k].frame;
+                time.mutable_data()[k] = c.frames[k].time;
+                soft.mutable_data()[k] = c.frames[k].soft;
+                binary.mutable_data()[k] = c.frames[k].binary;
+                plasticinelab.mutable_data()[k] = c.frames[k].plasticinelab;
+            }
+            py::dict d;
+            d["frame"] = frame;
+            d["time"] = time;
+            d["soft"] = soft;
+            d["binary"] = binary;
+            d["plasticinelab"] = plasticinelab;
+            d["only_a"] = c.only_a;
+            d["only_b"] = c.only_b;
+            d["clamped_a"] = c.clamped_a;
+            d["clamped_b"] = c.clamped_b;
+            d["dx"] = c.dx;
+            return d;
+        },
+        py::arg("dir_a"), py::arg("dir_b"), py::arg("dx") = 0.0,
+        R"doc(Compare two `pnet simulate` output directories frame by frame (what `pnet compare`
+computes): a dict of arrays over the frames both hold - frame, time (s), soft,
+binary and plasticinelab IoU - plus only_a / only_b (frames in one run only),
+clamped_a / clamped_b (particle positions at the domain's edge) and dx, the
+grid spacing used (dx = 0: DIR_A's). FileNotFoundError for a missing
+directory, ValueError for runs that cannot be compared (naming the file and field).)doc");
 }
 
 }  // namespace pnet::bindings

@@ -403,3 +403,26 @@ def test_imports_beside_torch_in_either_order():
                  "import torch, plasticitynet_sim; print(torch.ones(2).sum().item())"):
         r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
         assert r.returncode == 0 and r.stdout.strip() == "2.0", r.stderr
+
+
+def test_compare_runs_matches_pnet_compare(tmp_path):
+    if not PNET.exists():
+        pytest.fail(f"{PNET} is not built (run scripts/setup.sh)")
+    scene = TINY / "sand_column_2d.json"
+    for name, integrator in (("a", "explicit"), ("b", "lagged")):
+        r = subprocess.run([str(PNET), "simulate", str(scene), "--integrator", integrator, "--frames", "3",
+                            "--out", str(tmp_path / name)], capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+    result = pns.compare_runs(tmp_path / "a", tmp_path / "b")
+    assert list(result["frame"]) == [0, 1, 2, 3] and result["only_a"] == [] and result["dx"] > 0
+    assert result["soft"][0] == 1.0 and 0 < result["soft"][-1] < 1
+    r = subprocess.run([str(PNET), "compare", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(tmp_path / "c")],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    rows = (tmp_path / "c" / "iou.csv").read_text().splitlines()[1:]
+    assert np.allclose([float(row.split(",")[2]) for row in rows], result["soft"], rtol=1e-8)
+    with pytest.raises(FileNotFoundError, match="nope"):
+        pns.compare_runs(tmp_path / "a", tmp_path / "nope")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match="run.json"):
+        pns.compare_runs(tmp_path / "a", tmp_path / "empty")

@@ -44,6 +44,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     o.max_fixed_point_iterations =
         read_option(block, "max_fixed_point_iterations", o.max_fixed_point_iterations, context, 1, "an integer >= 1");
     o.regularizer_weight = read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
+    if (const auto it = block.find("preconditioner"); it != block.end()) {
+        if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi"))
+            throw std::invalid_argument(context + ": integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got " +
+                                        it->dump());
+        o.preconditioner = it->get<std::string>();
+    }
     return o;
 }
 
@@ -54,7 +60,8 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"cg_tolerance", cg_tolerance},
             {"fixed_point_tolerance", fixed_point_tolerance},
             {"max_fixed_point_iterations", max_fixed_point_iterations},
-            {"regularizer_weight", regularizer_weight}};
+            {"regularizer_weight", regularizer_weight},
+            {"preconditioner", preconditioner}};
 }
 
 template <int dim>
@@ -90,6 +97,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.cg_tolerance = options_.cg_tolerance;
     newton.residual_scale = potential_.residual_scale();
     newton.scale_by_hessian_diagonal = true;  // |g_i| / H_ii: a velocity correction, m/s
+    newton.block_preconditioner = options_.preconditioner == "block_jacobi";
 
     v_ = potential_.v_star();
     const bool fixed_point = method_ == ImplicitMethod::PlasticityNet;

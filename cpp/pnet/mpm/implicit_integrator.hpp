@@ -47,6 +47,7 @@ struct ImplicitOptions {
     // (notebooks/results/implicit_eval, the fixed-point ablation).
     int max_fixed_point_iterations = 1;
     double regularizer_weight = 1.0;     // w of eq. 11 (plasticitynet; 0: the ablation)
+    std::string preconditioner = "jacobi";  // PCG: "jacobi" or "block_jacobi" (the d x d block of each node)
 
     /// Reads the keys above from an integrator block (others are ignored: the
     /// block also holds name, dt and cfl). Throws std::invalid_argument

@@ -233,6 +233,31 @@ void IncrementalPotential<dim>::hessian_diagonal(VecX& diagonal) const {
     diagonal.array() = diagonal.array() * free_.array() + mass_.array();
 }
 
+template <int dim>
+void IncrementalPotential<dim>::hessian_block_diagonal(VecX& blocks) const {
+    constexpr int kB = dim * dim;
+    blocks.setZero(size() * dim);
+    double* out = blocks.data();
+    grid_->for_each_particle_coloured([&](int p) {
+        const Tensor4<dim>& K = K_[p];
+        for (int s = 0; s < kStencil; ++s) {
+            const Vec<dim>& g = stencil_grad_[p * kStencil + s];
+            double* B = out + kB * stencil_dof_[p * kStencil + s];  // row-major
+            for (int a = 0; a < dim; ++a)
+                for (int b = 0; b < dim; ++b) B[a * dim + b] += g.dot(K.template block<dim, dim>(a * dim, b * dim) * g);
+        }
+    });
+    const Eigen::Index nodes = size() / dim;
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index k = 0; k < nodes; ++k) {
+        double* B = out + kB * k;
+        for (int a = 0; a < dim; ++a) {
+            for (int b = 0; b < dim; ++b) B[a * dim + b] *= free_[dim * k + a] * free_[dim * k + b];
+            B[a * dim + a] += mass_[dim * k + a];
+        }
+    }
+}
+
 template class IncrementalPotential<2>;
 template class IncrementalPotential<3>;
 

@@ -68,6 +68,11 @@ public:
     double value_gradient_hessian(const VecX& v, VecX& gradient) override;
     void hessian_multiply(const VecX& d, VecX& out) const override;
     void hessian_diagonal(VecX& diagonal) const override;
+    int hessian_block_size() const override { return dim; }
+    /// The d x d block of each node: sum_p over the particles it reaches of
+    /// B_ab = g^T K_p[(a, .), (b, .)] g (g = grad w_ip), masked on fixed
+    /// components, plus the node mass on the diagonal.
+    void hessian_block_diagonal(VecX& blocks) const override;
 
     /// Project the particles' Hessians to PSD (default; false gives the exact
     /// Hessian of E, for derivative checks).

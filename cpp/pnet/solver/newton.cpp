@@ -39,7 +39,8 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     if (options.residual_scale.size() != 0 && options.residual_scale.size() != n)
         throw std::invalid_argument("minimize: residual_scale has the wrong size");
     NewtonStats stats;
-    VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n);
+    VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;
+    const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
     // Every accepted iterate comes with its Hessian prepared (value_gradient_hessian),
     // so an iteration whose full step passes the line search costs one energy pass.
     double energy = objective.value_gradient_hessian(x, g);
@@ -56,9 +57,15 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             stats.converged = true;
             break;
         }
-        for (Eigen::Index i = 0; i < n; ++i) diagonal[i] = diagonal[i] > 0.0 ? 1.0 / diagonal[i] : 1.0;
+        Preconditioner preconditioner;
+        if (block > 1) {
+            objective.hessian_block_diagonal(blocks);
+            preconditioner = Preconditioner::block_jacobi(blocks, block);
+        } else {
+            preconditioner = Preconditioner::jacobi(diagonal);
+        }
         const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
-        const PcgResult cg = solve_pcg(objective, -g, diagonal, d, forcing, options.max_cg_iterations);
+        const PcgResult cg = solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations);
         stats.cg_iterations += cg.iterations;
         const double slope = g.dot(d);
         if (!(slope < 0.0))

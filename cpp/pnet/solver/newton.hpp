@@ -3,7 +3,7 @@
 // search on E: the one optimization loop of every implicit integrator
 // (DESIGN.md §4; Gast et al. 2015, Li et al. 2020). Per iteration:
 //   g = grad E(x); stop if |g|_scaled <= tolerance;
-//   H d = -g by PCG (Jacobi) to the relative tolerance min(cg_tolerance, sqrt(|g| / |g0|))
+//   H d = -g by PCG (Jacobi or block Jacobi) to the relative tolerance min(cg_tolerance, sqrt(|g| / |g0|))
 //   (inexact Newton: loose far from the solution, tighter as it converges);
 //   alpha = 1, halved until E(x + alpha d) <= E(x) + c alpha g.d (Armijo; the full step is
 //   evaluated with value_gradient_hessian(), so an accepted full step costs one energy
@@ -35,6 +35,9 @@ struct NewtonOptions {
     /// stays meaningful where stiffness, not mass, dominates H (large dt, nodes
     /// at a body's rim holding little mass).
     bool scale_by_hessian_diagonal = false;
+    /// Block Jacobi (the objective's hessian_block_diagonal(), when its block
+    /// size is > 1) instead of Jacobi.
+    bool block_preconditioner = false;
 };
 
 struct NewtonStats {

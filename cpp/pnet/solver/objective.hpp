@@ -43,6 +43,14 @@ public:
 
     /// diag(H), for the Jacobi preconditioner; entries must be > 0.
     virtual void hessian_diagonal(VecX& diagonal) const = 0;
+
+    /// Size b of the diagonal blocks hessian_block_diagonal() gives (1: none;
+    /// MPM: the d velocity components of a grid node).
+    virtual int hessian_block_size() const { return 1; }
+
+    /// The size()/b diagonal b x b blocks of H, consecutive, each row-major,
+    /// for the block-Jacobi preconditioner (only called when b > 1).
+    virtual void hessian_block_diagonal(VecX& blocks) const { hessian_diagonal(blocks); }
 };
 
 }  // namespace pnet

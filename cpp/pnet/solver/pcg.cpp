@@ -1,10 +1,79 @@
 #include "pnet/solver/pcg.hpp"
 
+#include <Eigen/Cholesky>
 #include <cmath>
+#include <stdexcept>
 
 namespace pnet {
 
-PcgResult solve_pcg(const Objective& objective, const VecX& b, const VecX& inverse_diagonal, VecX& d,
+namespace {
+
+template <int b>
+void invert_blocks(const VecX& blocks, VecX& inverse) {
+    using Block = Eigen::Matrix<double, b, b, Eigen::RowMajor>;
+    const Eigen::Index n = blocks.size() / (b * b);
+    inverse.resize(blocks.size());
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index k = 0; k < n; ++k) {
+        const Eigen::Map<const Block> B(blocks.data() + k * b * b);
+        Eigen::Map<Block> inv(inverse.data() + k * b * b);
+        const Eigen::LLT<Block> llt(B);
+        if (llt.info() == Eigen::Success) {
+            inv = llt.solve(Block::Identity());
+        } else {
+            inv.setZero();
+            for (int i = 0; i < b; ++i) inv(i, i) = B(i, i) > 0.0 ? 1.0 / B(i, i) : 1.0;
+        }
+    }
+}
+
+template <int b>
+void apply_blocks(const VecX& inverse, const VecX& r, VecX& z) {
+    using Block = Eigen::Matrix<double, b, b, Eigen::RowMajor>;
+    const Eigen::Index n = r.size() / b;
+    z.resize(r.size());
+    for (Eigen::Index k = 0; k < n; ++k)
+        z.template segment<b>(b * k).noalias() =
+            Eigen::Map<const Block>(inverse.data() + k * b * b) * r.template segment<b>(b * k);
+}
+
+}  // namespace
+
+Preconditioner Preconditioner::jacobi(const VecX& diagonal) {
+    Preconditioner m;
+    m.inverse_ = diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
+    return m;
+}
+
+Preconditioner Preconditioner::block_jacobi(const VecX& blocks, int block) {
+    if (block < 1 || blocks.size() % (block * block) != 0)
+        throw std::invalid_argument("Preconditioner::block_jacobi: blocks do not hold whole " + std::to_string(block) +
+                                    " x " + std::to_string(block) + " blocks");
+    Preconditioner m;
+    m.block_ = block;
+    if (block == 1) {
+        m = jacobi(blocks);
+    } else if (block == 2) {
+        invert_blocks<2>(blocks, m.inverse_);
+    } else if (block == 3) {
+        invert_blocks<3>(blocks, m.inverse_);
+    } else {
+        throw std::invalid_argument("Preconditioner::block_jacobi: blocks of 2 or 3 are supported, got " +
+                                    std::to_string(block));
+    }
+    return m;
+}
+
+void Preconditioner::apply(const VecX& r, VecX& z) const {
+    if (block_ == 1)
+        z = inverse_.cwiseProduct(r);
+    else if (block_ == 2)
+        apply_blocks<2>(inverse_, r, z);
+    else
+        apply_blocks<3>(inverse_, r, z);
+}
+
+PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
                     double relative_tolerance, int max_iterations) {
     PcgResult result;
     const Eigen::Index n = b.size();
@@ -14,7 +83,9 @@ PcgResult solve_pcg(const Objective& objective, const VecX& b, const VecX& inver
         result.converged = true;
         return result;
     }
-    VecX r = b, z = inverse_diagonal.cwiseProduct(r), p = z, Hp(n);
+    VecX r = b, z(n), Hp(n);
+    preconditioner.apply(r, z);
+    VecX p = z;
     double rz = r.dot(z);
     for (int k = 0; k < max_iterations; ++k) {
         objective.hessian_multiply(p, Hp);
@@ -33,7 +104,7 @@ PcgResult solve_pcg(const Objective& objective, const VecX& b, const VecX& inver
             result.converged = true;
             break;
         }
-        z = inverse_diagonal.cwiseProduct(r);
+        preconditioner.apply(r, z);
         const double rz_next = r.dot(z);
         p = z + (rz_next / rz) * p;
         rz = rz_next;

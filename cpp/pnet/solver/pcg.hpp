@@ -1,10 +1,30 @@
 #pragma once
 // Matrix-free preconditioned conjugate gradients for H d = b with H symmetric
-// positive semi-definite (Objective::hessian_multiply) and a Jacobi
-// preconditioner (1 / diag H).
+// positive semi-definite (Objective::hessian_multiply), preconditioned by the
+// inverse of diag(H) (Jacobi) or of its b x b diagonal blocks (block Jacobi:
+// for MPM the d x d coupling of a node's velocity components).
 #include "pnet/solver/objective.hpp"
 
 namespace pnet {
+
+/// M^-1 of PCG: an inverse diagonal or inverse diagonal blocks.
+class Preconditioner {
+public:
+    /// 1 / H_ii (entries <= 0 are taken as 1).
+    static Preconditioner jacobi(const VecX& diagonal);
+    /// The inverses of the b x b blocks (consecutive, row-major, as
+    /// Objective::hessian_block_diagonal gives them); a block that is not
+    /// positive definite falls back to the inverse of its diagonal.
+    static Preconditioner block_jacobi(const VecX& blocks, int block);
+
+    int block() const { return block_; }
+    /// z = M^-1 r.
+    void apply(const VecX& r, VecX& z) const;
+
+private:
+    int block_ = 1;
+    VecX inverse_;  // block 1: the inverse diagonal; else the inverse blocks, row-major
+};
 
 struct PcgResult {
     int iterations = 0;
@@ -16,7 +36,7 @@ struct PcgResult {
 /// Solves H d = b from d = 0 until |b - H d| <= relative_tolerance |b| or
 /// max_iterations. On negative curvature it stops and keeps the last iterate
 /// (the first iterate, if any, is the preconditioned steepest descent step).
-PcgResult solve_pcg(const Objective& objective, const VecX& b, const VecX& inverse_diagonal, VecX& d,
+PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
                     double relative_tolerance, int max_iterations);
 
 }  // namespace pnet

@@ -190,6 +190,25 @@ TYPED_TEST(ImplicitTest, GradientAndHessianMatchFiniteDifferences) {
                 E.hessian_multiply(e, He);
                 EXPECT_NEAR(diagonal[i], He[i], 1e-12 * std::abs(He[i]));
             }
+
+            // The node blocks of the block-Jacobi preconditioner equal e_(k,a)^T H e_(k,b),
+            // fixed components included (mass on the diagonal, no coupling).
+            VecX blocks;
+            ASSERT_EQ(E.hessian_block_size(), dim);
+            E.hessian_block_diagonal(blocks);
+            ASSERT_EQ(blocks.size(), E.size() * dim);
+            for (int k = 0; k < 5; ++k) {
+                const Eigen::Index node = ((k * 7919) % E.size()) / dim;
+                for (int b = 0; b < dim; ++b) {
+                    e.setZero();
+                    e[dim * node + b] = 1.0;
+                    E.hessian_multiply(e, He);
+                    for (int a = 0; a < dim; ++a)
+                        EXPECT_NEAR(blocks[dim * dim * node + dim * a + b], He[dim * node + a],
+                                    1e-12 * std::abs(He[dim * node + b]))
+                            << "node " << node << " (" << a << ", " << b << ")";
+                }
+            }
         }
     }
 }
@@ -389,8 +408,11 @@ TYPED_TEST(ImplicitTest, EveryTinySceneRunsWithBothIntegrators) {
 
 TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     const nlohmann::json ok = {{"name", "plasticitynet"}, {"dt", 1e-3}, {"newton_tolerance", 1e-4},
-                               {"max_fixed_point_iterations", 3}, {"regularizer_weight", 0}};
+                               {"max_fixed_point_iterations", 3}, {"regularizer_weight", 0},
+                               {"preconditioner", "block_jacobi"}};
     const ImplicitOptions o = ImplicitOptions::from_json(ok, "s.json");
+    EXPECT_EQ(o.preconditioner, "block_jacobi");
+    EXPECT_EQ(ImplicitOptions::from_json(o.to_json(), "s.json").to_json(), o.to_json());
     EXPECT_EQ(o.newton_tolerance, 1e-4);
     EXPECT_EQ(o.max_fixed_point_iterations, 3);
     EXPECT_EQ(o.regularizer_weight, 0.0);
@@ -403,6 +425,8 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
         return std::string("accepted");
     };
     EXPECT_EQ(message({{"newton_tolerance", -1}}), "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
+    EXPECT_EQ(message({{"preconditioner", "ilu"}}),
+              "s.json: integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got \"ilu\"");
     EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),
               "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5");
     EXPECT_EQ(message({{"cg_tolerance", 2}}), "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2.000000");

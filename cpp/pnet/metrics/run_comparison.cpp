@@ -1,0 +1,217 @@
+#include "pnet/metrics/run_comparison.hpp"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <regex>
+
+#include "pnet/io/ply.hpp"
+#include "pnet/metrics/iou.hpp"
+
+namespace pnet {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Two grids of this many nodes (8 bytes each) are held at once: 2^27 nodes is 2 GiB in all.
+constexpr double kMaxGridNodes = double(1 << 27);
+
+/// The last component of a directory path, ignoring a trailing separator ("runs/sand/" -> "sand").
+std::string base_name(const std::string& dir) {
+    fs::path p = fs::absolute(fs::path(dir)).lexically_normal();
+    if (p.filename().empty()) p = p.parent_path();
+    return p.filename().string();
+}
+
+double positive_number(const nlohmann::json& j, const std::string& file, const char* key) {
+    if (!j.contains(key)) throw RunInputError(file + ": missing \"" + key + "\"");
+    const nlohmann::json& v = j.at(key);
+    if (!v.is_number() || !std::isfinite(v.get<double>()) || !(v.get<double>() > 0.0))
+        throw RunInputError(file + ": " + key + ": expected a positive number, got " + v.dump());
+    return v.get<double>();
+}
+
+std::array<double, 3> point(const nlohmann::json& j, const std::string& file, const char* key, int dim) {
+    if (!j.contains(key)) throw RunInputError(file + ": missing \"" + key + "\"");
+    const nlohmann::json& v = j.at(key);
+    bool ok = v.is_array() && v.size() == static_cast<std::size_t>(dim);
+    std::array<double, 3> p{};
+    for (int d = 0; ok && d < dim; ++d) {
+        ok = v[d].is_number() && std::isfinite(v[d].get<double>());
+        if (ok) p[d] = v[d].get<double>();
+    }
+    if (!ok)
+        throw RunInputError(file + ": " + key + ": expected " + std::to_string(dim) + " finite numbers, got " +
+                            v.dump());
+    return p;
+}
+
+bool same(double a, double b, double scale) {
+    return std::abs(a - b) <= 1e-9 * scale;
+}
+
+/// Errors, naming B's run.json and the field, if B cannot be compared frame by frame with A.
+void check_consistent(const RunInfo& a, const RunInfo& b) {
+    auto differs = [&](const std::string& field, const std::string& va, const std::string& vb) {
+        return RunInputError(b.json_file + ": " + field + " is " + vb + " but " + a.json_file + " has " + va +
+                             "; the runs cannot be compared");
+    };
+    auto list = [](const std::array<double, 3>& p, int dim) {
+        return nlohmann::json(std::vector<double>(p.begin(), p.begin() + dim)).dump();
+    };
+    if (a.dim != b.dim) throw differs("dim", std::to_string(a.dim), std::to_string(b.dim));
+    for (int d = 0; d < a.dim; ++d) {
+        const double extent = a.domain_max[d] - a.domain_min[d];
+        if (!same(a.domain_min[d], b.domain_min[d], extent))
+            throw differs("domain_min", list(a.domain_min, a.dim), list(b.domain_min, b.dim));
+        if (!same(a.domain_max[d], b.domain_max[d], extent))
+            throw differs("domain_max", list(a.domain_max, a.dim), list(b.domain_max, b.dim));
+    }
+    // Frames are paired by number, so they must be the same times.
+    if (!same(a.frame_dt, b.frame_dt, a.frame_dt))
+        throw differs("frame_dt", nlohmann::json(a.frame_dt).dump(), nlohmann::json(b.frame_dt).dump());
+}
+
+/// One frame's particle mass on the comparison grid; adds the particles put at the domain's edge to clamped.
+GridField rasterize_frame(const std::string& path, const RunInfo& run, double dx, std::size_t& clamped) {
+    PlyParticles p;
+    try {
+        // read_particles_ply's errors start with the path; requiring run.json's dim checks the file against it.
+        p = read_particles_ply(path, run.dim);
+    } catch (const std::runtime_error& e) {
+        throw RunInputError(e.what());
+    }
+    double total = 0.0;
+    for (double m : p.mass) total += m;
+    if (!(total > 0.0))
+        throw RunInputError(path + ": no particle mass to compare (" + std::to_string(p.size()) + " particles)");
+    std::size_t c = 0;
+    GridField g;
+    try {
+        g = rasterize_mass(run.dim, p.position, p.mass, run.domain_min.data(), run.domain_max.data(), dx, &c);
+    } catch (const std::invalid_argument& e) {
+        throw RunInputError(path + ": " + e.what());
+    }
+    clamped += c;
+    return g;
+}
+
+}  // namespace
+
+RunInfo read_run_info(const std::string& dir) {
+    RunInfo run;
+    run.dir = dir;
+    run.name = base_name(dir);
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec))
+        throw RunInputError(dir + (fs::exists(dir, ec) ? ": not a directory" : ": no such directory"));
+    run.json_file = (fs::path(dir) / "run.json").string();
+    std::ifstream in(run.json_file);
+    if (!in) throw RunInputError(run.json_file + ": cannot read (is " + dir + " the output of pnet simulate?)");
+    nlohmann::json j;
+    try {
+        j = nlohmann::json::parse(in);
+    } catch (const nlohmann::json::exception& e) {
+        throw RunInputError(run.json_file + ": not valid JSON: " + e.what());
+    }
+    if (!j.is_object()) throw RunInputError(run.json_file + ": expected a JSON object");
+    if (!j.contains("dim")) throw RunInputError(run.json_file + ": missing \"dim\"");
+    const nlohmann::json& dim = j.at("dim");
+    if (!dim.is_number_integer() || (dim.get<int>() != 2 && dim.get<int>() != 3))
+        throw RunInputError(run.json_file + ": dim: expected 2 or 3, got " + dim.dump());
+    run.dim = dim.get<int>();
+    run.domain_min = point(j, run.json_file, "domain_min", run.dim);
+    run.domain_max = point(j, run.json_file, "domain_max", run.dim);
+    for (int d = 0; d < run.dim; ++d)
+        if (!(run.domain_max[d] > run.domain_min[d]))
+            throw RunInputError(run.json_file + ": domain_max: must exceed domain_min on every axis, got " +
+                                j.at("domain_max").dump() + " and " + j.at("domain_min").dump());
+    run.dx = positive_number(j, run.json_file, "dx");
+    run.frame_dt = positive_number(j, run.json_file, "frame_dt");
+
+    // frame_NNNNN.ply: at least 5 digits (%05d); temporary files of an atomic write (".tmp.<pid>") do not match.
+    static const std::regex frame_name(R"(frame_(\d{5,9})\.ply)");
+    for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
+        std::smatch m;
+        const std::string name = e.path().filename().string();
+        if (std::regex_match(name, m, frame_name)) run.frames[std::stoi(m[1].str())] = e.path().string();
+    }
+    if (ec) throw RunInputError(dir + ": cannot list the directory: " + ec.message());
+    return run;
+}
+
+RunPair pair_runs(const std::string& dir_a, const std::string& dir_b, double dx) {
+    RunPair pair;
+    pair.a = read_run_info(dir_a);
+    pair.b = read_run_info(dir_b);
+    const RunInfo& a = pair.a;
+    const RunInfo& b = pair.b;
+    check_consistent(a, b);
+    pair.dx = dx > 0.0 ? dx : a.dx;
+    double nodes = 1.0;
+    for (int d = 0; d < a.dim; ++d) nodes *= std::ceil((a.domain_max[d] - a.domain_min[d]) / pair.dx) + 1.0;
+    if (nodes > kMaxGridNodes)
+        throw RunInputError("dx = " + nlohmann::json(pair.dx).dump() + " gives a grid of " +
+                            nlohmann::json(nodes).dump() + " nodes; choose a coarser --dx");
+
+    for (const auto& [frame, path] : a.frames) (b.frames.count(frame) ? pair.common : pair.only_a).push_back(frame);
+    for (const auto& [frame, path] : b.frames)
+        if (!a.frames.count(frame)) pair.only_b.push_back(frame);
+    if (pair.common.empty())
+        throw RunInputError("no frame_NNNNN.ply present in both " + a.dir + " (" +
+                            (a.frames.empty() ? "none" : frame_ranges(pair.only_a)) + ") and " + b.dir + " (" +
+                            (b.frames.empty() ? "none" : frame_ranges(pair.only_b)) + ")");
+    return pair;
+}
+
+RunComparison compare_runs(const RunPair& pair, const std::function<void(std::size_t, std::size_t)>& progress) {
+    const RunInfo& a = pair.a;
+    const RunInfo& b = pair.b;
+    RunComparison c;
+    c.dir_a = a.dir;
+    c.dir_b = b.dir;
+    c.name_a = a.name;
+    c.name_b = b.name;
+    c.dim = a.dim;
+    c.dx = pair.dx;
+    c.only_a = pair.only_a;
+    c.only_b = pair.only_b;
+    c.frames.reserve(pair.common.size());
+    for (std::size_t k = 0; k < pair.common.size(); ++k) {
+        const int frame = pair.common[k];
+        const std::string& path_a = a.frames.at(frame);
+        const std::string& path_b = b.frames.at(frame);
+        const GridField ga = rasterize_frame(path_a, a, pair.dx, c.clamped_a);
+        const GridField gb = rasterize_frame(path_b, b, pair.dx, c.clamped_b);
+        IouResult r{};
+        try {
+            r = iou(ga, gb);
+        } catch (const std::invalid_argument& e) {
+            throw RunInputError(path_a + " vs " + path_b + ": " + e.what());
+        }
+        c.frames.push_back({frame, frame * a.frame_dt, r.soft, r.binary, r.plasticinelab});
+        if (progress) progress(k + 1, pair.common.size());
+    }
+    return c;
+}
+
+RunComparison compare_runs(const std::string& dir_a, const std::string& dir_b, double dx,
+                           const std::function<void(std::size_t, std::size_t)>& progress) {
+    return compare_runs(pair_runs(dir_a, dir_b, dx), progress);
+}
+
+std::string frame_ranges(const std::vector<int>& frames) {
+    std::string s;
+    for (std::size_t i = 0; i < frames.size();) {
+        std::size_t j = i;
+        while (j + 1 < frames.size() && frames[j + 1] == frames[j] + 1) ++j;
+        if (!s.empty()) s += ", ";
+        s += std::to_string(frames[i]);
+        if (j > i) s += "-" + std::to_string(frames[j]);
+        i = j + 1;
+    }
+    return s;
+}
+
+}  // namespace pnet
