@@ -31,7 +31,8 @@ constexpr const char* kUsage =
     "                     [--color speed|hardening] [--trust-model]\n"
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
-    "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi]\n";
+    "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi]\n"
+    "                     [--lazy-hessian R]\n";
 
 struct Options {
     std::string scene, out, integrator, color = "speed";
@@ -39,7 +40,7 @@ struct Options {
     int frames = -1, threads = 0, checkpoint_every = 10;
     bool resume = false, trust_model = false;
     // Implicit solver overrides (unset: the scene's value).
-    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer;
+    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian;
     std::optional<std::string> preconditioner;
     std::optional<int> fixed_point_iterations;
 };
@@ -90,6 +91,8 @@ Options parse(int argc, char** argv) {
             o.fixed_point_tol = number(value());
         else if (arg == "--regularizer")
             o.regularizer = number(value());
+        else if (arg == "--lazy-hessian")
+            o.lazy_hessian = number(value());
         else if (arg == "--preconditioner")
             o.preconditioner = value();
         else if (arg == "--fixed-point-iterations")
@@ -116,6 +119,8 @@ Options parse(int argc, char** argv) {
     if (o.cg_tol && !(*o.cg_tol > 0.0 && *o.cg_tol < 1.0)) throw UsageError("--cg-tol must be in (0, 1)");
     if (o.fixed_point_tol && !(*o.fixed_point_tol >= 0.0)) throw UsageError("--fixed-point-tol must be >= 0");
     if (o.regularizer && !(*o.regularizer >= 0.0)) throw UsageError("--regularizer must be >= 0");
+    if (o.lazy_hessian && !(*o.lazy_hessian >= 0.0 && *o.lazy_hessian < 1.0))
+        throw UsageError("--lazy-hessian must be in [0, 1)");
     if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi")
         throw UsageError("--preconditioner: expected jacobi or block_jacobi, got \"" + *o.preconditioner + "\"");
     if (o.fixed_point_iterations && *o.fixed_point_iterations < 1)
@@ -287,6 +292,7 @@ int simulate_command(int argc, char** argv) {
         if (o.fixed_point_tol) settings.implicit.fixed_point_tolerance = *o.fixed_point_tol;
         if (o.regularizer) settings.implicit.regularizer_weight = *o.regularizer;
         if (o.preconditioner) settings.implicit.preconditioner = *o.preconditioner;
+        if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         load_scene_models(scene, o.trust_model, settings);
         return scene.dim == 2 ? run<2>(scene, o, settings) : run<3>(scene, o, settings);

@@ -197,12 +197,13 @@ def test_implicit_integrators_run_every_tiny_scene(tmp_path, name, integrator):
 def test_implicit_options_override_the_scene(tmp_path):
     out = tmp_path / "run"
     r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--fixed-point-iterations", 1,
-             "--regularizer", 0, "--newton-tol", 1e-4, "--dt", 2e-3, "--preconditioner", "block_jacobi", "--out", out)
+             "--regularizer", 0, "--newton-tol", 1e-4, "--dt", 2e-3, "--preconditioner", "block_jacobi", "--lazy-hessian", 0, "--out", out)
     assert r.returncode == 0, r.stderr
     run = json.loads((out / "run.json").read_text())
     assert run["integrator"] == "plasticitynet" and run["dt"] == 2e-3
     assert run["solver"]["max_fixed_point_iterations"] == 1 and run["solver"]["regularizer_weight"] == 0
     assert run["solver"]["newton_tolerance"] == 1e-4 and run["solver"]["preconditioner"] == "block_jacobi"
+    assert run["solver"]["lazy_hessian"] == 0
     steps = (out / "steps.csv").read_text().splitlines()[1:]
     assert len(steps) == 10 and all(line.split(",")[13] == "1" for line in steps)
 
@@ -213,6 +214,7 @@ def test_implicit_options_override_the_scene(tmp_path):
     (["--regularizer", -1], "--regularizer must be >= 0"),
     (["--integrator", "implicit"], "--integrator: expected explicit, plasticitynet or lagged"),
     (["--preconditioner", "ilu"], '--preconditioner: expected jacobi or block_jacobi, got "ilu"'),
+    (["--lazy-hessian", 1], "--lazy-hessian must be in [0, 1)"),
 ])
 def test_implicit_usage_errors(tmp_path, args, expected):
     r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", *args)

@@ -44,6 +44,10 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     o.max_fixed_point_iterations =
         read_option(block, "max_fixed_point_iterations", o.max_fixed_point_iterations, context, 1, "an integer >= 1");
     o.regularizer_weight = read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
+    o.lazy_hessian = read_option(block, "lazy_hessian", o.lazy_hessian, context, 0.0, "a number in [0, 1)");
+    if (o.lazy_hessian >= 1.0)
+        throw std::invalid_argument(context + ": integrator.lazy_hessian: expected a number in [0, 1), got " +
+                                    nlohmann::json(o.lazy_hessian).dump());
     if (const auto it = block.find("preconditioner"); it != block.end()) {
         if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi"))
             throw std::invalid_argument(context + ": integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got " +
@@ -61,7 +65,8 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"fixed_point_tolerance", fixed_point_tolerance},
             {"max_fixed_point_iterations", max_fixed_point_iterations},
             {"regularizer_weight", regularizer_weight},
-            {"preconditioner", preconditioner}};
+            {"preconditioner", preconditioner},
+            {"lazy_hessian", lazy_hessian}};
 }
 
 template <int dim>
@@ -98,6 +103,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.residual_scale = potential_.residual_scale();
     newton.scale_by_hessian_diagonal = true;  // |g_i| / H_ii: a velocity correction, m/s
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
+    newton.lazy_hessian = options_.lazy_hessian;
 
     v_ = potential_.v_star();
     const bool fixed_point = method_ == ImplicitMethod::PlasticityNet;

@@ -51,6 +51,8 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     if (!std::isfinite(energy) || !g.allFinite())
         throw NewtonError(where(context, 0, residual) + "the energy or its gradient is not finite at the start");
     const double g0 = std::max(g.norm(), 1e-300);
+    // Whether the next trial point re-forms the Hessian (always, unless lazy_hessian > 0).
+    bool fresh_hessian = !(options.lazy_hessian > 0.0);
 
     for (int it = 0; it < options.max_iterations; ++it) {
         if (residual <= options.tolerance) {
@@ -74,7 +76,12 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
 
         // The full step first, with its gradient and Hessian.
         x_trial = x + d;
-        const double e_full = objective.value_gradient_hessian(x_trial, g_trial);
+        // A lazy Hessian is kept (value_gradient leaves it) while the iterations converge fast.
+        const bool refresh = fresh_hessian;
+        const double residual_before = residual;
+        bool halved = false;
+        const double e_full = refresh ? objective.value_gradient_hessian(x_trial, g_trial)
+                                      : objective.value_gradient(x_trial, g_trial);
         ++stats.line_search_steps;
         const bool full_finite = std::isfinite(e_full) && g_trial.allFinite();
         // Near the solution the decrease g.d falls below the round-off of E: the
@@ -92,6 +99,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         } else {
             double alpha = 0.5, trial = e_full;
             bool decreased = false;
+            halved = true;
             for (int halvings = 1; halvings <= options.max_line_search; ++halvings) {
                 x_trial = x + alpha * d;
                 trial = objective.value(x_trial);
@@ -104,7 +112,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             }
             if (decreased) {
                 x.swap(x_trial);
-                energy = objective.value_gradient_hessian(x, g);
+                energy = refresh ? objective.value_gradient_hessian(x, g) : objective.value_gradient(x, g);
                 if (!std::isfinite(energy) || !g.allFinite())
                     throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
             } else if (lowers_gradient && std::abs(e_full - energy) <= 1e-8 * std::max(std::abs(energy), 1.0)) {
@@ -123,6 +131,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         }
         objective.hessian_diagonal(diagonal);  // at the new iterate (its Hessian is prepared)
         residual = scaled_residual(g, options, diagonal);
+        fresh_hessian = !(options.lazy_hessian > 0.0) || halved || residual > options.lazy_hessian * residual_before;
         stats.iterations = it + 1;
         stats.energy = energy;
         stats.residual = residual;

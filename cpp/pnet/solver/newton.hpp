@@ -12,6 +12,10 @@
 //   lowers E, the full step is still taken when it lowers |g| and changes E by less
 //   than 1e-8 max(|E|, 1) (E's round-off exceeds eps |E| when large terms cancel);
 //   otherwise the line search has stalled.
+// With lazy_hessian > 0 an iterate reached by a full step that cut the residual
+// by that factor is evaluated by value_gradient() and keeps the previous
+// Hessian (a chord / Shamanskii step): for a learned energy the Hessian pass
+// costs about twice the gradient pass.
 #include <stdexcept>
 #include <string>
 
@@ -38,6 +42,12 @@ struct NewtonOptions {
     /// Block Jacobi (the objective's hessian_block_diagonal(), when its block
     /// size is > 1) instead of Jacobi.
     bool block_preconditioner = false;
+    /// Lazy Hessian: > 0 keeps the last Hessian at the next iterate (a value and
+    /// gradient pass instead of a Hessian pass) as long as the previous
+    /// iteration took the full step and cut the scaled residual by at least
+    /// this factor; otherwise it is re-formed. 0: a fresh Hessian at every
+    /// iterate (Newton).
+    double lazy_hessian = 0.0;
 };
 
 struct NewtonStats {

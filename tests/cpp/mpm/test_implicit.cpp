@@ -409,9 +409,11 @@ TYPED_TEST(ImplicitTest, EveryTinySceneRunsWithBothIntegrators) {
 TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     const nlohmann::json ok = {{"name", "plasticitynet"}, {"dt", 1e-3}, {"newton_tolerance", 1e-4},
                                {"max_fixed_point_iterations", 3}, {"regularizer_weight", 0},
-                               {"preconditioner", "block_jacobi"}};
+                               {"preconditioner", "block_jacobi"}, {"lazy_hessian", 0}};
     const ImplicitOptions o = ImplicitOptions::from_json(ok, "s.json");
     EXPECT_EQ(o.preconditioner, "block_jacobi");
+    EXPECT_EQ(o.lazy_hessian, 0.0);
+    EXPECT_EQ(ImplicitOptions{}.lazy_hessian, 0.5);
     EXPECT_EQ(ImplicitOptions::from_json(o.to_json(), "s.json").to_json(), o.to_json());
     EXPECT_EQ(o.newton_tolerance, 1e-4);
     EXPECT_EQ(o.max_fixed_point_iterations, 3);
@@ -425,6 +427,7 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
         return std::string("accepted");
     };
     EXPECT_EQ(message({{"newton_tolerance", -1}}), "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
+    EXPECT_EQ(message({{"lazy_hessian", 1}}), "s.json: integrator.lazy_hessian: expected a number in [0, 1), got 1.0");
     EXPECT_EQ(message({{"preconditioner", "ilu"}}),
               "s.json: integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got \"ilu\"");
     EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),

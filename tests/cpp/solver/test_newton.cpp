@@ -222,6 +222,27 @@ TEST(Newton, ConvexChainConvergesAndEveryStepLowersTheEnergy) {
     }
 }
 
+// A lazy Hessian reaches the same minimizer with fewer Hessian passes, and
+// every accepted step still lowers E.
+TEST(Newton, LazyHessianConvergesToTheSameMinimizerWithFewerHessians) {
+    for (unsigned seed : {1u, 2u, 3u}) {
+        Chain exact(60, seed), lazy(60, seed);
+        VecX x_exact = VecX::Zero(60), x_lazy = VecX::Zero(60);
+        NewtonOptions options;
+        options.tolerance = 1e-10;
+        const NewtonStats s_exact = minimize(exact, x_exact, options, "chain");
+        options.lazy_hessian = 0.5;
+        const NewtonStats s_lazy = minimize(lazy, x_lazy, options, "chain");
+        EXPECT_TRUE(s_lazy.converged) << "seed " << seed;
+        EXPECT_LT((x_lazy - x_exact).lpNorm<Eigen::Infinity>(), 1e-8);
+        EXPECT_LT(lazy.hessians, s_lazy.iterations + 1) << "some iterates kept the Hessian";
+        EXPECT_LT(lazy.hessians, exact.hessians);
+        for (std::size_t i = 1; i < lazy.energies.size(); ++i)
+            EXPECT_LE(lazy.energies[i], lazy.energies[i - 1] + 1e-13 * std::abs(lazy.energies[i - 1]));
+        EXPECT_TRUE(s_exact.converged);
+    }
+}
+
 TEST(Newton, ResidualScaleTurnsForcesIntoVelocities) {
     Chain chain(10, 5);
     VecX x = VecX::Zero(10), g;
