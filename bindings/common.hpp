@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "pnet/math/types.hpp"
+#include "pnet/metrics/iou.hpp"
 
 namespace pnet::bindings {
 
@@ -73,5 +74,9 @@ namespace pnet::bindings {
 
 /// A str or os.PathLike as a path string (os.fspath).
 std::string path_string(const py::handle& obj);
+
+/// A nodal field as a new array of shape (nodes_x, nodes_y[, nodes_z]), index
+/// [i, j(, k)] = node (i, j, k) (metrics.cpp).
+py::array to_numpy(const GridField& field);
 
 }  // namespace pnet::bindings

@@ -33,6 +33,16 @@ GridField field(const py::handle& obj, const std::string& name) {
 
 }  // namespace
 
+py::array to_numpy(const GridField& g) {
+    const int n0 = g.nodes[0], n1 = g.nodes[1], n2 = g.nodes[2];
+    py::array_t<double> out = g.dim == 2 ? py::array_t<double>({n0, n1}) : py::array_t<double>({n0, n1, n2});
+    double* data = out.mutable_data();
+    for (int i = 0; i < n0; ++i)
+        for (int j = 0; j < n1; ++j)
+            for (int k = 0; k < n2; ++k) data[(static_cast<std::size_t>(i) * n1 + j) * n2 + k] = g.value[g.index(i, j, k)];
+    return std::move(out);
+}
+
 void define_metrics(py::module_& m) {
     m.def(
         "iou",
@@ -68,14 +78,7 @@ non-finite values, an all-zero field, or different shapes.)doc");
                 py::gil_scoped_release release;
                 g = rasterize_mass(d, xs, ms, domain_min.data(), domain_max.data(), dx);
             }
-            const int n0 = g.nodes[0], n1 = g.nodes[1], n2 = g.nodes[2];
-            py::array_t<double> out = d == 2 ? py::array_t<double>({n0, n1}) : py::array_t<double>({n0, n1, n2});
-            double* data = out.mutable_data();
-            for (int i = 0; i < n0; ++i)
-                for (int j = 0; j < n1; ++j)
-                    for (int k = 0; k < n2; ++k)
-                        data[(static_cast<std::size_t>(i) * n1 + j) * n2 + k] = g.value[g.index(i, j, k)];
-            return out;
+            return to_numpy(g);
         },
         py::arg("positions"), py::arg("mass"), py::arg("domain_min"), py::arg("domain_max"), py::arg("dx"),
         R"doc(Nodal mass (kg) of particles (positions (n, d) m, mass (n,) kg) with the

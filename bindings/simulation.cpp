@@ -17,26 +17,33 @@ namespace {
 /// Thrown from between two steps when Python has a pending signal (Ctrl-C).
 struct Interrupted {};
 
+/// Calls f(name, member pointer) for every StepStats field Python sees (one
+/// table for step() and step_stats()).
+template <typename F>
+void for_each_step_field(F&& f) {
+    f("dt", &StepStats::dt);
+    f("wall_s", &StepStats::wall_seconds);
+    f("p2g_s", &StepStats::p2g_seconds);
+    f("solve_s", &StepStats::grid_seconds);
+    f("g2p_s", &StepStats::g2p_seconds);
+    f("energy_s", &StepStats::energy_seconds);
+    f("cg_s", &StepStats::cg_seconds);
+    f("newton_iterations", &StepStats::newton_iterations);
+    f("cg_iterations", &StepStats::cg_iterations);
+    f("line_search_steps", &StepStats::line_search_steps);
+    f("fixed_point_iterations", &StepStats::fixed_point_iterations);
+    f("fixed_point_change", &StepStats::fixed_point_change);
+    f("initial_residual", &StepStats::initial_residual);
+    f("residual", &StepStats::residual);
+    f("energy", &StepStats::energy);
+    f("converged", &StepStats::converged);
+    f("clamped", &StepStats::clamped);
+    f("max_grid_speed", &StepStats::max_grid_speed);
+}
+
 py::dict to_dict(const StepStats& s) {
     py::dict d;
-    d["dt"] = s.dt;
-    d["wall_s"] = s.wall_seconds;
-    d["p2g_s"] = s.p2g_seconds;
-    d["solve_s"] = s.grid_seconds;
-    d["g2p_s"] = s.g2p_seconds;
-    d["energy_s"] = s.energy_seconds;
-    d["cg_s"] = s.cg_seconds;
-    d["newton_iterations"] = s.newton_iterations;
-    d["cg_iterations"] = s.cg_iterations;
-    d["line_search_steps"] = s.line_search_steps;
-    d["fixed_point_iterations"] = s.fixed_point_iterations;
-    d["fixed_point_change"] = s.fixed_point_change;
-    d["initial_residual"] = s.initial_residual;
-    d["residual"] = s.residual;
-    d["energy"] = s.energy;
-    d["converged"] = s.converged;
-    d["clamped"] = s.clamped;
-    d["max_grid_speed"] = s.max_grid_speed;
+    for_each_step_field([&](const char* name, auto member) { d[name] = s.*member; });
     return d;
 }
 
@@ -60,13 +67,15 @@ py::dict to_dict(const FrameStats& f) {
     return d;
 }
 
-/// One column of the step history as a numpy array.
-template <typename T, typename Field>
-py::array_t<T> column(const std::vector<StepStats>& steps, Field field) {
-    py::array_t<T> a(static_cast<py::ssize_t>(steps.size()));
-    T* out = a.mutable_data();
-    for (std::size_t k = 0; k < steps.size(); ++k) out[k] = static_cast<T>(steps[k].*field);
-    return a;
+/// One column of the step history as a numpy array: float64, int64 or bool.
+template <typename T>
+py::array column(const std::vector<StepStats>& steps, T StepStats::*member) {
+    using Out = std::conditional_t<std::is_same_v<T, bool>, bool,
+                                   std::conditional_t<std::is_integral_v<T>, std::int64_t, double>>;
+    py::array_t<Out> a(static_cast<py::ssize_t>(steps.size()));
+    Out* out = a.mutable_data();
+    for (std::size_t k = 0; k < steps.size(); ++k) out[k] = static_cast<Out>(steps[k].*member);
+    return std::move(a);
 }
 
 /// A read-only numpy view of `count` records of `record_bytes` each, whose
@@ -165,24 +174,7 @@ public:
 
     py::dict step_stats() const {
         py::dict d;
-        d["dt"] = column<double>(history_, &StepStats::dt);
-        d["wall_s"] = column<double>(history_, &StepStats::wall_seconds);
-        d["p2g_s"] = column<double>(history_, &StepStats::p2g_seconds);
-        d["solve_s"] = column<double>(history_, &StepStats::grid_seconds);
-        d["g2p_s"] = column<double>(history_, &StepStats::g2p_seconds);
-        d["energy_s"] = column<double>(history_, &StepStats::energy_seconds);
-        d["cg_s"] = column<double>(history_, &StepStats::cg_seconds);
-        d["newton_iterations"] = column<std::int64_t>(history_, &StepStats::newton_iterations);
-        d["cg_iterations"] = column<std::int64_t>(history_, &StepStats::cg_iterations);
-        d["line_search_steps"] = column<std::int64_t>(history_, &StepStats::line_search_steps);
-        d["fixed_point_iterations"] = column<std::int64_t>(history_, &StepStats::fixed_point_iterations);
-        d["fixed_point_change"] = column<double>(history_, &StepStats::fixed_point_change);
-        d["initial_residual"] = column<double>(history_, &StepStats::initial_residual);
-        d["residual"] = column<double>(history_, &StepStats::residual);
-        d["energy"] = column<double>(history_, &StepStats::energy);
-        d["converged"] = column<bool>(history_, &StepStats::converged);
-        d["clamped"] = column<std::int64_t>(history_, &StepStats::clamped);
-        d["max_grid_speed"] = column<double>(history_, &StepStats::max_grid_speed);
+        for_each_step_field([&](const char* name, auto member) { d[name] = column(history_, member); });
         return d;
     }
 
@@ -211,14 +203,7 @@ public:
             py::gil_scoped_release release;
             return rasterize_mass(d, x, p.mass, scene_.domain_min.data(), scene_.domain_max.data(), scene_.dx);
         });
-        // Index [i, j(, k)] = node (i, j, k): x first.
-        const int n0 = g.nodes[0], n1 = g.nodes[1], n2 = g.nodes[2];
-        py::array_t<double> out = dim() == 2 ? py::array_t<double>({n0, n1}) : py::array_t<double>({n0, n1, n2});
-        double* data = out.mutable_data();
-        for (int i = 0; i < n0; ++i)
-            for (int j = 0; j < n1; ++j)
-                for (int k = 0; k < n2; ++k) data[(static_cast<std::size_t>(i) * n1 + j) * n2 + k] = g.value[g.index(i, j, k)];
-        return std::move(out);
+        return to_numpy(g);
     }
 
 private:
