@@ -2,6 +2,7 @@
 // steps, particle arrays as numpy views, per-step statistics, checkpoints.
 #include <omp.h>
 
+#include <chrono>
 #include <memory>
 #include <variant>
 
@@ -148,8 +149,14 @@ public:
             bool interrupted = false;
             try {
                 py::gil_scoped_release release;
-                stats = visit([](auto& sim) {
-                    return sim.advance_frame([] {
+                // Signals are checked (which needs the GIL) at most every 20 ms, so
+                // that other Python threads get the GIL while short steps run.
+                auto last_check = std::chrono::steady_clock::now();
+                stats = visit([&](auto& sim) {
+                    return sim.advance_frame([&] {
+                        const auto now = std::chrono::steady_clock::now();
+                        if (now - last_check < std::chrono::milliseconds(20)) return;
+                        last_check = now;
                         py::gil_scoped_acquire acquire;
                         if (PyErr_CheckSignals() != 0) throw Interrupted{};
                     });
