@@ -74,7 +74,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             throw NewtonError(where(context, it, residual) + "the search direction is not a descent direction (g.d = " +
                               std::to_string(slope) + "); the Hessian is not positive definite");
 
-        // The full step first, with its gradient and Hessian.
+        // The full step first, with its gradient (and Hessian, unless a lazy one is kept).
         x_trial = x + d;
         // A lazy Hessian is kept (value_gradient leaves it) while the iterations converge fast.
         const bool refresh = fresh_hessian;
