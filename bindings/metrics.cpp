@@ -101,20 +101,20 @@ quadratic B-spline on the grid of nodes domain_min + i dx: an array of shape
             }
             const py::ssize_t n = static_cast<py::ssize_t>(c.frames.size());
             py::array_t<std::int64_t> frame(n);
-            py::array_t<double> time(n), soft(n), binary(n), plasticinelab(n);
-            for (py::ssize_t k = 0; k < n; ++k) {
-                frame.mutable_data()[k] = c.frames[k].frame;
-                time.mutable_data()[k] = c.frames[k].time;
-                soft.mutable_data()[k] = c.frames[k].soft;
-                binary.mutable_data()[k] = c.frames[k].binary;
-                plasticinelab.mutable_data()[k] = c.frames[k].plasticinelab;
-            }
             py::dict d;
+            for (py::ssize_t k = 0; k < n; ++k) frame.mutable_data()[k] = c.frames[k].frame;
             d["frame"] = frame;
-            d["time"] = time;
-            d["soft"] = soft;
-            d["binary"] = binary;
-            d["plasticinelab"] = plasticinelab;
+            const std::pair<const char*, double FrameIou::*> fields[] = {
+                {"time", &FrameIou::time},         {"soft", &FrameIou::soft},
+                {"binary", &FrameIou::binary},     {"plasticinelab", &FrameIou::plasticinelab},
+                {"soft_coarse", &FrameIou::soft_coarse}, {"spread_a", &FrameIou::spread_a},
+                {"spread_b", &FrameIou::spread_b}, {"height_a", &FrameIou::height_a},
+                {"height_b", &FrameIou::height_b}};
+            for (const auto& [name, field] : fields) {
+                py::array_t<double> values(n);
+                for (py::ssize_t k = 0; k < n; ++k) values.mutable_data()[k] = c.frames[k].*field;
+                d[name] = values;
+            }
             d["only_a"] = c.only_a;
             d["only_b"] = c.only_b;
             d["clamped_a"] = c.clamped_a;
@@ -125,7 +125,8 @@ quadratic B-spline on the grid of nodes domain_min + i dx: an array of shape
         py::arg("dir_a"), py::arg("dir_b"), py::arg("dx") = 0.0,
         R"doc(Compare two `pnet simulate` output directories frame by frame (what `pnet compare`
 computes): a dict of arrays over the frames both hold - frame, time (s), soft,
-binary and plasticinelab IoU - plus only_a / only_b (frames in one run only),
+binary and plasticinelab IoU, soft_coarse (soft IoU of the mass at 4 dx),
+spread_a / spread_b and height_a / height_b (deposit shape of each run, m) - plus only_a / only_b (frames in one run only),
 clamped_a / clamped_b (particle positions at the domain's edge) and dx, the
 grid spacing used (dx = 0: DIR_A's). FileNotFoundError for a missing
 directory, ValueError for runs that cannot be compared (naming the file and field).)doc");

@@ -39,6 +39,7 @@ PNET = ROOT / "build" / "cpp" / "pnet"
 # name: (integrator, dt, extra pnet options, group, scenes it applies to (None: all))
 RUNS = {
     "gt": ("explicit", 1e-5, [], "main", None),
+    "explicit_2e-5": ("explicit", 2e-5, [], "floor", None),
     "explicit_cfl": ("explicit", 0.0, [], "main", None),
     "plasticitynet_1e-3": ("plasticitynet", 1e-3, [], "main", None),
     "plasticitynet_1e-4": ("plasticitynet", 1e-4, [], "main", None),
@@ -56,9 +57,17 @@ RUNS = {
 }
 
 
-def run_marker(scene: str, command: list) -> dict:
-    """What a run's result depends on besides the simulator: the command and the scene file."""
-    scene_sha = hashlib.sha256((ROOT / "scenes" / f"{scene}.json").read_bytes()).hexdigest()
+def run_marker(scene: str, command: list, explicit: bool) -> dict:
+    """What a run's result depends on besides the simulator: the command and the scene file (for an
+    explicit run without its "integrator" block, which only sets the implicit solvers)."""
+    scene_json = json.loads((ROOT / "scenes" / f"{scene}.json").read_text())
+    if explicit:
+        scene_json.pop("integrator", None)
+    scene_sha = hashlib.sha256(json.dumps(scene_json, sort_keys=True).encode()).hexdigest()
+    # The binary and the output folder are not part of what a run computes (a run may be reused from
+    # another work folder through a link, or made by an older binary when only the implicit code changed).
+    i = command.index("--out")
+    command = command[2:i] + command[i + 2:]
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     return {"command": command, "scene_sha256": scene_sha, "commit": commit}  # commit: for the record only
 
@@ -71,12 +80,12 @@ def run_dir_complete(out: Path, marker: dict, frames: int) -> bool:
     return isinstance(old, dict) and all(old.get(k) == marker[k] for k in ("command", "scene_sha256"))
 
 
-def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force: bool) -> Path:
+def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force: bool, pnet: Path = None) -> Path:
     integrator, dt, extra, _, _ = RUNS[name]
     out = work / scene / name
-    command = [str(PNET), "simulate", str(ROOT / "scenes" / f"{scene}.json"), "--integrator", integrator,
+    command = [str(pnet or PNET), "simulate", str(ROOT / "scenes" / f"{scene}.json"), "--integrator", integrator,
                "--dt", repr(dt), "--frames", str(frames), "--threads", str(threads), "--out", str(out)] + extra
-    marker = run_marker(scene, command)
+    marker = run_marker(scene, command, integrator == "explicit")
     if not force and run_dir_complete(out, marker, frames):
         print(f"[{scene}/{name}] reusing {out}", flush=True)
         return out
@@ -147,13 +156,15 @@ def plot_scene(scene: str, curves: dict, path: Path):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=["sand_column_2d", "snowball_2d"])
-    parser.add_argument("--groups", nargs="+", default=["main", "ablation"], choices=["main", "ablation"])
+    parser.add_argument("--groups", nargs="+", default=["main", "floor"], choices=["main", "floor", "ablation"])
     parser.add_argument("--runs", nargs="+", help="only these runs (names as in the summary; gt is always run)")
     parser.add_argument("--frames", type=int, default=50)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--work", type=Path, default=ROOT / "out" / "eval")
     parser.add_argument("--results", type=Path, default=ROOT / "notebooks" / "results" / "implicit_eval")
     parser.add_argument("--force", action="store_true", help="re-run even when a complete run exists")
+    parser.add_argument("--pnet", type=Path, default=PNET, help="the pnet binary that simulates (default: the build's)")
+    parser.add_argument("--simulate-only", action="store_true", help="run the simulations, compare nothing")
     args = parser.parse_args()
     if not PNET.exists():
         sys.exit(f"{PNET} not found: build first (./scripts/setup.sh)")
@@ -166,12 +177,18 @@ def main():
         names = [n for n, (_, _, _, group, only) in RUNS.items()
                  if group in args.groups and (only is None or scene in only)
                  and (n == "gt" or not args.runs or n in args.runs)]
-        gt = simulate(scene, "gt", args.frames, args.threads, args.work, args.force)
+        gt = simulate(scene, "gt", args.frames, args.threads, args.work, args.force, args.pnet)
+        if args.simulate_only:
+            for name in names:
+                if name != "gt":
+                    simulate(scene, name, args.frames, args.threads, args.work, args.force, args.pnet)
+            continue
         curves = {}
         results = args.results / scene
         results.mkdir(parents=True, exist_ok=True)
         for name in names:
-            run = gt if name == "gt" else simulate(scene, name, args.frames, args.threads, args.work, args.force)
+            run = gt if name == "gt" else simulate(scene, name, args.frames, args.threads, args.work, args.force,
+                                                   args.pnet)
             figures = run_figures(run)
             # Per-step rows of an explicit run hold only timings (100k rows for the ground
             # truth); its per-frame stats.csv is kept, steps.csv stays in --work.

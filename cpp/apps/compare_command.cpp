@@ -125,23 +125,27 @@ int compare(const Options& o) {
                      "their mass was put at its edge\n",
                      c.clamped_a, a.dir.c_str(), c.clamped_b, b.dir.c_str());
 
-    std::string csv = "frame,time_s,soft_iou,binary_iou,plasticinelab_iou\n";
+    std::string csv =
+        "frame,time_s,soft_iou,binary_iou,plasticinelab_iou,soft_iou_coarse,spread_a_m,spread_b_m,height_a_m,"
+        "height_b_m\n";
     LinePlot plot;
     plot.title = "IoU: " + a.name + " vs " + b.name;
     plot.x_label = "time (s)";
     plot.y_label = "IoU";
     plot.y_min = 0.0;
     plot.y_max = 1.05;  // headroom, so that a curve at 1 does not run along the frame
-    plot.series = {{"soft IoU", {}, {}}, {"binary IoU", {}, {}}};
+    plot.series = {{"soft IoU", {}, {}}, {"binary IoU", {}, {}}, {"soft IoU at 4 dx", {}, {}}};
     for (const FrameIou& r : rows) {
-        char line[160];
-        std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.9g,%.9g\n", r.frame, r.time, r.soft, r.binary,
-                      r.plasticinelab);
+        char line[256];
+        std::snprintf(line, sizeof line, "%d,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g\n", r.frame, r.time, r.soft,
+                      r.binary, r.plasticinelab, r.soft_coarse, r.spread_a, r.spread_b, r.height_a, r.height_b);
         csv += line;
         plot.series[0].x.push_back(r.time);
         plot.series[0].y.push_back(r.soft);
         plot.series[1].x.push_back(r.time);
         plot.series[1].y.push_back(r.binary);
+        plot.series[2].x.push_back(r.time);
+        plot.series[2].y.push_back(r.soft_coarse);
     }
     const Image image = render_line_plot(plot);
 
@@ -162,6 +166,13 @@ int compare(const Options& o) {
                 rows[soft.argmin].time, soft.mean);
     std::printf("binary IoU: min %.4f at frame %d (t = %.4g s), mean %.4f\n", binary.min, rows[binary.argmin].frame,
                 rows[binary.argmin].time, binary.mean);
+    const Summary coarse = summarize(rows, &FrameIou::soft_coarse);
+    std::printf("soft IoU at %d dx: min %.4f at frame %d (t = %.4g s), mean %.4f\n", kCoarseFactor, coarse.min,
+                rows[coarse.argmin].frame, rows[coarse.argmin].time, coarse.mean);
+    const FrameIou& last = rows.back();
+    std::printf("deposit at frame %d: spread %.4f m vs %.4f m (%+.1f%%), height %.4f m vs %.4f m (%+.1f%%)\n",
+                last.frame, last.spread_b, last.spread_a, 100.0 * (last.spread_b / last.spread_a - 1.0), last.height_b,
+                last.height_a, 100.0 * (last.height_b / last.height_a - 1.0));
     std::printf("wrote %s and %s\n", (out / "iou.csv").string().c_str(), (out / "iou.png").string().c_str());
     return 0;
 }

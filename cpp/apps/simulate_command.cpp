@@ -2,7 +2,9 @@
 
 #include <omp.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -32,13 +34,13 @@ constexpr const char* kUsage =
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi]\n"
-    "                     [--lazy-hessian R]\n";
+    "                     [--lazy-hessian R] [--fail-on-unconverged]\n";
 
 struct Options {
     std::string scene, out, integrator, color = "speed";
-    double dt = -1.0, cfl = -1.0;
+    std::optional<double> dt, cfl;
     int frames = -1, threads = 0, checkpoint_every = 10;
-    bool resume = false, trust_model = false;
+    bool resume = false, trust_model = false, fail_on_unconverged = false;
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian;
     std::optional<std::string> preconditioner;
@@ -103,6 +105,8 @@ Options parse(int argc, char** argv) {
             o.resume = true;
         else if (arg == "--trust-model")
             o.trust_model = true;
+        else if (arg == "--fail-on-unconverged")
+            o.fail_on_unconverged = true;
         else if (!arg.empty() && arg[0] == '-')
             throw UsageError("unknown option " + arg);
         else if (o.scene.empty())
@@ -114,7 +118,9 @@ Options parse(int argc, char** argv) {
     if (o.out.empty()) throw UsageError("--out DIR is required");
     if (o.color != "speed" && o.color != "hardening") throw UsageError("--color: speed or hardening");
     if (o.frames == 0 || o.frames < -1) throw UsageError("--frames must be >= 1");
-    if (o.dt != -1.0 && !(o.dt >= 0.0)) throw UsageError("--dt must be >= 0 (0: the CFL step)");
+    if (o.dt && !(std::isfinite(*o.dt) && *o.dt >= 0.0))
+        throw UsageError("--dt must be a number >= 0 (seconds; 0: the CFL step)");
+    if (o.cfl && !(std::isfinite(*o.cfl) && *o.cfl > 0.0)) throw UsageError("--cfl must be a number > 0");
     if (o.newton_tol && !(*o.newton_tol > 0.0)) throw UsageError("--newton-tol must be > 0");
     if (o.cg_tol && !(*o.cg_tol > 0.0 && *o.cg_tol < 1.0)) throw UsageError("--cg-tol must be in (0, 1)");
     if (o.fixed_point_tol && !(*o.fixed_point_tol >= 0.0)) throw UsageError("--fixed-point-tol must be >= 0");
@@ -194,11 +200,11 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     std::string stats = "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y" +
                         std::string(dim == 3 ? ",momentum_z" : "") +
                         ",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,max_residual_m_per_s,"
-                        "converged\n";
+                        "converged,unconverged_steps,hardening_clamped\n";
     std::string steps_csv =
         "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
         "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
-        "energy_J,converged,clamped\n";
+        "energy_J,converged,clamped,line_search_failed,hardening_clamped\n";
     const fs::path steps_path = out / "steps.csv";
     auto keep_rows = [&](const fs::path& path, std::string& text) {
         if (!o.resume || !fs::exists(path)) return;
@@ -214,6 +220,9 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
 
     const auto start = std::chrono::steady_clock::now();
     const int first = sim.frame();
+    long run_steps = 0, run_unconverged = 0;
+    double run_worst_residual = 0.0;
+    std::size_t run_hardening_clamped = 0;
     while (sim.frame() < frames) {
         FrameStats f;
         try {
@@ -231,8 +240,13 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
                                 f.steps, f.dt_min, f.dt_max, f.wall_seconds, f.clamped, f.kinetic, f.potential,
                                 f.momentum[0], f.momentum[1]);
         if (dim == 3) len += std::snprintf(row + len, sizeof row - len, ",%.9g", f.momentum[2]);
-        std::snprintf(row + len, sizeof row - len, ",%ld,%ld,%ld,%ld,%.6g,%d", f.newton_iterations, f.cg_iterations,
-                      f.line_search_steps, f.fixed_point_iterations, f.max_residual, f.converged ? 1 : 0);
+        std::snprintf(row + len, sizeof row - len, ",%ld,%ld,%ld,%ld,%.6g,%d,%ld,%zu", f.newton_iterations,
+                      f.cg_iterations, f.line_search_steps, f.fixed_point_iterations, f.max_residual,
+                      f.converged ? 1 : 0, f.unconverged_steps, f.hardening_clamped);
+        run_steps += f.steps;
+        run_unconverged += f.unconverged_steps;
+        if (f.unconverged_steps > 0) run_worst_residual = std::max(run_worst_residual, f.max_residual);
+        run_hardening_clamped = std::max(run_hardening_clamped, f.hardening_clamped);
         stats += std::string(row) + "\n";
         double t = f.time;  // the frame's start time, from its step sizes
         for (const StepStats& s : sim.last_frame_steps()) t -= s.dt;
@@ -240,11 +254,11 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         for (const StepStats& s : sim.last_frame_steps()) {
             t += s.dt;
             std::snprintf(row, sizeof row,
-                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu\n",
+                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu\n",
                           f.frame, step++, t, s.dt, s.wall_seconds, s.p2g_seconds, s.grid_seconds, s.g2p_seconds,
                           s.energy_seconds, s.cg_seconds, s.newton_iterations, s.cg_iterations, s.line_search_steps,
                           s.fixed_point_iterations, s.fixed_point_change, s.initial_residual, s.residual, s.energy,
-                          s.converged ? 1 : 0, s.clamped);
+                          s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped);
             steps_csv += row;
         }
         write_text_atomically(stats_path.string(), stats);
@@ -261,6 +275,20 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
                          per_frame, per_frame * (frames - sim.frame()));
     }
     std::fprintf(stderr, "\n");
+    if (implicit) {
+        if (run_unconverged > 0)
+            std::printf("warning: %ld of %ld steps ended with the Newton solve unconverged (largest residual %.3g m/s, "
+                        "tolerance %.3g m/s); they are marked converged = 0 in steps.csv "
+                        "(--fail-on-unconverged stops at the first)\n",
+                        run_unconverged, run_steps, run_worst_residual, settings.implicit.newton_tolerance);
+        else
+            std::printf("all %ld steps converged (Newton residual <= %.3g m/s)\n", run_steps,
+                        settings.implicit.newton_tolerance);
+        if (run_hardening_clamped > 0)
+            std::printf("note: up to %zu particles in a step had a hardening state outside the range the model was "
+                        "trained on (clamped; hardening_clamped in stats.csv)\n",
+                        run_hardening_clamped);
+    }
     std::printf("wrote %d frames (PLY + PNG), stats.csv, steps.csv and run.json to %s\n", frames, out.string().c_str());
     return 0;
 }
@@ -285,8 +313,9 @@ int simulate_command(int argc, char** argv) {
             if (o.integrator.empty()) throw;  // the scene's own name was checked when it was loaded
             throw UsageError(std::string("--") + e.what());
         }
-        if (o.dt >= 0.0) settings.dt = o.dt;
-        if (o.cfl > 0.0) settings.cfl = o.cfl;
+        if (o.dt) settings.dt = *o.dt;
+        if (o.cfl) settings.cfl = *o.cfl;
+        if (o.fail_on_unconverged) settings.implicit.fail_on_unconverged = true;
         if (o.newton_tol) settings.implicit.newton_tolerance = *o.newton_tol;
         if (o.cg_tol) settings.implicit.cg_tolerance = *o.cg_tol;
         if (o.fixed_point_tol) settings.implicit.fixed_point_tolerance = *o.fixed_point_tol;

@@ -168,8 +168,30 @@ class LearnedEnergy:
         h = as_batch_hardening(self.training_material.initial_hardening if h is None else h, F.shape[0], F)
         return F, F0, h, single and single0
 
+    @property
+    def hardening_range(self) -> tuple[float, float] | None:
+        """The range of the network's hardening input in training (recipe.distribution.h_range; for
+        files that do not record it, DESIGN.md §3's: Cam-Clay [-0.5, 0] in 2D and [-1, 0] in 3D, von
+        Mises [0, 1]); None for a model without hardening input."""
+        if not self.has_hardening:
+            return None
+        rng = self.metadata.get("recipe", {}).get("distribution", {}).get("h_range")
+        if rng is not None:
+            return float(rng[0]), float(rng[1])
+        if self.training_material.plasticity.name == "cam_clay":
+            return (-0.5 if self.dim == 2 else -1.0), 0.0
+        return 0.0, 1.0
+
+    def network_hardening(self, h: torch.Tensor) -> torch.Tensor:
+        """The network's input for hardening states h (DESIGN.md §3, as the C++ simulator): Cam-Clay
+        h = min(a, 0), von Mises h itself, clamped to hardening_range."""
+        lo, hi = self.hardening_range
+        if self.training_material.plasticity.name == "cam_clay":
+            h = torch.clamp(h, max=0.0)
+        return torch.clamp(h, lo, hi)
+
     def _net_h(self, h):
-        return h if self.has_hardening else None
+        return self.network_hardening(h) if self.has_hardening else None
 
     @property
     def mu(self) -> float:

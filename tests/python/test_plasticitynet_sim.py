@@ -246,7 +246,10 @@ def test_model_matches_torch(model_name, dim, E):
     assert model.metadata["dim"] == dim and model.widths[-1] == 1
     F0 = random_F(16, dim, seed=1)
     F = F0 + 0.05 * np.random.default_rng(2).standard_normal((16, dim, dim))
-    h = -0.1 - 0.2 * np.random.default_rng(3).random(16)
+    # Hardening states inside and outside the trained range (snow: a > 0 and a below the range; metal:
+    # h > 1): both implementations feed the network the clamped h of DESIGN.md §3.
+    u = np.random.default_rng(3).random(16)
+    h = 0.02 + 1.3 * u if model_name.startswith("metal") else -1.5 + 2.5 * u
     for w in (0.0, 1.0):
         tF, tF0, th = (torch.from_numpy(a) for a in (F, F0, h))
         scale = abs(model.E)
@@ -265,6 +268,15 @@ def test_model_matches_torch(model_name, dim, E):
     assert np.allclose(model.gradient(F0, F0, h), model.stress(F0, h), rtol=0, atol=1e-9 * scale)
     assert np.allclose(model.stress(F0, h), reference.Ptilde(torch.from_numpy(F0), torch.from_numpy(h)).numpy(),
                        rtol=0, atol=1e-10 * scale)
+
+
+def test_network_hardening_input_is_min_of_the_state_clamped_to_the_trained_range():
+    reference = plasticitynet.load_model(MODELS / "snow_2d.pt", E=1.4e5)
+    assert reference.hardening_range == (-0.5, 0.0)
+    h = torch.tensor([2.0, 0.0, -0.2, -0.5, -1.29], dtype=torch.float64)
+    assert reference.network_hardening(h).tolist() == [0.0, 0.0, -0.2, -0.5, -0.5]
+    assert plasticitynet.load_model(MODELS / "metal_2d.pt").network_hardening(
+        torch.tensor([0.05, 1.7], dtype=torch.float64)).tolist() == [0.05, 1.0]
 
 
 def test_return_map_model_matches_torch():
@@ -424,6 +436,9 @@ def test_compare_runs_matches_pnet_compare(tmp_path):
     assert r.returncode == 0, r.stderr
     rows = (tmp_path / "c" / "iou.csv").read_text().splitlines()[1:]
     assert np.allclose([float(row.split(",")[2]) for row in rows], result["soft"], rtol=1e-8)
+    assert np.allclose([float(row.split(",")[5]) for row in rows], result["soft_coarse"], rtol=1e-8)
+    assert result["soft_coarse"][0] == 1.0 and (result["soft_coarse"] > 0).all()
+    assert result["spread_a"][0] == result["spread_b"][0] > 0 and (result["height_a"] > 0).all()
     with pytest.raises(FileNotFoundError, match="nope"):
         pns.compare_runs(tmp_path / "a", tmp_path / "nope")
     (tmp_path / "empty").mkdir()

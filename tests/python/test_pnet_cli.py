@@ -179,8 +179,11 @@ def test_implicit_integrators_run_every_tiny_scene(tmp_path, name, integrator):
     assert run["solver"]["max_fixed_point_iterations"] >= 1 and run["solver"]["regularizer_weight"] == 1
     frames = (out / "stats.csv").read_text().splitlines()
     assert frames[0].endswith(",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
-                              "max_residual_m_per_s,converged")
-    assert len(frames) == 3 and all(row.endswith(",1") for row in frames[1:]), "every solve converged"
+                              "max_residual_m_per_s,converged,unconverged_steps,hardening_clamped")
+    frame_rows = [dict(zip(frames[0].split(","), row.split(","))) for row in frames[1:]]
+    assert len(frames) == 3 and all(r["converged"] == "1" and r["unconverged_steps"] == "0" for r in frame_rows), \
+        "every solve converged"
+    assert "all 40 steps converged" in r.stdout
     steps = (out / "steps.csv").read_text().splitlines()
     header = steps[0].split(",")
     assert len(steps) == 1 + 40, "one row per step: 2 frames of 20 steps at dt 1e-3"
@@ -215,6 +218,9 @@ def test_implicit_options_override_the_scene(tmp_path):
     (["--integrator", "implicit"], "--integrator: expected explicit, plasticitynet or lagged"),
     (["--preconditioner", "ilu"], '--preconditioner: expected jacobi or block_jacobi, got "ilu"'),
     (["--lazy-hessian", 1], "--lazy-hessian must be in [0, 1)"),
+    (["--dt", -1], "--dt must be a number >= 0"),
+    (["--dt", "nan"], "--dt must be a number >= 0"),
+    (["--cfl", 0], "--cfl must be a number > 0"),
 ])
 def test_implicit_usage_errors(tmp_path, args, expected):
     r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", *args)
@@ -239,3 +245,40 @@ def test_bad_solver_option_in_the_scene_names_the_key(tmp_path):
     r = pnet("simulate", path, "--out", tmp_path / "o")
     assert r.returncode == 2
     assert f"{path}: integrator.max_fixed_point_iterations: expected an integer >= 1, got 0" in r.stderr
+
+
+def test_unconverged_steps_are_counted_reported_and_can_fail_the_run(tmp_path):
+    # One Newton iteration per solve against a tolerance no iteration reaches: every step ends
+    # unconverged. The run goes on, marks the steps, and says so at the end; --fail-on-unconverged
+    # stops at the first such step instead, keeping the frames already written.
+    scene = tiny_scene("sand_column_2d")
+    scene["integrator"].update({"max_newton_iterations": 1, "newton_tolerance": 1e-9})
+    path = write_scene(tmp_path, scene)
+    out = tmp_path / "run"
+    r = pnet("simulate", path, "--frames", 1, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "warning: 20 of 20 steps ended with the Newton solve unconverged" in r.stdout, r.stdout
+    stats = (out / "stats.csv").read_text().splitlines()
+    row = dict(zip(stats[0].split(","), stats[1].split(",")))
+    assert row["converged"] == "0" and row["unconverged_steps"] == "20"
+    steps = (out / "steps.csv").read_text().splitlines()
+    assert all(dict(zip(steps[0].split(","), line.split(",")))["converged"] == "0" for line in steps[1:])
+
+    r = pnet("simulate", path, "--frames", 1, "--fail-on-unconverged", "--out", tmp_path / "strict")
+    assert r.returncode == 1
+    assert "error: step 0" in r.stderr and "did not converge" in r.stderr, r.stderr
+    assert (tmp_path / "strict" / "frame_00000.ply").exists()
+
+
+def test_a_model_trained_for_other_plasticity_parameters_is_refused(tmp_path):
+    # sand_2d.pt was trained for a 30 deg friction angle: a 35 deg scene would mix both.
+    scene = tiny_scene("sand_column_2d")
+    scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = 35
+    path = write_scene(tmp_path, scene)
+    r = pnet("simulate", path, "--frames", 1, "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert f"{path}: objects[0].model: " in r.stderr
+    assert "sand_2d.pt was trained for material.plasticity.friction_angle_deg = 30" in r.stderr
+    assert "the object's material has 35" in r.stderr, r.stderr
+    # lagged uses no model: the same scene runs.
+    assert pnet("simulate", path, "--integrator", "lagged", "--frames", 1, "--out", tmp_path / "l").returncode == 0

@@ -23,7 +23,9 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
           return FusedMlp(model.weights, kM);
       }()),
       training_material_(model.metadata.material),
+      metadata_(model.metadata),
       has_hardening_(model.metadata.has_hardening),
+      relative_(options.relative_to_reference),
       input_width_(model.metadata.input_width()),
       E_(options.youngs_modulus / model.metadata.training_E),
       w_(options.regularizer_weight),
@@ -52,26 +54,34 @@ template <int dim>
 void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const double* hardening, std::size_t n) {
     F0_.assign(F0, F0 + n);
     c_.resize(n);
-    inputs_.assign(n * input_width_, 0.0);
+    offset_.assign(n, 0.0);
+    inputs_.resize(n * input_width_);
     net_value_.resize(n);
     net_gradient_.resize(n * kM);
     const double h0 = training_material_.description().initial_hardening;
-    auto h_of = [&](std::size_t p) { return hardening ? hardening[p] : h0; };
-    for (std::size_t p = 0; p < n; ++p) {
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+    std::size_t clamped = 0;
+#pragma omp parallel for schedule(static) reduction(+ : clamped) if (count >= 1024)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
         double* x = &inputs_[p * input_width_];
         for (int i = 0; i < dim; ++i)
             for (int j = 0; j < dim; ++j) x[i * dim + j] = x[kM + i * dim + j] = F0[p](i, j);
-        if (has_hardening_) x[2 * kM] = h_of(p);
+        if (has_hardening_) {
+            bool outside = false;
+            x[2 * kM] = metadata_.network_hardening(hardening ? hardening[p] : h0, &outside);
+            clamped += outside;
+        }
     }
+    hardening_clamped_ = clamped;
     // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
     net_.evaluate(inputs_.data(), n, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
-    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
 #pragma omp parallel for schedule(static) if (count >= 64)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
-        const double h = h_of(p);
+        const double h = hardening ? hardening[p] : h0;
         const Mat<dim> P = return_map_ ? return_map_->elastoplastic_stress(F0[p], h)
                                        : training_material_.elastoplastic_stress(F0[p], h);
         for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - P(k / dim, k % dim);
+        if (relative_) offset_[p] = net_value_[p];  // N(F0, F0, h)
     }
 }
 
@@ -85,6 +95,7 @@ Mat<dim> NeuralElastoplasticEnergy<dim>::correction(std::size_t p) const {
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::load_inputs(const Mat<dim>* F) const {
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
+#pragma omp parallel for schedule(static) if (count >= 1024)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
         double* x = &inputs_[p * input_width_];
         for (int i = 0; i < dim; ++i)
@@ -92,7 +103,9 @@ void NeuralElastoplasticEnergy<dim>::load_inputs(const Mat<dim>* F) const {
     }
 }
 
-/// psi = E (N - c : F + w mu/2 |F - F0|^2); gradient = E (grad N - c + w mu (F - F0)).
+/// psi = E (N - c : F + w mu/2 |F - F0|^2); gradient = E (grad N - c + w mu (F - F0)). Relative to the
+/// reference, psi - Psi(F0) = E ((N - N0) - c : (F - F0) + w mu/2 |F - F0|^2), summed in that form so that
+/// no large constant is formed and cancelled.
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
     const double wmu = w_ * mu_train_;
@@ -102,11 +115,11 @@ void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<
         double cF = 0.0, dF2 = 0.0;
         for (int k = 0; k < kM; ++k) {
             const double Fk = F[p](k / dim, k % dim), dFk = Fk - F0_[p](k / dim, k % dim);
-            cF += c_[p][k] * Fk;
+            cF += c_[p][k] * (relative_ ? dFk : Fk);
             dF2 += dFk * dFk;
             if (gradient) (*(gradient + p))(k / dim, k % dim) = E_ * (net_gradient_[p * kM + k] - c_[p][k] + wmu * dFk);
         }
-        psi[p] = E_ * (net_value_[p] - cF + 0.5 * wmu * dF2);
+        psi[p] = E_ * ((net_value_[p] - offset_[p]) - cF + 0.5 * wmu * dF2);  // offset_: N0 or 0
     }
 }
 

@@ -7,7 +7,10 @@
 //
 // so that grad_F Psi(F0) = E Ptilde(F0, h) exactly. N, Ptilde and mu are at
 // the training Young's modulus (1: the net is dimensionless) and E is the
-// scene's. c is computed once per optimization (set_reference()); within it,
+// scene's. The network's hardening input is the h of DESIGN.md §3 for the
+// particle's state (Cam-Clay: min(a, 0)), clamped to the range the model was
+// trained on (ModelMetadata::network_hardening); Ptilde(F0, h) in c uses the
+// state itself, so grad Psi(F0) stays exact where the input was clamped. c is computed once per optimization (set_reference()); within it,
 // the line search asks for values, Newton for gradients and Hessians
 //   d2 Psi / dF2 = E [ Hess_F N + w mu I ]   (d^2 x d^2, row-major vec(F) basis),
 // optionally projected to positive semi-definite (eigenvalue clamp).
@@ -31,6 +34,11 @@ public:
     struct Options {
         double youngs_modulus = 1.0;     // E of the scene's material, Pa
         double regularizer_weight = 1.0; // w of eq. 11 (0: the paper's eq. 8 alone)
+        /// Report Psi(F) - Psi(F0) (same gradient and Hessian): the constant
+        /// N(F0, F0, h) - c : F0 is of the size of the elastic energy density
+        /// at E, so an incremental potential summed over many particles would
+        /// carry a large constant whose round-off hides the step's changes.
+        bool relative_to_reference = false;
     };
 
     /// Throws std::invalid_argument (naming the model file) unless `model` is a
@@ -41,6 +49,9 @@ public:
     /// their constants c. h is ignored by models without hardening input.
     void set_reference(const Mat<dim>* F0, const double* hardening, std::size_t n);
     std::size_t size() const { return F0_.size(); }
+    /// Particles of the last set_reference() whose hardening input was outside
+    /// the trained range (and was clamped to it).
+    std::size_t hardening_clamped() const { return hardening_clamped_; }
 
     /// Psi per particle (the line search).
     void value(const Mat<dim>* F, double* psi) const;
@@ -71,7 +82,9 @@ private:
     FusedMlp net_;
     Material<dim> training_material_;
     std::shared_ptr<const LearnedReturnMap<dim>> return_map_;
+    ModelMetadata metadata_;
     bool has_hardening_;
+    bool relative_;
     int input_width_;
     double E_;          // scene E / training E
     double w_;
@@ -79,6 +92,8 @@ private:
 
     std::vector<Mat<dim>> F0_;
     std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)
+    std::vector<double> offset_;                   // Psi(F0) / E when relative_, else 0
+    std::size_t hardening_clamped_ = 0;
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> inputs_, net_value_, net_gradient_;

@@ -28,12 +28,6 @@ void ElasticParticleEnergy<dim>::evaluate(const std::vector<Mat<dim>>& F, typena
     }
 }
 
-namespace {
-
-bool same_number(double a, double b) { return std::abs(a - b) <= 1e-9 * std::max(std::abs(a), std::abs(b)); }
-
-}  // namespace
-
 template <int dim>
 NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
                                                 const std::vector<Material<dim>>& materials,
@@ -45,22 +39,22 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
             throw std::invalid_argument(context[k] + ": the plasticitynet integrator needs an energy model for "
                                                      "every object (none given)");
         const ModelFile& model = *models[k];
-        const MaterialDescription& trained = model.metadata.material;
+        // A model is used only for the material it was trained for (DESIGN.md §4.1): the correction c
+        // uses the model's return mapping, G2P the scene's, so any difference would mix two materials.
+        const std::vector<MaterialDifference> differences =
+            constitutive_differences(model.metadata.material, materials[k].description());
+        if (!differences.empty()) {
+            const MaterialDifference& d = differences.front();
+            throw std::invalid_argument(context[k] + ": " + model.path + " was trained for material." + d.field +
+                                        " = " + d.first + ", the object's material has " + d.second +
+                                        " (a model is used only for the material it was trained for)");
+        }
         const MaterialDescription& scene = materials[k].description();
-        std::string mismatch;
-        if (trained.elasticity != scene.elasticity)
-            mismatch = "elasticity " + to_string(trained.elasticity) + ", the object's is " + to_string(scene.elasticity);
-        else if (trained.plasticity != scene.plasticity)
-            mismatch = "plasticity " + to_string(trained.plasticity) + ", the object's is " + to_string(scene.plasticity);
-        else if (!same_number(trained.elastic.nu, scene.elastic.nu))
-            mismatch = "Poisson ratio " + std::to_string(trained.elastic.nu) + ", the object's is " +
-                       std::to_string(scene.elastic.nu);
-        if (!mismatch.empty())
-            throw std::invalid_argument(context[k] + ": " + model.path + " was trained for " + mismatch);
         Group group;
         try {
             group.energy = std::make_unique<NeuralElastoplasticEnergy<dim>>(
-                model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight});
+                model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight,
+                                                                        /*relative_to_reference=*/true});
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(context[k] + ": " + e.what());
         }
@@ -73,8 +67,10 @@ void NeuralParticleEnergy<dim>::set_reference(const std::vector<Mat<dim>>& F0, c
                                               const std::vector<int>& object) {
     if (objects_.size() == 1) {  // one object: evaluate() needs no gathering
         objects_[0].energy->set_reference(F0.data(), hardening.data(), F0.size());
+        hardening_clamped_ = objects_[0].energy->hardening_clamped();
         return;
     }
+    hardening_clamped_ = 0;
     for (Group& g : objects_) g.particles.clear();
     for (std::size_t p = 0; p < object.size(); ++p) objects_.at(object[p]).particles.push_back(static_cast<int>(p));
     std::vector<Mat<dim>> F0_group;
@@ -92,6 +88,7 @@ void NeuralParticleEnergy<dim>::set_reference(const std::vector<Mat<dim>>& F0, c
         g.psi.resize(n);
         g.H.resize(n);
         g.energy->set_reference(F0_group.data(), h_group.data(), n);
+        hardening_clamped_ += g.energy->hardening_clamped();
     }
 }
 

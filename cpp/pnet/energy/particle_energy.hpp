@@ -41,6 +41,10 @@ public:
     /// The result does not depend on the thread count.
     virtual void evaluate(const std::vector<Mat<dim>>& F, Order order, double* psi, Mat<dim>* P, Tensor4<dim>* H,
                           bool project_psd = true) = 0;
+
+    /// Particles of the last set_reference() whose hardening state was outside
+    /// the range a learned energy was trained on (its input was clamped).
+    virtual std::size_t hardening_clamped() const { return 0; }
 };
 
 /// psi(F) of the elasticity model of each particle's material.
@@ -68,7 +72,11 @@ public:
     /// models[k] is object k's energy model; materials[k] its material (the
     /// scene's). Throws std::invalid_argument naming `context[k]` (e.g.
     /// "scene.json: objects[0].model") when a model is missing, of another
-    /// dimension, or trained for another elasticity or plasticity model.
+    /// dimension, or trained for another material (any field of
+    /// constitutive_differences(): elasticity model, nu, plasticity model and
+    /// parameters; E may differ, the energy is scaled). Psi is evaluated
+    /// relative to the reference, Psi(F) - Psi(F0) (see
+    /// NeuralElastoplasticEnergy::Options::relative_to_reference).
     NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
                          const std::vector<Material<dim>>& materials, const std::vector<std::string>& context,
                          double regularizer_weight);
@@ -80,6 +88,7 @@ public:
 
     /// Object k's energy (its learned return mapping, if any, included).
     const NeuralElastoplasticEnergy<dim>& object_energy(std::size_t k) const { return *objects_[k].energy; }
+    std::size_t hardening_clamped() const override { return hardening_clamped_; }
 
 private:
     struct Group {
@@ -90,6 +99,7 @@ private:
         std::vector<Tensor4<dim>> H;
     };
     std::vector<Group> objects_;
+    std::size_t hardening_clamped_ = 0;
 };
 
 }  // namespace pnet

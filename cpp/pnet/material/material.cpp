@@ -1,8 +1,11 @@
 #include "pnet/material/material.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+
+#include <nlohmann/json.hpp>
 
 namespace pnet {
 
@@ -101,6 +104,39 @@ Elasticity<dim> make_elasticity(const MaterialDescription& d) {
 }
 
 }  // namespace
+
+std::vector<MaterialDifference> constitutive_differences(const MaterialDescription& a, const MaterialDescription& b) {
+    std::vector<MaterialDifference> out;
+    auto number = [&](const char* field, double x, double y) {
+        if (std::abs(x - y) > 1e-9 * std::max(std::abs(x), std::abs(y)))
+            out.push_back({field, nlohmann::json(x).dump(), nlohmann::json(y).dump()});
+    };
+    auto text = [&](const char* field, const std::string& x, const std::string& y) {
+        if (x != y) out.push_back({field, "\"" + x + "\"", "\"" + y + "\""});
+    };
+    text("elasticity.model", to_string(a.elasticity), to_string(b.elasticity));
+    number("elasticity.nu", a.elastic.nu, b.elastic.nu);
+    text("plasticity.model", to_string(a.plasticity), to_string(b.plasticity));
+    if (a.plasticity != b.plasticity) return out;
+    switch (a.plasticity) {
+        case PlasticityModel::None: break;
+        case PlasticityModel::DruckerPrager:
+            number("plasticity.friction_angle_deg", a.drucker_prager.friction_angle_deg,
+                   b.drucker_prager.friction_angle_deg);
+            break;
+        case PlasticityModel::CamClay:
+            number("plasticity.friction_angle_deg", a.cam_clay.friction_angle_deg, b.cam_clay.friction_angle_deg);
+            number("plasticity.xi", a.cam_clay.xi, b.cam_clay.xi);
+            number("plasticity.beta", a.cam_clay.beta, b.cam_clay.beta);
+            text("plasticity.variant", to_string(a.cam_clay.variant), to_string(b.cam_clay.variant));
+            break;
+        case PlasticityModel::VonMises:
+            number("plasticity.hardening_coefficient", a.von_mises.hardening_coefficient,
+                   b.von_mises.hardening_coefficient);
+            break;
+    }
+    return out;
+}
 
 template <int dim>
 Material<dim>::Material(const MaterialDescription& description)

@@ -36,6 +36,18 @@ struct MaterialDescription {
     void validate() const;
 };
 
+/// A field in which two material descriptions differ: its JSON path (as in a
+/// scene, e.g. "plasticity.friction_angle_deg") and both values as text.
+struct MaterialDifference {
+    std::string field, first, second;
+};
+
+/// The fields of the constitutive model (elasticity model and nu, plasticity
+/// model and every one of its parameters) in which a and b differ; numbers are
+/// equal to 1e-9 relative. Young's modulus, density and the initial hardening
+/// are not compared: a learned energy is scaled by E, and the others are state.
+std::vector<MaterialDifference> constitutive_differences(const MaterialDescription& a, const MaterialDescription& b);
+
 /// The materials of DESIGN.md §3: "sand", "snow", "metal", "metal_nh".
 MaterialDescription material_preset(const std::string& name);
 std::vector<std::string> material_preset_names();

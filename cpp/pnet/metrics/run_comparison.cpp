@@ -7,6 +7,7 @@
 #include <regex>
 
 #include "pnet/io/ply.hpp"
+#include "pnet/metrics/deposit_shape.hpp"
 #include "pnet/metrics/iou.hpp"
 
 namespace pnet {
@@ -73,8 +74,8 @@ void check_consistent(const RunInfo& a, const RunInfo& b) {
         throw differs("frame_dt", nlohmann::json(a.frame_dt).dump(), nlohmann::json(b.frame_dt).dump());
 }
 
-/// One frame's particle mass on the comparison grid; adds the particles put at the domain's edge to clamped.
-GridField rasterize_frame(const std::string& path, const RunInfo& run, double dx, std::size_t& clamped) {
+/// One frame's particles, with some mass.
+PlyParticles read_frame(const std::string& path, const RunInfo& run) {
     PlyParticles p;
     try {
         // read_particles_ply's errors start with the path; requiring run.json's dim checks the file against it.
@@ -86,6 +87,12 @@ GridField rasterize_frame(const std::string& path, const RunInfo& run, double dx
     for (double m : p.mass) total += m;
     if (!(total > 0.0))
         throw RunInputError(path + ": no particle mass to compare (" + std::to_string(p.size()) + " particles)");
+    return p;
+}
+
+/// One frame's particle mass on the comparison grid; adds the particles put at the domain's edge to clamped.
+GridField rasterize_frame(const PlyParticles& p, const std::string& path, const RunInfo& run, double dx,
+                          std::size_t& clamped) {
     std::size_t c = 0;
     GridField g;
     try {
@@ -182,15 +189,32 @@ RunComparison compare_runs(const RunPair& pair, const std::function<void(std::si
         const int frame = pair.common[k];
         const std::string& path_a = a.frames.at(frame);
         const std::string& path_b = b.frames.at(frame);
-        const GridField ga = rasterize_frame(path_a, a, pair.dx, c.clamped_a);
-        const GridField gb = rasterize_frame(path_b, b, pair.dx, c.clamped_b);
-        IouResult r{};
-        try {
-            r = iou(ga, gb);
-        } catch (const std::invalid_argument& e) {
-            throw RunInputError(path_a + " vs " + path_b + ": " + e.what());
-        }
-        c.frames.push_back({frame, frame * a.frame_dt, r.soft, r.binary, r.plasticinelab});
+        const PlyParticles pa = read_frame(path_a, a), pb = read_frame(path_b, b);
+        auto compare = [&](double dx, std::size_t& clamped_a, std::size_t& clamped_b) {
+            const GridField ga = rasterize_frame(pa, path_a, a, dx, clamped_a);
+            const GridField gb = rasterize_frame(pb, path_b, b, dx, clamped_b);
+            try {
+                return iou(ga, gb);
+            } catch (const std::invalid_argument& e) {
+                throw RunInputError(path_a + " vs " + path_b + ": " + e.what());
+            }
+        };
+        const IouResult r = compare(pair.dx, c.clamped_a, c.clamped_b);
+        std::size_t unused_a = 0, unused_b = 0;  // the same particles as at dx
+        const IouResult coarse = compare(kCoarseFactor * pair.dx, unused_a, unused_b);
+        const DepositShape sa = deposit_shape(a.dim, pa.position, pa.mass), sb = deposit_shape(b.dim, pb.position, pb.mass);
+        FrameIou f;
+        f.frame = frame;
+        f.time = frame * a.frame_dt;
+        f.soft = r.soft;
+        f.binary = r.binary;
+        f.plasticinelab = r.plasticinelab;
+        f.soft_coarse = coarse.soft;
+        f.spread_a = sa.spread;
+        f.spread_b = sb.spread;
+        f.height_a = sa.height;
+        f.height_b = sb.height;
+        c.frames.push_back(f);
         if (progress) progress(k + 1, pair.common.size());
     }
     return c;

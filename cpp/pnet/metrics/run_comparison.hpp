@@ -57,12 +57,21 @@ struct RunPair {
 /// nodes (compare_runs holds two such grids, 8 bytes a node: 2 GiB).
 RunPair pair_runs(const std::string& dir_a, const std::string& dir_b, double dx = 0.0);
 
-/// IoU of one pair of frames (see IouResult).
+/// IoU of one pair of frames (see IouResult), the Jaccard index of the mass deposited at 4 dx, and
+/// the shape of each deposit (DESIGN.md §6).
 struct FrameIou {
     int frame = 0;
     double time = 0.0;  // frame frame_dt, s
     double soft = 0.0, binary = 0.0, plasticinelab = 0.0;
+    /// soft IoU of the mass fields rasterized at 4 dx (coarse-grained: insensitive to a film one cell
+    /// thick moving by a cell).
+    double soft_coarse = 0.0;
+    double spread_a = 0.0, spread_b = 0.0;  // deposit_shape().spread of each run, m
+    double height_a = 0.0, height_b = 0.0;  // deposit_shape().height of each run, m
 };
+
+/// The comparison grid is coarsened by this factor for FrameIou::soft_coarse.
+constexpr int kCoarseFactor = 4;
 
 /// What compare_runs found: the IoU of every common frame, and what it could not compare exactly.
 struct RunComparison {
@@ -77,8 +86,8 @@ struct RunComparison {
 };
 
 /// Reads every common frame of both runs, requiring the dim of run.json, rasterizes each frame's particle
-/// mass with rasterize_mass on the grid with spacing pair.dx and origin domain_min, and computes iou() of
-/// each pair. All frames are compared before returning. progress(k, n), when given, is called after the
+/// mass with rasterize_mass on the grid with spacing pair.dx (and kCoarseFactor pair.dx) and origin
+/// domain_min, computes iou() of each pair and deposit_shape() of each frame. All frames are compared before returning. progress(k, n), when given, is called after the
 /// k-th of n frames. Throws RunInputError "<ply path>: ..." for a frame that cannot be read, contradicts
 /// run.json's dim, has no mass or a non-finite position or mass, and "<ply A> vs <ply B>: ..." if iou()
 /// refuses the pair.

@@ -119,6 +119,20 @@ void Grid<dim>::apply_boundary(const int* node, Vec<dim>& v, const BoundaryCondi
 }
 
 template <int dim>
+void Grid<dim>::project_velocity(const BoundaryConditions& bc) {
+    const std::ptrdiff_t active = static_cast<std::ptrdiff_t>(active_blocks_.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < active; ++i) {
+        const std::int64_t first = static_cast<std::int64_t>(active_blocks_[i]) * kBlockNodes;
+        for (int k = 0; k < kBlockNodes; ++k) {
+            int coord[dim];
+            coordinates(first + k, coord);
+            apply_boundary(coord, storage_[first + k].momentum, bc);
+        }
+    }
+}
+
+template <int dim>
 void Grid<dim>::constrained_components(const int* node, bool* fixed, const BoundaryConditions& bc) const {
     const bool floor = bc.sticky_floor_cells > 0 && node[1] <= bc.sticky_floor_cells;
     for (int a = 0; a < dim; ++a)

@@ -89,10 +89,16 @@ public:
     /// Applies the boundary conditions to a velocity v of node `node`.
     void apply_boundary(const int* node, Vec<dim>& v, const BoundaryConditions& bc) const;
 
+    /// apply_boundary() on the velocity (Node::momentum after
+    /// update_velocity() or an implicit solve) of every active node.
+    void project_velocity(const BoundaryConditions& bc);
+
     /// The velocity components of node `node` that the boundary conditions
     /// constrain (fixed[a] for axis a): all of them on the sticky floor, the
-    /// wall-normal one within kWallNodes of a slip wall. The implicit
-    /// integrators hold these at their apply_boundary() value.
+    /// wall-normal one within kWallNodes of a slip wall. An implicit solve
+    /// holds these at their apply_boundary() value (the integrators pass
+    /// conditions without slip walls: those act after the solve, see
+    /// implicit_integrator.hpp).
     void constrained_components(const int* node, bool* fixed, const BoundaryConditions& bc) const;
 
     /// The active blocks (valid after bin_and_clear), sorted; block b holds the

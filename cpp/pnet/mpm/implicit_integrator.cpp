@@ -1,5 +1,6 @@
 #include "pnet/mpm/implicit_integrator.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -48,6 +49,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     if (o.lazy_hessian >= 1.0)
         throw std::invalid_argument(context + ": integrator.lazy_hessian: expected a number in [0, 1), got " +
                                     nlohmann::json(o.lazy_hessian).dump());
+    if (const auto it = block.find("fail_on_unconverged"); it != block.end()) {
+        if (!it->is_boolean())
+            throw std::invalid_argument(context + ": integrator.fail_on_unconverged: expected true or false, got " +
+                                        it->dump());
+        o.fail_on_unconverged = it->get<bool>();
+    }
     if (const auto it = block.find("preconditioner"); it != block.end()) {
         if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi"))
             throw std::invalid_argument(context + ": integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got " +
@@ -66,7 +73,8 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"max_fixed_point_iterations", max_fixed_point_iterations},
             {"regularizer_weight", regularizer_weight},
             {"preconditioner", preconditioner},
-            {"lazy_hessian", lazy_hessian}};
+            {"lazy_hessian", lazy_hessian},
+            {"fail_on_unconverged", fail_on_unconverged}};
 }
 
 template <int dim>
@@ -92,16 +100,18 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
 
     particles_to_grid<dim>(grid_, particles, nullptr);
     const auto after_p2g = std::chrono::steady_clock::now();
-    grid_.update_velocity(dt, system_.gravity, system_.boundary);  // v*, boundary values applied
-    potential_.begin_step(grid_, particles, dt, system_.boundary);
+    // v* with the sticky floor applied; slip walls act after the solve (see the header).
+    BoundaryConditions solve_boundary = system_.boundary;
+    solve_boundary.slip_walls = false;
+    grid_.update_velocity(dt, system_.gravity, solve_boundary);
+    potential_.begin_step(grid_, particles, dt, solve_boundary);
 
     NewtonOptions newton;
     newton.tolerance = options_.newton_tolerance;
     newton.max_iterations = options_.max_newton_iterations;
     newton.max_cg_iterations = options_.max_cg_iterations;
     newton.cg_tolerance = options_.cg_tolerance;
-    newton.residual_scale = potential_.residual_scale();
-    newton.scale_by_hessian_diagonal = true;  // |g_i| / H_ii: a velocity correction, m/s
+    newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
     newton.lazy_hessian = options_.lazy_hessian;
 
@@ -113,6 +123,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     for (int j = 0; j < solves; ++j) {
         // The elastic energy has no reference state: lagged passes the particles' F^E.
         potential_.set_reference(fixed_point ? F0_ : particles.F_elastic);
+        stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped());
         const std::string context = "step " + std::to_string(step_index) +
                                     (fixed_point ? ", fixed-point iteration " + std::to_string(j + 1) : "");
         NewtonStats s;
@@ -128,6 +139,13 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         stats.residual = s.residual;
         stats.energy = s.energy;
         stats.converged = stats.converged && (s.converged || s.roundoff_floor);
+        stats.line_search_failed = stats.line_search_failed || s.line_search_failed;
+        if (options_.fail_on_unconverged && !(s.converged || s.roundoff_floor))
+            throw SimulationError(context + ": the Newton solve did not converge (" +
+                                  (s.line_search_failed ? std::string("line search failed")
+                                                        : std::to_string(s.iterations) + " iterations") +
+                                  ", residual " + std::to_string(s.residual) + " m/s > tolerance " +
+                                  std::to_string(options_.newton_tolerance) + " m/s)");
         ++stats.fixed_point_iterations;
         if (!fixed_point) break;
         potential_.deformation(v_, F_);
@@ -147,6 +165,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     }
     if (fixed_point) v_.swap(best_v_);
     potential_.write_velocity(v_, grid_);
+    grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM
     double max_speed = 0.0;
     for (Eigen::Index k = 0; k < v_.size() / dim; ++k) max_speed = std::max(max_speed, v_.segment<dim>(dim * k).norm());
     stats.max_grid_speed = max_speed;

@@ -16,6 +16,16 @@
 //   with the smallest change.
 // `lagged`: psi = the elastic energy of F_p(v) alone; plasticity is applied
 //   after the step by the return mapping (as in Ziran and HOT).
+//
+// Boundary conditions are those of explicit MPM (DESIGN.md §4.1): the sticky
+// floor's nodes are fixed at zero velocity during the solve, and slip walls
+// act after it, removing the wall-ward normal velocity of the nodes within
+// Grid::kWallNodes of a wall, just as explicit MPM projects its updated grid
+// velocity (so v* of a wall node is not projected either). A one-sided
+// constraint inside the solve (v_n >= 0) would need a bound-constrained Newton
+// and would differ from explicit MPM, which has no such constraint on the
+// internal forces; with the projection after the solve the two integrators
+// differ only by the time integration.
 #include <memory>
 #include <string>
 #include <vector>
@@ -36,7 +46,9 @@ enum class ImplicitMethod { PlasticityNet, Lagged };
 /// Solver settings of the implicit integrators. In a scene they are keys of the
 /// "integrator" block (same names); the command line can override some.
 struct ImplicitOptions {
-    double newton_tolerance = 1e-3;      // m/s: max over free components of |dE/dv_i| / H_ii (a Jacobi velocity correction)
+    // m/s: the mass-weighted velocity residual sqrt(sum_i g_i^2 / H_ii / sum_i m_i) over the free
+    // components (NewtonOptions::residual_mass; E - min E ~ M r^2 / 2).
+    double newton_tolerance = 1e-3;
     int max_newton_iterations = 50;
     int max_cg_iterations = 500;
     double cg_tolerance = 0.1;           // largest relative PCG residual (inexact Newton)
@@ -56,6 +68,9 @@ struct ImplicitOptions {
     // iteration). 0.5 halved the energy time on sand_column_2d and cut it by
     // 40% on snowball_2d at dt 1e-3, with as many or fewer Newton iterations.
     double lazy_hessian = 0.5;
+    // A step whose solve ends unconverged (iteration cap or failed line search)
+    // is an error (SimulationError) instead of being counted and used.
+    bool fail_on_unconverged = false;
 
     /// Reads the keys above from an integrator block (others are ignored: the
     /// block also holds name, dt and cfl). Throws std::invalid_argument

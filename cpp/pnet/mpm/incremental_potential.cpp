@@ -37,8 +37,12 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
         });
     }
 
-    // Unknowns: the nodes some stencil reaches, numbered in storage order.
-    node_dof_.assign(grid.storage_size(), -1);
+    // Unknowns: the nodes some stencil reaches, numbered in storage order. Only
+    // the last step's unknowns are cleared (the map spans the whole grid).
+    if (static_cast<std::int64_t>(node_dof_.size()) != grid.storage_size())
+        node_dof_.assign(grid.storage_size(), -1);
+    else
+        for (std::int64_t node : dof_node_) node_dof_[node] = -1;
     for (int node : stencil_dof_) node_dof_[node] = 0;
     dof_node_.clear();
     constexpr int kBlockNodes = Grid<dim>::kBlockNodes;
@@ -58,6 +62,7 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
     v_star_.resize(dim * dofs);
     free_.resize(dim * dofs);
     residual_scale_.resize(dim * dofs);
+    residual_mass_.resize(dim * dofs);
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t k = 0; k < dofs; ++k) {
         const typename Grid<dim>::Node& node = grid.node(dof_node_[k]);
@@ -72,6 +77,7 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
             v_star_[i] = massless ? 0.0 : node.momentum[a];
             free_[i] = (fixed[a] || massless) ? 0.0 : 1.0;
             residual_scale_[i] = free_[i] / mass_[i];
+            residual_mass_[i] = free_[i] * mass_[i];
         }
     }
     F_.resize(n);
@@ -149,19 +155,21 @@ void IncrementalPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient)
 
 template <int dim>
 void IncrementalPotential<dim>::transform_hessians() {
-    // K_p = V0 dt^2 T^T H T with T the map vec(dG) -> vec(dG F^E): in the
-    // row-major basis T[(i, j), (i, k)] = F^E_kj.
+    // K_p = V0 dt^2 T^T H T with T the map vec(dG) -> vec(dG F^E). In the
+    // row-major basis T = I (x) F^E^T is block diagonal, so the d x d block
+    // (a, b) of K is V0 dt^2 F^E H_ab F^E^T: 2 d^5 flops instead of 4 d^6.
     const Particles<dim>& particles = *particles_;
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t p = 0; p < n; ++p) {
-        const Mat<dim>& FE = particles.F_elastic[p];
-        Tensor4<dim> T = Tensor4<dim>::Zero();
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j)
-                for (int k = 0; k < dim; ++k) T(i * dim + j, i * dim + k) = FE(k, j);
-        const Tensor4<dim> HT = K_[p] * T;
-        K_[p].noalias() = (particles.rest_volume[p] * dt_ * dt_) * (T.transpose() * HT);
+        const Mat<dim> FE = particles.F_elastic[p];
+        const double scale = particles.rest_volume[p] * dt_ * dt_;
+        Tensor4<dim>& K = K_[p];
+        for (int a = 0; a < dim; ++a)
+            for (int b = 0; b < dim; ++b) {
+                const Mat<dim> block = scale * (FE * K.template block<dim, dim>(a * dim, b * dim) * FE.transpose());
+                K.template block<dim, dim>(a * dim, b * dim) = block;
+            }
     }
 }
 

@@ -44,9 +44,11 @@ public:
 
     /// v* on the unknowns: the starting point of the solve.
     const VecX& v_star() const { return v_star_; }
-    /// 1 / m_i on free components, 0 on fixed ones: Newton's residual is then a
-    /// velocity error (m/s).
+    /// 1 / m_i on free components, 0 on fixed ones.
     const VecX& residual_scale() const { return residual_scale_; }
+    /// m_i on free components, 0 on fixed ones: Newton's mass-weighted
+    /// velocity residual (NewtonOptions::residual_mass), m/s.
+    const VecX& residual_mass() const { return residual_mass_; }
     /// Nodes that are unknowns.
     std::size_t nodes() const { return dof_node_.size(); }
 
@@ -99,7 +101,7 @@ private:
     std::vector<int> node_dof_;             // grid storage index -> dof (-1: not an unknown)
     std::vector<std::int64_t> dof_node_;    // dof -> grid storage index
     VecX mass_;                             // per component (m_i, or 1 for a massless node), kg
-    VecX v_star_, free_, residual_scale_;   // free_: 1 on free components, 0 on fixed ones
+    VecX v_star_, free_, residual_scale_, residual_mass_;  // free_: 1 on free components, 0 on fixed ones
     std::vector<int> stencil_dof_;          // particle p, node s: dof of node s of p's stencil
     std::vector<Vec<dim>> stencil_grad_;    // grad w_ip, 1/m
 

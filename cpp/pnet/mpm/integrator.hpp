@@ -32,6 +32,8 @@ struct StepStats {
     double initial_residual = 0.0, residual = 0.0;  // scaled gradient before the first and after the last solve, m/s
     double energy = 0.0;             // incremental potential at the solution, J
     bool converged = true;           // every Newton solve reached its tolerance
+    bool line_search_failed = false; // a solve stopped because no step lowered the energy
+    std::size_t hardening_clamped = 0;  // plasticitynet: particles whose hardening input was clamped to the trained range
     // Where an implicit step's time went (parts of grid_seconds).
     double energy_seconds = 0.0;     // per-particle energies, stresses and Hessians
     double cg_seconds = 0.0;         // Hessian-vector products and PCG

@@ -53,6 +53,8 @@ struct FrameStats {
     long newton_iterations = 0, cg_iterations = 0, line_search_steps = 0, fixed_point_iterations = 0;
     double max_residual = 0.0;
     bool converged = true;
+    long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
+    std::size_t hardening_clamped = 0;   // most particles with a clamped hardening input in one step
 };
 
 template <int dim>

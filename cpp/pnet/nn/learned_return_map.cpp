@@ -10,7 +10,8 @@ namespace pnet {
 template <int dim>
 LearnedReturnMap<dim>::LearnedReturnMap(const ModelFile& model)
     : material_(model.metadata.material), net_(model.weights, 0),
-      xi_(model.metadata.material.von_mises.hardening_coefficient) {
+      xi_(model.metadata.material.von_mises.hardening_coefficient),
+      metadata_(model.metadata) {
     const ModelMetadata& meta = model.metadata;
     if (meta.kind != ModelKind::ReturnMap)
         throw std::invalid_argument(model.path + ": a model of kind \"" + to_string(meta.kind) +
@@ -30,7 +31,7 @@ void LearnedReturnMap<dim>::return_map(const Vec<dim>* Sigma, const double* hard
     for (std::size_t p = 0; p < n; ++p) {
         const Vec<dim> Sc = clamp_singular_values<dim>(Sigma[p]);
         for (int i = 0; i < dim; ++i) x[p * (dim + 1) + i] = Sc[i];
-        x[p * (dim + 1) + dim] = hardening[p];
+        x[p * (dim + 1) + dim] = metadata_.network_hardening(hardening[p]);  // clamped to the trained range
     }
     net_.evaluate(x.data(), n, FusedMlp::Order::Value, dgamma.data());
     for (std::size_t p = 0; p < n; ++p) {

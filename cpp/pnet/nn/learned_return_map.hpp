@@ -41,6 +41,7 @@ private:
     Material<dim> material_;
     FusedMlp net_;
     double xi_;
+    ModelMetadata metadata_;  // the network's hardening input range
 };
 
 }  // namespace pnet

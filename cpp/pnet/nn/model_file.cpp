@@ -1,5 +1,7 @@
 #include "pnet/nn/model_file.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -129,6 +131,31 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
     if (meta.material.elastic.E != meta.training_E)
         fail(context, "material.elasticity.E", "differs from training_E");
 
+    // The hardening range the network saw in training: recipe.distribution.h_range.
+    const bool takes_hardening = meta.kind == ModelKind::ReturnMap || meta.has_hardening;
+    if (takes_hardening) {
+        if (meta.material.plasticity == PlasticityModel::CamClay) {
+            meta.hardening_min = d == 2 ? -0.5 : -1.0;  // DESIGN.md §3, for files that do not say
+            meta.hardening_max = 0.0;
+        } else {
+            meta.hardening_min = 0.0;
+            meta.hardening_max = 1.0;
+        }
+        const json* range = nullptr;
+        if (j.contains("recipe") && j.at("recipe").is_object() && j.at("recipe").contains("distribution") &&
+            j.at("recipe").at("distribution").is_object() && j.at("recipe").at("distribution").contains("h_range"))
+            range = &j.at("recipe").at("distribution").at("h_range");
+        if (range) {
+            if (!range->is_array() || range->size() != 2 || !(*range)[0].is_number() || !(*range)[1].is_number() ||
+                !std::isfinite((*range)[0].get<double>()) || !std::isfinite((*range)[1].get<double>()) ||
+                !((*range)[0].get<double>() <= (*range)[1].get<double>()))
+                fail(context, "recipe.distribution.h_range",
+                     "expected [low, high] with finite low <= high, got " + range->dump());
+            meta.hardening_min = (*range)[0].get<double>();
+            meta.hardening_max = (*range)[1].get<double>();
+        }
+    }
+
     if (meta.kind == ModelKind::Energy && j.contains("return_map")) {
         const json& rm = j.at("return_map");
         if (!rm.is_object() || !rm.contains("type") || !rm.at("type").is_string())
@@ -143,6 +170,13 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
         }
     }
     return meta;
+}
+
+double ModelMetadata::network_hardening(double state, bool* clamped) const {
+    const double h = material.plasticity == PlasticityModel::CamClay ? std::min(state, 0.0) : state;
+    const double c = std::clamp(h, hardening_min, hardening_max);
+    if (clamped) *clamped = c != h;
+    return c;
 }
 
 std::optional<std::string> manifest_sha256(const std::string& model_path) {

@@ -44,6 +44,11 @@ struct ModelMetadata {
     int dim = 2;
     std::vector<int> widths;
     bool has_hardening = false;         // energy: the input ends with h
+    /// The range of the network's hardening input h it was trained on
+    /// (recipe.distribution.h_range; energies with hardening and return maps).
+    /// Models that do not record it get the training distribution of DESIGN.md
+    /// §3 for their plasticity and dimension.
+    double hardening_min = 0.0, hardening_max = 0.0;
     double training_E = 1.0;            // Pa; the net is dimensionless, scaled by the scene's E
     MaterialDescription material;       // at the training E
     /// Energy models trained with the learned return mapping name its file
@@ -55,6 +60,11 @@ struct ModelMetadata {
     /// Inputs the simulator differentiates in: d^2 (F) for an energy, 0 otherwise.
     int derivative_inputs() const { return kind == ModelKind::Energy ? dim * dim : 0; }
     bool learned_return_map() const { return !return_map_file.empty(); }
+    /// The network's hardening input for the material's hardening state
+    /// (DESIGN.md §3): Cam-Clay h = min(a, 0), von Mises h = tau_Y / (2 mu)
+    /// itself, clamped to [hardening_min, hardening_max]. *clamped (if given)
+    /// is set when the clamp changed it.
+    double network_hardening(double state, bool* clamped = nullptr) const;
 };
 
 /// Parses and validates the metadata entry; std::invalid_argument naming

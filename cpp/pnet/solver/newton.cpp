@@ -11,15 +11,20 @@ namespace pnet {
 
 namespace {
 
-/// |g|_scaled (NewtonOptions); `diagonal` is diag(H) at the same point.
-double scaled_residual(const VecX& g, const NewtonOptions& options, const VecX& diagonal) {
-    const VecX& scale = options.residual_scale;
-    if (options.scale_by_hessian_diagonal) {
-        double r = 0.0;
+/// The residual of NewtonOptions at a point with gradient g; `diagonal` is
+/// diag(H) of the Hessian prepared last.
+double residual_of(const VecX& g, const NewtonOptions& options, const VecX& diagonal) {
+    const VecX& mass = options.residual_mass;
+    if (mass.size() != 0) {
+        double energy = 0.0, total_mass = 0.0;
         for (Eigen::Index i = 0; i < g.size(); ++i)
-            if (scale.size() == 0 || scale[i] > 0.0) r = std::max(r, std::abs(g[i]) / diagonal[i]);
-        return r;
+            if (mass[i] > 0.0) {
+                energy += g[i] * g[i] / diagonal[i];
+                total_mass += mass[i];
+            }
+        return total_mass > 0.0 ? std::sqrt(energy / total_mass) : 0.0;
     }
+    const VecX& scale = options.residual_scale;
     if (scale.size() == 0) return g.lpNorm<Eigen::Infinity>();
     return g.cwiseProduct(scale).lpNorm<Eigen::Infinity>();
 }
@@ -38,21 +43,27 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     if (x.size() != n) throw std::invalid_argument("minimize: x has the wrong size");
     if (options.residual_scale.size() != 0 && options.residual_scale.size() != n)
         throw std::invalid_argument("minimize: residual_scale has the wrong size");
+    if (options.residual_mass.size() != 0 && options.residual_mass.size() != n)
+        throw std::invalid_argument("minimize: residual_mass has the wrong size");
     NewtonStats stats;
+    // Work vectors: sized once per solve; PCG keeps its own between calls.
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;
+    PcgWorkspace pcg;
     const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
-    // Every accepted iterate comes with its Hessian prepared (value_gradient_hessian),
-    // so an iteration whose full step passes the line search costs one energy pass.
+    const bool lazy = options.lazy_hessian > 0.0;
+    // Every iterate's Hessian is prepared before its direction is computed:
+    // at the start by value_gradient_hessian, later by the full step's
+    // evaluation or by prepare_hessian when a lazy one may not be kept.
     double energy = objective.value_gradient_hessian(x, g);
+    ++stats.hessians;
     objective.hessian_diagonal(diagonal);
-    double residual = scaled_residual(g, options, diagonal);
+    double residual = residual_of(g, options, diagonal);
     stats.initial_energy = stats.energy = energy;
     stats.initial_residual = stats.residual = residual;
     if (!std::isfinite(energy) || !g.allFinite())
         throw NewtonError(where(context, 0, residual) + "the energy or its gradient is not finite at the start");
     const double g0 = std::max(g.norm(), 1e-300);
-    // Whether the next trial point re-forms the Hessian (always, unless lazy_hessian > 0).
-    bool fresh_hessian = !(options.lazy_hessian > 0.0);
+    bool contracted = false;  // the last iterate was reached by a full step that cut the residual enough
 
     for (int it = 0; it < options.max_iterations; ++it) {
         if (residual <= options.tolerance) {
@@ -67,21 +78,20 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             preconditioner = Preconditioner::jacobi(diagonal);
         }
         const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
-        const PcgResult cg = solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations);
+        const PcgResult cg = solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, pcg);
         stats.cg_iterations += cg.iterations;
         const double slope = g.dot(d);
         if (!(slope < 0.0))
             throw NewtonError(where(context, it, residual) + "the search direction is not a descent direction (g.d = " +
                               std::to_string(slope) + "); the Hessian is not positive definite");
 
-        // The full step first, with its gradient (and Hessian, unless a lazy one is kept).
+        // The full step first, with its gradient; with its Hessian too unless the
+        // last iteration contracted (then this one likely does, and keeps the Hessian).
         x_trial = x + d;
-        // A lazy Hessian is kept (value_gradient leaves it) while the iterations converge fast.
-        const bool refresh = fresh_hessian;
-        const double residual_before = residual;
-        bool halved = false;
-        const double e_full = refresh ? objective.value_gradient_hessian(x_trial, g_trial)
-                                      : objective.value_gradient(x_trial, g_trial);
+        const bool trial_hessian = !(lazy && contracted);
+        const double e_full = trial_hessian ? objective.value_gradient_hessian(x_trial, g_trial)
+                                            : objective.value_gradient(x_trial, g_trial);
+        stats.hessians += trial_hessian;
         ++stats.line_search_steps;
         const bool full_finite = std::isfinite(e_full) && g_trial.allFinite();
         // Near the solution the decrease g.d falls below the round-off of E: the
@@ -92,17 +102,20 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             stats.roundoff_floor = true;  // nothing left to gain in double precision
             break;
         }
+        const double residual_before = residual;
+        bool full_step = true;
+        bool hessian_at_x = trial_hessian;  // whether the Hessian prepared last is at the new iterate
         if (roundoff || (full_finite && e_full <= energy + options.armijo * slope)) {
             x.swap(x_trial);
             g.swap(g_trial);
             energy = e_full;
         } else {
             double alpha = 0.5, trial = e_full;
-            bool decreased = false;
-            halved = true;
+            bool decreased = false, any_finite = std::isfinite(e_full);
             for (int halvings = 1; halvings <= options.max_line_search; ++halvings) {
                 x_trial = x + alpha * d;
                 trial = objective.value(x_trial);
+                any_finite = any_finite || std::isfinite(trial);
                 ++stats.line_search_steps;
                 if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope) {
                     decreased = true;
@@ -111,27 +124,44 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 alpha *= 0.5;
             }
             if (decreased) {
+                // A backtracked iterate always gets its own Hessian.
                 x.swap(x_trial);
-                energy = refresh ? objective.value_gradient_hessian(x, g) : objective.value_gradient(x, g);
+                energy = objective.value_gradient_hessian(x, g);
+                ++stats.hessians;
+                hessian_at_x = true;
+                full_step = false;
                 if (!std::isfinite(energy) || !g.allFinite())
                     throw NewtonError(where(context, it, residual) + "the gradient is not finite after the step");
-            } else if (lowers_gradient && std::abs(e_full - energy) <= 1e-8 * std::max(std::abs(energy), 1.0)) {
-                // E is a sum of large terms that may cancel (a learned energy's
-                // N - c : F), so its round-off can exceed eps |E|: when the energy
-                // cannot rank any step, the gradient decides. The Hessian last
-                // prepared is the full step's (value() does not touch it).
+            } else if (lowers_gradient &&
+                       std::abs(e_full - energy) <= 1e-10 * std::max(std::abs(energy), std::abs(e_full))) {
+                // The energy cannot rank the step (a change at its round-off):
+                // the gradient decides.
                 x.noalias() = x + d;
                 g.swap(g_trial);
                 energy = e_full;
+            } else if (!any_finite) {
+                throw NewtonError(where(context, it, residual) + "the energy is not finite anywhere along the Newton "
+                                  "direction (down to a step of 2^-" + std::to_string(options.max_line_search) + ")");
             } else {
-                throw NewtonError(where(context, it, residual) + "line search stalled after " +
-                                  std::to_string(options.max_line_search) + " halvings (E = " +
-                                  std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
+                stats.line_search_failed = true;
+                if (options.throw_on_line_search_failure)
+                    throw NewtonError(where(context, it, residual) + "line search failed after " +
+                                      std::to_string(options.max_line_search) + " halvings (E = " +
+                                      std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
+                break;  // x and g are those of the last accepted iterate
+
             }
         }
-        objective.hessian_diagonal(diagonal);  // at the new iterate (its Hessian is prepared)
-        residual = scaled_residual(g, options, diagonal);
-        fresh_hessian = !(options.lazy_hessian > 0.0) || halved || residual > options.lazy_hessian * residual_before;
+        objective.hessian_diagonal(diagonal);  // of the Hessian prepared last
+        residual = residual_of(g, options, diagonal);
+        contracted = full_step && residual <= options.lazy_hessian * residual_before;
+        if (!hessian_at_x && !contracted) {
+            // The lazy Hessian may be kept only after a contracting full step.
+            objective.prepare_hessian(x);
+            ++stats.hessians;
+            objective.hessian_diagonal(diagonal);
+            residual = residual_of(g, options, diagonal);
+        }
         stats.iterations = it + 1;
         stats.energy = energy;
         stats.residual = residual;

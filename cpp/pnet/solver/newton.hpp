@@ -2,20 +2,28 @@
 // Newton's method with a PSD Hessian, matrix-free PCG and backtracking line
 // search on E: the one optimization loop of every implicit integrator
 // (DESIGN.md §4; Gast et al. 2015, Li et al. 2020). Per iteration:
-//   g = grad E(x); stop if |g|_scaled <= tolerance;
+//   g = grad E(x); stop if the residual (below) <= tolerance;
 //   H d = -g by PCG (Jacobi or block Jacobi) to the relative tolerance min(cg_tolerance, sqrt(|g| / |g0|))
 //   (inexact Newton: loose far from the solution, tighter as it converges);
-//   alpha = 1, halved until E(x + alpha d) <= E(x) + c alpha g.d (Armijo; the full step is
-//   evaluated with value_gradient_hessian(), so an accepted full step costs one energy
-//   pass and arrives with its Hessian prepared); once |g.d| is
-//   below the round-off of E, the full step is taken if it lowers |g|. If no halving
-//   lowers E, the full step is still taken when it lowers |g| and changes E by less
-//   than 1e-8 max(|E|, 1) (E's round-off exceeds eps |E| when large terms cancel);
-//   otherwise the line search has stalled.
-// With lazy_hessian > 0 an iterate reached by a full step that cut the residual
-// by that factor is evaluated by value_gradient() and keeps the previous
-// Hessian (a chord / Shamanskii step): for a learned energy the Hessian pass
-// costs about twice the gradient pass.
+//   alpha = 1, halved (at most max_line_search times) until E(x + alpha d) <= E(x) + c alpha g.d
+//   (Armijo). The full step is evaluated with value_gradient_hessian(), so an accepted full step
+//   costs one energy pass and arrives with its Hessian prepared. Once |g.d| is below the round-off
+//   of E, the full step is taken if it lowers |g|. If no halving lowers E, the full step is still
+//   taken when it lowers |g| and changes E by less than its round-off; otherwise the solve stops,
+//   unconverged, at the last accepted iterate (stats.line_search_failed; an error only with
+//   throw_on_line_search_failure, or when E was not finite at any trial point).
+// Residual: max_i |g_i| residual_scale_i (by default), or, with residual_mass (per-component masses
+// m_i, 0 on fixed components), the mass-weighted velocity residual
+//   r = sqrt( sum_i g_i^2 / H_ii / sum_i m_i )  (m/s; sums over components with m_i > 0),
+// the energy norm of the Jacobi correction g_i / H_ii per unit mass: E(x) - min E ~ M r^2 / 2 with
+// M = sum m_i, so r measures what the energy can still gain, and nodes that hold little mass (a
+// body's rim) weigh little. Where inertia dominates H it is the rms velocity error sqrt(sum m_i
+// (g_i / m_i)^2 / M).
+// Lazy Hessian (lazy_hessian > 0): an iterate reached by a full step that cut the residual by that
+// factor keeps the previous Hessian (a chord / Shamanskii step: its trial point was evaluated by
+// value_gradient(), about half the cost of a Hessian pass for a learned energy); any other iterate
+// (a backtracked step, or a full step that did not contract enough) gets its own Hessian before its
+// direction and convergence test are computed.
 #include <stdexcept>
 #include <string>
 
@@ -29,24 +37,22 @@ struct NewtonOptions {
     int max_cg_iterations = 500;
     double cg_tolerance = 1e-2;     // largest relative CG residual
     double armijo = 1e-4;           // sufficient-decrease constant c
-    int max_line_search = 40;       // halvings before a stall
-    /// |g|_scaled = max_i |g_i| * residual_scale_i; with residual_scale_i =
-    /// 1 / m_i (MPM) the residual is a velocity error in m/s. Empty: 1.
+    int max_line_search = 12;       // halvings (alpha >= 2^-12) before the line search has failed
+    /// Residual max_i |g_i| residual_scale_i (empty: max |g_i|). Ignored when
+    /// residual_mass is given.
     VecX residual_scale;
-    /// Scale by the Hessian's diagonal instead: |g|_scaled = max_i |g_i| / H_ii
-    /// over the components where residual_scale_i > 0 (all if it is empty): the
-    /// size of a Jacobi correction, which for MPM is a velocity error in m/s that
-    /// stays meaningful where stiffness, not mass, dominates H (large dt, nodes
-    /// at a body's rim holding little mass).
-    bool scale_by_hessian_diagonal = false;
+    /// Per-component masses (kg; 0 on fixed components): the residual is then
+    /// the mass-weighted velocity residual sqrt(sum g_i^2 / H_ii / sum m_i), m/s.
+    VecX residual_mass;
+    /// A failed line search throws NewtonError instead of ending the solve
+    /// unconverged.
+    bool throw_on_line_search_failure = false;
     /// Block Jacobi (the objective's hessian_block_diagonal(), when its block
     /// size is > 1) instead of Jacobi.
     bool block_preconditioner = false;
-    /// Lazy Hessian: > 0 keeps the last Hessian at the next iterate (a value and
-    /// gradient pass instead of a Hessian pass) as long as the previous
-    /// iteration took the full step and cut the scaled residual by at least
-    /// this factor; otherwise it is re-formed. 0: a fresh Hessian at every
-    /// iterate (Newton).
+    /// Lazy Hessian: > 0 lets an iterate reached by a full step that cut the
+    /// residual by at least this factor keep the previous Hessian; every other
+    /// iterate gets a fresh one. 0: a fresh Hessian at every iterate (Newton).
     double lazy_hessian = 0.0;
 };
 
@@ -60,19 +66,26 @@ struct NewtonStats {
     /// Stopped because neither E nor |g| could be lowered in double precision
     /// (the tolerance is below what this problem's round-off allows).
     bool roundoff_floor = false;
+    /// Stopped because no step along the Newton direction lowered E (x is the
+    /// last accepted iterate; converged is false).
+    bool line_search_failed = false;
+    int hessians = 0;  // Hessian passes (value_gradient_hessian or prepare_hessian)
 };
 
-/// A solve that cannot go on: non-finite energy or gradient, a non-descent
-/// direction, or a line-search stall. The message names the iteration, the
-/// residual and what happened; `context` (e.g. "step 120") prefixes it.
+/// A solve that cannot go on: non-finite energy or gradient at the start or
+/// after a step, an energy that is not finite anywhere along the direction, a
+/// non-descent direction (the Hessian is not PSD), or a failed
+/// line search with throw_on_line_search_failure. The message names the
+/// iteration, the residual and what happened; `context` (e.g. "step 120")
+/// prefixes it.
 class NewtonError : public std::runtime_error {
 public:
     using std::runtime_error::runtime_error;
 };
 
 /// Minimizes `objective` from x (updated in place). Returns the statistics;
-/// not converging within max_iterations is not an error (stats.converged is
-/// false). Throws NewtonError as described above.
+/// not converging within max_iterations, or a failed line search, is not an
+/// error (stats.converged is false). Throws NewtonError as described above.
 NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options, const std::string& context = "");
 
 }  // namespace pnet

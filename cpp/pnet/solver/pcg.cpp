@@ -74,7 +74,7 @@ void Preconditioner::apply(const VecX& r, VecX& z) const {
 }
 
 PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
-                    double relative_tolerance, int max_iterations) {
+                    double relative_tolerance, int max_iterations, PcgWorkspace& work) {
     PcgResult result;
     const Eigen::Index n = b.size();
     d.setZero(n);
@@ -83,9 +83,12 @@ PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditio
         result.converged = true;
         return result;
     }
-    VecX r = b, z(n), Hp(n);
+    VecX &r = work.r, &z = work.z, &p = work.p, &Hp = work.Hp;
+    r = b;
+    z.resize(n);
+    Hp.resize(n);
     preconditioner.apply(r, z);
-    VecX p = z;
+    p = z;
     double rz = r.dot(z);
     for (int k = 0; k < max_iterations; ++k) {
         objective.hessian_multiply(p, Hp);
@@ -110,6 +113,12 @@ PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditio
         rz = rz_next;
     }
     return result;
+}
+
+PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
+                    double relative_tolerance, int max_iterations) {
+    PcgWorkspace work;
+    return solve_pcg(objective, b, preconditioner, d, relative_tolerance, max_iterations, work);
 }
 
 }  // namespace pnet

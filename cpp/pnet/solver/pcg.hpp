@@ -33,9 +33,17 @@ struct PcgResult {
     bool negative_curvature = false;  // d^T H d <= 0 met (H not PD along a search direction)
 };
 
+/// PCG's work vectors, kept between solves so that a Newton loop allocates
+/// them once.
+struct PcgWorkspace {
+    VecX r, z, p, Hp;
+};
+
 /// Solves H d = b from d = 0 until |b - H d| <= relative_tolerance |b| or
 /// max_iterations. On negative curvature it stops and keeps the last iterate
 /// (the first iterate, if any, is the preconditioned steepest descent step).
+PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
+                    double relative_tolerance, int max_iterations, PcgWorkspace& work);
 PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
                     double relative_tolerance, int max_iterations);
 

@@ -99,21 +99,27 @@ Result compare(std::vector<std::string> args) {
 
 struct CsvRow {
     int frame;
-    double time, soft, binary, plasticinelab;
+    double time, soft, binary, plasticinelab, soft_coarse, spread_a, spread_b, height_a, height_b;
 };
 
 std::vector<CsvRow> read_csv(const std::string& path) {
     std::istringstream in(read_file(path));
     std::string line;
     std::getline(in, line);
-    EXPECT_EQ(line, "frame,time_s,soft_iou,binary_iou,plasticinelab_iou");
+    EXPECT_EQ(line,
+              "frame,time_s,soft_iou,binary_iou,plasticinelab_iou,soft_iou_coarse,spread_a_m,spread_b_m,height_a_m,"
+              "height_b_m");
     std::vector<CsvRow> rows;
     while (std::getline(in, line)) {
         CsvRow r{};
-        char comma[4];
+        char comma[9];
         std::istringstream s(line);
-        s >> r.frame >> comma[0] >> r.time >> comma[1] >> r.soft >> comma[2] >> r.binary >> comma[3] >> r.plasticinelab;
-        EXPECT_TRUE(s && comma[0] == ',' && comma[1] == ',' && comma[2] == ',' && comma[3] == ',') << line;
+        s >> r.frame >> comma[0] >> r.time >> comma[1] >> r.soft >> comma[2] >> r.binary >> comma[3] >>
+            r.plasticinelab >> comma[4] >> r.soft_coarse >> comma[5] >> r.spread_a >> comma[6] >> r.spread_b >>
+            comma[7] >> r.height_a >> comma[8] >> r.height_b;
+        bool commas = true;
+        for (char c : comma) commas = commas && c == ',';
+        EXPECT_TRUE(s && commas) << line;
         rows.push_back(r);
     }
     return rows;
@@ -136,6 +142,10 @@ TEST(CompareCommand, IdenticalRunsHaveBinaryIouOne) {
         EXPECT_DOUBLE_EQ(rows[f].time, 0.02 * f);
         EXPECT_EQ(rows[f].binary, 1.0);
         EXPECT_EQ(rows[f].soft, 1.0);
+        EXPECT_EQ(rows[f].soft_coarse, 1.0);
+        EXPECT_EQ(rows[f].spread_a, rows[f].spread_b);
+        EXPECT_GT(rows[f].spread_a, 0.0);
+        EXPECT_EQ(rows[f].height_a, rows[f].height_b);
         // PlasticineLab's self-IoU is below 1 (the B-spline rim of the block), but a solid block is mostly full nodes.
         EXPECT_GT(rows[f].plasticinelab, 0.8);
         EXPECT_LT(rows[f].plasticinelab, 1.0);

@@ -171,6 +171,75 @@ TEST(NeuralElastoplasticEnergy, RejectsBadConfiguration) {
     EXPECT_THROW((NeuralElastoplasticEnergy<2>(rm, {1.0, 1.0})), std::invalid_argument);
 }
 
+// The network's hardening input is h = min(a, 0) for Cam-Clay (paper A.2.2,
+// DESIGN.md §3), clamped to the range the model was trained on (snow_2d:
+// [-0.5, 0]); Ptilde(F0, a) in c keeps the state itself, so grad Psi(F0) stays
+// exactly E Ptilde(F0, a). A raw state a > 0 (28-35% of a snowball's particles
+// after impact) or a < -0.5 would be an input the network never saw.
+TEST(NeuralElastoplasticEnergy, HardeningInputIsMinOfTheStateClampedToTheTrainedRange) {
+    const ModelFile model = load_model_file(kModels + "/snow_2d.pt");
+    EXPECT_EQ(model.metadata.hardening_min, -0.5);
+    EXPECT_EQ(model.metadata.hardening_max, 0.0);
+    const double E = 1.4e5;
+    NeuralElastoplasticEnergy<2> energy(model, {E, 1.0});
+    const Batch<2> b = make_batch<2>(model.metadata, 6, 31);
+    const std::size_t n = b.F.size();
+    // The same particles at four states: a > 0 against a = 0, a < -0.5 against a = -0.5.
+    const std::vector<std::pair<double, double>> states = {{2.0, 0.0}, {6.45, 0.0}, {-1.29, -0.5}, {-3.0, -0.5}};
+    for (const auto& [outside, inside] : states) {
+        SCOPED_TRACE("a = " + std::to_string(outside));
+        std::vector<double> h_out(n, outside), h_in(n, inside), psi_out(n), psi_in(n);
+        std::vector<Mat<2>> g_out(n), g_in(n);
+        energy.set_reference(b.F0.data(), h_out.data(), n);
+        energy.value_gradient(b.F.data(), psi_out.data(), g_out.data());
+        EXPECT_EQ(energy.hardening_clamped(), outside < -0.5 ? n : 0u) << "only a < -0.5 is outside [-0.5, 0]";
+        energy.set_reference(b.F0.data(), h_in.data(), n);
+        energy.value_gradient(b.F.data(), psi_in.data(), g_in.data());
+        EXPECT_EQ(energy.hardening_clamped(), 0u);
+        for (std::size_t p = 0; p < n; ++p) {
+            // The network sees the same input, so grad Psi(F) - E Ptilde(F0, a) is the same.
+            const Mat<2> d_out = g_out[p] - energy.elastoplastic_stress(b.F0[p], outside);
+            const Mat<2> d_in = g_in[p] - energy.elastoplastic_stress(b.F0[p], inside);
+            EXPECT_LE((d_out - d_in).cwiseAbs().maxCoeff(), 1e-9 * E) << "particle " << p;
+        }
+    }
+    // Inside the range the input is the state itself: a = -0.2 differs from a = 0.
+    std::vector<double> h0(n, 0.0), h1(n, -0.2), psi0(n), psi1(n);
+    std::vector<Mat<2>> g0(n), g1(n);
+    energy.set_reference(b.F0.data(), h0.data(), n);
+    energy.value_gradient(b.F.data(), psi0.data(), g0.data());
+    energy.set_reference(b.F0.data(), h1.data(), n);
+    energy.value_gradient(b.F.data(), psi1.data(), g1.data());
+    double differ = 0.0;
+    for (std::size_t p = 0; p < n; ++p)
+        differ = std::max(differ, ((g1[p] - energy.elastoplastic_stress(b.F0[p], -0.2)) -
+                                   (g0[p] - energy.elastoplastic_stress(b.F0[p], 0.0))).cwiseAbs().maxCoeff());
+    EXPECT_GT(differ, 1e-6 * E) << "the hardening input changes the network's output";
+}
+
+// Relative to the reference, Psi(F) - Psi(F0): the same gradient and Hessian,
+// and 0 at F0 instead of a constant of the size of the energy density.
+TEST(NeuralElastoplasticEnergy, RelativeToTheReferenceShiftsOnlyTheValue) {
+    const ModelFile model = load_model_file(kModels + "/sand_2d.pt");
+    NeuralElastoplasticEnergy<2> paper(model, {3.5e5, 1.0}), relative(model, {3.5e5, 1.0, true});
+    const Batch<2> b = make_batch<2>(model.metadata, 8, 5);
+    const std::size_t n = b.F.size();
+    paper.set_reference(b.F0.data(), b.h.data(), n);
+    relative.set_reference(b.F0.data(), b.h.data(), n);
+    std::vector<double> a(n), r(n), a0(n), r0(n);
+    std::vector<Mat<2>> ga(n), gr(n);
+    paper.value(b.F0.data(), a0.data());
+    relative.value(b.F0.data(), r0.data());
+    paper.value_gradient(b.F.data(), a.data(), ga.data());
+    relative.value_gradient(b.F.data(), r.data(), gr.data());
+    for (std::size_t p = 0; p < n; ++p) {
+        EXPECT_EQ(r0[p], 0.0);
+        EXPECT_GT(std::abs(a0[p]), 1.0) << "the paper's Psi(F0) is a large constant (J/m^3)";
+        EXPECT_NEAR(r[p], a[p] - a0[p], 1e-9 * std::abs(a0[p]));
+        EXPECT_TRUE(gr[p] == ga[p]);
+    }
+}
+
 // --- Python cross-check ----------------------------------------------------------
 
 template <int dim>
