@@ -87,7 +87,9 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     force_matrix_.resize(particles.size());
 
     // P2G (race-free by block colouring, see grid.hpp) with the stress force.
-    for (std::size_t p = 0; p < particles.size(); ++p) force_matrix_[p] = -dt * scaled_stress_[p];
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) force_matrix_[p] = -dt * scaled_stress_[p];
     particles_to_grid(grid_, particles, &force_matrix_);
     const auto after_p2g = std::chrono::steady_clock::now();
 

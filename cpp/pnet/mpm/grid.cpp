@@ -49,17 +49,25 @@ void Grid<dim>::bin_and_clear(const std::vector<Vec<dim>>& x) {
     active_blocks_.clear();
     for (int c = 0; c < kColours; ++c) colour_blocks_[c].clear();
 
-    for (std::size_t p = 0; p < n; ++p) {
+    // The blocks in parallel, the counts serially (a stable counting sort).
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+    bool outside = false;
+#pragma omp parallel for schedule(static) reduction(|| : outside)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
         int block = 0;
         for (int a = 0; a < dim; ++a) {
             const int base = static_cast<int>(std::floor((x[p][a] - origin_[a]) * inv_dx_ - 0.5));
-            if (base < 0 || base + 2 >= nodes_[a])
-                throw std::logic_error("grid: a particle's stencil leaves the grid (positions must be clamped)");
+            if (base < 0 || base + 2 >= nodes_[a]) {
+                outside = true;
+                block = 0;
+                break;
+            }
             block = block * blocks_[a] + (base >> kBlockBits);
         }
         particle_block_[p] = block;
-        ++block_count_[block];
     }
+    if (outside) throw std::logic_error("grid: a particle's stencil leaves the grid (positions must be clamped)");
+    for (std::size_t p = 0; p < n; ++p) ++block_count_[particle_block_[p]];
     block_start_[0] = 0;
     for (std::size_t b = 0; b < block_count_.size(); ++b) block_start_[b + 1] = block_start_[b] + block_count_[b];
     order_.resize(n);

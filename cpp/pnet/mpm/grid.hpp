@@ -68,13 +68,16 @@ public:
     void bin_and_clear(const std::vector<Vec<dim>>& x);
 
     /// Calls fn(p) for every particle, colour after colour, blocks of a colour
-    /// in parallel (OpenMP), particles of a block in index order.
+    /// in parallel (OpenMP), particles of a block in index order. One parallel
+    /// region for all colours (a barrier between them, not a fork and join):
+    /// the implicit solver calls this in every Hessian-vector product.
     template <typename Fn>
     void for_each_particle_coloured(Fn&& fn) const {
+#pragma omp parallel
         for (int colour = 0; colour < kColours; ++colour) {
             const std::vector<int>& blocks = colour_blocks_[colour];
             const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(blocks.size());
-#pragma omp parallel for schedule(dynamic, 2)
+#pragma omp for schedule(dynamic, 2)
             for (std::ptrdiff_t b = 0; b < count; ++b) {
                 const int block = blocks[b];
                 for (int q = block_start_[block]; q < block_start_[block + 1]; ++q) fn(order_[q]);
