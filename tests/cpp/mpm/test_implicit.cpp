@@ -567,7 +567,8 @@ TYPED_TEST(ImplicitTest, LaggedAgreesWithExplicitOnAnElasticBlockAtSmallDt) {
     double motion = 0.0;
     const double worst = explicit_lagged_distance<dim>(elastic_box<dim>(lo, hi, v, -9.8, 3), 2e-4, 4, &motion);
     EXPECT_GT(motion, 0.05) << "the box falls and hits the floor";
-    EXPECT_LT(worst, 0.02 / 32) << "m: within 2% of a cell after 0.08 s";
+    // Measured: 3.0e-4 m (2D) and 2.5e-4 m (3D): the O(dt) difference of the two time integrations.
+    EXPECT_LT(worst, 4.5e-4) << "m: within 1.5% of a cell after 0.08 s";
 }
 
 // Slip walls act the same in both integrators (DESIGN.md §4.1): only the
@@ -584,7 +585,9 @@ TYPED_TEST(ImplicitTest, SlipWallsActTheSameInBothIntegrators) {
     double motion = 0.0;
     const double worst = explicit_lagged_distance<dim>(elastic_box<dim>(lo, hi, v, 0.0, 0), 2e-4, 4, &motion);
     EXPECT_GT(motion, 0.03) << "the box reaches the wall";
-    EXPECT_LT(worst, 0.02 / 32) << "m: within 2% of a cell after 0.08 s";
+    // Measured: 2.5e-4 m (2D) and 2.2e-4 m (3D); with the whole normal component held fixed (the old
+    // implicit walls) 1.9e-3 m and 7.3e-4 m.
+    EXPECT_LT(worst, 4.5e-4) << "m: within 1.5% of a cell after 0.08 s";
 }
 
 }  // namespace
