@@ -45,8 +45,7 @@ RUNS = {
     "plasticitynet_1e-4": ("plasticitynet", 1e-4, [], "main", None),
     "lagged_1e-3": ("lagged", 1e-3, [], "main", None),
     "plasticitynet_1e-3_w0": ("plasticitynet", 1e-3, ["--regularizer", "0"], "ablation", {"sand_column_2d"}),
-    "plasticitynet_1e-3_fp1": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "1"], "ablation",
-                               {"sand_column_2d"}),
+    "plasticitynet_1e-3_fp1": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "1"], "ablation", None),
     "plasticitynet_1e-3_fp2": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "2", "--fixed-point-tol", "0"],
                                "ablation", {"sand_column_2d"}),
     "plasticitynet_1e-3_fp4": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "4", "--fixed-point-tol", "0"],
@@ -65,6 +64,7 @@ def run_marker(scene: str, command: list, explicit: bool) -> dict:
     """What a run's result depends on besides the simulator: the command and the scene file (for an
     explicit run without its "integrator" block, which only sets the implicit solvers)."""
     scene_json = json.loads((ROOT / "scenes" / f"{scene}.json").read_text())
+    scene_json.pop("description", None)  # prose
     if explicit:
         scene_json.pop("integrator", None)
     scene_sha = hashlib.sha256(json.dumps(scene_json, sort_keys=True).encode()).hexdigest()
@@ -93,6 +93,8 @@ def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force
     if not force and run_dir_complete(out, marker, frames):
         print(f"[{scene}/{name}] reusing {out}", flush=True)
         return out
+    if out.is_symlink():
+        sys.exit(f"{out} links to an incomplete or outdated run ({out.resolve()}); remove the link to re-run it here")
     if out.exists():
         shutil.rmtree(out)
     print(f"[{scene}/{name}] " + " ".join(command), flush=True)
