@@ -49,6 +49,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     // Work vectors: sized once per solve; PCG keeps its own between calls.
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;
     PcgWorkspace pcg;
+    Preconditioner preconditioner;
     const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
     const bool lazy = options.lazy_hessian > 0.0;
     // Every iterate's Hessian is prepared before its direction is computed:
@@ -70,12 +71,11 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             stats.converged = true;
             break;
         }
-        Preconditioner preconditioner;
         if (block > 1) {
             objective.hessian_block_diagonal(blocks);
-            preconditioner = Preconditioner::block_jacobi(blocks, block);
+            preconditioner.set_block_jacobi(blocks, block);
         } else {
-            preconditioner = Preconditioner::jacobi(diagonal);
+            preconditioner.set_jacobi(diagonal);
         }
         const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
         const PcgResult cg = solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, pcg);

@@ -41,27 +41,38 @@ void apply_blocks(const VecX& inverse, const VecX& r, VecX& z) {
 
 Preconditioner Preconditioner::jacobi(const VecX& diagonal) {
     Preconditioner m;
-    m.inverse_ = diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
+    m.set_jacobi(diagonal);
     return m;
 }
 
 Preconditioner Preconditioner::block_jacobi(const VecX& blocks, int block) {
+    Preconditioner m;
+    m.set_block_jacobi(blocks, block);
+    return m;
+}
+
+void Preconditioner::set_jacobi(const VecX& diagonal) {
+    block_ = 1;
+    inverse_.resize(diagonal.size());
+    inverse_ = diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
+}
+
+void Preconditioner::set_block_jacobi(const VecX& blocks, int block) {
     if (block < 1 || blocks.size() % (block * block) != 0)
         throw std::invalid_argument("Preconditioner::block_jacobi: blocks do not hold whole " + std::to_string(block) +
                                     " x " + std::to_string(block) + " blocks");
-    Preconditioner m;
-    m.block_ = block;
     if (block == 1) {
-        m = jacobi(blocks);
+        set_jacobi(blocks);
     } else if (block == 2) {
-        invert_blocks<2>(blocks, m.inverse_);
+        block_ = 2;
+        invert_blocks<2>(blocks, inverse_);
     } else if (block == 3) {
-        invert_blocks<3>(blocks, m.inverse_);
+        block_ = 3;
+        invert_blocks<3>(blocks, inverse_);
     } else {
         throw std::invalid_argument("Preconditioner::block_jacobi: blocks of 2 or 3 are supported, got " +
                                     std::to_string(block));
     }
-    return m;
 }
 
 void Preconditioner::apply(const VecX& r, VecX& z) const {

@@ -17,6 +17,10 @@ public:
     /// positive definite falls back to the inverse of its diagonal.
     static Preconditioner block_jacobi(const VecX& blocks, int block);
 
+    /// The same, in place: the storage is kept from one Newton iteration to the next.
+    void set_jacobi(const VecX& diagonal);
+    void set_block_jacobi(const VecX& blocks, int block);
+
     int block() const { return block_; }
     /// z = M^-1 r.
     void apply(const VecX& r, VecX& z) const;
