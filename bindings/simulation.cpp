@@ -38,7 +38,9 @@ void for_each_step_field(F&& f) {
     f("residual", &StepStats::residual);
     f("energy", &StepStats::energy);
     f("converged", &StepStats::converged);
+    f("line_search_failed", &StepStats::line_search_failed);
     f("clamped", &StepStats::clamped);
+    f("hardening_clamped", &StepStats::hardening_clamped);
     f("max_grid_speed", &StepStats::max_grid_speed);
 }
 
@@ -64,7 +66,9 @@ py::dict to_dict(const FrameStats& f) {
     d["fixed_point_iterations"] = f.fixed_point_iterations;
     d["max_residual"] = f.max_residual;
     d["converged"] = f.converged;
+    d["unconverged_steps"] = f.unconverged_steps;
     d["clamped"] = f.clamped;
+    d["hardening_clamped"] = f.hardening_clamped;
     return d;
 }
 
@@ -311,7 +315,9 @@ Every model the scene names is loaded and checked.)doc")
              py::arg("frames") = 1, py::arg("callback") = py::none(),
              R"doc(Advance by whole frames; returns one dict per frame (frame, time, steps,
 dt_min, dt_max, wall_s, kinetic_energy and potential_energy in J, Newton / CG /
-line-search / fixed-point totals, max_residual in m/s, converged, clamped).
+line-search / fixed-point totals, max_residual in m/s, converged, unconverged_steps,
+clamped, hardening_clamped: the most particles in a step whose hardening input
+was clamped to the model's trained range).
 
 callback(sim, frame_stats) runs after every frame; returning False stops early.
 Ctrl-C raises KeyboardInterrupt between two steps (the state stays consistent;
@@ -321,7 +327,8 @@ a later advance finishes the frame).)doc")
 load_checkpoint) as a dict of arrays: dt, wall_s, p2g_s, solve_s, g2p_s, energy_s,
 cg_s (seconds), newton_iterations, cg_iterations, line_search_steps,
 fixed_point_iterations, fixed_point_change, initial_residual and residual (m/s),
-energy (J), converged, clamped, max_grid_speed (m/s).)doc")
+energy (J), converged, line_search_failed, clamped, hardening_clamped,
+max_grid_speed (m/s).)doc")
         .def("save_checkpoint", &PySimulation::save_checkpoint, py::arg("path"),
              "Write the whole state to a file atomically (what is there is replaced only when the write succeeds).")
         .def("load_checkpoint", &PySimulation::load_checkpoint, py::arg("path"),

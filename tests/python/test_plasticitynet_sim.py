@@ -116,6 +116,8 @@ def test_simulation_arrays_and_stats(name, integrator):
     assert np.isclose(stats["dt"].sum(), sim.time)
     if integrator != "explicit":
         assert stats["converged"].all() and (stats["newton_iterations"] >= 0).all()
+        assert not stats["line_search_failed"].any() and (stats["hardening_clamped"] >= 0).all()
+        assert frames[0]["unconverged_steps"] == 0 and frames[0]["hardening_clamped"] >= 0
 
     mass = sim.grid_mass()
     assert mass.shape == tuple(c + 1 for c in sim.scene.cells)
