@@ -39,6 +39,7 @@ void for_each_step_field(F&& f) {
     f("energy", &StepStats::energy);
     f("converged", &StepStats::converged);
     f("line_search_failed", &StepStats::line_search_failed);
+    f("fixed_point_converged", &StepStats::fixed_point_converged);
     f("clamped", &StepStats::clamped);
     f("hardening_clamped", &StepStats::hardening_clamped);
     f("max_grid_speed", &StepStats::max_grid_speed);
@@ -327,7 +328,7 @@ a later advance finishes the frame).)doc")
 load_checkpoint) as a dict of arrays: dt, wall_s, p2g_s, solve_s, g2p_s, energy_s,
 cg_s (seconds), newton_iterations, cg_iterations, line_search_steps,
 fixed_point_iterations, fixed_point_change, initial_residual and residual (m/s),
-energy (J), converged, line_search_failed, clamped, hardening_clamped,
+energy (J), converged, line_search_failed, fixed_point_converged, clamped, hardening_clamped,
 max_grid_speed (m/s).)doc")
         .def("save_checkpoint", &PySimulation::save_checkpoint, py::arg("path"),
              "Write the whole state to a file atomically (what is there is replaced only when the write succeeds).")

@@ -204,7 +204,7 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     std::string steps_csv =
         "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
         "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
-        "energy_J,converged,clamped,line_search_failed,hardening_clamped\n";
+        "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged\n";
     const fs::path steps_path = out / "steps.csv";
     auto keep_rows = [&](const fs::path& path, std::string& text) {
         if (!o.resume || !fs::exists(path)) return;
@@ -223,6 +223,7 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     long run_steps = 0, run_unconverged = 0;
     double run_worst_residual = 0.0;
     std::size_t run_hardening_clamped = 0;
+    long run_fixed_point_capped = 0;
     while (sim.frame() < frames) {
         FrameStats f;
         try {
@@ -247,6 +248,7 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         run_unconverged += f.unconverged_steps;
         if (f.unconverged_steps > 0) run_worst_residual = std::max(run_worst_residual, f.max_residual);
         run_hardening_clamped = std::max(run_hardening_clamped, f.hardening_clamped);
+        run_fixed_point_capped += f.fixed_point_capped_steps;
         stats += std::string(row) + "\n";
         double t = f.time;  // the frame's start time, from its step sizes
         for (const StepStats& s : sim.last_frame_steps()) t -= s.dt;
@@ -254,11 +256,12 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         for (const StepStats& s : sim.last_frame_steps()) {
             t += s.dt;
             std::snprintf(row, sizeof row,
-                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu\n",
+                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu,%d\n",
                           f.frame, step++, t, s.dt, s.wall_seconds, s.p2g_seconds, s.grid_seconds, s.g2p_seconds,
                           s.energy_seconds, s.cg_seconds, s.newton_iterations, s.cg_iterations, s.line_search_steps,
                           s.fixed_point_iterations, s.fixed_point_change, s.initial_residual, s.residual, s.energy,
-                          s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped);
+                          s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped,
+                          s.fixed_point_converged ? 1 : 0);
             steps_csv += row;
         }
         write_text_atomically(stats_path.string(), stats);
@@ -284,6 +287,12 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         else
             std::printf("all %ld steps converged (Newton residual <= %.3g m/s)\n", run_steps,
                         settings.implicit.newton_tolerance);
+        if (run_fixed_point_capped > 0)
+            std::printf("note: in %ld of %ld steps the fixed point on F0 stopped above its tolerance %.3g "
+                        "(max_fixed_point_iterations %d, or it stopped contracting; fixed_point_converged = 0 in "
+                        "steps.csv)\n",
+                        run_fixed_point_capped, run_steps, settings.implicit.fixed_point_tolerance,
+                        settings.implicit.max_fixed_point_iterations);
         if (run_hardening_clamped > 0)
             std::printf("note: up to %zu particles in a step had a hardening state outside the range the model was "
                         "trained on (clamped; hardening_clamped in stats.csv)\n",

@@ -264,6 +264,15 @@ def test_unconverged_steps_are_counted_reported_and_can_fail_the_run(tmp_path):
     steps = (out / "steps.csv").read_text().splitlines()
     assert all(dict(zip(steps[0].split(","), line.split(",")))["converged"] == "0" for line in steps[1:])
 
+    # A fixed point on F0 stopped by its cap is reported too.
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--fixed-point-iterations", 1,
+             "--fixed-point-tol", 0, "--out", tmp_path / "capped")
+    assert r.returncode == 0, r.stderr
+    steps = (tmp_path / "capped" / "steps.csv").read_text().splitlines()
+    capped = sum(dict(zip(steps[0].split(","), line.split(",")))["fixed_point_converged"] == "0" for line in steps[1:])
+    assert capped > 10, "a change of exactly 0 (the column at rest) is the only way to meet tolerance 0"
+    assert f"note: in {capped} of 20 steps the fixed point on F0 stopped above its tolerance" in r.stdout, r.stdout
+
     r = pnet("simulate", path, "--frames", 1, "--fail-on-unconverged", "--out", tmp_path / "strict")
     assert r.returncode == 1
     assert "error: step 0" in r.stderr and "did not converge" in r.stderr, r.stderr

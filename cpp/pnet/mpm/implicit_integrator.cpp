@@ -163,7 +163,10 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         previous_change = change;
         F0_.swap(F_);  // F0^{j+1} = F(v^{j+1})
     }
-    if (fixed_point) v_.swap(best_v_);
+    if (fixed_point) {
+        v_.swap(best_v_);
+        stats.fixed_point_converged = best_change <= options_.fixed_point_tolerance;
+    }
     potential_.write_velocity(v_, grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM
     double max_speed = 0.0;

@@ -33,6 +33,7 @@ struct StepStats {
     double energy = 0.0;             // incremental potential at the solution, J
     bool converged = true;           // every Newton solve reached its tolerance
     bool line_search_failed = false; // a solve stopped because no step lowered the energy
+    bool fixed_point_converged = true;  // plasticitynet: the fixed point on F0 reached its tolerance (not the cap)
     std::size_t hardening_clamped = 0;  // plasticitynet: particles whose hardening input was clamped to the trained range
     // Where an implicit step's time went (parts of grid_seconds).
     double energy_seconds = 0.0;     // per-particle energies, stresses and Hessians

@@ -119,6 +119,7 @@ FrameStats Simulation<dim>::advance_frame(const std::function<void()>& after_ste
         stats.max_residual = std::max(stats.max_residual, s.residual);
         stats.converged = stats.converged && s.converged;
         stats.unconverged_steps += !s.converged;
+        stats.fixed_point_capped_steps += !s.fixed_point_converged;
         stats.hardening_clamped = std::max(stats.hardening_clamped, s.hardening_clamped);
         frame_steps_.push_back(s);
         if (after_step) after_step();

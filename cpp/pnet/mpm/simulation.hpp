@@ -54,6 +54,7 @@ struct FrameStats {
     double max_residual = 0.0;
     bool converged = true;
     long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
+    long fixed_point_capped_steps = 0;   // plasticitynet: steps whose fixed point on F0 stopped above its tolerance
     std::size_t hardening_clamped = 0;   // most particles with a clamped hardening input in one step
 };
 
