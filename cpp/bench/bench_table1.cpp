@@ -3,7 +3,10 @@
 // paper's ground-truth step) and at its CFL step, on the same scene, in one run.
 //
 //   bench_table1 [--frames N] [--threads T] [--scenes DIR] [--only NAME] [--dt-implicit S]
-//                [--with-lagged] [--3d]
+//                [--with-lagged] [--with-one-solve] [--3d]
+//
+// --with-one-solve adds plasticitynet with one solve per step (F0 = F(v*), the
+// fixed point not converged) beside the default.
 //
 // Every integrator runs the same simulated interval, frames [0, N) from the
 // scene's initial state (default N = 10: 0.2 s, the sand column collapsing, the
@@ -84,7 +87,8 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
 }
 
 template <int dim>
-std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_implicit, bool with_lagged) {
+std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_implicit, bool with_lagged,
+                             bool with_one_solve) {
     pnet::IntegratorSettings base = pnet::IntegratorSettings::from_scene(scene);
     for (const pnet::SceneObject& object : scene.objects) {
         pnet::LoadOptions load;
@@ -102,6 +106,12 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
         return s;
     };
     rows.push_back(measure<dim>(scene, with("plasticitynet", dt_implicit), frames));
+    if (with_one_solve) {  // the fixed point on F0 not converged: F0 = F(v*) only (the default before issue 14)
+        pnet::IntegratorSettings one = with("plasticitynet", dt_implicit);
+        one.implicit.max_fixed_point_iterations = 1;
+        rows.push_back(measure<dim>(scene, one, frames));
+        rows.back().integrator = "plasticitynet, 1 solve";
+    }
     if (with_lagged) rows.push_back(measure<dim>(scene, with("lagged", dt_implicit), frames));
     rows.push_back(measure<dim>(scene, with("explicit", 1e-5), frames));
     rows.push_back(measure<dim>(scene, with("explicit", 0.0), frames));
@@ -113,7 +123,7 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
 int main(int argc, char** argv) {
     int frames = 10, threads = 0;
     double dt_implicit = 1e-3;
-    bool with_lagged = false, three_d = false;
+    bool with_lagged = false, with_one_solve = false, three_d = false;
     std::string scenes_dir = PNET_SCENES_DIR, only;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
@@ -130,11 +140,12 @@ int main(int argc, char** argv) {
         else if (arg == "--scenes") scenes_dir = value();
         else if (arg == "--only") only = value();
         else if (arg == "--with-lagged") with_lagged = true;
+        else if (arg == "--with-one-solve") with_one_solve = true;
         else if (arg == "--3d") three_d = true;
         else {
             std::fprintf(stderr,
                          "usage: bench_table1 [--frames N] [--threads T] [--dt-implicit S] [--scenes DIR] "
-                         "[--only NAME] [--with-lagged] [--3d]\n");
+                         "[--only NAME] [--with-lagged] [--with-one-solve] [--3d]\n");
             return 2;
         }
     }
@@ -160,8 +171,8 @@ int main(int argc, char** argv) {
         try {
             const pnet::Scene scene = pnet::load_scene(scenes_dir + "/" + name + ".json");
             std::fprintf(stderr, "%s:\n", name.c_str());
-            rows = scene.dim == 2 ? bench_scene<2>(scene, frames, dt_implicit, with_lagged)
-                                  : bench_scene<3>(scene, frames, dt_implicit, with_lagged);
+            rows = scene.dim == 2 ? bench_scene<2>(scene, frames, dt_implicit, with_lagged, with_one_solve)
+                                  : bench_scene<3>(scene, frames, dt_implicit, with_lagged, with_one_solve);
         } catch (const std::exception& e) {
             std::fprintf(stderr, "bench_table1: %s: %s\n", name.c_str(), e.what());
             return 1;
