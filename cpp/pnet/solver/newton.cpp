@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <limits>
 
+#include <Eigen/CholmodSupport>
+
 #include "pnet/solver/pcg.hpp"
 
 namespace pnet {
@@ -29,6 +31,35 @@ double residual_of(const VecX& g, const NewtonOptions& options, const VecX& diag
     return g.cwiseProduct(scale).lpNorm<Eigen::Infinity>();
 }
 
+/// CHOLMOD's supernodal Cholesky of the objective's assembled Hessian, keeping
+/// the symbolic analysis while the sparsity pattern stays the same.
+class DirectSolver {
+public:
+    /// Factorizes H; false if H is not positive definite.
+    bool factorize(const SparseMatrix& H, NewtonStats& stats) {
+        if (!same_pattern(H)) {
+            llt_.analyzePattern(H);
+            outer_.assign(H.outerIndexPtr(), H.outerIndexPtr() + H.outerSize() + 1);
+            inner_.assign(H.innerIndexPtr(), H.innerIndexPtr() + H.nonZeros());
+            ++stats.analyses;
+        }
+        llt_.factorize(H);
+        ++stats.factorizations;
+        return llt_.info() == Eigen::Success;
+    }
+    void solve(const VecX& b, VecX& x) { x = llt_.solve(b); }
+
+private:
+    bool same_pattern(const SparseMatrix& H) const {
+        return !outer_.empty() && static_cast<Eigen::Index>(outer_.size()) == H.outerSize() + 1 &&
+               static_cast<Eigen::Index>(inner_.size()) == H.nonZeros() &&
+               std::equal(outer_.begin(), outer_.end(), H.outerIndexPtr()) &&
+               std::equal(inner_.begin(), inner_.end(), H.innerIndexPtr());
+    }
+    Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower> llt_;
+    std::vector<SparseMatrix::StorageIndex> outer_, inner_;
+};
+
 std::string where(const std::string& context, int iteration, double residual) {
     char text[160];
     std::snprintf(text, sizeof text, "%sNewton iteration %d (residual %.3e): ",
@@ -50,6 +81,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;
     PcgWorkspace pcg;
     Preconditioner preconditioner;
+    DirectSolver direct;
     const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
     const bool lazy = options.lazy_hessian > 0.0;
     // Every iterate's Hessian is prepared before its direction is computed:
@@ -71,15 +103,22 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             stats.converged = true;
             break;
         }
-        if (block > 1) {
-            objective.hessian_block_diagonal(blocks);
-            preconditioner.set_block_jacobi(blocks, block);
+        const SparseMatrix* H = options.linear_solver == NewtonOptions::LinearSolver::Cholesky
+                                    ? objective.hessian_matrix()
+                                    : nullptr;
+        if (H && direct.factorize(*H, stats)) {
+            direct.solve(-g, d);
         } else {
-            preconditioner.set_jacobi(diagonal);
+            if (block > 1) {
+                objective.hessian_block_diagonal(blocks);
+                preconditioner.set_block_jacobi(blocks, block);
+            } else {
+                preconditioner.set_jacobi(diagonal);
+            }
+            const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
+            const PcgResult cg = solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, pcg);
+            stats.cg_iterations += cg.iterations;
         }
-        const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
-        const PcgResult cg = solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, pcg);
-        stats.cg_iterations += cg.iterations;
         const double slope = g.dot(d);
         if (!(slope < 0.0))
             throw NewtonError(where(context, it, residual) + "the search direction is not a descent direction (g.d = " +

@@ -50,6 +50,13 @@ struct NewtonOptions {
     /// Block Jacobi (the objective's hessian_block_diagonal(), when its block
     /// size is > 1) instead of Jacobi.
     bool block_preconditioner = false;
+    /// The linear solve of H d = -g: PCG (matrix-free), or a sparse Cholesky
+    /// factorization by CHOLMOD of the objective's hessian_matrix() (FEM:
+    /// small, stiff systems), whose symbolic analysis is kept while the
+    /// sparsity pattern is unchanged. An objective without an assembled
+    /// matrix, or a factorization that fails (H not positive definite), falls
+    /// back to PCG for that iteration.
+    enum class LinearSolver { Pcg, Cholesky } linear_solver = LinearSolver::Pcg;
     /// Lazy Hessian: > 0 lets an iterate reached by a full step that cut the
     /// residual by at least this factor keep the previous Hessian; every other
     /// iterate gets a fresh one. 0: a fresh Hessian at every iterate (Newton).
@@ -70,6 +77,7 @@ struct NewtonStats {
     /// last accepted iterate; converged is false).
     bool line_search_failed = false;
     int hessians = 0;  // Hessian passes (value_gradient_hessian or prepare_hessian)
+    int factorizations = 0, analyses = 0;  // Cholesky: numeric factorizations, symbolic analyses
 };
 
 /// A solve that cannot go on: non-finite energy or gradient at the start or

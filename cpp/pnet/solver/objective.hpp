@@ -5,10 +5,12 @@
 // of its Hessian with a vector. Newton (newton.hpp) only ever sees this
 // interface, so the MPM incremental potential, FEM and coupling share it.
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 
 namespace pnet {
 
 using VecX = Eigen::VectorXd;
+using SparseMatrix = Eigen::SparseMatrix<double>;  // column-major
 
 class Objective {
 public:
@@ -51,6 +53,11 @@ public:
     /// The size()/b diagonal b x b blocks of H, consecutive, each row-major,
     /// for the block-Jacobi preconditioner (only called when b > 1).
     virtual void hessian_block_diagonal(VecX& blocks) const { hessian_diagonal(blocks); }
+
+    /// H assembled (symmetric, both triangles stored) at the last
+    /// prepare_hessian(), for a direct solve (NewtonOptions::linear_solver);
+    /// null for matrix-free objectives (MPM).
+    virtual const SparseMatrix* hessian_matrix() const { return nullptr; }
 };
 
 }  // namespace pnet

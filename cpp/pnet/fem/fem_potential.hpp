@@ -1,0 +1,107 @@
+#pragma once
+// The incremental potential of an implicit FEM step (DESIGN.md §4.2), over the
+// nodal velocities v with x = x^n + dt v, so that FEM has the same unknowns
+// (velocities, m/s) and the same Newton loop as MPM:
+//
+//   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_e V0_e psi_e(F^E_e(v)),
+//   F^E_e(v) = F_e(x) (F^P_e)^-1 = sum_a x_a gt_ea^T,   gt_ea = (F^P_e)^-T g_ea,
+//
+// g_ea the rest gradients of element e's linear shape functions (g_a = row a-1
+// of D_m^-1 for a >= 1, g_0 = -sum_a g_a; F_e(x) = D_s(x) D_m^-1 = sum_a x_a
+// g_ea^T). psi_e is a ParticleEnergy (an element is a material point with a
+// rest volume): elastic for `lagged`, the PlasticityNet energy for
+// `plasticitynet`, with P = dpsi/dF^E and H = d2psi/dF^E2 (PSD). Then
+//   dE/dv_a = m_a (v_a - v*_a) + dt sum_e V0_e P_e gt_ea,
+//   d2E/dv_a dv_b = m_a delta_ab I + dt^2 sum_e V0_e B_eab,  (B_eab)_ik = sum_jl gt_ea[j] H_e(ij, kl) gt_eb[l].
+// The Hessian is assembled as a sparse matrix (hessian_matrix()) for a direct
+// solve by CHOLMOD; fixed components (Dirichlet nodes: targets reached by
+// v = v*) keep only their mass on the diagonal. Sums run in element order, so
+// results do not depend on the thread count.
+#include <Eigen/SparseCore>
+#include <vector>
+
+#include "pnet/energy/particle_energy.hpp"
+#include "pnet/fem/mesh.hpp"
+#include "pnet/solver/objective.hpp"
+
+namespace pnet {
+
+/// Per-element rest quantities of a mesh.
+template <int dim>
+struct ElementRest {
+    std::vector<double> volume;                          // V0_e, m^d
+    std::vector<std::array<Vec<dim>, dim + 1>> grad;     // g_ea, 1/m
+    std::vector<double> node_mass;                       // lumped: rho V0 / (d + 1) from each element, kg
+
+    /// From the rest mesh and a density per element (kg/m^d).
+    ElementRest(const Mesh<dim>& mesh, const std::vector<double>& density);
+    ElementRest() = default;
+};
+
+/// F_e(x) = sum_a x_a g_ea^T of element e at positions x.
+template <int dim>
+Mat<dim> deformation_gradient(const Mesh<dim>& mesh, const ElementRest<dim>& rest, const std::vector<Vec<dim>>& x,
+                              std::size_t e);
+
+template <int dim>
+class FemPotential final : public Objective {
+public:
+    static constexpr int kElementNodes = dim + 1;
+    static constexpr int kM = dim * dim;
+
+    FemPotential(const Mesh<dim>& mesh, const ElementRest<dim>& rest, ParticleEnergy<dim>& energy)
+        : mesh_(mesh), rest_(rest), energy_(energy) {}
+
+    /// Sets up one step: positions x^n, v* (= v^n + dt g on free nodes, the
+    /// prescribed velocity on fixed ones), per element (F^P)^-1, and which
+    /// velocity components are fixed (size dim n; empty: none).
+    void begin_step(const std::vector<Vec<dim>>& x_start, const VecX& v_star, double dt,
+                    const std::vector<Mat<dim>>& plastic_inverse, const std::vector<char>& fixed);
+
+    /// F^E_e(v) of every element.
+    void elastic_deformation(const VecX& v, std::vector<Mat<dim>>& FE) const;
+    /// The energy's reference (plasticitynet: F0 per element) and the elements' hardening states.
+    void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
+                       const std::vector<int>& object);
+
+    const VecX& v_star() const { return v_star_; }
+    /// m_i on free components, 0 on fixed ones (NewtonOptions::residual_mass).
+    const VecX& residual_mass() const { return residual_mass_; }
+
+    // Objective
+    Eigen::Index size() const override { return v_star_.size(); }
+    double value(const VecX& v) override;
+    double value_gradient(const VecX& v, VecX& gradient) override;
+    void prepare_hessian(const VecX& v) override;
+    double value_gradient_hessian(const VecX& v, VecX& gradient) override;
+    void hessian_multiply(const VecX& d, VecX& out) const override;
+    void hessian_diagonal(VecX& diagonal) const override;
+    int hessian_block_size() const override { return dim; }
+    void hessian_block_diagonal(VecX& blocks) const override;
+    const SparseMatrix* hessian_matrix() const override { return &hessian_; }
+
+    /// Project the element Hessians to PSD (default; false: the exact Hessian, for derivative checks).
+    void set_project_psd(bool project) { project_psd_ = project; }
+
+private:
+    double inertia(const VecX& v) const;
+    void evaluate(const VecX& v, typename ParticleEnergy<dim>::Order order);
+    void assemble_gradient(const VecX& v, VecX& gradient) const;
+    double potential_sum() const;
+
+    const Mesh<dim>& mesh_;
+    const ElementRest<dim>& rest_;
+    ParticleEnergy<dim>& energy_;
+    std::vector<Vec<dim>> x_start_;
+    double dt_ = 0.0;
+    VecX v_star_, mass_, free_, residual_mass_;
+    std::vector<std::array<Vec<dim>, dim + 1>> grad_;  // gt_ea = (F^P)^-T g_ea
+    std::vector<Mat<dim>> FE_, P_;
+    std::vector<double> psi_;
+    std::vector<Tensor4<dim>> H_;
+    SparseMatrix hessian_;
+    std::vector<Eigen::Triplet<double>> triplets_;
+    bool project_psd_ = true;
+};
+
+}  // namespace pnet

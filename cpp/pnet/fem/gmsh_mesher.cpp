@@ -1,0 +1,148 @@
+#include "pnet/fem/gmsh_mesher.hpp"
+
+#include <gmsh.h>
+
+#include <cmath>
+#include <filesystem>
+#include <mutex>
+#include <unordered_map>
+
+namespace pnet {
+
+namespace {
+
+std::mutex gmsh_mutex;
+
+/// One gmsh session: initialized quiet and deterministic, finalized on exit.
+class GmshSession {
+public:
+    GmshSession() {
+        gmsh::initialize(0, nullptr, /*readConfigFiles=*/false);
+        gmsh::option::setNumber("General.Terminal", 0);
+        gmsh::option::setNumber("General.Verbosity", 1);
+        gmsh::option::setNumber("General.NumThreads", 1);
+        gmsh::option::setNumber("Mesh.Algorithm", 6);  // Frontal-Delaunay
+        gmsh::option::setNumber("Mesh.RandomSeed", 1);
+    }
+    ~GmshSession() { gmsh::finalize(); }
+    GmshSession(const GmshSession&) = delete;
+    GmshSession& operator=(const GmshSession&) = delete;
+};
+
+/// The elements of gmsh type `type` in the current model, with compact node numbers.
+template <int dim>
+Mesh<dim> collect(int type, const std::string& context) {
+    std::vector<std::size_t> element_tags, node_tags;
+    gmsh::model::mesh::getElementsByType(type, element_tags, node_tags);
+    if (element_tags.empty())
+        throw MeshError(context + ": no " + (dim == 2 ? "triangles" : "tetrahedra") + " in the mesh");
+    std::vector<std::size_t> all_tags;
+    std::vector<double> coord, parametric;
+    gmsh::model::mesh::getNodes(all_tags, coord, parametric, -1, -1, false, false);
+    std::unordered_map<std::size_t, std::size_t> position;  // gmsh node tag -> index into coord / 3
+    for (std::size_t i = 0; i < all_tags.size(); ++i) position[all_tags[i]] = i;
+    Mesh<dim> mesh;
+    std::unordered_map<std::size_t, int> index;  // gmsh node tag -> mesh node, in order of first use
+    const std::size_t per = dim + 1;
+    mesh.elements.resize(element_tags.size());
+    for (std::size_t e = 0; e < element_tags.size(); ++e)
+        for (std::size_t a = 0; a < per; ++a) {
+            const std::size_t tag = node_tags[e * per + a];
+            auto [it, inserted] = index.try_emplace(tag, static_cast<int>(mesh.x.size()));
+            if (inserted) {
+                const auto p = position.find(tag);
+                if (p == position.end())
+                    throw MeshError(context + ": element " + std::to_string(element_tags[e]) + " refers to node " +
+                                    std::to_string(tag) + ", which the file does not define");
+                const double* c = &coord[3 * p->second];
+                if (dim == 2 && std::abs(c[2]) > 1e-12 * (1.0 + std::abs(c[0]) + std::abs(c[1])))
+                    throw MeshError(context + ": node " + std::to_string(tag) + " has z = " + std::to_string(c[2]) +
+                                    "; a 2D mesh lies in the plane z = 0");
+                Vec<dim> x;
+                for (int k = 0; k < dim; ++k) x[k] = c[k];
+                mesh.x.push_back(x);
+            }
+            mesh.elements[e][a] = it->second;
+        }
+    mesh.finalize(context);
+    return mesh;
+}
+
+}  // namespace
+
+Mesh<2> mesh_shape(const Shape2d& shape, const std::string& context) {
+    auto fail = [&](const std::string& what) { throw MeshError(context + ": " + what); };
+    const Vec<2> size = shape.max - shape.min;
+    double extent = 0.0;
+    switch (shape.kind) {
+        case Shape2d::Kind::Box:
+        case Shape2d::Kind::Frame:
+            if (!(size.minCoeff() > 0.0) || !size.allFinite()) fail("the box must have max > min on both axes");
+            extent = size.minCoeff();
+            if (shape.kind == Shape2d::Kind::Frame && !(shape.thickness > 0.0 && 2.0 * shape.thickness < extent))
+                fail("the frame's thickness must be > 0 and leave a hole (less than half of " + std::to_string(extent) +
+                     " m)");
+            break;
+        case Shape2d::Kind::Disk:
+            if (!(shape.radius > 0.0) || !shape.center.allFinite()) fail("the disk's radius must be > 0");
+            extent = 2.0 * shape.radius;
+            break;
+    }
+    if (!(shape.element_size > 0.0) || !(shape.element_size <= extent))
+        fail("element_size must be > 0 and at most the shape's size (" + std::to_string(extent) + " m)");
+
+    std::lock_guard<std::mutex> lock(gmsh_mutex);
+    GmshSession session;
+    try {
+        gmsh::model::add("shape");
+        int surface = 0;
+        if (shape.kind == Shape2d::Kind::Disk) {
+            surface = gmsh::model::occ::addDisk(shape.center[0], shape.center[1], 0.0, shape.radius, shape.radius);
+        } else {
+            surface = gmsh::model::occ::addRectangle(shape.min[0], shape.min[1], 0.0, size[0], size[1]);
+            if (shape.kind == Shape2d::Kind::Frame) {
+                const double t = shape.thickness;
+                const int hole = gmsh::model::occ::addRectangle(shape.min[0] + t, shape.min[1] + t, 0.0,
+                                                                size[0] - 2.0 * t, size[1] - 2.0 * t);
+                gmsh::vectorpair out;
+                std::vector<gmsh::vectorpair> map;
+                gmsh::model::occ::cut({{2, surface}}, {{2, hole}}, out, map);
+                if (out.size() != 1) fail("gmsh could not cut the frame's hole");
+                surface = out[0].second;
+            }
+        }
+        gmsh::model::occ::synchronize();
+        gmsh::option::setNumber("Mesh.CharacteristicLengthMin", shape.element_size);
+        gmsh::option::setNumber("Mesh.CharacteristicLengthMax", shape.element_size);
+        gmsh::model::mesh::generate(2);
+        return collect<2>(2, context);
+    } catch (const MeshError&) {
+        throw;
+    } catch (const std::exception& e) {
+        fail(std::string("gmsh failed: ") + e.what());
+    } catch (...) {
+        fail("gmsh failed");
+    }
+    return {};
+}
+
+template <int dim>
+Mesh<dim> read_mesh_file(const std::string& path) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) throw MeshError(path + ": no such mesh file");
+    std::lock_guard<std::mutex> lock(gmsh_mutex);
+    GmshSession session;
+    try {
+        gmsh::open(path);
+    } catch (const std::exception& e) {
+        throw MeshError(path + ": gmsh cannot read it: " + e.what());
+    } catch (...) {
+        throw MeshError(path + ": gmsh cannot read it");
+    }
+    return collect<dim>(dim == 2 ? 2 : 4, path);  // gmsh types: 2 = 3-node triangle, 4 = 4-node tetrahedron
+}
+
+template Mesh<2> read_mesh_file<2>(const std::string&);
+template Mesh<3> read_mesh_file<3>(const std::string&);
+
+}  // namespace pnet
