@@ -1,5 +1,6 @@
 #include "pnet/fem/fem_potential.hpp"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace pnet {
@@ -81,6 +82,21 @@ void FemPotential<dim>::elastic_deformation(const VecX& v, std::vector<Mat<dim>>
 }
 
 template <int dim>
+void FemPotential<dim>::positions(const VecX& v, std::vector<Vec<dim>>& x) const {
+    x.resize(x_start_.size());
+    for (std::size_t i = 0; i < x.size(); ++i) x[i] = x_start_[i] + dt_ * v.template segment<dim>(dim * i);
+}
+
+template <int dim>
+double FemPotential<dim>::max_step(const VecX& v, const VecX& d) {
+    if (!contact_) return 1.0;
+    positions(v, x_);
+    dx_.resize(x_.size());
+    for (std::size_t i = 0; i < x_.size(); ++i) dx_[i] = dt_ * d.template segment<dim>(dim * i);
+    return contact_->max_step(x_, dx_);
+}
+
+template <int dim>
 void FemPotential<dim>::set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
                                       const std::vector<int>& object) {
     energy_.set_reference(F0, hardening, object);
@@ -112,20 +128,32 @@ void FemPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient) const {
         for (int a = 0; a <= dim; ++a)
             gradient.template segment<dim>(dim * mesh_.elements[e][a]).noalias() += Q * grad_[e][a];
     }
+    if (contact_) {
+        std::vector<Vec<dim>> x;
+        positions(v, x);
+        contact_->add_gradient(x, dt_, gradient);
+    }
     gradient.array() *= free_.array();
+}
+
+template <int dim>
+double FemPotential<dim>::contact_value(const VecX& v) {
+    if (!contact_) return 0.0;
+    positions(v, x_);
+    return contact_->value(x_);
 }
 
 template <int dim>
 double FemPotential<dim>::value(const VecX& v) {
     evaluate(v, ParticleEnergy<dim>::Order::Value);
-    return inertia(v) + potential_sum();
+    return inertia(v) + potential_sum() + contact_value(v);
 }
 
 template <int dim>
 double FemPotential<dim>::value_gradient(const VecX& v, VecX& gradient) {
     evaluate(v, ParticleEnergy<dim>::Order::Gradient);
     assemble_gradient(v, gradient);
-    return inertia(v) + potential_sum();
+    return inertia(v) + potential_sum() + contact_value(v);
 }
 
 template <int dim>
@@ -152,6 +180,17 @@ void FemPotential<dim>::prepare_hessian(const VecX& v) {
                     }
             }
     }
+    if (contact_) {
+        positions(v, x_);
+        const std::size_t first = triplets_.size();
+        contact_->add_hessian(x_, dt_ * dt_, triplets_, project_psd_);
+        // Fixed components keep only their mass.
+        triplets_.erase(std::remove_if(triplets_.begin() + first, triplets_.end(),
+                                       [&](const Eigen::Triplet<double>& t) {
+                                           return free_[t.row()] == 0.0 || free_[t.col()] == 0.0;
+                                       }),
+                        triplets_.end());
+    }
     hessian_.resize(n, n);
     hessian_.setFromTriplets(triplets_.begin(), triplets_.end());  // duplicates summed in triplet order
 }
@@ -160,7 +199,7 @@ template <int dim>
 double FemPotential<dim>::value_gradient_hessian(const VecX& v, VecX& gradient) {
     prepare_hessian(v);  // the Hessian pass leaves psi and P at v
     assemble_gradient(v, gradient);
-    return inertia(v) + potential_sum();
+    return inertia(v) + potential_sum() + contact_value(v);
 }
 
 template <int dim>

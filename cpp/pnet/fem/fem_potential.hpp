@@ -3,7 +3,7 @@
 // nodal velocities v with x = x^n + dt v, so that FEM has the same unknowns
 // (velocities, m/s) and the same Newton loop as MPM:
 //
-//   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_e V0_e psi_e(F^E_e(v)),
+//   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_e V0_e psi_e(F^E_e(v)) + B(x(v)),
 //   F^E_e(v) = F_e(x) (F^P_e)^-1 = sum_a x_a gt_ea^T,   gt_ea = (F^P_e)^-T g_ea,
 //
 // g_ea the rest gradients of element e's linear shape functions (g_a = row a-1
@@ -13,6 +13,9 @@
 // `plasticitynet`, with P = dpsi/dF^E and H = d2psi/dF^E2 (PSD). Then
 //   dE/dv_a = m_a (v_a - v*_a) + dt sum_e V0_e P_e gt_ea,
 //   d2E/dv_a dv_b = m_a delta_ab I + dt^2 sum_e V0_e B_eab,  (B_eab)_ik = sum_jl gt_ea[j] H_e(ij, kl) gt_eb[l].
+// B is the contact potential (IPC barrier, contact/ipc_contact.hpp; none if not
+// set): its gradient enters as dt dB/dx, its Hessian as dt^2 d2B/dx2, and
+// max_step() is its CCD filter on the motion x -> x + dt d.
 // The Hessian is assembled as a sparse matrix (hessian_matrix()) for a direct
 // solve by CHOLMOD; fixed components (Dirichlet nodes: targets reached by
 // v = v*) keep only their mass on the diagonal. Sums run in element order, so
@@ -20,6 +23,7 @@
 #include <Eigen/SparseCore>
 #include <vector>
 
+#include "pnet/contact/ipc_contact.hpp"
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/mesh.hpp"
 #include "pnet/solver/objective.hpp"
@@ -58,6 +62,12 @@ public:
     void begin_step(const std::vector<Vec<dim>>& x_start, const VecX& v_star, double dt,
                     const std::vector<Mat<dim>>& plastic_inverse, const std::vector<char>& fixed);
 
+    /// The contact potential (not owned; null: no contact).
+    void set_contact(const ContactPotential<dim>* contact) { contact_ = contact; }
+
+    /// x(v) = x^n + dt v.
+    void positions(const VecX& v, std::vector<Vec<dim>>& x) const;
+
     /// F^E_e(v) of every element.
     void elastic_deformation(const VecX& v, std::vector<Mat<dim>>& FE) const;
     /// The energy's reference (plasticitynet: F0 per element) and the elements' hardening states.
@@ -79,6 +89,7 @@ public:
     int hessian_block_size() const override { return dim; }
     void hessian_block_diagonal(VecX& blocks) const override;
     const SparseMatrix* hessian_matrix() const override { return &hessian_; }
+    double max_step(const VecX& v, const VecX& d) override;
 
     /// Project the element Hessians to PSD (default; false: the exact Hessian, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
@@ -88,11 +99,13 @@ private:
     void evaluate(const VecX& v, typename ParticleEnergy<dim>::Order order);
     void assemble_gradient(const VecX& v, VecX& gradient) const;
     double potential_sum() const;
+    double contact_value(const VecX& v);
 
     const Mesh<dim>& mesh_;
     const ElementRest<dim>& rest_;
     ParticleEnergy<dim>& energy_;
-    std::vector<Vec<dim>> x_start_;
+    const ContactPotential<dim>* contact_ = nullptr;
+    std::vector<Vec<dim>> x_start_, x_, dx_;
     double dt_ = 0.0;
     VecX v_star_, mass_, free_, residual_mass_;
     std::vector<std::array<Vec<dim>, dim + 1>> grad_;  // gt_ea = (F^P)^-T g_ea

@@ -124,6 +124,14 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             throw NewtonError(where(context, it, residual) + "the search direction is not a descent direction (g.d = " +
                               std::to_string(slope) + "); the Hessian is not positive definite");
 
+        // A step filter (contact: CCD) may shorten the step; the line search then
+        // starts from the largest allowed fraction.
+        const double alpha_max = std::min(1.0, objective.max_step(x, d));
+        if (!(alpha_max > 0.0))
+            throw NewtonError(where(context, it, residual) + "the step filter allows no motion along the Newton "
+                              "direction (max_step = " + std::to_string(alpha_max) + ")");
+        if (alpha_max < 1.0) d *= alpha_max;
+        const double slope_full = g.dot(d);  // the slope of the (possibly shortened) step
         // The full step first, with its gradient; with its Hessian too unless the
         // last iteration contracted (then this one likely does, and keeps the Hessian).
         x_trial = x + d;
@@ -135,16 +143,16 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         const bool full_finite = std::isfinite(e_full) && g_trial.allFinite();
         // Near the solution the decrease g.d falls below the round-off of E: the
         // energy cannot rank the step any more, the gradient still can.
-        const bool roundoff = -slope <= 16.0 * std::numeric_limits<double>::epsilon() * std::abs(energy);
+        const bool roundoff = -slope_full <= 16.0 * std::numeric_limits<double>::epsilon() * std::abs(energy);
         const bool lowers_gradient = full_finite && g_trial.norm() < g.norm();
         if (roundoff && !lowers_gradient) {
             stats.roundoff_floor = true;  // nothing left to gain in double precision
             break;
         }
         const double residual_before = residual;
-        bool full_step = true;
+        bool full_step = alpha_max >= 1.0;
         bool hessian_at_x = trial_hessian;  // whether the Hessian prepared last is at the new iterate
-        if (roundoff || (full_finite && e_full <= energy + options.armijo * slope)) {
+        if (roundoff || (full_finite && e_full <= energy + options.armijo * slope_full)) {
             x.swap(x_trial);
             g.swap(g_trial);
             energy = e_full;
@@ -156,7 +164,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 trial = objective.value(x_trial);
                 any_finite = any_finite || std::isfinite(trial);
                 ++stats.line_search_steps;
-                if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope) {
+                if (std::isfinite(trial) && trial <= energy + options.armijo * alpha * slope_full) {
                     decreased = true;
                     break;
                 }

@@ -58,6 +58,11 @@ public:
     /// prepare_hessian(), for a direct solve (NewtonOptions::linear_solver);
     /// null for matrix-free objectives (MPM).
     virtual const SparseMatrix* hessian_matrix() const { return nullptr; }
+
+    /// The largest step fraction in (0, 1] that x + t d may take (the line
+    /// search's filter: for contact, what CCD allows, so that no iterate
+    /// intersects); E must be finite on [x, x + max_step d]. Default 1.
+    virtual double max_step(const VecX& /*x*/, const VecX& /*d*/) { return 1.0; }
 };
 
 }  // namespace pnet

@@ -1,0 +1,153 @@
+#include "pnet/contact/ipc_contact.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "pnet/contact/ccd.hpp"
+#include "pnet/contact/distance.hpp"
+#include "pnet/math/psd.hpp"
+
+namespace pnet {
+
+Contact2d::Contact2d(const std::vector<std::array<int, 2>>& boundary_edges, double dhat, double kappa)
+    : edges_(boundary_edges), dhat_(dhat), kappa_(kappa), barrier_{dhat * dhat} {
+    if (!(dhat > 0.0) || !(kappa > 0.0)) throw std::invalid_argument("Contact2d: dhat and kappa must be > 0");
+    for (const auto& e : edges_) nodes_.insert(nodes_.end(), e.begin(), e.end());
+    std::sort(nodes_.begin(), nodes_.end());
+    nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
+}
+
+std::vector<Contact2d::Pair> Contact2d::active(const std::vector<Vec<2>>& x) const {
+    std::vector<Pair> pairs;
+    const double s_hat = dhat_ * dhat_;
+    for (int node : nodes_) {
+        const Vec<2>& p = x[node];
+        for (std::size_t k = 0; k < edges_.size(); ++k) {
+            const auto& e = edges_[k];
+            if (e[0] == node || e[1] == node) continue;
+            const Vec<2> lo = x[e[0]].cwiseMin(x[e[1]]).array() - dhat_, hi = x[e[0]].cwiseMax(x[e[1]]).array() + dhat_;
+            if ((p.array() < lo.array()).any() || (p.array() > hi.array()).any()) continue;
+            if (point_edge_distance_sq(p, x[e[0]], x[e[1]]) < s_hat) pairs.push_back({node, static_cast<int>(k)});
+        }
+        for (std::size_t h = 0; h < half_spaces_.size(); ++h) {
+            const double d = half_spaces_[h].normal.dot(p - half_spaces_[h].origin);
+            if (d < dhat_) pairs.push_back({node, -static_cast<int>(h) - 1});
+        }
+    }
+    return pairs;
+}
+
+double Contact2d::value(const std::vector<Vec<2>>& x) const {
+    double sum = 0.0;
+    for (const Pair& pair : active(x)) {
+        const Vec<2>& p = x[pair.node];
+        double s;
+        if (pair.edge >= 0) {
+            s = point_edge_distance_sq(p, x[edges_[pair.edge][0]], x[edges_[pair.edge][1]]);
+        } else {
+            const HalfSpace2d& h = half_spaces_[-pair.edge - 1];
+            const double d = h.normal.dot(p - h.origin);
+            s = d > 0.0 ? d * d : 0.0;  // on or below the plane: intersecting
+        }
+        sum += barrier_.value(s);
+    }
+    return kappa_ * sum;
+}
+
+void Contact2d::add_gradient(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd& g) const {
+    for (const Pair& pair : active(x)) {
+        const Vec<2>& p = x[pair.node];
+        if (pair.edge >= 0) {
+            const int a = edges_[pair.edge][0], b = edges_[pair.edge][1];
+            const PointEdgeCase c = point_edge_case(p, x[a], x[b]);
+            const double s = point_edge_distance_sq(p, x[a], x[b], c);
+            const Vec6 ds = point_edge_distance_sq_gradient(p, x[a], x[b], c);
+            const double f = scale * kappa_ * barrier_.first(s);
+            const int slot[3] = {pair.node, a, b};
+            for (int k = 0; k < 3; ++k) g.segment<2>(2 * slot[k]) += f * ds.segment<2>(2 * k);
+        } else {
+            const HalfSpace2d& h = half_spaces_[-pair.edge - 1];
+            const double d = h.normal.dot(p - h.origin);
+            g.segment<2>(2 * pair.node) += scale * kappa_ * barrier_.first(d * d) * 2.0 * d * h.normal;
+        }
+    }
+}
+
+void Contact2d::add_hessian(const std::vector<Vec<2>>& x, double scale,
+                            std::vector<Eigen::Triplet<double>>& triplets, bool project_psd) const {
+    for (const Pair& pair : active(x)) {
+        const Vec<2>& p = x[pair.node];
+        if (pair.edge >= 0) {
+            const int a = edges_[pair.edge][0], b = edges_[pair.edge][1];
+            const PointEdgeCase c = point_edge_case(p, x[a], x[b]);
+            const double s = point_edge_distance_sq(p, x[a], x[b], c);
+            const Vec6 ds = point_edge_distance_sq_gradient(p, x[a], x[b], c);
+            Mat6 H = barrier_.second(s) * ds * ds.transpose() +
+                     barrier_.first(s) * point_edge_distance_sq_hessian(p, x[a], x[b], c);
+            if (project_psd) H = pnet::project_psd<6>(H);
+            H *= scale * kappa_;
+            const int slot[3] = {pair.node, a, b};
+            for (int r = 0; r < 6; ++r)
+                for (int q = 0; q < 6; ++q)
+                    triplets.emplace_back(2 * slot[r / 2] + r % 2, 2 * slot[q / 2] + q % 2, H(r, q));
+        } else {
+            const HalfSpace2d& h = half_spaces_[-pair.edge - 1];
+            const double d = h.normal.dot(p - h.origin), s = d * d;
+            // d2b/dx2 = b'' (2 d n)(2 d n)^T + b' 2 n n^T: PSD whenever b'' >= 0 > b' ... project anyway.
+            const double coefficient = barrier_.second(s) * 4.0 * s + barrier_.first(s) * 2.0;
+            const double k = scale * kappa_ * (project_psd ? std::max(coefficient, 0.0) : coefficient);
+            const Eigen::Matrix2d H = k * h.normal * h.normal.transpose();
+            for (int r = 0; r < 2; ++r)
+                for (int q = 0; q < 2; ++q) triplets.emplace_back(2 * pair.node + r, 2 * pair.node + q, H(r, q));
+        }
+    }
+}
+
+double Contact2d::max_step(const std::vector<Vec<2>>& x, const std::vector<Vec<2>>& dx) const {
+    double t = 1.0;
+    for (int node : nodes_) {
+        const Vec<2>& p = x[node];
+        const Vec<2> p1 = p + dx[node];
+        const Vec<2> lo = p.cwiseMin(p1), hi = p.cwiseMax(p1);
+        for (const auto& e : edges_) {
+            if (e[0] == node || e[1] == node) continue;
+            const Vec<2> a1 = x[e[0]] + dx[e[0]], b1 = x[e[1]] + dx[e[1]];
+            const Vec<2> elo = x[e[0]].cwiseMin(x[e[1]]).cwiseMin(a1).cwiseMin(b1);
+            const Vec<2> ehi = x[e[0]].cwiseMax(x[e[1]]).cwiseMax(a1).cwiseMax(b1);
+            if ((hi.array() < elo.array()).any() || (lo.array() > ehi.array()).any()) continue;  // swept boxes apart
+            t = std::min(t, point_edge_time_of_impact(p, x[e[0]], x[e[1]], dx[node], dx[e[0]], dx[e[1]], 0.0, t));
+        }
+        for (const HalfSpace2d& h : half_spaces_)
+            t = std::min(t, point_plane_time_of_impact(p, dx[node], h.origin, h.normal, t));
+    }
+    return t;
+}
+
+double Contact2d::min_distance(const std::vector<Vec<2>>& x) const {
+    double d = kNoImpact;
+    for (int node : nodes_) {
+        for (const auto& e : edges_)
+            if (e[0] != node && e[1] != node)
+                d = std::min(d, std::sqrt(point_edge_distance_sq(x[node], x[e[0]], x[e[1]])));
+        for (const HalfSpace2d& h : half_spaces_) d = std::min(d, h.normal.dot(x[node] - h.origin));
+    }
+    return d;
+}
+
+std::size_t Contact2d::active_pairs(const std::vector<Vec<2>>& x) const { return active(x).size(); }
+
+std::string Contact2d::first_intersection(const std::vector<Vec<2>>& x) const {
+    for (int node : nodes_) {
+        for (const auto& e : edges_)
+            if (e[0] != node && e[1] != node && !(point_edge_distance_sq(x[node], x[e[0]], x[e[1]]) > 0.0))
+                return "node " + std::to_string(node) + " and edge " + std::to_string(e[0]) + "-" + std::to_string(e[1]);
+        for (std::size_t h = 0; h < half_spaces_.size(); ++h)
+            if (!(half_spaces_[h].normal.dot(x[node] - half_spaces_[h].origin) > 0.0))
+                return "node " + std::to_string(node) + " and half-space " + std::to_string(h);
+    }
+    return "";
+}
+
+}  // namespace pnet

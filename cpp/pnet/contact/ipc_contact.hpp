@@ -1,0 +1,86 @@
+#pragma once
+// IPC contact as an energy in the nodal positions (DESIGN.md §4.3):
+//   B(x) = kappa sum_k b(s_k(x)),   b the log barrier (barrier.hpp), s_k squared distances,
+// over the pairs of a 2D boundary: every boundary node against every boundary
+// edge it is not an endpoint of (contact between bodies and self-contact), and
+// every boundary node against every half-space (the ground). A pair only
+// counts while s < dhat^2. The Hessian of each pair, kappa (b'' ds ds^T +
+// b' d2s), is projected to PSD before assembly. max_step() is the CCD filter
+// of the line search: the largest step fraction that keeps every pair apart.
+//
+// Pairs are found by testing every node against every edge's bounding box (a
+// quadratic broad phase: fine for the meshes of the 2D scenes, a hash grid is
+// the 3D issue's).
+#include <array>
+#include <vector>
+
+#include <Eigen/SparseCore>
+
+#include "pnet/contact/barrier.hpp"
+#include "pnet/math/types.hpp"
+
+namespace pnet {
+
+/// The region n.(x - origin) < 0 is solid; n is a unit vector.
+struct HalfSpace2d {
+    Vec<2> origin = Vec<2>::Zero();
+    Vec<2> normal = Vec<2>(0.0, 1.0);
+};
+
+/// The contact potential of positions x (all nodes of a mesh, m), added to an
+/// objective's value, gradient and Hessian with a scale (the chain rule of
+/// x = x^n + dt v gives dt and dt^2).
+template <int dim>
+class ContactPotential {
+public:
+    virtual ~ContactPotential() = default;
+    virtual double value(const std::vector<Vec<dim>>& x) const = 0;
+    /// g += scale dB/dx (g: dim values per node).
+    virtual void add_gradient(const std::vector<Vec<dim>>& x, double scale, Eigen::VectorXd& g) const = 0;
+    /// Triplets of scale d2B/dx2, PSD-projected per pair when project_psd.
+    virtual void add_hessian(const std::vector<Vec<dim>>& x, double scale,
+                             std::vector<Eigen::Triplet<double>>& triplets, bool project_psd) const = 0;
+    /// The largest t in (0, 1] such that x + t dx keeps every pair apart (1 if nothing collides).
+    virtual double max_step(const std::vector<Vec<dim>>& x, const std::vector<Vec<dim>>& dx) const = 0;
+};
+
+class Contact2d final : public ContactPotential<2> {
+public:
+    /// boundary_edges: the mesh's boundary facets (node pairs). dhat > 0 (m),
+    /// kappa > 0 (the barrier stiffness, J/m^4: b is in m^4).
+    Contact2d(const std::vector<std::array<int, 2>>& boundary_edges, double dhat, double kappa);
+
+    void add_half_space(const HalfSpace2d& half_space) { half_spaces_.push_back(half_space); }
+    double dhat() const { return dhat_; }
+    double kappa() const { return kappa_; }
+    void set_kappa(double kappa) { kappa_ = kappa; }
+
+    double value(const std::vector<Vec<2>>& x) const override;
+    void add_gradient(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd& g) const override;
+    void add_hessian(const std::vector<Vec<2>>& x, double scale, std::vector<Eigen::Triplet<double>>& triplets,
+                     bool project_psd) const override;
+    double max_step(const std::vector<Vec<2>>& x, const std::vector<Vec<2>>& dx) const override;
+
+    /// The smallest distance of any pair (node-edge, node-plane), m.
+    double min_distance(const std::vector<Vec<2>>& x) const;
+    /// Pairs closer than dhat.
+    std::size_t active_pairs(const std::vector<Vec<2>>& x) const;
+    /// A node-edge pair (or node inside a half-space) that intersects or touches at x, as text
+    /// ("node 12 and edge 30-31"), or empty if none: a start state must have none.
+    std::string first_intersection(const std::vector<Vec<2>>& x) const;
+
+private:
+    struct Pair {
+        int node, edge;  // edge < 0: half-space -edge - 1
+    };
+    /// The pairs closer than dhat at x, in a fixed order.
+    std::vector<Pair> active(const std::vector<Vec<2>>& x) const;
+
+    std::vector<std::array<int, 2>> edges_;
+    std::vector<int> nodes_;  // boundary nodes, ascending
+    std::vector<HalfSpace2d> half_spaces_;
+    double dhat_, kappa_;
+    Barrier barrier_;
+};
+
+}  // namespace pnet
