@@ -9,16 +9,12 @@
 
 namespace pnet {
 
-namespace {
-
 /// (log a - log b) / (a - b) for a, b > 0, exact also as a -> b.
 double log_difference_quotient(double a, double b) {
     const double x = (a - b) / b;
     if (x == 0.0) return 1.0 / b;
     return std::log1p(x) / (x * b);
 }
-
-}  // namespace
 
 std::string to_string(ElasticityModel model) {
     switch (model) {
@@ -168,20 +164,25 @@ Tensor4<dim> Elasticity<dim>::dPdF(const Mat<dim>& F, bool project_psd) const {
     return dPdF(clamped_svd<dim>(F), project_psd);
 }
 
+template <int dim>
+Tensor4<dim> Elasticity<dim>::dPdF(const PolarSVD<dim>& svd, bool project_psd) const {
+    const Vec<dim>& S = svd.Sigma;
+    return isotropic_dPdF<dim>(svd, tau(S), dtau_deps(S),
+                               [&](int i, int j) { return tau_difference_quotient(S, i, j); }, project_psd);
+}
+
 // dP/dF of an isotropic energy (Irving et al. 2004; Teran et al. 2005): in the
 // basis rotated by U and V it decouples into the d x d block of
 // d^2 psi / d Sigma_i d Sigma_j on the diagonal entries and, for each pair
 // i < j, the 2x2 block [[a, b], [b, a]] acting on the (ij, ji) entries with
 //   a = (D + E)/2, b = (D - E)/2,
 //   D = (P_i - P_j)/(Sigma_i - Sigma_j), E = (P_i + P_j)/(Sigma_i + Sigma_j),
-// P_i = tau_i / Sigma_i. D is formed from tau_difference_quotient() so that it
-// is exact for equal singular values.
+// P_i = tau_i / Sigma_i. D is formed from the difference quotient of tau so that
+// it is exact for equal singular values.
 template <int dim>
-Tensor4<dim> Elasticity<dim>::dPdF(const PolarSVD<dim>& svd, bool project_psd) const {
+Tensor4<dim> isotropic_dPdF(const PolarSVD<dim>& svd, const Vec<dim>& t, const Mat<dim>& H_eps,
+                            const std::function<double(int, int)>& tau_quotient, bool project_psd) {
     const Vec<dim>& S = svd.Sigma;
-    const Vec<dim> t = tau(S);
-    const Mat<dim> H_eps = dtau_deps(S);
-
     // d^2 psi / d Sigma_i d Sigma_j = (d tau_i/d eps_j - delta_ij tau_i) / (Sigma_i Sigma_j)
     Mat<dim> H_sigma;
     for (int i = 0; i < dim; ++i)
@@ -193,7 +194,7 @@ Tensor4<dim> Elasticity<dim>::dPdF(const PolarSVD<dim>& svd, bool project_psd) c
         for (int j = 0; j < dim; ++j) A(i * dim + i, j * dim + j) = H_sigma(i, j);
     for (int i = 0; i < dim; ++i) {
         for (int j = i + 1; j < dim; ++j) {
-            const double Q = tau_difference_quotient(S, i, j);
+            const double Q = tau_quotient(i, j);
             const double D = (0.5 * Q * (S[i] + S[j]) - 0.5 * (t[i] + t[j])) / (S[i] * S[j]);
             const double E = (t[i] / S[i] + t[j] / S[j]) / (S[i] + S[j]);
             double a = 0.5 * (D + E), b = 0.5 * (D - E);
@@ -239,6 +240,10 @@ PolarSVD<dim> clamped_svd(const Mat<dim>& F) {
 
 template class Elasticity<2>;
 template class Elasticity<3>;
+template Tensor4<2> isotropic_dPdF<2>(const PolarSVD<2>&, const Vec<2>&, const Mat<2>&,
+                                      const std::function<double(int, int)>&, bool);
+template Tensor4<3> isotropic_dPdF<3>(const PolarSVD<3>&, const Vec<3>&, const Mat<3>&,
+                                      const std::function<double(int, int)>&, bool);
 template Vec<2> clamp_singular_values<2>(const Vec<2>&);
 template Vec<3> clamp_singular_values<3>(const Vec<3>&);
 template PolarSVD<2> clamped_svd<2>(const Mat<2>&);

@@ -6,6 +6,7 @@
 // tau_i = d psi / d eps_i (so tau = U diag(tau) U^T) and the first Piola stress
 // P = tau F^{-T} = U diag(tau_i / Sigma_i) V^T. Formulas: DESIGN.md §3 and the
 // paper's eqs. 14 (StVK-Hencky), 17 (neo-Hookean, snow), 24 (neo-Hookean, metal).
+#include <functional>
 #include <string>
 
 #include "pnet/math/svd.hpp"
@@ -72,6 +73,19 @@ private:
     ElasticParams params_;
     double mu_, lambda_, K_;
 };
+
+/// dP/dF (row-major vec basis) of an isotropic energy given in diagonal space
+/// by its Kirchhoff stress tau_i = dpsi/deps_i, dtau_i/deps_j and the
+/// difference quotients (tau_i - tau_j) / (Sigma_i - Sigma_j) (closed form, so
+/// that equal singular values are exact), at the polar SVD svd. With
+/// project_psd the result is positive semi-definite (the Sigma block and each
+/// twist/flip pair clamped).
+template <int dim>
+Tensor4<dim> isotropic_dPdF(const PolarSVD<dim>& svd, const Vec<dim>& tau, const Mat<dim>& dtau_deps,
+                            const std::function<double(int, int)>& tau_quotient, bool project_psd);
+
+/// (log a - log b) / (a - b), exact as a -> b (1 / a there).
+double log_difference_quotient(double a, double b);
 
 /// Sigma with every entry raised to at least kSigmaMin (inverted -> kSigmaMin).
 template <int dim>
