@@ -66,7 +66,7 @@ void FemPotential<dim>::begin_step(const std::vector<Vec<dim>>& x_start, const V
 }
 
 template <int dim>
-void FemPotential<dim>::elastic_deformation(const VecX& v, std::vector<Mat<dim>>& FE) const {
+void FemPotential<dim>::deformation(const VecX& v, std::vector<Mat<dim>>& FE) const {
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(mesh_.elements.size());
     FE.resize(n);
 #pragma omp parallel for schedule(static) if (n >= 256)
@@ -97,9 +97,10 @@ double FemPotential<dim>::max_step(const VecX& v, const VecX& d) {
 }
 
 template <int dim>
-void FemPotential<dim>::set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
-                                      const std::vector<int>& object) {
-    energy_.set_reference(F0, hardening, object);
+void FemPotential<dim>::set_reference(const std::vector<Mat<dim>>& F0) {
+    if (object_.size() != mesh_.elements.size() || hardening_.size() != mesh_.elements.size())
+        throw std::logic_error("FemPotential: set_material_state() before set_reference()");
+    energy_.set_reference(F0, hardening_, object_);
 }
 
 template <int dim>
@@ -116,7 +117,7 @@ double FemPotential<dim>::potential_sum() const {
 
 template <int dim>
 void FemPotential<dim>::evaluate(const VecX& v, typename ParticleEnergy<dim>::Order order) {
-    elastic_deformation(v, FE_);
+    deformation(v, FE_);
     energy_.evaluate(FE_, order, psi_.data(), P_.data(), H_.data(), project_psd_);
 }
 

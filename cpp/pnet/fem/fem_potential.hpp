@@ -26,7 +26,7 @@
 #include "pnet/contact/ipc_contact.hpp"
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/mesh.hpp"
-#include "pnet/solver/objective.hpp"
+#include "pnet/solver/fixed_point.hpp"
 
 namespace pnet {
 
@@ -48,7 +48,7 @@ Mat<dim> deformation_gradient(const Mesh<dim>& mesh, const ElementRest<dim>& res
                               std::size_t e);
 
 template <int dim>
-class FemPotential final : public Objective {
+class FemPotential final : public ReferencedObjective<dim> {
 public:
     static constexpr int kElementNodes = dim + 1;
     static constexpr int kM = dim * dim;
@@ -68,11 +68,18 @@ public:
     /// x(v) = x^n + dt v.
     void positions(const VecX& v, std::vector<Vec<dim>>& x) const;
 
+    /// The elements' object (material) indices and start-of-step hardening
+    /// states, passed to the energy with every set_reference().
+    void set_material_state(const std::vector<int>& object, const std::vector<double>& hardening) {
+        object_ = object;
+        hardening_ = hardening;
+    }
+
     /// F^E_e(v) of every element.
-    void elastic_deformation(const VecX& v, std::vector<Mat<dim>>& FE) const;
-    /// The energy's reference (plasticitynet: F0 per element) and the elements' hardening states.
-    void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
-                       const std::vector<int>& object);
+    void deformation(const VecX& v, std::vector<Mat<dim>>& FE) const override;
+    /// The energy's reference (plasticitynet: F0 per element; ignored by the
+    /// elastic and analytic energies, which only record the material state).
+    void set_reference(const std::vector<Mat<dim>>& F0) override;
 
     const VecX& v_star() const { return v_star_; }
     /// m_i on free components, 0 on fixed ones (NewtonOptions::residual_mass).
@@ -106,6 +113,8 @@ private:
     ParticleEnergy<dim>& energy_;
     const ContactPotential<dim>* contact_ = nullptr;
     std::vector<Vec<dim>> x_start_, x_, dx_;
+    std::vector<int> object_;
+    std::vector<double> hardening_;
     double dt_ = 0.0;
     VecX v_star_, mass_, free_, residual_mass_;
     std::vector<std::array<Vec<dim>, dim + 1>> grad_;  // gt_ea = (F^P)^-T g_ea

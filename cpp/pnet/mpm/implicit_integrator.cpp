@@ -116,57 +116,32 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.lazy_hessian = options_.lazy_hessian;
 
     v_ = potential_.v_star();
-    const bool fixed_point = method_ == ImplicitMethod::PlasticityNet;
-    const int solves = fixed_point ? options_.max_fixed_point_iterations : 1;
-    if (fixed_point) potential_.deformation(v_, F0_);  // F0^0 = F(v*)
-    double best_change = std::numeric_limits<double>::infinity(), previous_change = best_change;
-    for (int j = 0; j < solves; ++j) {
-        // The elastic energy has no reference state: lagged passes the particles' F^E.
-        potential_.set_reference(fixed_point ? F0_ : particles.F_elastic);
-        stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped());
-        const std::string context = "step " + std::to_string(step_index) +
-                                    (fixed_point ? ", fixed-point iteration " + std::to_string(j + 1) : "");
-        NewtonStats s;
-        try {
-            s = minimize(potential_, v_, newton, context);
-        } catch (const NewtonError& e) {
-            throw SimulationError(e.what());
-        }
-        if (j == 0) stats.initial_residual = s.initial_residual;
-        stats.newton_iterations += s.iterations;
-        stats.cg_iterations += s.cg_iterations;
-        stats.line_search_steps += s.line_search_steps;
-        stats.residual = s.residual;
-        stats.energy = s.energy;
-        stats.converged = stats.converged && (s.converged || s.roundoff_floor);
-        stats.line_search_failed = stats.line_search_failed || s.line_search_failed;
-        if (options_.fail_on_unconverged && !(s.converged || s.roundoff_floor))
-            throw SimulationError(context + ": the Newton solve did not converge (" +
-                                  (s.line_search_failed ? std::string("line search failed")
-                                                        : std::to_string(s.iterations) + " iterations") +
-                                  ", residual " + std::to_string(s.residual) + " m/s > tolerance " +
-                                  std::to_string(options_.newton_tolerance) + " m/s)");
-        ++stats.fixed_point_iterations;
-        if (!fixed_point) break;
-        potential_.deformation(v_, F_);
-        double change = 0.0;
-        for (std::size_t p = 0; p < F_.size(); ++p) change = std::max(change, (F_[p] - F0_[p]).norm());
-        // Keep the most self-consistent solution: far outside the regime the
-        // network was trained on (an impact at a large dt) the iteration on F0
-        // can stop contracting, and it is then stopped at its best iterate.
-        if (change < best_change) {
-            best_change = change;
-            best_v_ = v_;
-        }
-        stats.fixed_point_change = best_change;
-        if (change <= options_.fixed_point_tolerance || change > previous_change) break;
-        previous_change = change;
-        F0_.swap(F_);  // F0^{j+1} = F(v^{j+1})
+    ReferenceSolveOptions solve;
+    solve.fixed_point = method_ == ImplicitMethod::PlasticityNet;
+    solve.max_solves = options_.max_fixed_point_iterations;
+    solve.tolerance = options_.fixed_point_tolerance;
+    solve.fail_on_unconverged = options_.fail_on_unconverged;
+    // The elastic energy has no reference state: lagged passes the particles' F^E.
+    if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
+    ReferenceSolveStats s;
+    try {
+        s = solve_with_reference<dim>(potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, [&] {
+            stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped());
+        });
+    } catch (const NewtonError& e) {
+        throw SimulationError(e.what());
     }
-    if (fixed_point) {
-        v_.swap(best_v_);
-        stats.fixed_point_converged = best_change <= options_.fixed_point_tolerance;
-    }
+    stats.initial_residual = s.initial_residual;
+    stats.newton_iterations = s.newton_iterations;
+    stats.cg_iterations = s.cg_iterations;
+    stats.line_search_steps = s.line_search_steps;
+    stats.fixed_point_iterations = s.solves;
+    stats.fixed_point_change = s.change;
+    stats.residual = s.residual;
+    stats.energy = s.energy;
+    stats.converged = s.converged;
+    stats.line_search_failed = s.line_search_failed;
+    stats.fixed_point_converged = s.fixed_point_converged;
     potential_.write_velocity(v_, grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM
     double max_speed = 0.0;

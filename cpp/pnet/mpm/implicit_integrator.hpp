@@ -111,8 +111,8 @@ private:
     std::vector<const LearnedReturnMap<dim>*> return_maps_;
     Grid<dim> grid_;
     IncrementalPotential<dim> potential_;
-    std::vector<Mat<dim>> F0_, F_;
-    VecX v_, best_v_;
+    ReferenceSolveWork<dim> work_;
+    VecX v_;
 };
 
 }  // namespace pnet

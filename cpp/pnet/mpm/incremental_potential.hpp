@@ -25,12 +25,12 @@
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/mpm/grid.hpp"
 #include "pnet/mpm/particles.hpp"
-#include "pnet/solver/objective.hpp"
+#include "pnet/solver/fixed_point.hpp"
 
 namespace pnet {
 
 template <int dim>
-class IncrementalPotential final : public Objective {
+class IncrementalPotential final : public ReferencedObjective<dim> {
 public:
     static constexpr int kStencil = dim == 2 ? 9 : 27;
     static constexpr int kM = dim * dim;
@@ -53,11 +53,11 @@ public:
     std::size_t nodes() const { return dof_node_.size(); }
 
     /// F_p(v) of every particle.
-    void deformation(const VecX& v, std::vector<Mat<dim>>& F) const;
+    void deformation(const VecX& v, std::vector<Mat<dim>>& F) const override;
 
     /// The energy's reference state (plasticitynet: F0 of eq. 10, with the
     /// particles' start-of-step hardening).
-    void set_reference(const std::vector<Mat<dim>>& F0);
+    void set_reference(const std::vector<Mat<dim>>& F0) override;
 
     /// Writes v into the grid's Node::momentum (velocities) for G2P.
     void write_velocity(const VecX& v, Grid<dim>& grid) const;

@@ -216,7 +216,8 @@ TEST(Contact2d, ElasticSquareDroppedOnTheGroundComesToRestWithoutPenetration) {
         VecX v_star = v;
         for (std::size_t i = 0; i < n; ++i) v_star[2 * i + 1] -= 9.8 * dt;
         potential.begin_step(x, v_star, dt, identity, {});
-        potential.set_reference({}, hardening, object);
+        potential.set_material_state(object, hardening);
+        potential.set_reference({});
         options.residual_mass = potential.residual_mass();
         // The solve starts intersection-free: at v* as far as CCD allows from x^n (v = 0).
         v = potential.max_step(VecX::Zero(2 * n), v_star) * v_star;

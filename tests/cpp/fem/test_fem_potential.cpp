@@ -69,7 +69,8 @@ TEST(FemPotential, GradientAndHessianMatchFiniteDifferences) {
     fixed[0] = fixed[1] = 1;  // node 0 is fixed
     const double dt = 1e-2;
     f.potential.begin_step(x, v_star, dt, plastic_inverse, fixed);
-    f.potential.set_reference({}, f.hardening, f.object);
+    f.potential.set_material_state(f.object, f.hardening);
+    f.potential.set_reference({});
     f.potential.set_project_psd(false);
     VecX v = v_star;
     for (Eigen::Index k = 2; k < v.size(); ++k) v[k] += random.uniform(-0.2, 0.2);
@@ -129,7 +130,8 @@ TEST(FemPotential, CholeskyAndPcgReachTheSameMinimizer) {
         if (!fixed[2 * i]) v_star[2 * i + 1] = -9.8 * 0.01 - 0.5;  // gravity and a downward push
     f.potential.begin_step(f.mesh.x, v_star, 0.01, std::vector<Mat<2>>(f.mesh.elements.size(), Mat<2>::Identity()),
                            fixed);
-    f.potential.set_reference({}, f.hardening, f.object);
+    f.potential.set_material_state(f.object, f.hardening);
+    f.potential.set_reference({});
     NewtonOptions options;
     options.tolerance = 1e-10;
     options.residual_mass = f.potential.residual_mass();
@@ -169,7 +171,8 @@ TEST(FemPotential, HangingBarSettlesAtTheAnalyticElongation) {
             else v_star[2 * i + 1] -= g * dt;
         }
         f.potential.begin_step(x, v_star, dt, identity, fixed);
-        f.potential.set_reference({}, f.hardening, f.object);
+        f.potential.set_material_state(f.object, f.hardening);
+        f.potential.set_reference({});
         options.residual_mass = f.potential.residual_mass();
         v = v_star;
         const NewtonStats s = minimize(f.potential, v, options, "step " + std::to_string(step));

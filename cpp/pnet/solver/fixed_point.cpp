@@ -1,0 +1,65 @@
+#include "pnet/solver/fixed_point.hpp"
+
+#include <limits>
+
+namespace pnet {
+
+template <int dim>
+ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
+                                         const ReferenceSolveOptions& options, const std::string& context,
+                                         ReferenceSolveWork<dim>& work, const std::function<void()>& after_reference) {
+    ReferenceSolveStats stats;
+    const bool fixed_point = options.fixed_point;
+    const int solves = fixed_point ? options.max_solves : 1;
+    if (fixed_point) objective.deformation(v, work.F0);  // F0^0 = F(v)
+    double best_change = std::numeric_limits<double>::infinity(), previous_change = best_change;
+    for (int j = 0; j < solves; ++j) {
+        if (fixed_point) objective.set_reference(work.F0);
+        if (after_reference) after_reference();
+        const std::string where = context + (fixed_point ? ", fixed-point iteration " + std::to_string(j + 1) : "");
+        const NewtonStats s = minimize(objective, v, newton, where);
+        if (j == 0) stats.initial_residual = s.initial_residual;
+        stats.newton_iterations += s.iterations;
+        stats.cg_iterations += s.cg_iterations;
+        stats.line_search_steps += s.line_search_steps;
+        stats.residual = s.residual;
+        stats.energy = s.energy;
+        const bool converged = s.converged || s.roundoff_floor;
+        stats.converged = stats.converged && converged;
+        stats.line_search_failed = stats.line_search_failed || s.line_search_failed;
+        if (options.fail_on_unconverged && !converged)
+            throw NewtonError(where + ": the Newton solve did not converge (" +
+                              (s.line_search_failed ? std::string("line search failed")
+                                                    : std::to_string(s.iterations) + " iterations") +
+                              ", residual " + std::to_string(s.residual) + " m/s > tolerance " +
+                              std::to_string(newton.tolerance) + " m/s)");
+        ++stats.solves;
+        if (!fixed_point) break;
+        objective.deformation(v, work.F);
+        double change = 0.0;
+        for (std::size_t p = 0; p < work.F.size(); ++p) change = std::max(change, (work.F[p] - work.F0[p]).norm());
+        // Keep the most self-consistent solution.
+        if (change < best_change) {
+            best_change = change;
+            work.best_v = v;
+        }
+        stats.change = best_change;
+        if (change <= options.tolerance || change > previous_change) break;
+        previous_change = change;
+        work.F0.swap(work.F);  // F0^{j+1} = F(v^{j+1})
+    }
+    if (fixed_point) {
+        v.swap(work.best_v);
+        stats.fixed_point_converged = best_change <= options.tolerance;
+    }
+    return stats;
+}
+
+template ReferenceSolveStats solve_with_reference<2>(ReferencedObjective<2>&, VecX&, const NewtonOptions&,
+                                                     const ReferenceSolveOptions&, const std::string&,
+                                                     ReferenceSolveWork<2>&, const std::function<void()>&);
+template ReferenceSolveStats solve_with_reference<3>(ReferencedObjective<3>&, VecX&, const NewtonOptions&,
+                                                     const ReferenceSolveOptions&, const std::string&,
+                                                     ReferenceSolveWork<3>&, const std::function<void()>&);
+
+}  // namespace pnet

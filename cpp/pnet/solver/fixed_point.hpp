@@ -1,0 +1,67 @@
+#pragma once
+// The solve of one implicit step with a reference deformation (DESIGN.md
+// §4.1-4.2, paper eq. 10), shared by MPM and FEM around the one Newton loop:
+//
+//   plasticitynet: F0^0 = F(v); solve j minimizes E(v; F0^j) from the previous
+//     v, then F0^{j+1} = F(v^{j+1}), until max_p ||F(v) - F0||_F <= tolerance or
+//     max_solves. If the change grows from one solve to the next (far outside
+//     the network's training regime the iteration can stop contracting) it
+//     stops; the solution with the smallest change is kept.
+//   otherwise (lagged, analytic): one solve with the reference the caller set.
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "pnet/math/types.hpp"
+#include "pnet/solver/newton.hpp"
+#include "pnet/solver/objective.hpp"
+
+namespace pnet {
+
+/// An objective whose energy is evaluated about a reference deformation per
+/// material point (MPM particle, FEM element).
+template <int dim>
+class ReferencedObjective : public Objective {
+public:
+    /// The deformation of every material point at the unknowns v (MPM: F_p(v);
+    /// FEM: F^E_e(v)).
+    virtual void deformation(const VecX& v, std::vector<Mat<dim>>& F) const = 0;
+    /// The energy's reference F0 (with the points' start-of-step hardening).
+    virtual void set_reference(const std::vector<Mat<dim>>& F0) = 0;
+};
+
+struct ReferenceSolveOptions {
+    bool fixed_point = false;       // iterate on F0 (plasticitynet)
+    int max_solves = 8;             // fixed point: the cap
+    double tolerance = 1e-3;        // fixed point: on max_p ||F(v) - F0||_F
+    bool fail_on_unconverged = false;  // an unconverged Newton solve throws NewtonError
+};
+
+/// Totals over the step's solves.
+struct ReferenceSolveStats {
+    int solves = 0, newton_iterations = 0, cg_iterations = 0, line_search_steps = 0;
+    double initial_residual = 0.0, residual = 0.0, energy = 0.0;
+    double change = 0.0;                 // fixed point: the smallest max_p ||F(v) - F0|| reached
+    bool converged = true;               // every Newton solve reached its tolerance
+    bool line_search_failed = false;
+    bool fixed_point_converged = true;   // the change reached the tolerance (not the cap)
+};
+
+/// Work arrays kept between steps.
+template <int dim>
+struct ReferenceSolveWork {
+    std::vector<Mat<dim>> F0, F;
+    VecX best_v;
+};
+
+/// Solves the step from v (updated). `after_reference`, if given, runs after
+/// every set_reference (statistics of the energy's reference). Throws
+/// NewtonError from the solves, and, with fail_on_unconverged, for a solve that
+/// ends above its tolerance ("<context>: the Newton solve did not converge ...").
+template <int dim>
+ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
+                                         const ReferenceSolveOptions& options, const std::string& context,
+                                         ReferenceSolveWork<dim>& work,
+                                         const std::function<void()>& after_reference = {});
+
+}  // namespace pnet
