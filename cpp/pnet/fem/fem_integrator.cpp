@@ -1,0 +1,221 @@
+#include "pnet/fem/fem_integrator.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace pnet {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+template <int dim>
+void FemSystem<dim>::make_rest() {
+    std::vector<double> density(mesh.elements.size());
+    for (std::size_t e = 0; e < density.size(); ++e) density[e] = materials.at(element_object[e]).description().density;
+    rest = ElementRest<dim>(mesh, density);
+    if (fixed_node.empty()) fixed_node.assign(mesh.nodes(), 0);
+    if (prescribed_velocity.empty()) prescribed_velocity.assign(mesh.nodes(), Vec<dim>::Zero());
+}
+
+template <int dim>
+double FemSystem<dim>::free_mass() const {
+    double m = 0.0;
+    for (std::size_t i = 0; i < mesh.nodes(); ++i)
+        if (!fixed_node[i]) m += rest.node_mass[i];
+    return m;
+}
+
+template <int dim>
+FemState<dim> FemState<dim>::at_rest(const FemSystem<dim>& system) {
+    FemState s;
+    s.x = system.mesh.x;
+    s.v.assign(system.mesh.nodes(), Vec<dim>::Zero());
+    s.plastic_inverse.assign(system.mesh.elements.size(), Mat<dim>::Identity());
+    s.hardening.resize(system.mesh.elements.size());
+    for (std::size_t e = 0; e < s.hardening.size(); ++e)
+        s.hardening[e] = system.materials[system.element_object[e]].description().initial_hardening;
+    return s;
+}
+
+template <int dim>
+void fem_return_mapping(const FemSystem<dim>& system, FemState<dim>& state) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(system.mesh.elements.size());
+#pragma omp parallel for schedule(static) if (n >= 256)
+    for (std::ptrdiff_t e = 0; e < n; ++e) {
+        const Mat<dim> F = deformation_gradient(system.mesh, system.rest, state.x, e);
+        const Mat<dim> FE_trial = F * state.plastic_inverse[e];
+        const auto projection = system.materials[system.element_object[e]].project(FE_trial, state.hardening[e]);
+        state.plastic_inverse[e] = F.inverse() * projection.F_elastic;  // F^P = (F^E)^-1 F
+        state.hardening[e] = projection.hardening;
+    }
+}
+
+template <int dim>
+FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, FemMethod method,
+                                                  const ImplicitOptions& options,
+                                                  std::unique_ptr<ParticleEnergy<dim>> energy,
+                                                  const ContactPotential<dim>* contact)
+    : system_(system),
+      method_(method),
+      options_(options),
+      energy_(std::move(energy)),
+      potential_(system_.mesh, system_.rest, *energy_) {
+    potential_.set_contact(contact);
+    fixed_components_.assign(dim * system.mesh.nodes(), 0);
+    for (std::size_t i = 0; i < system.mesh.nodes(); ++i)
+        for (int a = 0; a < dim; ++a) fixed_components_[dim * i + a] = system.fixed_node[i];
+}
+
+template <int dim>
+StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
+    const auto start = std::chrono::steady_clock::now();
+    StepStats stats;
+    stats.dt = dt;
+    const std::size_t n = system_.mesh.nodes();
+    VecX v_star(dim * n);
+    for (std::size_t i = 0; i < n; ++i)
+        v_star.template segment<dim>(dim * i) =
+            system_.fixed_node[i] ? system_.prescribed_velocity[i] : Vec<dim>(state.v[i] + dt * system_.gravity);
+    potential_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
+    potential_.set_material_state(system_.element_object, state.hardening);
+
+    NewtonOptions newton;
+    newton.tolerance = options_.newton_tolerance;
+    newton.max_iterations = options_.max_newton_iterations;
+    newton.max_cg_iterations = options_.max_cg_iterations;
+    newton.cg_tolerance = options_.cg_tolerance;
+    newton.residual_mass = potential_.residual_mass();
+    newton.lazy_hessian = options_.lazy_hessian;
+    newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+
+    // An intersection-free start: v* as far as CCD allows from x^n (v = 0).
+    VecX v = v_star;
+    const double alpha = potential_.max_step(VecX::Zero(v.size()), v_star);
+    if (alpha < 1.0) v *= alpha;
+
+    ReferenceSolveOptions solve;
+    solve.fixed_point = method_ == FemMethod::PlasticityNet;
+    solve.max_solves = options_.max_fixed_point_iterations;
+    solve.tolerance = options_.fixed_point_tolerance;
+    solve.fail_on_unconverged = options_.fail_on_unconverged;
+    if (!solve.fixed_point) potential_.set_reference({});  // the elastic and analytic energies need no F0
+    ReferenceSolveStats s;
+    try {
+        s = solve_with_reference<dim>(potential_, v, newton, solve, "step " + std::to_string(step_index), work_,
+                                      [&] { stats.hardening_clamped = std::max(stats.hardening_clamped,
+                                                                               energy_->hardening_clamped()); });
+    } catch (const NewtonError& e) {
+        throw SimulationError(e.what());
+    }
+    stats.initial_residual = s.initial_residual;
+    stats.newton_iterations = s.newton_iterations;
+    stats.cg_iterations = s.cg_iterations;
+    stats.line_search_steps = s.line_search_steps;
+    stats.fixed_point_iterations = s.solves;
+    stats.fixed_point_change = s.change;
+    stats.residual = s.residual;
+    stats.energy = s.energy;
+    stats.converged = s.converged;
+    stats.line_search_failed = s.line_search_failed;
+    stats.fixed_point_converged = s.fixed_point_converged;
+    const auto after_solve = std::chrono::steady_clock::now();
+
+    double max_speed = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        state.v[i] = v.template segment<dim>(dim * i);
+        state.x[i] += dt * state.v[i];
+        if (!state.x[i].allFinite())
+            throw SimulationError("step " + std::to_string(step_index) + ": node " + std::to_string(i) +
+                                  " has a non-finite position");
+        max_speed = std::max(max_speed, state.v[i].norm());
+    }
+    stats.max_grid_speed = max_speed;
+    fem_return_mapping(system_, state);
+    stats.grid_seconds = std::chrono::duration<double>(after_solve - start).count();
+    stats.g2p_seconds = seconds_since(after_solve);
+    stats.wall_seconds = seconds_since(start);
+    return stats;
+}
+
+template <int dim>
+StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
+    const auto start = std::chrono::steady_clock::now();
+    StepStats stats;
+    stats.dt = dt;
+    const Mesh<dim>& mesh = system_.mesh;
+    const std::size_t n = mesh.nodes();
+    VecX force = VecX::Zero(dim * n);
+    for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+        const Mat<dim> FE = deformation_gradient(mesh, system_.rest, state.x, e) * state.plastic_inverse[e];
+        const Mat<dim> P = system_.materials[system_.element_object[e]].elasticity().P(FE);
+        const Mat<dim> Q = system_.rest.volume[e] * P * state.plastic_inverse[e].transpose();
+        for (int a = 0; a <= dim; ++a) force.template segment<dim>(dim * mesh.elements[e][a]) -= Q * system_.rest.grad[e][a];
+    }
+    if (contact_) {
+        VecX barrier = VecX::Zero(dim * n);
+        contact_->add_gradient(state.x, 1.0, barrier);
+        force -= barrier;
+    }
+    std::vector<Vec<dim>> dx(n);
+    double max_speed = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        if (system_.fixed_node[i])
+            state.v[i] = system_.prescribed_velocity[i];
+        else
+            state.v[i] += dt * (force.template segment<dim>(dim * i) / system_.rest.node_mass[i] + system_.gravity);
+        dx[i] = dt * state.v[i];
+        max_speed = std::max(max_speed, state.v[i].norm());
+        if (!state.v[i].allFinite())
+            throw SimulationError("step " + std::to_string(step_index) + ": node " + std::to_string(i) +
+                                  " has a non-finite velocity (the simulation blew up; try a smaller dt)");
+    }
+    if (contact_) {
+        const double t = contact_->max_step(state.x, dx);
+        if (t < 1.0)
+            throw SimulationError("step " + std::to_string(step_index) + ": the explicit step would make the mesh "
+                                  "intersect (CCD allows " + std::to_string(t) + " of it); use a smaller dt");
+    }
+    for (std::size_t i = 0; i < n; ++i) state.x[i] += dx[i];
+    fem_return_mapping(system_, state);
+    stats.max_grid_speed = max_speed;
+    stats.wall_seconds = seconds_since(start);
+    return stats;
+}
+
+template <int dim>
+double FemExplicitIntegrator<dim>::cfl_time_step(double cfl) const {
+    double c = 0.0;
+    for (const Material<dim>& m : system_.materials) {
+        const ElasticParams& e = m.description().elastic;
+        c = std::max(c, std::sqrt((e.lambda() + 2.0 * e.mu()) / m.description().density));
+    }
+    double h = 1e300;  // the smallest element height: d V / (largest facet measure), approximated by the longest edge
+    for (std::size_t e = 0; e < system_.mesh.elements.size(); ++e) {
+        double longest = 0.0;
+        const auto& el = system_.mesh.elements[e];
+        for (int a = 0; a <= dim; ++a)
+            for (int b = 0; b < a; ++b) longest = std::max(longest, (system_.mesh.x[el[a]] - system_.mesh.x[el[b]]).norm());
+        const double height = dim * system_.rest.volume[e] / std::pow(longest, dim - 1);
+        h = std::min(h, height);
+    }
+    return cfl * h / c;
+}
+
+template struct FemSystem<2>;
+template struct FemSystem<3>;
+template struct FemState<2>;
+template struct FemState<3>;
+template class FemImplicitIntegrator<2>;
+template class FemImplicitIntegrator<3>;
+template class FemExplicitIntegrator<2>;
+template class FemExplicitIntegrator<3>;
+template void fem_return_mapping<2>(const FemSystem<2>&, FemState<2>&);
+template void fem_return_mapping<3>(const FemSystem<3>&, FemState<3>&);
+
+}  // namespace pnet

@@ -1,0 +1,103 @@
+#pragma once
+// FEM time integrators (DESIGN.md §4.2) on a simplicial mesh with per-element
+// plasticity: the state is the nodal positions and velocities and, per
+// element, the inverse plastic deformation (F^P)^-1 and the hardening state.
+//
+// Implicit (`plasticitynet`, `lagged`, `analytic`): one step minimizes the
+// incremental potential over the nodal velocities (fem_potential.hpp) with the
+// shared solve driver (solver/fixed_point.hpp: the fixed point on F0 for
+// plasticitynet, one solve otherwise) and the one Newton loop, by CHOLMOD's
+// direct solve; the start is v* as far as contact's CCD allows from x^n, so
+// every iterate is intersection-free. Then x += dt v, and per element
+//   F^E_tr = F(x) (F^P)^-1,  F^E = Z(F^E_tr, h),  (F^P)^-1 = F^-1 F^E,  h updated
+// (the materials' return mappings, the same as MPM's).
+// Explicit (the ground truth): symplectic Euler with the elastic stress of the
+// admissible F^E and the same contact potential's force, then the same return
+// mapping; a step whose motion CCD finds intersecting is a blow-up.
+// Fixed nodes (kinematic: the pressing plate, clamps) move with a prescribed
+// velocity in both.
+#include <memory>
+#include <vector>
+
+#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/energy/particle_energy.hpp"
+#include "pnet/fem/fem_potential.hpp"
+#include "pnet/mpm/implicit_integrator.hpp"  // ImplicitOptions, StepStats, SimulationError
+#include "pnet/solver/fixed_point.hpp"
+
+namespace pnet {
+
+/// What does not change during a run.
+template <int dim>
+struct FemSystem {
+    Mesh<dim> mesh;
+    std::vector<int> element_object;          // material index per element
+    std::vector<Material<dim>> materials;
+    ElementRest<dim> rest;                    // from the mesh and the materials' densities (make_rest())
+    Vec<dim> gravity = Vec<dim>::Zero();      // m/s^2
+    std::vector<char> fixed_node;             // per node: kinematic (prescribed velocity)
+    std::vector<Vec<dim>> prescribed_velocity;  // per node, used where fixed_node
+
+    /// rest from mesh, element_object and the materials' densities.
+    void make_rest();
+    /// Lumped nodal masses of the free nodes, summed, kg (per unit depth in 2D).
+    double free_mass() const;
+};
+
+template <int dim>
+struct FemState {
+    std::vector<Vec<dim>> x, v;                // nodes, m and m/s
+    std::vector<Mat<dim>> plastic_inverse;     // (F^P)^-1 per element
+    std::vector<double> hardening;             // per element
+
+    /// At rest in the mesh's rest shape, with each element's material's initial hardening.
+    static FemState at_rest(const FemSystem<dim>& system);
+};
+
+enum class FemMethod { PlasticityNet, Lagged, Analytic };
+
+template <int dim>
+class FemImplicitIntegrator {
+public:
+    /// energy: the element energy of the method (NeuralParticleEnergy,
+    /// ElasticParticleEnergy or AnalyticElastoplasticEnergy); contact may be null.
+    FemImplicitIntegrator(const FemSystem<dim>& system, FemMethod method, const ImplicitOptions& options,
+                          std::unique_ptr<ParticleEnergy<dim>> energy, const ContactPotential<dim>* contact);
+
+    /// Throws SimulationError naming the step on a failed solve.
+    StepStats step(FemState<dim>& state, double dt, long step_index);
+
+    FemPotential<dim>& potential() { return potential_; }
+
+private:
+    const FemSystem<dim>& system_;
+    FemMethod method_;
+    ImplicitOptions options_;
+    std::unique_ptr<ParticleEnergy<dim>> energy_;
+    FemPotential<dim> potential_;
+    ReferenceSolveWork<dim> work_;
+    std::vector<char> fixed_components_;
+};
+
+template <int dim>
+class FemExplicitIntegrator {
+public:
+    FemExplicitIntegrator(const FemSystem<dim>& system, const ContactPotential<dim>* contact)
+        : system_(system), contact_(contact) {}
+
+    /// Throws SimulationError naming the step if the motion intersects (CCD) or a value is not finite.
+    StepStats step(FemState<dim>& state, double dt, long step_index);
+
+    /// The largest stable step of the elements: cfl h_min / c with c the fastest wave speed.
+    double cfl_time_step(double cfl = 0.5) const;
+
+private:
+    const FemSystem<dim>& system_;
+    const ContactPotential<dim>* contact_;
+};
+
+/// The return mapping of every element after a step: F^E_tr = F(x) (F^P)^-1 -> Z, (F^P)^-1, h.
+template <int dim>
+void fem_return_mapping(const FemSystem<dim>& system, FemState<dim>& state);
+
+}  // namespace pnet
