@@ -65,8 +65,11 @@ FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, 
       method_(method),
       options_(options),
       energy_(std::move(energy)),
-      potential_(system_.mesh, system_.rest, *energy_) {
+      potential_(system_.mesh, system_.rest, *energy_),
+      elastic_energy_(system_.materials),
+      predictor_(system_.mesh, system_.rest, elastic_energy_) {
     potential_.set_contact(contact);
+    predictor_.set_contact(contact);
     fixed_components_.assign(dim * system.mesh.nodes(), 0);
     for (std::size_t i = 0; i < system.mesh.nodes(); ++i)
         for (int a = 0; a < dim; ++a) fixed_components_[dim * i + a] = system.fixed_node[i];
@@ -99,6 +102,18 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     const double alpha = potential_.max_step(VecX::Zero(v.size()), v_star);
     if (alpha < 1.0) v *= alpha;
 
+    if (method_ == FemMethod::PlasticityNet) {
+        predictor_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
+        predictor_.set_material_state(system_.element_object, state.hardening);
+        predictor_.set_reference({});
+        try {
+            const NewtonStats p = minimize(predictor_, v, newton, "step " + std::to_string(step_index) + ", predictor");
+            stats.newton_iterations += p.iterations;
+            stats.line_search_steps += p.line_search_steps;
+        } catch (const NewtonError& e) {
+            throw SimulationError(e.what());
+        }
+    }
     ReferenceSolveOptions solve;
     solve.fixed_point = method_ == FemMethod::PlasticityNet;
     solve.max_solves = options_.max_fixed_point_iterations;
@@ -114,9 +129,9 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         throw SimulationError(e.what());
     }
     stats.initial_residual = s.initial_residual;
-    stats.newton_iterations = s.newton_iterations;
+    stats.newton_iterations += s.newton_iterations;
     stats.cg_iterations = s.cg_iterations;
-    stats.line_search_steps = s.line_search_steps;
+    stats.line_search_steps += s.line_search_steps;
     stats.fixed_point_iterations = s.solves;
     stats.fixed_point_change = s.change;
     stats.residual = s.residual;
