@@ -71,8 +71,10 @@ FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, 
     potential_.set_contact(contact);
     predictor_.set_contact(contact);
     fixed_components_.assign(dim * system.mesh.nodes(), 0);
-    for (std::size_t i = 0; i < system.mesh.nodes(); ++i)
+    for (std::size_t i = 0; i < system.mesh.nodes(); ++i) {
         for (int a = 0; a < dim; ++a) fixed_components_[dim * i + a] = system.fixed_node[i];
+        has_kinematic_ = has_kinematic_ || system.fixed_node[i];
+    }
 }
 
 template <int dim>
@@ -97,7 +99,9 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     newton.lazy_hessian = options_.lazy_hessian;
     newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
 
-    // An intersection-free start: v* as far as CCD allows from x^n (v = 0).
+    // An intersection-free start: v* as far as CCD allows from x^n (v = 0). The
+    // kinematic nodes (fixed components, held where they start) then reach
+    // their targets in stages below.
     VecX v = v_star;
     const double alpha = potential_.max_step(VecX::Zero(v.size()), v_star);
     if (alpha < 1.0) v *= alpha;
@@ -127,6 +131,57 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
                                                                                energy_->hardening_clamped()); });
     } catch (const NewtonError& e) {
         throw SimulationError(e.what());
+    }
+    // Kinematic targets not reached (CCD held the start back): as IPC does, make
+    // the kinematic nodes unknowns pulled to their targets by a stiff weight,
+    // so that they move together with what they push (every iterate stays
+    // intersection-free), stiffening it tenfold until they are within 1e-9 m
+    // of their targets; then put them on the targets exactly (if CCD allows)
+    // and solve once more with them fixed.
+    stats.kinematic_reached = true;
+    auto accumulate = [&](const ReferenceSolveStats& more) {
+        s.newton_iterations += more.newton_iterations;
+        s.line_search_steps += more.line_search_steps;
+        s.cg_iterations += more.cg_iterations;
+        s.solves += more.solves;
+        s.residual = more.residual;
+        s.energy = more.energy;
+        s.converged = s.converged && more.converged;
+        s.line_search_failed = s.line_search_failed || more.line_search_failed;
+        s.fixed_point_converged = more.fixed_point_converged;
+        s.change = more.change;
+    };
+    auto deviation = [&] {
+        double worst = 0.0;
+        for (Eigen::Index k = 0; k < v.size(); ++k)
+            if (fixed_components_[k]) worst = std::max(worst, std::abs(v[k] - v_star[k]));
+        return worst * dt;  // m
+    };
+    if (has_kinematic_ && deviation() > 0.0) {
+        try {
+            double weight = 1e3;
+            for (int stage = 0; stage < options_.max_kinematic_stages && deviation() > 1e-9; ++stage, weight *= 10.0) {
+                potential_.soften_fixed(weight);
+                NewtonOptions soft = newton;
+                soft.residual_mass = potential_.residual_mass();
+                accumulate(solve_with_reference<dim>(potential_, v, soft, solve,
+                                                     "step " + std::to_string(step_index) + ", kinematic stage " +
+                                                         std::to_string(stage + 1),
+                                                     work_));
+                ++stats.kinematic_stages;
+            }
+            potential_.harden_fixed();
+            VecX d = VecX::Zero(v.size());
+            for (Eigen::Index k = 0; k < d.size(); ++k)
+                if (fixed_components_[k]) d[k] = v_star[k] - v[k];
+            const double t = potential_.max_step(v, d);
+            v += t * d;
+            stats.kinematic_reached = t >= 1.0;
+            accumulate(solve_with_reference<dim>(potential_, v, newton, solve,
+                                                 "step " + std::to_string(step_index) + ", kinematic targets", work_));
+        } catch (const NewtonError& e) {
+            throw SimulationError(e.what());
+        }
     }
     stats.initial_residual = s.initial_residual;
     stats.newton_iterations += s.newton_iterations;

@@ -49,6 +49,8 @@ void FemPotential<dim>::begin_step(const std::vector<Vec<dim>>& x_start, const V
     mass_.resize(dim * nodes);
     free_.resize(dim * nodes);
     residual_mass_.resize(dim * nodes);
+    inertia_scale_.setOnes(dim * nodes);
+    fixed_ = fixed;
     for (std::size_t i = 0; i < nodes; ++i)
         for (int a = 0; a < dim; ++a) {
             const std::size_t k = dim * i + a;
@@ -82,6 +84,26 @@ void FemPotential<dim>::deformation(const VecX& v, std::vector<Mat<dim>>& FE) co
 }
 
 template <int dim>
+void FemPotential<dim>::soften_fixed(double weight) {
+    for (std::size_t k = 0; k < fixed_.size(); ++k)
+        if (fixed_[k]) {
+            free_[k] = 1.0;
+            inertia_scale_[k] = weight;
+            residual_mass_[k] = mass_[k];  // their pull to the target counts in the residual
+        }
+}
+
+template <int dim>
+void FemPotential<dim>::harden_fixed() {
+    for (std::size_t k = 0; k < fixed_.size(); ++k)
+        if (fixed_[k]) {
+            free_[k] = 0.0;
+            inertia_scale_[k] = 1.0;
+            residual_mass_[k] = 0.0;
+        }
+}
+
+template <int dim>
 void FemPotential<dim>::positions(const VecX& v, std::vector<Vec<dim>>& x) const {
     x.resize(x_start_.size());
     for (std::size_t i = 0; i < x.size(); ++i) x[i] = x_start_[i] + dt_ * v.template segment<dim>(dim * i);
@@ -105,7 +127,7 @@ void FemPotential<dim>::set_reference(const std::vector<Mat<dim>>& F0) {
 
 template <int dim>
 double FemPotential<dim>::inertia(const VecX& v) const {
-    return 0.5 * (v - v_star_).cwiseAbs2().dot(mass_.cwiseProduct(free_));
+    return 0.5 * (v - v_star_).cwiseAbs2().dot(mass_.cwiseProduct(free_).cwiseProduct(inertia_scale_));
 }
 
 template <int dim>
@@ -123,7 +145,7 @@ void FemPotential<dim>::evaluate(const VecX& v, typename ParticleEnergy<dim>::Or
 
 template <int dim>
 void FemPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient) const {
-    gradient = mass_.cwiseProduct(v - v_star_);
+    gradient = mass_.cwiseProduct(inertia_scale_).cwiseProduct(v - v_star_);
     for (std::size_t e = 0; e < mesh_.elements.size(); ++e) {
         const Mat<dim> Q = (rest_.volume[e] * dt_) * P_[e];
         for (int a = 0; a <= dim; ++a)
@@ -163,7 +185,7 @@ void FemPotential<dim>::prepare_hessian(const VecX& v) {
     const Eigen::Index n = size();
     triplets_.clear();
     triplets_.reserve(mesh_.elements.size() * (dim + 1) * (dim + 1) * dim * dim + n);
-    for (Eigen::Index k = 0; k < n; ++k) triplets_.emplace_back(k, k, mass_[k]);
+    for (Eigen::Index k = 0; k < n; ++k) triplets_.emplace_back(k, k, mass_[k] * (free_[k] > 0.0 ? inertia_scale_[k] : 1.0));
     for (std::size_t e = 0; e < mesh_.elements.size(); ++e) {
         const Tensor4<dim>& H = H_[e];
         const double scale = rest_.volume[e] * dt_ * dt_;

@@ -62,6 +62,14 @@ public:
     void begin_step(const std::vector<Vec<dim>>& x_start, const VecX& v_star, double dt,
                     const std::vector<Mat<dim>>& plastic_inverse, const std::vector<char>& fixed);
 
+    /// Soft kinematic constraints (IPC's approach to prescribed motion under
+    /// contact): the components fixed at begin_step() become unknowns whose
+    /// inertia term, pulling them to their v*, is weighted by `weight` (>> 1),
+    /// so that Newton moves them together with what they push.
+    /// harden_fixed() makes them fixed again.
+    void soften_fixed(double weight);
+    void harden_fixed();
+
     /// The contact potential (not owned; null: no contact).
     void set_contact(const ContactPotential<dim>* contact) { contact_ = contact; }
 
@@ -116,7 +124,8 @@ private:
     std::vector<int> object_;
     std::vector<double> hardening_;
     double dt_ = 0.0;
-    VecX v_star_, mass_, free_, residual_mass_;
+    VecX v_star_, mass_, free_, residual_mass_, inertia_scale_;
+    std::vector<char> fixed_;
     std::vector<std::array<Vec<dim>, dim + 1>> grad_;  // gt_ea = (F^P)^-T g_ea
     std::vector<Mat<dim>> FE_, P_;
     std::vector<double> psi_;

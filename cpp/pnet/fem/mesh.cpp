@@ -14,6 +14,17 @@ double Mesh<dim>::signed_volume(const std::vector<Vec<dim>>& positions, std::siz
 }
 
 template <int dim>
+int Mesh<dim>::append(const Mesh& other) {
+    const int offset = static_cast<int>(x.size());
+    x.insert(x.end(), other.x.begin(), other.x.end());
+    for (Element el : other.elements) {
+        for (int& a : el) a += offset;
+        elements.push_back(el);
+    }
+    return offset;
+}
+
+template <int dim>
 std::pair<Vec<dim>, Vec<dim>> Mesh<dim>::bounding_box() const {
     Vec<dim> lo = Vec<dim>::Constant(1e300), hi = Vec<dim>::Constant(-1e300);
     for (const Vec<dim>& p : x) {

@@ -42,6 +42,10 @@ struct Mesh {
     /// exactly one element) in a fixed order. Throws MeshError naming `context`.
     void finalize(const std::string& context);
 
+    /// Adds the nodes and elements of `other` (node indices shifted); call
+    /// finalize() afterwards. Returns the index of other's first node here.
+    int append(const Mesh& other);
+
     /// Signed volume of element e at positions `positions` (m^d).
     double signed_volume(const std::vector<Vec<dim>>& positions, std::size_t e) const;
 

@@ -73,6 +73,9 @@ struct ImplicitOptions {
     // A step whose solve ends unconverged (iteration cap or failed line search)
     // is an error (SimulationError) instead of being counted and used.
     bool fail_on_unconverged = false;
+    // FEM: the most extra solves per step that move kinematic nodes (the plate)
+    // to targets that contact's CCD kept them from at the start.
+    int max_kinematic_stages = 20;
 
     /// Reads the keys above from an integrator block (others are ignored: the
     /// block also holds name, dt and cfl). Throws std::invalid_argument

@@ -35,6 +35,9 @@ struct StepStats {
     bool line_search_failed = false; // a solve stopped because no step lowered the energy
     bool fixed_point_converged = true;  // plasticitynet: the fixed point on F0 reached its tolerance (not the cap)
     std::size_t hardening_clamped = 0;  // plasticitynet: particles whose hardening input was clamped to the trained range
+    // FEM with kinematic nodes: extra solves that moved them toward their targets, and whether they got there.
+    int kinematic_stages = 0;
+    bool kinematic_reached = true;
     // Where an implicit step's time went (parts of grid_seconds).
     double energy_seconds = 0.0;     // per-particle energies, stresses and Hessians
     double cg_seconds = 0.0;         // Hessian-vector products and PCG

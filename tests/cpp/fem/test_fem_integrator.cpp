@@ -94,3 +94,73 @@ TEST(FemIntegrator, ImplicitStepsAreThreadCountIndependent) {
 
 }  // namespace
 }  // namespace pnet
+
+namespace pnet {
+namespace {
+
+// A kinematic plate pressing an elastic block onto the ground: the plate
+// reaches its prescribed position every step (the start is held back by CCD,
+// then stages move it as the block makes room), and nothing ever touches.
+TEST(FemIntegrator, KinematicPlatePressesABlockWithoutPenetration) {
+    Shape2d block_shape, plate_shape;
+    block_shape.kind = plate_shape.kind = Shape2d::Kind::Box;
+    block_shape.min = Vec<2>(0.0, 0.0005);
+    block_shape.max = Vec<2>(0.1, 0.0505);
+    block_shape.element_size = 0.01;
+    plate_shape.min = Vec<2>(-0.01, 0.051);
+    plate_shape.max = Vec<2>(0.11, 0.061);
+    plate_shape.element_size = 0.01;
+    FemSystem<2> system;
+    system.mesh = mesh_shape(block_shape, "block");
+    const std::size_t block_nodes = system.mesh.nodes();
+    const std::size_t block_elements = system.mesh.elements.size();
+    system.mesh.append(mesh_shape(plate_shape, "plate"));
+    system.mesh.finalize("block and plate");
+    MaterialDescription jelly;
+    jelly.density = 1000.0;
+    jelly.elasticity = ElasticityModel::NeoHookeanMetal;
+    jelly.elastic.E = 1e5;
+    jelly.elastic.nu = 0.3;
+    system.materials = {Material<2>(jelly)};
+    system.element_object.assign(system.mesh.elements.size(), 0);
+    system.gravity = Vec<2>(0.0, -9.8);
+    system.fixed_node.assign(system.mesh.nodes(), 0);
+    system.prescribed_velocity.assign(system.mesh.nodes(), Vec<2>::Zero());
+    const double speed = 0.05, dt = 1e-2;  // the frame scene's plate: 0.5 mm per step
+    for (std::size_t i = block_nodes; i < system.mesh.nodes(); ++i) {
+        system.fixed_node[i] = 1;
+        system.prescribed_velocity[i] = Vec<2>(0.0, -speed);
+    }
+    system.make_rest();
+    Contact2d contact(system.mesh.boundary, 1e-3, 1e8);
+    contact.add_half_space({Vec<2>(0.0, 0.0), Vec<2>(0.0, 1.0)});
+    ASSERT_EQ(contact.first_intersection(system.mesh.x), "");
+    ImplicitOptions options;
+    options.newton_tolerance = 1e-5;  // m/s
+    options.max_newton_iterations = 200;
+    FemImplicitIntegrator<2> integrator(system, FemMethod::Lagged, options,
+                                        std::make_unique<ElasticParticleEnergy<2>>(system.materials), &contact);
+    FemState<2> state = FemState<2>::at_rest(system);
+    int staged = 0, newton = 0;
+    for (int step = 0; step < 10; ++step) {
+        const StepStats s = integrator.step(state, dt, step);
+        ASSERT_TRUE(s.converged) << "step " << step << ": residual " << s.residual << " Newton " << s.newton_iterations
+                                 << " line search failed " << s.line_search_failed << " stages " << s.kinematic_stages;
+        EXPECT_TRUE(s.kinematic_reached) << "step " << step;
+        staged += s.kinematic_stages;
+        newton += s.newton_iterations;
+        ASSERT_GT(contact.min_distance(state.x), 0.0) << "step " << step;
+        for (std::size_t i = block_nodes; i < system.mesh.nodes(); ++i)
+            ASSERT_NEAR(state.x[i][1], system.mesh.x[i][1] - speed * dt * (step + 1), 1e-12) << "plate node " << i;
+    }
+    EXPECT_GT(staged, 0) << "the plate's start was held back by contact at least once";
+    double top = -1.0;
+    for (std::size_t i = 0; i < block_nodes; ++i) top = std::max(top, state.x[i][1]);
+    EXPECT_LT(top, 0.0505 - 0.004) << "the block is compressed by the plate's 5 mm of travel";
+    EXPECT_GT(top, 0.0) << "the block is not crushed through the ground";
+    (void)block_elements;
+    RecordProperty("newton_iterations", newton);
+}
+
+}  // namespace
+}  // namespace pnet
