@@ -65,6 +65,19 @@ public:
     double min_distance(const std::vector<Vec<2>>& x) const;
     /// Pairs closer than dhat.
     std::size_t active_pairs(const std::vector<Vec<2>>& x) const;
+    /// An active pair's lagged friction data at x (friction.hpp): the nodes and
+    /// weights of its relative velocity (node minus the closest point of the
+    /// edge; the node alone against a half-space), its tangent and its normal
+    /// force kappa |b'(s)| 2 d (N per unit depth).
+    struct LaggedPair {
+        std::array<int, 3> node{};
+        std::array<double, 3> weight{};
+        int count = 0;
+        Vec<2> tangent = Vec<2>::Zero();
+        double normal_force = 0.0;
+    };
+    std::vector<LaggedPair> lagged_pairs(const std::vector<Vec<2>>& x) const;
+
     /// A node-edge pair (or node inside a half-space) that intersects or touches at x, as text
     /// ("node 12 and edge 30-31"), or empty if none: a start state must have none.
     std::string first_intersection(const std::vector<Vec<2>>& x) const;

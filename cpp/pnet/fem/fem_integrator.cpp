@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
 
 namespace pnet {
 
@@ -78,8 +79,20 @@ FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, 
 }
 
 template <int dim>
+void FemImplicitIntegrator<dim>::set_friction(Friction2d* friction, const Contact2d* contact) {
+    if (dim != 2) throw std::invalid_argument("FemImplicitIntegrator: friction is 2D only");
+    friction_ = friction;
+    friction_contact_ = contact;
+    potential_.set_friction(friction);
+    predictor_.set_friction(friction);
+}
+
+template <int dim>
 StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
+    if constexpr (dim == 2) {
+        if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
+    }
     StepStats stats;
     stats.dt = dt;
     const std::size_t n = system_.mesh.nodes();

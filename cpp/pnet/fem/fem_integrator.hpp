@@ -71,6 +71,9 @@ public:
     FemImplicitIntegrator(const FemSystem<dim>& system, FemMethod method, const ImplicitOptions& options,
                           std::unique_ptr<ParticleEnergy<dim>> energy, const ContactPotential<dim>* contact);
 
+    /// Lagged friction on the pairs of `contact` (2D), lagged at the start of every step.
+    void set_friction(Friction2d* friction, const Contact2d* contact);
+
     /// Throws SimulationError naming the step on a failed solve.
     StepStats step(FemState<dim>& state, double dt, long step_index);
 
@@ -87,6 +90,8 @@ private:
     ReferenceSolveWork<dim> work_;
     std::vector<char> fixed_components_;
     bool has_kinematic_ = false;
+    Friction2d* friction_ = nullptr;
+    const Contact2d* friction_contact_ = nullptr;
 };
 
 template <int dim>

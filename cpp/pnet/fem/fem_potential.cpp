@@ -156,14 +156,19 @@ void FemPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient) const {
         positions(v, x);
         contact_->add_gradient(x, dt_, gradient);
     }
+    if (friction_ && dim == 2) friction_->add_gradient(v, dt_, gradient);
     gradient.array() *= free_.array();
 }
 
 template <int dim>
 double FemPotential<dim>::contact_value(const VecX& v) {
-    if (!contact_) return 0.0;
-    positions(v, x_);
-    return contact_->value(x_);
+    double e = 0.0;
+    if (contact_) {
+        positions(v, x_);
+        e += contact_->value(x_);
+    }
+    if (friction_ && dim == 2) e += dt_ * friction_->value(v);
+    return e;
 }
 
 template <int dim>
@@ -203,10 +208,11 @@ void FemPotential<dim>::prepare_hessian(const VecX& v) {
                     }
             }
     }
-    if (contact_) {
+    if (contact_ || friction_) {
         positions(v, x_);
         const std::size_t first = triplets_.size();
-        contact_->add_hessian(x_, dt_ * dt_, triplets_, project_psd_);
+        if (contact_) contact_->add_hessian(x_, dt_ * dt_, triplets_, project_psd_);
+        if (friction_ && dim == 2) friction_->add_hessian(v, dt_, triplets_);
         // Fixed components keep only their mass.
         triplets_.erase(std::remove_if(triplets_.begin() + first, triplets_.end(),
                                        [&](const Eigen::Triplet<double>& t) {
