@@ -9,6 +9,7 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 
+#include "pnet/contact/adaptive_stiffness.hpp"
 #include "pnet/contact/ccd.hpp"
 #include "pnet/contact/distance.hpp"
 #include "pnet/contact/ipc_contact.hpp"
@@ -235,6 +236,39 @@ TEST(Contact2d, ElasticSquareDroppedOnTheGroundComesToRestWithoutPenetration) {
     for (Eigen::Index k = 0; k < v.size(); ++k) speed = std::max(speed, std::abs(v[k]));
     EXPECT_LT(speed, 1e-2) << "m/s: at rest";
     EXPECT_GT(lowest, 0.0);
+}
+
+}  // namespace
+}  // namespace pnet
+
+namespace pnet {
+namespace {
+
+TEST(AdaptiveStiffness, InitialValueBalancesTheGradientsWithinIpcBounds) {
+    const double diag = 0.2, dhat = 2e-4, mass = 0.01, dt = 1e-2;
+    Eigen::VectorXd gE(2), gB(2);
+    gB << 0.0, -1.0;
+    // No contact force to balance: the lower bound. IPC's kappa_min = 1e11 m / (4 d0 b''(d0)), d0 = (1e-8 diag)^2.
+    const Barrier b{dhat * dhat};
+    const double d0 = 1e-8 * diag * 1e-8 * diag;
+    const double kappa_min = 1e11 * mass / (4.0 * d0 * b.second(d0)) / (dt * dt);
+    gE << 0.0, 0.0;
+    BarrierStiffness k = initial_barrier_stiffness(diag, dhat, mass, dt, gE, gB);
+    EXPECT_NEAR(k.kappa, kappa_min, 1e-12 * kappa_min);
+    EXPECT_NEAR(k.kappa_max, 100.0 * kappa_min, 1e-12 * kappa_min);
+    // Gravity pushing into the barrier: kappa = -gB.gE / |gB|^2 when inside the bounds.
+    gE << 0.0, 5.0 * kappa_min;
+    EXPECT_NEAR(initial_barrier_stiffness(diag, dhat, mass, dt, gE, gB).kappa, 5.0 * kappa_min, 1e-9 * kappa_min);
+    gE << 0.0, 1e6 * kappa_min;
+    EXPECT_NEAR(initial_barrier_stiffness(diag, dhat, mass, dt, gE, gB).kappa, 100.0 * kappa_min, 1e-9 * kappa_min);
+    // Doubling: only while the smallest distance is below 1e-9 diag and still shrinking.
+    const double eps = 1e-9 * diag;
+    EXPECT_EQ(update_barrier_stiffness(k, 0.5 * eps, 0.4 * eps, diag), 2.0 * k.kappa);
+    EXPECT_EQ(update_barrier_stiffness(k, 0.5 * eps, 0.6 * eps, diag), k.kappa);
+    EXPECT_EQ(update_barrier_stiffness(k, 2.0 * eps, 0.4 * eps, diag), k.kappa);
+    BarrierStiffness top{k.kappa_max, k.kappa_max};
+    EXPECT_EQ(update_barrier_stiffness(top, 0.5 * eps, 0.4 * eps, diag), k.kappa_max);
+    EXPECT_THROW(initial_barrier_stiffness(0.0, dhat, mass, dt, gE, gB), std::invalid_argument);
 }
 
 }  // namespace
