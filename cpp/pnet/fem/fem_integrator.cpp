@@ -173,11 +173,15 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     if (has_kinematic_ && deviation() > 0.0) {
         try {
             double weight = 1e3;
+            // Every stage converges the fixed point on F0 (plasticitynet): measured on the metal
+            // frame, one solve per stage with the fixed point only at the end was 2.5x faster but
+            // 18x farther from the analytic run (0.090% against 0.005% of the diagonal, 5 frames).
+            const ReferenceSolveOptions& stage_solve = solve;
             for (int stage = 0; stage < options_.max_kinematic_stages && deviation() > 1e-9; ++stage, weight *= 10.0) {
                 potential_.soften_fixed(weight);
                 NewtonOptions soft = newton;
                 soft.residual_mass = potential_.residual_mass();
-                accumulate(solve_with_reference<dim>(potential_, v, soft, solve,
+                accumulate(solve_with_reference<dim>(potential_, v, soft, stage_solve,
                                                      "step " + std::to_string(step_index) + ", kinematic stage " +
                                                          std::to_string(stage + 1),
                                                      work_));
