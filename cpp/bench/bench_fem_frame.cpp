@@ -10,7 +10,7 @@
 // at the last frame (m and % of the bounding-box diagonal), and the smallest
 // contact distance over the run (> 0: nothing ever touched).
 //
-//   bench_fem_frame [--frames N] [--threads T] [--dt-implicit S]
+//   bench_fem_frame [--frames N] [--threads T] [--dt-implicit S] [--kappa-scale K]
 #include <omp.h>
 
 #include <algorithm>
@@ -163,7 +163,7 @@ std::pair<double, double> nodal_distance(const Experiment& ex, const FemState<2>
 
 int main(int argc, char** argv) {
     int frames = 3, threads = 0;
-    double dt_implicit = 1e-2;
+    double dt_implicit = 1e-2, kappa_scale = 1.0;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
         if (i + 1 >= argc) {
@@ -173,8 +173,9 @@ int main(int argc, char** argv) {
         if (arg == "--frames") frames = std::atoi(argv[++i]);
         else if (arg == "--threads") threads = std::atoi(argv[++i]);
         else if (arg == "--dt-implicit") dt_implicit = std::atof(argv[++i]);
+        else if (arg == "--kappa-scale") kappa_scale = std::atof(argv[++i]);
         else {
-            std::fprintf(stderr, "usage: bench_fem_frame [--frames N] [--threads T] [--dt-implicit S]\n");
+            std::fprintf(stderr, "usage: bench_fem_frame [--frames N] [--threads T] [--dt-implicit S] [--kappa-scale K]\n");
             return 2;
         }
     }
@@ -188,8 +189,10 @@ int main(int argc, char** argv) {
     // balance at the start: the lower bound. The same kappa, a physical stiffness, in every row.
     double mass = 0.0;
     for (double m : ex.system.rest.node_mass) mass += m;
-    const BarrierStiffness k = initial_barrier_stiffness(ex.diagonal, ex.dhat, mass / ex.system.mesh.nodes(), dt_implicit,
-                                                         Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(2));
+    BarrierStiffness k = initial_barrier_stiffness(ex.diagonal, ex.dhat, mass / ex.system.mesh.nodes(), dt_implicit,
+                                                   Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(2));
+    // --kappa-scale K: K times IPC's lower bound (at most its upper bound, 100).
+    k.kappa = std::min(k.kappa_max, kappa_scale * k.kappa);
     std::printf("Metal frame (2D, %zu frame nodes, %zu elements, dhat %.3g m, kappa %.3g): frames 0-%d (%.2f s "
                 "of plate travel), %d threads\n\n",
                 ex.frame_nodes, ex.system.mesh.elements.size(), ex.dhat, k.kappa, frames, frames * kFrameDt,

@@ -1,6 +1,7 @@
 #include "pnet/fem/gmsh_mesher.hpp"
 
 #include <gmsh.h>
+#include <omp.h>
 
 #include <cmath>
 #include <filesystem>
@@ -14,9 +15,11 @@ namespace {
 std::mutex gmsh_mutex;
 
 /// One gmsh session: initialized quiet and deterministic, finalized on exit.
+/// gmsh's General.NumThreads sets OpenMP's thread count for the whole process;
+/// the caller's is restored when the session ends.
 class GmshSession {
 public:
-    GmshSession() {
+    GmshSession() : threads_(omp_get_max_threads()) {
         gmsh::initialize(0, nullptr, /*readConfigFiles=*/false);
         gmsh::option::setNumber("General.Terminal", 0);
         gmsh::option::setNumber("General.Verbosity", 1);
@@ -24,9 +27,15 @@ public:
         gmsh::option::setNumber("Mesh.Algorithm", 6);  // Frontal-Delaunay
         gmsh::option::setNumber("Mesh.RandomSeed", 1);
     }
-    ~GmshSession() { gmsh::finalize(); }
+    ~GmshSession() {
+        gmsh::finalize();
+        omp_set_num_threads(threads_);
+    }
     GmshSession(const GmshSession&) = delete;
     GmshSession& operator=(const GmshSession&) = delete;
+
+private:
+    int threads_;
 };
 
 /// The elements of gmsh type `type` in the current model, with compact node numbers.

@@ -1,6 +1,7 @@
 // FEM meshes: validation and boundary extraction on hand-made meshes, gmsh's
 // procedural shapes (areas, boundaries, determinism) and mesh files.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <cmath>
 #include <fstream>
@@ -107,6 +108,12 @@ TEST(GmshMesher, FrameHasTheRightAreaBoundaryAndSize) {
     for (const auto& el : m.elements)
         for (int a = 0; a < 3; ++a, ++edges) edge_sum += (m.x[el[a]] - m.x[el[(a + 1) % 3]]).norm();
     EXPECT_NEAR(edge_sum / edges, 0.003, 0.001) << "elements of about the requested size";
+    // gmsh runs with one thread but leaves the caller's OpenMP thread count alone.
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(2);
+    mesh_shape(frame, "metal frame");
+    EXPECT_EQ(omp_get_max_threads(), 2);
+    omp_set_num_threads(threads);
     // Deterministic: the same call gives the same mesh.
     const Mesh<2> again = mesh_shape(frame, "metal frame");
     ASSERT_EQ(again.x.size(), m.x.size());
