@@ -97,6 +97,7 @@ Row run(const Experiment& ex, const std::string& name, double dt, int frames, do
     try {
         if (name == "explicit") {
             FemExplicitIntegrator<2> integrator(ex.system, &contact);
+            integrator.set_friction(&friction, &contact);
             if (dt == 0.0) row.dt = dt = integrator.cfl_time_step(0.5);
             const int steps = static_cast<int>(std::ceil(frames * kFrameDt / dt - 1e-9));
             const double h = frames * kFrameDt / steps;
@@ -234,6 +235,21 @@ int main(int argc, char** argv) {
                     implicit ? std::to_string(r.fixed_point).substr(0, 5).c_str() : "-",
                     implicit ? std::to_string(r.unconverged).c_str() : "-", speedup,
                     distance.c_str(), to_analytic.c_str(), r.min_distance);
+    }
+    std::printf("\nFrame's centre of mass moved by (m), and its top and bottom nodes' mean height change (m):\n");
+    for (const Row& r : rows) {
+        if (!r.failure.empty()) continue;
+        Vec<2> shift = Vec<2>::Zero();
+        double top = 0.0, bottom = 0.0;
+        int n_top = 0, n_bottom = 0;
+        for (std::size_t i = 0; i < ex.frame_nodes; ++i) {
+            shift += r.state.x[i] - ex.system.mesh.x[i];
+            if (ex.system.mesh.x[i][1] > 0.18) top += r.state.x[i][1] - ex.system.mesh.x[i][1], ++n_top;
+            if (ex.system.mesh.x[i][1] < 0.001) bottom += r.state.x[i][1] - ex.system.mesh.x[i][1], ++n_bottom;
+        }
+        shift /= ex.frame_nodes;
+        std::printf("  %s dt %.3g: (%.3e, %.3e), top %.3e, bottom %.3e\n", r.name.c_str(), r.dt, shift[0], shift[1],
+                    top / std::max(n_top, 1), bottom / std::max(n_bottom, 1));
     }
     for (const Row& r : rows)
         if (!r.failure.empty()) std::printf("\n%s (dt %g) failed: %s\n", r.name.c_str(), r.dt, r.failure.c_str());

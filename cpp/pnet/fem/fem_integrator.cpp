@@ -249,6 +249,15 @@ StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         contact_->add_gradient(state.x, 1.0, barrier);
         force -= barrier;
     }
+    if constexpr (dim == 2) {
+        if (friction_) {
+            friction_->lag(*friction_contact_, state.x);
+            VecX v(dim * n), friction_gradient = VecX::Zero(dim * n);
+            for (std::size_t i = 0; i < n; ++i) v.template segment<dim>(dim * i) = state.v[i];
+            friction_->add_gradient(v, 1.0, friction_gradient);
+            force -= friction_gradient;
+        }
+    }
     std::vector<Vec<dim>> dx(n);
     double max_speed = 0.0;
     for (std::size_t i = 0; i < n; ++i) {

@@ -100,6 +100,14 @@ public:
     FemExplicitIntegrator(const FemSystem<dim>& system, const ContactPotential<dim>* contact)
         : system_(system), contact_(contact) {}
 
+    /// The same lagged friction as the implicit integrators (2D): its force
+    /// -dD/dv at the start-of-step velocities, with the normal forces of the
+    /// start-of-step positions.
+    void set_friction(Friction2d* friction, const Contact2d* contact) {
+        friction_ = friction;
+        friction_contact_ = contact;
+    }
+
     /// Throws SimulationError naming the step if the motion intersects (CCD) or a value is not finite.
     StepStats step(FemState<dim>& state, double dt, long step_index);
 
@@ -109,6 +117,8 @@ public:
 private:
     const FemSystem<dim>& system_;
     const ContactPotential<dim>* contact_;
+    Friction2d* friction_ = nullptr;
+    const Contact2d* friction_contact_ = nullptr;
 };
 
 /// The return mapping of every element after a step: F^E_tr = F(x) (F^P)^-1 -> Z, (F^P)^-1, h.

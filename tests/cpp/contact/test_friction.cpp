@@ -70,7 +70,7 @@ TEST(Friction, PotentialMatchesFiniteDifferences) {
 
 /// A stiff 2 x 2 cm block resting on a slope of angle `degrees`, friction mu; returns the block's
 /// mean velocity along the slope (down-slope positive) at t1 and t2.
-std::pair<double, double> slope_velocities(double degrees, double mu, double t1, double t2) {
+std::pair<double, double> slope_velocities(double degrees, double mu, double t1, double t2, bool explicit_ = false) {
     const double angle = degrees * M_PI / 180.0, dhat = 1e-4;
     const Eigen::Matrix2d R = Eigen::Rotation2Dd(angle).toRotationMatrix();
     const Vec<2> along(std::cos(angle), std::sin(angle)), normal(-std::sin(angle), std::cos(angle));
@@ -99,11 +99,13 @@ std::pair<double, double> slope_velocities(double degrees, double mu, double t1,
     ImplicitOptions options;
     options.newton_tolerance = 1e-7;
     options.max_newton_iterations = 200;
-    FemImplicitIntegrator<2> integrator(system, FemMethod::Lagged, options,
-                                        std::make_unique<ElasticParticleEnergy<2>>(system.materials), &contact);
-    integrator.set_friction(&friction, &contact);
+    FemImplicitIntegrator<2> implicit(system, FemMethod::Lagged, options,
+                                      std::make_unique<ElasticParticleEnergy<2>>(system.materials), &contact);
+    implicit.set_friction(&friction, &contact);
+    FemExplicitIntegrator<2> explicit_integrator(system, &contact);
+    explicit_integrator.set_friction(&friction, &contact);
     FemState<2> state = FemState<2>::at_rest(system);
-    const double dt = 1e-3;
+    const double dt = explicit_ ? 0.5 * explicit_integrator.cfl_time_step(0.5) : 1e-3;
     auto slope_speed = [&] {
         double u = 0.0;
         for (const Vec<2>& v : state.v) u -= v.dot(along);  // down the slope
@@ -112,8 +114,12 @@ std::pair<double, double> slope_velocities(double degrees, double mu, double t1,
     std::pair<double, double> out{0.0, 0.0};
     const int n1 = static_cast<int>(std::lround(t1 / dt)), n2 = static_cast<int>(std::lround(t2 / dt));
     for (int step = 0; step < n2; ++step) {
-        const StepStats s = integrator.step(state, dt, step);
-        EXPECT_TRUE(s.converged) << "step " << step;
+        if (explicit_) {
+            explicit_integrator.step(state, dt, step);
+        } else {
+            const StepStats s = implicit.step(state, dt, step);
+            EXPECT_TRUE(s.converged) << "step " << step;
+        }
         EXPECT_GT(contact.min_distance(state.x), 0.0) << "step " << step;
         if (step + 1 == n1) out.first = slope_speed();
     }
@@ -128,7 +134,15 @@ TEST(Friction, BlockOnASlopeSticksBelowTheFrictionAngleAndSlidesAbove) {
     const auto [v1, v2] = slope_velocities(30.0, mu, 0.1, 0.2);
     const double a = (v2 - v1) / 0.1, expected = 9.8 * (std::sin(M_PI / 6) - mu * std::cos(M_PI / 6));
     EXPECT_NEAR(a, expected, 0.02 * expected) << "m/s^2 down the slope";
-    RecordProperty("acceleration", std::to_string(a) + " vs " + std::to_string(expected));
+    // The explicit integrator with the same contact and friction forces (the ground truth's) is
+    // less accurate: measured 2.271 m/s^2 sliding (3.5% low) and a creep of 0.034 m/s where it
+    // should stick (the smoothed force evaluated at the start-of-step velocity, with a normal
+    // force that follows the block's bouncing on the barrier). A guard, not a target.
+    const auto [e1, e2] = slope_velocities(30.0, mu, 0.1, 0.2, true);
+    const double a_explicit = (e2 - e1) / 0.1;
+    EXPECT_NEAR(a_explicit, expected, 0.05 * expected) << "m/s^2 down the slope, explicit";
+    RecordProperty("acceleration", std::to_string(a) + " (explicit " + std::to_string(a_explicit) + ") vs " +
+                                       std::to_string(expected));
     (void)stick1;
 }
 
