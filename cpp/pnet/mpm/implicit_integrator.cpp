@@ -49,6 +49,8 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     if (o.lazy_hessian >= 1.0)
         throw std::invalid_argument(context + ": integrator.lazy_hessian: expected a number in [0, 1), got " +
                                     nlohmann::json(o.lazy_hessian).dump());
+    o.max_kinematic_stages =
+        read_option(block, "max_kinematic_stages", o.max_kinematic_stages, context, 0, "an integer >= 0");
     if (const auto it = block.find("fail_on_unconverged"); it != block.end()) {
         if (!it->is_boolean())
             throw std::invalid_argument(context + ": integrator.fail_on_unconverged: expected true or false, got " +
@@ -74,7 +76,8 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"regularizer_weight", regularizer_weight},
             {"preconditioner", preconditioner},
             {"lazy_hessian", lazy_hessian},
-            {"fail_on_unconverged", fail_on_unconverged}};
+            {"fail_on_unconverged", fail_on_unconverged},
+            {"max_kinematic_stages", max_kinematic_stages}};
 }
 
 template <int dim>

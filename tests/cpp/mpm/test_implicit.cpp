@@ -411,10 +411,13 @@ TYPED_TEST(ImplicitTest, EveryTinySceneRunsWithBothIntegrators) {
 TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     const nlohmann::json ok = {{"name", "plasticitynet"}, {"dt", 1e-3}, {"newton_tolerance", 1e-4},
                                {"max_fixed_point_iterations", 3}, {"regularizer_weight", 0},
-                               {"preconditioner", "block_jacobi"}, {"lazy_hessian", 0}};
+                               {"preconditioner", "block_jacobi"}, {"lazy_hessian", 0},
+                               {"max_kinematic_stages", 5}, {"fail_on_unconverged", true}};
     const ImplicitOptions o = ImplicitOptions::from_json(ok, "s.json");
     EXPECT_EQ(o.preconditioner, "block_jacobi");
     EXPECT_EQ(o.lazy_hessian, 0.0);
+    EXPECT_EQ(o.max_kinematic_stages, 5);
+    EXPECT_TRUE(o.fail_on_unconverged);
     EXPECT_EQ(ImplicitOptions{}.lazy_hessian, 0.5);
     EXPECT_EQ(ImplicitOptions::from_json(o.to_json(), "s.json").to_json(), o.to_json());
     EXPECT_EQ(o.newton_tolerance, 1e-4);
@@ -435,6 +438,8 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),
               "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5");
     EXPECT_EQ(message({{"cg_tolerance", 2}}), "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2.000000");
+    EXPECT_EQ(message({{"fail_on_unconverged", 1}}),
+              "s.json: integrator.fail_on_unconverged: expected true or false, got 1");
     EXPECT_EQ(message({{"regularizer_weight", "one"}}),
               "s.json: integrator.regularizer_weight: expected a number >= 0, got \"one\"");
 }
