@@ -51,9 +51,14 @@ void fem_return_mapping(const FemSystem<dim>& system, FemState<dim>& state) {
     for (std::ptrdiff_t e = 0; e < n; ++e) {
         const Mat<dim> F = deformation_gradient(system.mesh, system.rest, state.x, e);
         const Mat<dim> FE_trial = F * state.plastic_inverse[e];
-        const auto projection = system.materials[system.element_object[e]].project(FE_trial, state.hardening[e]);
-        state.plastic_inverse[e] = F.inverse() * projection.F_elastic;  // F^P = (F^E)^-1 F
-        state.hardening[e] = projection.hardening;
+        const int object = system.element_object[e];
+        const LearnedReturnMap<dim>* learned =
+            static_cast<std::size_t>(object) < system.return_maps.size() ? system.return_maps[object] : nullptr;
+        const PolarSVD<dim> svd = clamped_svd<dim>(FE_trial);
+        const ReturnResult<dim> Z = learned ? learned->return_map(svd.Sigma, state.hardening[e])
+                                            : system.materials[object].return_map(svd.Sigma, state.hardening[e]);
+        state.plastic_inverse[e] = F.inverse() * svd.compose(Z.Sigma);  // F^P = (F^E)^-1 F
+        state.hardening[e] = Z.hardening;
     }
 }
 

@@ -30,6 +30,7 @@
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/mpm/implicit_integrator.hpp"  // ImplicitOptions, StepStats, SimulationError
+#include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
 
 namespace pnet {
@@ -42,6 +43,10 @@ struct FemSystem {
     std::vector<Material<dim>> materials;
     ElementRest<dim> rest;                    // from the mesh and the materials' densities (make_rest())
     Vec<dim> gravity = Vec<dim>::Zero();      // m/s^2
+    /// Per object: a learned return mapping used instead of the material's
+    /// (the one its learned energy was trained with, e.g. metal_nh_rm_2d.pt);
+    /// empty or null: the material's own.
+    std::vector<const LearnedReturnMap<dim>*> return_maps;
     std::vector<char> fixed_node;             // per node: kinematic (prescribed velocity)
     std::vector<Vec<dim>> prescribed_velocity;  // per node, used where fixed_node
 
@@ -121,7 +126,8 @@ private:
     const Contact2d* friction_contact_ = nullptr;
 };
 
-/// The return mapping of every element after a step: F^E_tr = F(x) (F^P)^-1 -> Z, (F^P)^-1, h.
+/// The return mapping of every element after a step: F^E_tr = F(x) (F^P)^-1 -> Z, (F^P)^-1, h
+/// (the object's learned return mapping where FemSystem::return_maps gives one).
 template <int dim>
 void fem_return_mapping(const FemSystem<dim>& system, FemState<dim>& state);
 

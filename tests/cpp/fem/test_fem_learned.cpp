@@ -9,6 +9,7 @@
 #include "pnet/energy/analytic_elastoplastic.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
+#include "pnet/nn/learned_return_map.hpp"
 #include "pnet/nn/model_file.hpp"
 
 namespace pnet {
@@ -104,6 +105,42 @@ TEST(FemLearned, PlasticityNetReproducesTheAnalyticEnergyAndBeatsLagged) {
         for (double h : analytic.hardening) yielded = std::max(yielded, h - 0.05);
         EXPECT_GT(yielded, 0.005);
     }
+}
+
+}  // namespace
+}  // namespace pnet
+
+namespace pnet {
+namespace {
+
+// The FEM return mapping uses an object's learned return mapping when one is
+// given (metal_nh: models/metal_nh_rm_2d.pt), and it stays close to the exact
+// root-find: a neo-Hookean metal bar crushed 20%, lagged at dt 1e-3, with each.
+TEST(FemLearned, LearnedReturnMapFollowsTheExactOneOnANeoHookeanBar) {
+    FemSystem<2> exact = crushed_bar(0.05);
+    exact.materials = {Material<2>(material_preset("metal_nh"))};
+    exact.make_rest();
+    FemSystem<2> learned = exact;
+    const LearnedReturnMap<2> rm(load_model_file(std::string(PNET_MODELS_DIR) + "/metal_nh_rm_2d.pt"));
+    learned.return_maps = {&rm};
+    int unconverged = 0;
+    const FemState<2> a = run(exact, FemMethod::Lagged, 1e-3, 0.4, &unconverged);
+    const FemState<2> b = run(learned, FemMethod::Lagged, 1e-3, 0.4, &unconverged);
+    EXPECT_EQ(unconverged, 0);
+    const double diagonal = std::sqrt(0.02 * 0.02 + 0.1 * 0.1);
+    double plastic = 0.0, hardening_difference = 0.0;
+    for (std::size_t e = 0; e < a.hardening.size(); ++e) {
+        plastic = std::max(plastic, a.hardening[e] - 0.05);
+        hardening_difference = std::max(hardening_difference, std::abs(a.hardening[e] - b.hardening[e]));
+    }
+    EXPECT_GT(plastic, 0.005) << "the bar yields";
+    EXPECT_GT(hardening_difference, 0.0) << "the learned mapping was used";
+    const double d = mean_distance(a, b);
+    RecordProperty("learned_vs_exact_return_map", std::to_string(d / diagonal));
+    // Measured: 0.82% of the diagonal. The shipped return-map network's mean |dgamma| error is 1.5e-3
+    // per projection (models/MANIFEST), as large as a step's plastic increment here, and it
+    // accumulates over the 400 steps. A guard at 2%, not a target (issue 16 retrains the models).
+    EXPECT_LT(d, 0.02 * diagonal) << "mean nodal distance";
 }
 
 }  // namespace
