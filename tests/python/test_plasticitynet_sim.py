@@ -446,3 +446,12 @@ def test_compare_runs_matches_pnet_compare(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match="run.json"):
         pns.compare_runs(tmp_path / "a", tmp_path / "empty")
+
+
+def test_a_model_for_other_plasticity_parameters_raises_value_error():
+    scene = json.loads((TINY / "sand_column_2d.json").read_text())
+    scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = 35
+    scene["objects"][0]["model"] = str(MODELS / "sand_2d.pt")
+    with pytest.raises(ValueError, match=r"trained for material\.plasticity\.friction_angle_deg = 30\.0, the object's "
+                                         r"material has 35\.0"):
+        pns.Simulation(scene, integrator="plasticitynet")
