@@ -39,40 +39,34 @@ std::vector<Contact2d::Pair> Contact2d::active(const std::vector<Vec<2>>& x) con
     return pairs;
 }
 
-double Contact2d::value(const std::vector<Vec<2>>& x) const {
+double Contact2d::energy(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd* g) const {
     double sum = 0.0;
-    for (const Pair& pair : active(x)) {
-        const Vec<2>& p = x[pair.node];
-        double s;
-        if (pair.edge >= 0) {
-            s = point_edge_distance_sq(p, x[edges_[pair.edge][0]], x[edges_[pair.edge][1]]);
-        } else {
-            const HalfSpace2d& h = half_spaces_[-pair.edge - 1];
-            const double d = h.normal.dot(p - h.origin);
-            s = d > 0.0 ? d * d : 0.0;  // on or below the plane: intersecting
-        }
-        sum += barrier_.value(s);
-    }
-    return kappa_ * sum;
-}
-
-void Contact2d::add_gradient(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd& g) const {
     for (const Pair& pair : active(x)) {
         const Vec<2>& p = x[pair.node];
         if (pair.edge >= 0) {
             const int a = edges_[pair.edge][0], b = edges_[pair.edge][1];
             const PointEdgeCase c = point_edge_case(p, x[a], x[b]);
             const double s = point_edge_distance_sq(p, x[a], x[b], c);
+            sum += barrier_.value(s);
+            if (!g) continue;
             const Vec6 ds = point_edge_distance_sq_gradient(p, x[a], x[b], c);
             const double f = scale * kappa_ * barrier_.first(s);
             const int slot[3] = {pair.node, a, b};
-            for (int k = 0; k < 3; ++k) g.segment<2>(2 * slot[k]) += f * ds.segment<2>(2 * k);
+            for (int k = 0; k < 3; ++k) g->segment<2>(2 * slot[k]) += f * ds.segment<2>(2 * k);
         } else {
             const HalfSpace2d& h = half_spaces_[-pair.edge - 1];
             const double d = h.normal.dot(p - h.origin);
-            g.segment<2>(2 * pair.node) += scale * kappa_ * barrier_.first(d * d) * 2.0 * d * h.normal;
+            sum += barrier_.value(d > 0.0 ? d * d : 0.0);  // on or below the plane: intersecting
+            if (g) g->segment<2>(2 * pair.node) += scale * kappa_ * barrier_.first(d * d) * 2.0 * d * h.normal;
         }
     }
+    return kappa_ * sum;
+}
+
+double Contact2d::value(const std::vector<Vec<2>>& x) const { return energy(x, 0.0, nullptr); }
+
+double Contact2d::add_gradient(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd& g) const {
+    return energy(x, scale, &g);
 }
 
 void Contact2d::add_hessian(const std::vector<Vec<2>>& x, double scale,

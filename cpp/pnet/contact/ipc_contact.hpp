@@ -35,8 +35,8 @@ class ContactPotential {
 public:
     virtual ~ContactPotential() = default;
     virtual double value(const std::vector<Vec<dim>>& x) const = 0;
-    /// g += scale dB/dx (g: dim values per node).
-    virtual void add_gradient(const std::vector<Vec<dim>>& x, double scale, Eigen::VectorXd& g) const = 0;
+    /// g += scale dB/dx (g: dim values per node); returns B(x), found in the same pass.
+    virtual double add_gradient(const std::vector<Vec<dim>>& x, double scale, Eigen::VectorXd& g) const = 0;
     /// Triplets of scale d2B/dx2, PSD-projected per pair when project_psd.
     virtual void add_hessian(const std::vector<Vec<dim>>& x, double scale,
                              std::vector<Eigen::Triplet<double>>& triplets, bool project_psd) const = 0;
@@ -56,7 +56,7 @@ public:
     void set_kappa(double kappa) { kappa_ = kappa; }
 
     double value(const std::vector<Vec<2>>& x) const override;
-    void add_gradient(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd& g) const override;
+    double add_gradient(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd& g) const override;
     void add_hessian(const std::vector<Vec<2>>& x, double scale, std::vector<Eigen::Triplet<double>>& triplets,
                      bool project_psd) const override;
     double max_step(const std::vector<Vec<2>>& x, const std::vector<Vec<2>>& dx) const override;
@@ -88,6 +88,8 @@ private:
     };
     /// The pairs closer than dhat at x, in a fixed order.
     std::vector<Pair> active(const std::vector<Vec<2>>& x) const;
+    /// B(x), and g += scale dB/dx when g is given: one pass over the active pairs.
+    double energy(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd* g) const;
 
     std::vector<std::array<int, 2>> edges_;
     std::vector<int> nodes_;  // boundary nodes, ascending

@@ -157,18 +157,6 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     // of their targets; then put them on the targets exactly (if CCD allows)
     // and solve once more with them fixed.
     stats.kinematic_reached = true;
-    auto accumulate = [&](const ReferenceSolveStats& more) {
-        s.newton_iterations += more.newton_iterations;
-        s.line_search_steps += more.line_search_steps;
-        s.cg_iterations += more.cg_iterations;
-        s.solves += more.solves;
-        s.residual = more.residual;
-        s.energy = more.energy;
-        s.converged = s.converged && more.converged;
-        s.line_search_failed = s.line_search_failed || more.line_search_failed;
-        s.fixed_point_converged = more.fixed_point_converged;
-        s.change = more.change;
-    };
     auto deviation = [&] {
         double worst = 0.0;
         for (Eigen::Index k = 0; k < v.size(); ++k)
@@ -186,7 +174,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
                 potential_.soften_fixed(weight);
                 NewtonOptions soft = newton;
                 soft.residual_mass = potential_.residual_mass();
-                accumulate(solve_with_reference<dim>(potential_, v, soft, stage_solve,
+                s.append(solve_with_reference<dim>(potential_, v, soft, stage_solve,
                                                      "step " + std::to_string(step_index) + ", kinematic stage " +
                                                          std::to_string(stage + 1),
                                                      work_));
@@ -199,23 +187,13 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
             const double t = potential_.max_step(v, d);
             v += t * d;
             stats.kinematic_reached = t >= 1.0;
-            accumulate(solve_with_reference<dim>(potential_, v, newton, solve,
+            s.append(solve_with_reference<dim>(potential_, v, newton, solve,
                                                  "step " + std::to_string(step_index) + ", kinematic targets", work_));
         } catch (const NewtonError& e) {
             throw SimulationError(e.what());
         }
     }
-    stats.initial_residual = s.initial_residual;
-    stats.newton_iterations += s.newton_iterations;
-    stats.cg_iterations = s.cg_iterations;
-    stats.line_search_steps += s.line_search_steps;
-    stats.fixed_point_iterations = s.solves;
-    stats.fixed_point_change = s.change;
-    stats.residual = s.residual;
-    stats.energy = s.energy;
-    stats.converged = s.converged;
-    stats.line_search_failed = s.line_search_failed;
-    stats.fixed_point_converged = s.fixed_point_converged;
+    record_solve(s, stats);
     const auto after_solve = std::chrono::steady_clock::now();
 
     double max_speed = 0.0;

@@ -144,20 +144,24 @@ void FemPotential<dim>::evaluate(const VecX& v, typename ParticleEnergy<dim>::Or
 }
 
 template <int dim>
-void FemPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient) const {
+double FemPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient) {
     gradient = mass_.cwiseProduct(inertia_scale_).cwiseProduct(v - v_star_);
     for (std::size_t e = 0; e < mesh_.elements.size(); ++e) {
         const Mat<dim> Q = (rest_.volume[e] * dt_) * P_[e];
         for (int a = 0; a <= dim; ++a)
             gradient.template segment<dim>(dim * mesh_.elements[e][a]).noalias() += Q * grad_[e][a];
     }
+    double e = 0.0;
     if (contact_) {
-        std::vector<Vec<dim>> x;
-        positions(v, x);
-        contact_->add_gradient(x, dt_, gradient);
+        positions(v, x_);
+        e += contact_->add_gradient(x_, dt_, gradient);
     }
-    if (friction_ && dim == 2) friction_->add_gradient(v, dt_, gradient);
+    if (friction_ && dim == 2) {
+        e += dt_ * friction_->value(v);
+        friction_->add_gradient(v, dt_, gradient);
+    }
     gradient.array() *= free_.array();
+    return e;
 }
 
 template <int dim>
@@ -180,8 +184,8 @@ double FemPotential<dim>::value(const VecX& v) {
 template <int dim>
 double FemPotential<dim>::value_gradient(const VecX& v, VecX& gradient) {
     evaluate(v, ParticleEnergy<dim>::Order::Gradient);
-    assemble_gradient(v, gradient);
-    return inertia(v) + potential_sum() + contact_value(v);
+    const double contact = assemble_gradient(v, gradient);
+    return inertia(v) + potential_sum() + contact;
 }
 
 template <int dim>
@@ -227,8 +231,8 @@ void FemPotential<dim>::prepare_hessian(const VecX& v) {
 template <int dim>
 double FemPotential<dim>::value_gradient_hessian(const VecX& v, VecX& gradient) {
     prepare_hessian(v);  // the Hessian pass leaves psi and P at v
-    assemble_gradient(v, gradient);
-    return inertia(v) + potential_sum() + contact_value(v);
+    const double contact = assemble_gradient(v, gradient);
+    return inertia(v) + potential_sum() + contact;
 }
 
 template <int dim>

@@ -116,7 +116,8 @@ public:
 private:
     double inertia(const VecX& v) const;
     void evaluate(const VecX& v, typename ParticleEnergy<dim>::Order order);
-    void assemble_gradient(const VecX& v, VecX& gradient) const;
+    /// The gradient of E at v; returns the contact and friction part of E, evaluated in the same pass.
+    double assemble_gradient(const VecX& v, VecX& gradient);
     double potential_sum() const;
     double contact_value(const VecX& v);
 

@@ -134,17 +134,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     } catch (const NewtonError& e) {
         throw SimulationError(e.what());
     }
-    stats.initial_residual = s.initial_residual;
-    stats.newton_iterations = s.newton_iterations;
-    stats.cg_iterations = s.cg_iterations;
-    stats.line_search_steps = s.line_search_steps;
-    stats.fixed_point_iterations = s.solves;
-    stats.fixed_point_change = s.change;
-    stats.residual = s.residual;
-    stats.energy = s.energy;
-    stats.converged = s.converged;
-    stats.line_search_failed = s.line_search_failed;
-    stats.fixed_point_converged = s.fixed_point_converged;
+    record_solve(s, stats);
     potential_.write_velocity(v_, grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM
     double max_speed = 0.0;

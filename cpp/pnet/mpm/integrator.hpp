@@ -11,6 +11,7 @@
 
 #include "pnet/math/types.hpp"
 #include "pnet/mpm/particles.hpp"
+#include "pnet/solver/fixed_point.hpp"
 
 namespace pnet {
 
@@ -42,6 +43,22 @@ struct StepStats {
     double energy_seconds = 0.0;     // per-particle energies, stresses and Hessians
     double cg_seconds = 0.0;         // Hessian-vector products and PCG
 };
+
+/// Adds a step's solve statistics (solver/fixed_point.hpp) to its StepStats;
+/// iteration counts add to what is there (a predictor's).
+inline void record_solve(const ReferenceSolveStats& s, StepStats& stats) {
+    stats.initial_residual = s.initial_residual;
+    stats.newton_iterations += s.newton_iterations;
+    stats.cg_iterations += s.cg_iterations;
+    stats.line_search_steps += s.line_search_steps;
+    stats.fixed_point_iterations = s.solves;
+    stats.fixed_point_change = s.change;
+    stats.residual = s.residual;
+    stats.energy = s.energy;
+    stats.converged = s.converged;
+    stats.line_search_failed = s.line_search_failed;
+    stats.fixed_point_converged = s.fixed_point_converged;
+}
 
 /// A NaN, a blow-up or a failed solve: names the step (and the particle or
 /// Newton iteration).

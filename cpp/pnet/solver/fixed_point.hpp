@@ -45,6 +45,21 @@ struct ReferenceSolveStats {
     bool converged = true;               // every Newton solve reached its tolerance
     bool line_search_failed = false;
     bool fixed_point_converged = true;   // the change reached the tolerance (not the cap)
+
+    /// Adds a later solve of the same step: counts sum, the last solve's
+    /// residual, energy and fixed-point outcome stand, failures stick.
+    void append(const ReferenceSolveStats& later) {
+        solves += later.solves;
+        newton_iterations += later.newton_iterations;
+        cg_iterations += later.cg_iterations;
+        line_search_steps += later.line_search_steps;
+        residual = later.residual;
+        energy = later.energy;
+        change = later.change;
+        converged = converged && later.converged;
+        line_search_failed = line_search_failed || later.line_search_failed;
+        fixed_point_converged = later.fixed_point_converged;
+    }
 };
 
 /// Work arrays kept between steps.
