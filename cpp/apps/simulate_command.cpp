@@ -11,13 +11,15 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
 #include "pnet/io/render.hpp"
-#include "pnet/mpm/scene_models.hpp"
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/scene_models.hpp"
+#include "pnet/sim/fem_simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/scene.hpp"
 
@@ -28,13 +30,16 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kUsage =
-    "usage: pnet simulate SCENE.json --out DIR [--integrator explicit|plasticitynet|lagged] [--dt SECONDS]\n"
+    "usage: pnet simulate SCENE.json --out DIR [--integrator explicit|plasticitynet|lagged|analytic] [--dt SECONDS]\n"
     "                     [--cfl C] [--frames N] [--threads T] [--checkpoint-every N] [--resume]\n"
     "                     [--color speed|hardening] [--trust-model]\n"
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi]\n"
-    "                     [--lazy-hessian R] [--fail-on-unconverged]\n";
+    "                     [--lazy-hessian R] [--fail-on-unconverged]\n"
+    "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
+    "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
+    "                     material's exact one)\n";
 
 struct Options {
     std::string scene, out, integrator, color = "speed";
@@ -43,7 +48,7 @@ struct Options {
     bool resume = false, trust_model = false, fail_on_unconverged = false;
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian;
-    std::optional<std::string> preconditioner;
+    std::optional<std::string> preconditioner, return_map;
     std::optional<int> fixed_point_iterations;
 };
 
@@ -99,6 +104,8 @@ Options parse(int argc, char** argv) {
             o.preconditioner = value();
         else if (arg == "--fixed-point-iterations")
             o.fixed_point_iterations = static_cast<int>(number(value()));
+        else if (arg == "--return-map")
+            o.return_map = value();
         else if (arg == "--color")
             o.color = value();
         else if (arg == "--resume")
@@ -129,6 +136,8 @@ Options parse(int argc, char** argv) {
         throw UsageError("--lazy-hessian must be in [0, 1)");
     if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi")
         throw UsageError("--preconditioner: expected jacobi or block_jacobi, got \"" + *o.preconditioner + "\"");
+    if (o.return_map && *o.return_map != "learned" && *o.return_map != "exact")
+        throw UsageError("--return-map: expected learned or exact, got \"" + *o.return_map + "\"");
     if (o.fixed_point_iterations && *o.fixed_point_iterations < 1)
         throw UsageError("--fixed-point-iterations must be >= 1");
     return o;
@@ -171,12 +180,62 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
     write_png((out / frame_name(sim.frame(), "png")).string(), image);
 }
 
-template <int dim>
+void write_frame(const FemSimulation& sim, const Scene& scene, const Options& o, const fs::path& out) {
+    const FemState<2>& state = sim.state();
+    const Mesh<2>& mesh = sim.mesh();
+    PlyMesh ply;
+    for (std::size_t i = 0; i < state.x.size(); ++i)
+        for (int a = 0; a < 2; ++a) {
+            ply.position.push_back(state.x[i][a]);
+            ply.velocity.push_back(state.v[i][a]);
+        }
+    std::vector<double> colour(mesh.elements.size());
+    for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+        for (int a = 0; a < 3; ++a) ply.triangles.push_back(mesh.elements[e][a]);
+        ply.hardening.push_back(state.hardening[e]);
+        Vec<2> v = Vec<2>::Zero();
+        for (int a = 0; a < 3; ++a) v += state.v[mesh.elements[e][a]] / 3.0;
+        colour[e] = o.color == "speed" ? v.norm() : state.hardening[e];
+    }
+    write_mesh_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
+    ParticleRenderOptions r;
+    // Speed: 0 to twice the fastest prescribed or initial speed (the plate's 0.05 m/s: 0.1 m/s).
+    double speed_scale = 0.0;
+    for (const SceneMesh& m : scene.meshes) speed_scale = std::max(speed_scale, m.velocity.norm());
+    r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
+    r.value_max = o.color == "speed" ? std::max(0.1, 2.0 * speed_scale)
+                                     : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
+    for (int a = 0; a < 2; ++a) {
+        r.domain_min[a] = scene.domain_min[a];
+        r.domain_max[a] = scene.domain_max[a];
+    }
+    char caption[128];
+    std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
+    r.caption = caption;
+    r.width_px = 640;
+    write_png((out / frame_name(sim.frame(), "png")).string(), render_mesh_2d(ply.position, ply.triangles, colour, r));
+}
+
+template <class Sim>
+nlohmann::json describe_run(const Sim& sim) {
+    if constexpr (std::is_same_v<Sim, FemSimulation>) {
+        const FemSceneSystem& s = sim.scene_system();
+        return {{"nodes", sim.mesh().nodes()}, {"elements", sim.mesh().elements.size()},
+                {"mesh_first_node", s.first_node}, {"mesh_first_element", s.first_element},
+                {"bbox_diagonal", s.diagonal}, {"dhat", s.dhat}, {"kappa", s.kappa}, {"step", sim.step_size()}};
+    } else {
+        return {{"dx", sim.system().dx}, {"particles", sim.particles().size()}};
+    }
+}
+
+template <class Sim>
 int run(const Scene& scene, const Options& o, const IntegratorSettings& settings) {
+    constexpr int dim = Sim::kDim;
+    constexpr bool fem = std::is_same_v<Sim, FemSimulation>;
     const fs::path out(o.out);
     fs::create_directories(out);
     const int frames = o.frames > 0 ? o.frames : scene.frames;
-    Simulation<dim> sim(scene, settings);
+    Sim sim(scene, settings);
     const bool implicit = settings.name != "explicit";
     const fs::path checkpoint = out / "checkpoint.bin";
     const fs::path stats_path = out / "stats.csv";
@@ -188,10 +247,11 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     nlohmann::json run_json = {{"scene", fs::absolute(scene.file).string()}, {"name", scene.name}, {"dim", dim},
                                {"integrator", settings.name}, {"dt", settings.dt}, {"cfl", settings.cfl},
                                {"frame_dt", scene.frame_dt},
-                               {"frames", frames}, {"dx", scene.dx}, {"particles", sim.particles().size()},
+                               {"frames", frames},
                                {"threads", omp_get_max_threads()},
                                {"domain_min", std::vector<double>(scene.domain_min.data(), scene.domain_min.data() + dim)},
                                {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)}};
+    run_json.update(describe_run(sim));
     if (implicit) run_json["solver"] = settings.implicit.to_json();
     write_text_atomically((out / "run.json").string(), run_json.dump(2) + "\n");
 
@@ -200,11 +260,14 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     std::string stats = "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y" +
                         std::string(dim == 3 ? ",momentum_z" : "") +
                         ",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,max_residual_m_per_s,"
-                        "converged,unconverged_steps,hardening_clamped\n";
+                        "converged,unconverged_steps,hardening_clamped" +
+                        std::string(fem ? ",contact_pairs,min_distance_m,ccd_queries,ccd_limited" : "") + "\n";
     std::string steps_csv =
         "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
         "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
-        "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged\n";
+        "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged" +
+        std::string(fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m" : "") +
+        "\n";
     const fs::path steps_path = out / "steps.csv";
     auto keep_rows = [&](const fs::path& path, std::string& text) {
         if (!o.resume || !fs::exists(path)) return;
@@ -241,9 +304,12 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
                                 f.steps, f.dt_min, f.dt_max, f.wall_seconds, f.clamped, f.kinetic, f.potential,
                                 f.momentum[0], f.momentum[1]);
         if (dim == 3) len += std::snprintf(row + len, sizeof row - len, ",%.9g", f.momentum[2]);
-        std::snprintf(row + len, sizeof row - len, ",%ld,%ld,%ld,%ld,%.6g,%d,%ld,%zu", f.newton_iterations,
-                      f.cg_iterations, f.line_search_steps, f.fixed_point_iterations, f.max_residual,
-                      f.converged ? 1 : 0, f.unconverged_steps, f.hardening_clamped);
+        len += std::snprintf(row + len, sizeof row - len, ",%ld,%ld,%ld,%ld,%.6g,%d,%ld,%zu", f.newton_iterations,
+                             f.cg_iterations, f.line_search_steps, f.fixed_point_iterations, f.max_residual,
+                             f.converged ? 1 : 0, f.unconverged_steps, f.hardening_clamped);
+        if (fem)
+            std::snprintf(row + len, sizeof row - len, ",%zu,%.6g,%ld,%ld", f.contact_pairs, f.min_distance,
+                          f.ccd_queries, f.ccd_limited);
         run_steps += f.steps;
         run_unconverged += f.unconverged_steps;
         if (f.unconverged_steps > 0) run_worst_residual = std::max(run_worst_residual, f.max_residual);
@@ -255,13 +321,18 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         long step = sim.total_steps() - static_cast<long>(sim.last_frame_steps().size());
         for (const StepStats& s : sim.last_frame_steps()) {
             t += s.dt;
-            std::snprintf(row, sizeof row,
-                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu,%d\n",
+            int n = std::snprintf(row, sizeof row,
+                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu,%d",
                           f.frame, step++, t, s.dt, s.wall_seconds, s.p2g_seconds, s.grid_seconds, s.g2p_seconds,
                           s.energy_seconds, s.cg_seconds, s.newton_iterations, s.cg_iterations, s.line_search_steps,
                           s.fixed_point_iterations, s.fixed_point_change, s.initial_residual, s.residual, s.energy,
                           s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped,
                           s.fixed_point_converged ? 1 : 0);
+            if (fem)
+                n += std::snprintf(row + n, sizeof row - n, ",%d,%d,%d,%d,%zu,%.6g", s.kinematic_stages,
+                                   s.kinematic_reached ? 1 : 0, s.ccd_queries, s.ccd_limited, s.contact_pairs,
+                                   s.min_distance);
+            std::snprintf(row + n, sizeof row - n, "\n");
             steps_csv += row;
         }
         write_text_atomically(stats_path.string(), stats);
@@ -298,6 +369,27 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
                         "trained on (clamped; hardening_clamped in stats.csv)\n",
                         run_hardening_clamped);
     }
+    if constexpr (fem) {
+        double closest = 1e300;
+        std::size_t most_pairs = 0;
+        long ccd_limited = 0;
+        // From the rows kept and written (a resumed run included).
+        std::istringstream rows(stats);
+        std::string line;
+        std::getline(rows, line);
+        while (std::getline(rows, line)) {
+            std::vector<std::string> cells;
+            std::stringstream fields(line);
+            for (std::string c; std::getline(fields, c, ',');) cells.push_back(c);
+            const std::size_t m = cells.size();
+            most_pairs = std::max<std::size_t>(most_pairs, std::stoul(cells[m - 4]));
+            closest = std::min(closest, std::stod(cells[m - 3]));
+            ccd_limited += std::stol(cells[m - 1]);
+        }
+        std::printf("contact: no intersection at any frame (exact test); smallest distance %.3g m (dhat %.3g m), "
+                    "up to %zu pairs within dhat, %ld CCD-shortened steps\n",
+                    closest, sim.scene_system().dhat, most_pairs, ccd_limited);
+    }
     std::printf("wrote %d frames (PLY + PNG), stats.csv, steps.csv and run.json to %s\n", frames, out.string().c_str());
     return 0;
 }
@@ -332,8 +424,10 @@ int simulate_command(int argc, char** argv) {
         if (o.preconditioner) settings.implicit.preconditioner = *o.preconditioner;
         if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
+        if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";
         load_scene_models(scene, o.trust_model, settings);
-        return scene.dim == 2 ? run<2>(scene, o, settings) : run<3>(scene, o, settings);
+        if (scene.has_meshes()) return run<FemSimulation>(scene, o, settings);
+        return scene.dim == 2 ? run<Simulation<2>>(scene, o, settings) : run<Simulation<3>>(scene, o, settings);
     } catch (const UsageError& e) {
         std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
         return 2;

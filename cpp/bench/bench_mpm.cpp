@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "pnet/mpm/explicit_integrator.hpp"
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/scene/scene.hpp"
 

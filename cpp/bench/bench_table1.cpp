@@ -26,7 +26,7 @@
 #include <string>
 #include <vector>
 
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/scene.hpp"
 

@@ -170,6 +170,23 @@ double Contact2d::min_distance(const std::vector<Vec<2>>& x) const {
 
 std::size_t Contact2d::active_pairs(const std::vector<Vec<2>>& x) const { return active(x).size(); }
 
+namespace {
+
+double orient(const Vec<2>& a, const Vec<2>& b, const Vec<2>& c) {
+    return (b - a)[0] * (c - a)[1] - (b - a)[1] * (c - a)[0];
+}
+
+/// Segments pq and rs (no shared endpoint) cross or touch.
+bool segments_intersect(const Vec<2>& p, const Vec<2>& q, const Vec<2>& r, const Vec<2>& s) {
+    const double d1 = orient(r, s, p), d2 = orient(r, s, q), d3 = orient(p, q, r), d4 = orient(p, q, s);
+    if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return true;
+    // Touching or collinear overlap: an endpoint on the other segment.
+    return !(point_edge_distance_sq(p, r, s) > 0.0) || !(point_edge_distance_sq(q, r, s) > 0.0) ||
+           !(point_edge_distance_sq(r, p, q) > 0.0) || !(point_edge_distance_sq(s, p, q) > 0.0);
+}
+
+}  // namespace
+
 std::string Contact2d::first_intersection(const std::vector<Vec<2>>& x) const {
     for (int node : nodes_) {
         for (const auto& e : edges_)
@@ -178,6 +195,16 @@ std::string Contact2d::first_intersection(const std::vector<Vec<2>>& x) const {
         for (std::size_t h = 0; h < half_spaces_.size(); ++h)
             if (!(half_spaces_[h].normal.dot(x[node] - half_spaces_[h].origin) > 0.0))
                 return "node " + std::to_string(node) + " and half-space " + std::to_string(h);
+    }
+    for (std::size_t i = 0; i < edges_.size(); ++i) {
+        const auto& a = edges_[i];
+        for (std::size_t j = i + 1; j < edges_.size(); ++j) {
+            const auto& b = edges_[j];
+            if (a[0] == b[0] || a[0] == b[1] || a[1] == b[0] || a[1] == b[1]) continue;
+            if (segments_intersect(x[a[0]], x[a[1]], x[b[0]], x[b[1]]))
+                return "edge " + std::to_string(a[0]) + "-" + std::to_string(a[1]) + " and edge " +
+                       std::to_string(b[0]) + "-" + std::to_string(b[1]);
+        }
     }
     return "";
 }

@@ -78,8 +78,10 @@ public:
     };
     std::vector<LaggedPair> lagged_pairs(const std::vector<Vec<2>>& x) const;
 
-    /// A node-edge pair (or node inside a half-space) that intersects or touches at x, as text
-    /// ("node 12 and edge 30-31"), or empty if none: a start state must have none.
+    /// A node-edge pair (or node inside a half-space) that intersects or touches at x, or two
+    /// boundary edges that cross, as text ("node 12 and edge 30-31", "edge 3-4 and edge 30-31"),
+    /// or empty if none: a start state must have none. (A body wholly inside another crosses no
+    /// edge: the caller tests containment.) Exact predicates, all pairs: O(edges^2).
     std::string first_intersection(const std::vector<Vec<2>>& x) const;
 
 private:

@@ -194,6 +194,8 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         }
     }
     record_solve(s, stats);
+    stats.ccd_queries = potential_.ccd_queries() + predictor_.ccd_queries();
+    stats.ccd_limited = potential_.ccd_limited() + predictor_.ccd_limited();
     const auto after_solve = std::chrono::steady_clock::now();
 
     double max_speed = 0.0;
@@ -256,6 +258,8 @@ StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     }
     if (contact_) {
         const double t = contact_->max_step(state.x, dx);
+        stats.ccd_queries = 1;
+        stats.ccd_limited = t < 1.0;
         if (t < 1.0)
             throw SimulationError("step " + std::to_string(step_index) + ": the explicit step would make the mesh "
                                   "intersect (CCD allows " + std::to_string(t) + " of it); use a smaller dt");

@@ -46,6 +46,7 @@ void FemPotential<dim>::begin_step(const std::vector<Vec<dim>>& x_start, const V
     x_start_ = x_start;
     v_star_ = v_star;
     dt_ = dt;
+    ccd_queries_ = ccd_limited_ = 0;
     mass_.resize(dim * nodes);
     free_.resize(dim * nodes);
     residual_mass_.resize(dim * nodes);
@@ -115,7 +116,10 @@ double FemPotential<dim>::max_step(const VecX& v, const VecX& d) {
     positions(v, x_);
     dx_.resize(x_.size());
     for (std::size_t i = 0; i < x_.size(); ++i) dx_[i] = dt_ * d.template segment<dim>(dim * i);
-    return contact_->max_step(x_, dx_);
+    const double t = contact_->max_step(x_, dx_);
+    ++ccd_queries_;
+    ccd_limited_ += t < 1.0;
+    return t;
 }
 
 template <int dim>

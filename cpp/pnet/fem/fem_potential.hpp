@@ -110,6 +110,10 @@ public:
     const SparseMatrix* hessian_matrix() const override { return &hessian_; }
     double max_step(const VecX& v, const VecX& d) override;
 
+    /// CCD queries of max_step() since the last begin_step(), and how many of them shortened the step.
+    int ccd_queries() const { return ccd_queries_; }
+    int ccd_limited() const { return ccd_limited_; }
+
     /// Project the element Hessians to PSD (default; false: the exact Hessian, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
 
@@ -139,6 +143,7 @@ private:
     SparseMatrix hessian_;
     std::vector<Eigen::Triplet<double>> triplets_;
     bool project_psd_ = true;
+    int ccd_queries_ = 0, ccd_limited_ = 0;
 };
 
 }  // namespace pnet

@@ -97,7 +97,8 @@ Mesh<2> mesh_shape(const Shape2d& shape, const std::string& context) {
             extent = 2.0 * shape.radius;
             break;
     }
-    if (!(shape.element_size > 0.0) || !(shape.element_size <= extent))
+    // Up to round-off: 0.1911 - 0.1811 is 0.00999999... (a 1 cm plate of 1 cm triangles).
+    if (!(shape.element_size > 0.0) || !(shape.element_size <= extent * (1.0 + 1e-9)))
         fail("element_size must be > 0 and at most the shape's size (" + std::to_string(extent) + " m)");
 
     std::lock_guard<std::mutex> lock(gmsh_mutex);

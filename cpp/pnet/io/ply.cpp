@@ -234,4 +234,139 @@ PlyParticles read_particles_ply(const std::string& path, int dim) {
     return p;
 }
 
+namespace {
+
+constexpr std::array<const char*, 6> kMeshVertexProperties = {"x", "y", "z", "vx", "vy", "vz"};
+constexpr std::size_t kMeshVertexBytes = 6 * sizeof(double);
+constexpr std::size_t kFaceBytes = 1 + 3 * 4 + 8;  // count, three int32 indices, hardening
+
+void put_le_int32(char* dst, std::int32_t value) {
+    const auto bits = static_cast<std::uint32_t>(value);
+    for (int i = 0; i < 4; ++i) dst[i] = static_cast<char>((bits >> (8 * i)) & 0xff);
+}
+
+std::int32_t get_le_int32(const char* src) {
+    std::uint32_t bits = 0;
+    for (int i = 0; i < 4; ++i) bits |= std::uint32_t(static_cast<unsigned char>(src[i])) << (8 * i);
+    return static_cast<std::int32_t>(bits);
+}
+
+}  // namespace
+
+void write_mesh_ply(const std::string& path, const PlyMesh& m) {
+    if (m.dim != 2) throw std::invalid_argument(path + ": mesh frames are 2D (triangles), got dim " + std::to_string(m.dim));
+    const std::size_t n = m.position.size() / 2, f = m.triangles.size() / 3;
+    check_size(path, "position", m.position.size(), 2 * n, "2 per node");
+    check_size(path, "velocity", m.velocity.size(), 2 * n, std::to_string(n) + " nodes x 2");
+    check_size(path, "triangles", m.triangles.size(), 3 * f, "3 per triangle");
+    check_size(path, "hardening", m.hardening.size(), f, std::to_string(f) + " triangles");
+    for (int t : m.triangles)
+        if (t < 0 || static_cast<std::size_t>(t) >= n)
+            throw std::invalid_argument(path + ": triangle node " + std::to_string(t) + " out of range (" +
+                                        std::to_string(n) + " nodes)");
+    std::ostringstream header;
+    header << "ply\nformat binary_little_endian 1.0\ncomment plasticitynet mesh\ncomment dim 2\n"
+           << "element vertex " << n << "\n";
+    for (const char* name : kMeshVertexProperties) header << "property double " << name << "\n";
+    header << "element face " << f << "\nproperty list uchar int vertex_indices\nproperty double hardening\nend_header\n";
+    std::string data(n * kMeshVertexBytes + f * kFaceBytes, '\0');
+    for (std::size_t i = 0; i < n; ++i) {
+        char* row = &data[i * kMeshVertexBytes];
+        for (std::size_t k = 0; k < 2; ++k) {
+            put_le_double(row + 8 * k, m.position[2 * i + k]);
+            put_le_double(row + 8 * (3 + k), m.velocity[2 * i + k]);
+        }
+        put_le_double(row + 16, 0.0);
+        put_le_double(row + 40, 0.0);
+    }
+    for (std::size_t k = 0; k < f; ++k) {
+        char* row = &data[n * kMeshVertexBytes + k * kFaceBytes];
+        row[0] = 3;
+        for (int a = 0; a < 3; ++a) put_le_int32(row + 1 + 4 * a, m.triangles[3 * k + a]);
+        put_le_double(row + 13, m.hardening[k]);
+    }
+    const std::string header_text = header.str();
+    write_file_atomically(path, [&](std::ostream& out) {
+        out.write(header_text.data(), std::streamsize(header_text.size()));
+        out.write(data.data(), std::streamsize(data.size()));
+    });
+}
+
+PlyMesh read_mesh_ply(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw std::runtime_error(path + ": cannot open for reading: " + std::strerror(errno));
+    auto fail = [&](const std::string& problem) { return std::runtime_error(path + ": " + problem); };
+    // The header must be exactly write_mesh_ply's, comments and obj_info aside.
+    std::vector<std::string> expected = {"ply", "format binary_little_endian 1.0", "element vertex #"};
+    for (const char* name : kMeshVertexProperties) expected.push_back(std::string("property double ") + name);
+    expected.insert(expected.end(), {"element face #", "property list uchar int vertex_indices",
+                                     "property double hardening", "end_header"});
+    std::uint64_t counts[2] = {0, 0};
+    int count_index = 0, line_number = 0;
+    std::size_t next = 0, header_bytes = 0;
+    for (std::string line; next < expected.size() && read_header_line(in, line, header_bytes);) {
+        ++line_number;
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        const std::vector<std::string> w = split_words(line);
+        if (line_number > 1 && !w.empty() && (w[0] == "comment" || w[0] == "obj_info")) {
+            if (w.size() >= 2 && w[1] == "dim" && (w.size() != 3 || w[2] != "2"))
+                throw fail("header line " + std::to_string(line_number) + ": mesh frames are 2D ('comment dim 2')");
+            continue;
+        }
+        const std::string& want = expected[next];
+        const std::string where = "header line " + std::to_string(line_number) + " '" + line.substr(0, 80) + "': ";
+        if (want.back() == '#') {
+            const std::vector<std::string> ww = split_words(want);
+            if (w.size() != 3 || w[0] != ww[0] || w[1] != ww[1] || !parse_count(w[2], counts[count_index++]))
+                throw fail(where + "expected '" + want.substr(0, want.size() - 1) + "<count>'");
+        } else if (line != want) {
+            throw fail(line_number == 1 ? "not a PLY file (the first line is not 'ply')"
+                                        : where + "expected '" + want + "' (a plasticitynet mesh frame)");
+        }
+        ++next;
+    }
+    if (next < expected.size()) throw fail("PLY header ends before '" + expected[next] + "'");
+    const std::uint64_t n = counts[0], f = counts[1];
+    const std::streamoff data_start = in.tellg();
+    in.seekg(0, std::ios::end);
+    const std::streamoff file_end = in.tellg();
+    if (data_start < 0 || file_end < data_start) throw fail("cannot determine the file size");
+    const std::uint64_t available = std::uint64_t(file_end - data_start);
+    if (n > available / kMeshVertexBytes || f > available / kFaceBytes ||
+        available != n * kMeshVertexBytes + f * kFaceBytes)
+        throw fail("the header announces " + std::to_string(n) + " vertices and " + std::to_string(f) +
+                   " faces but " + std::to_string(available) + " bytes of data follow");
+    std::string data(std::size_t(available), '\0');
+    in.seekg(data_start);
+    in.read(&data[0], std::streamsize(available));
+    if (!in) throw fail("reading the data failed");
+    PlyMesh m;
+    m.position.resize(2 * n);
+    m.velocity.resize(2 * n);
+    m.triangles.resize(3 * f);
+    m.hardening.resize(f);
+    for (std::size_t i = 0; i < n; ++i) {
+        const char* row = &data[i * kMeshVertexBytes];
+        for (std::size_t k = 0; k < 2; ++k) {
+            m.position[2 * i + k] = get_le_double(row + 8 * k);
+            m.velocity[2 * i + k] = get_le_double(row + 8 * (3 + k));
+        }
+        if (get_le_double(row + 16) != 0.0 || get_le_double(row + 40) != 0.0)
+            throw fail("vertex " + std::to_string(i) + " has z or vz != 0 in a 2D mesh");
+    }
+    for (std::size_t k = 0; k < f; ++k) {
+        const char* row = &data[n * kMeshVertexBytes + k * kFaceBytes];
+        if (row[0] != 3) throw fail("face " + std::to_string(k) + " is not a triangle");
+        for (int a = 0; a < 3; ++a) {
+            const std::int32_t t = get_le_int32(row + 1 + 4 * a);
+            if (t < 0 || static_cast<std::uint64_t>(t) >= n)
+                throw fail("face " + std::to_string(k) + " names vertex " + std::to_string(t) + " of " +
+                           std::to_string(n));
+            m.triangles[3 * k + a] = t;
+        }
+        m.hardening[k] = get_le_double(row + 13);
+    }
+    return m;
+}
+
 }  // namespace pnet

@@ -56,4 +56,30 @@ void write_particles_ply(const std::string& path, const PlyParticles& p);
 /// longer than the header announces.
 PlyParticles read_particles_ply(const std::string& path, int dim = 0);
 
+/// A 2D FEM frame: the mesh's nodes and triangles. Layout (binary little-endian;
+/// Blender, ParaView and MeshLab open it as a surface):
+///
+///     ply / format binary_little_endian 1.0 / comment plasticitynet mesh / comment dim 2
+///     element vertex <n>    property double x y z vx vy vz   (z = vz = 0)
+///     element face <m>      property list uchar int vertex_indices
+///                           property double hardening          (the element's state)
+///     end_header
+struct PlyMesh {
+    int dim = 2;
+    std::vector<double> position;   // n * 2, m
+    std::vector<double> velocity;   // n * 2, m/s
+    std::vector<int> triangles;     // m * 3 node indices
+    std::vector<double> hardening;  // m
+
+    std::size_t nodes() const { return position.size() / 2; }
+};
+
+/// Writes m atomically. Throws std::invalid_argument "<path>: ..." for sizes that disagree or
+/// an index out of range, std::runtime_error if the file cannot be written.
+void write_mesh_ply(const std::string& path, const PlyMesh& m);
+
+/// Reads a file in that layout; std::runtime_error "<path>: <problem>" for anything else
+/// (another header, a truncated or overlong body, an index out of range).
+PlyMesh read_mesh_ply(const std::string& path);
+
 }  // namespace pnet

@@ -469,6 +469,60 @@ Image render_particles_2d(const std::vector<double>& position, const std::vector
     return img;
 }
 
+Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>& triangles,
+                     const std::vector<double>& value, const ParticleRenderOptions& options) {
+    constexpr const char* who = "render_mesh_2d";
+    check_particle_input(position, {}, 2, options, who);
+    const std::size_t n = position.size() / 2, m = triangles.size() / 3;
+    if (triangles.size() % 3 != 0) throw std::invalid_argument(std::string(who) + ": triangles is not a multiple of 3");
+    if (!value.empty() && value.size() != m)
+        throw std::invalid_argument(std::string(who) + ": " + std::to_string(value.size()) + " values for " +
+                                    std::to_string(m) + " triangles");
+    for (int t : triangles)
+        if (t < 0 || static_cast<std::size_t>(t) >= n)
+            throw std::invalid_argument(std::string(who) + ": triangle node " + std::to_string(t) + " out of range");
+    const double ex = options.domain_max[0] - options.domain_min[0];
+    const double ey = options.domain_max[1] - options.domain_min[1];
+    const int margin = 4;
+    const double s = (options.width_px - 2 * margin) / ex;
+    Image img(options.width_px, image_height(ey * s, margin, who), {255, 255, 255});
+    draw_rect(img, {margin - 1, margin - 1, margin + int(std::lround(ex * s)), margin + int(std::lround(ey * s))},
+              {170, 170, 170});
+    auto px = [&](std::size_t i) {
+        return std::array<double, 2>{margin + (position[2 * i] - options.domain_min[0]) * s,
+                                     margin + (options.domain_max[1] - position[2 * i + 1]) * s};
+    };
+    const Rect clip{0, 0, img.width - 1, img.height - 1};
+    // Fill: a pixel whose centre lies in the triangle (edge functions) takes its colour.
+    for (std::size_t k = 0; k < m; ++k) {
+        const auto a = px(triangles[3 * k]), b = px(triangles[3 * k + 1]), c = px(triangles[3 * k + 2]);
+        if (!std::isfinite(a[0] + a[1] + b[0] + b[1] + c[0] + c[1])) continue;
+        const Rgb colour = particle_colour(value, k, options);
+        const int x0 = std::max(0, int(std::floor(std::min({a[0], b[0], c[0]}))));
+        const int x1 = std::min(img.width - 1, int(std::ceil(std::max({a[0], b[0], c[0]}))));
+        const int y0 = std::max(0, int(std::floor(std::min({a[1], b[1], c[1]}))));
+        const int y1 = std::min(img.height - 1, int(std::ceil(std::max({a[1], b[1], c[1]}))));
+        auto edge = [](const std::array<double, 2>& p, const std::array<double, 2>& q, double x, double y) {
+            return (q[0] - p[0]) * (y - p[1]) - (q[1] - p[1]) * (x - p[0]);
+        };
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+                const double cx = x + 0.5, cy = y + 0.5;
+                const double d1 = edge(a, b, cx, cy), d2 = edge(b, c, cx, cy), d3 = edge(c, a, cx, cy);
+                if ((d1 >= 0 && d2 >= 0 && d3 >= 0) || (d1 <= 0 && d2 <= 0 && d3 <= 0)) img.set(x, y, colour);
+            }
+    }
+    // Edges: thin, darker, translucent, so that the element size shows without hiding the colour.
+    for (std::size_t k = 0; k < m; ++k)
+        for (int e = 0; e < 3; ++e) {
+            const auto a = px(triangles[3 * k + e]), b = px(triangles[3 * k + (e + 1) % 3]);
+            if (!std::isfinite(a[0] + a[1] + b[0] + b[1])) continue;
+            draw_segment(img, a[0], a[1], b[0], b[1], 0.6, {30, 30, 30}, clip, 0.45);
+        }
+    draw_caption(img, options, margin);
+    return img;
+}
+
 Image render_particles_3d(const std::vector<double>& position, const std::vector<double>& value,
                           const ParticleRenderOptions& options) {
     constexpr const char* who = "render_particles_3d";

@@ -51,6 +51,13 @@ Image render_particles_2d(const std::vector<double>& position, const std::vector
 Image render_particles_3d(const std::vector<double>& position, const std::vector<double>& value,
                           const ParticleRenderOptions& options);
 
+/// A 2D triangle mesh (position n x 2, triangles m x 3 node indices) as filled triangles,
+/// triangle k coloured by viridis of value[k] (may be empty: one colour), with thin dark edges,
+/// framed by the domain like render_particles_2d (radius_px is unused). Throws
+/// std::invalid_argument for mismatched sizes or a node index out of range.
+Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>& triangles,
+                     const std::vector<double>& value, const ParticleRenderOptions& options);
+
 /// One polyline of a line plot; points with a non-finite coordinate break the line.
 struct PlotSeries {
     std::string label;  // legend entry; a plot whose labels are all empty has no legend

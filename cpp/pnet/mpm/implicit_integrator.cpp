@@ -57,6 +57,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                                         it->dump());
         o.fail_on_unconverged = it->get<bool>();
     }
+    if (const auto it = block.find("learned_return_map"); it != block.end()) {
+        if (!it->is_boolean())
+            throw std::invalid_argument(context + ": integrator.learned_return_map: expected true or false, got " +
+                                        it->dump());
+        o.learned_return_map = it->get<bool>();
+    }
     if (const auto it = block.find("preconditioner"); it != block.end()) {
         if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi"))
             throw std::invalid_argument(context + ": integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got " +
@@ -77,7 +83,8 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"preconditioner", preconditioner},
             {"lazy_hessian", lazy_hessian},
             {"fail_on_unconverged", fail_on_unconverged},
-            {"max_kinematic_stages", max_kinematic_stages}};
+            {"max_kinematic_stages", max_kinematic_stages},
+            {"learned_return_map", learned_return_map}};
 }
 
 template <int dim>

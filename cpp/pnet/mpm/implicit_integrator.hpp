@@ -76,6 +76,10 @@ struct ImplicitOptions {
     // FEM: the most extra solves per step that move kinematic nodes (the plate)
     // to targets that contact's CCD kept them from at the start.
     int max_kinematic_stages = 20;
+    // plasticitynet: after each step, the return mapping of a model that ships
+    // one (metal_nh_2d.pt: metal_nh_rm_2d.pt) instead of the material's exact
+    // one; false: the material library's (for the comparison of the two).
+    bool learned_return_map = true;
 
     /// Reads the keys above from an integrator block (others are ignored: the
     /// block also holds name, dt and cfl). Throws std::invalid_argument

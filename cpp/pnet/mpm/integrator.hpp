@@ -39,6 +39,11 @@ struct StepStats {
     // FEM with kinematic nodes: extra solves that moved them toward their targets, and whether they got there.
     int kinematic_stages = 0;
     bool kinematic_reached = true;
+    // FEM contact: CCD queries of the step (line search and starts) and how many shortened a step;
+    // contact pairs closer than dhat and the smallest pair distance (m) at the end of the step.
+    int ccd_queries = 0, ccd_limited = 0;
+    std::size_t contact_pairs = 0;
+    double min_distance = 0.0;
     // Where an implicit step's time went (parts of grid_seconds).
     double energy_seconds = 0.0;     // per-particle energies, stresses and Hessians
     double cg_seconds = 0.0;         // Hessian-vector products and PCG

@@ -185,12 +185,12 @@ void read_integrator(const Reader& r, const json& j, Scene& scene) {
     if (!integrator) return;
     r.require_object(*integrator, "integrator");
     // A block without a name would silently mean "explicit", whose stable step is far below the implicit ones'.
-    const json& name = r.require(*integrator, "name", "integrator", "explicit, plasticitynet or lagged");
+    const json& name = r.require(*integrator, "name", "integrator", "explicit, plasticitynet, lagged or analytic");
     scene.integrator.name = r.text(name, "integrator.name");
     if (scene.integrator.name != "explicit" && scene.integrator.name != "plasticitynet" &&
-        scene.integrator.name != "lagged")
-        r.fail("integrator.name",
-               "unknown integrator '" + scene.integrator.name + "' (expected explicit, plasticitynet or lagged)");
+        scene.integrator.name != "lagged" && scene.integrator.name != "analytic")
+        r.fail("integrator.name", "unknown integrator '" + scene.integrator.name +
+                                      "' (expected explicit, plasticitynet, lagged or analytic)");
     scene.integrator.options = json::object();
     for (const auto& item : integrator->items()) {
         const std::string path = join("integrator", item.key());
@@ -302,6 +302,115 @@ SceneObject read_object(const Reader& r, const json& v, const std::string& path,
     return object;
 }
 
+SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, const Scene& scene,
+                    const std::string& base_dir) {
+    const int dim = scene.dim;
+    r.require_object(v, path);
+    SceneMesh mesh;
+    mesh.json_path = path;
+    const std::string shape_path = join(path, "shape");
+    const std::string shape = r.text(r.require(v, "shape", path, "box, frame, disk or file"), shape_path);
+    std::vector<std::string> keys = {"shape", "material", "model", "velocity", "hardening", "kinematic"};
+    if (shape == "box") {
+        mesh.shape = SceneMesh::Shape::Box;
+        keys.insert(keys.begin() + 1, {"min", "max", "element_size"});
+    } else if (shape == "frame") {
+        mesh.shape = SceneMesh::Shape::Frame;
+        keys.insert(keys.begin() + 1, {"min", "max", "thickness", "element_size"});
+    } else if (shape == "disk") {
+        mesh.shape = SceneMesh::Shape::Disk;
+        keys.insert(keys.begin() + 1, {"center", "radius", "element_size"});
+    } else if (shape == "file") {
+        mesh.shape = SceneMesh::Shape::File;
+        keys.insert(keys.begin() + 1, "file");
+    } else {
+        r.fail(shape_path, "unknown mesh shape '" + shape + "' (expected box, frame, disk or file)");
+    }
+    std::string hint = " (a " + shape + " mesh takes";
+    for (std::size_t i = 0; i < keys.size(); ++i) hint += (i ? ", " : " ") + keys[i];
+    r.reject_unknown_keys(v, path, keys, hint + ")");
+
+    const std::string vec_expected = "an array of " + std::to_string(dim) + " numbers";
+    if (mesh.shape == SceneMesh::Shape::Box || mesh.shape == SceneMesh::Shape::Frame) {
+        mesh.min = r.vector(r.require(v, "min", path, vec_expected), join(path, "min"), dim);
+        mesh.max = r.vector(r.require(v, "max", path, vec_expected), join(path, "max"), dim);
+        for (int a = 0; a < dim; ++a)
+            if (!(mesh.max[a] > mesh.min[a]))
+                r.fail(index_path(join(path, "max"), a), "must exceed min[" + std::to_string(a) + "] = " +
+                                                             show(mesh.min[a]) + ", got " + show(mesh.max[a]));
+    }
+    if (mesh.shape == SceneMesh::Shape::Frame) {
+        mesh.thickness = r.positive(r.require(v, "thickness", path, "a positive number"), join(path, "thickness"));
+        const double narrowest = (mesh.max - mesh.min).minCoeff();
+        if (!(2.0 * mesh.thickness < narrowest))
+            r.fail(join(path, "thickness"), "two walls of " + show(mesh.thickness) + " m leave no hole in a frame " +
+                                                show(narrowest) + " m wide");
+    }
+    if (mesh.shape == SceneMesh::Shape::Disk) {
+        mesh.center = r.vector(r.require(v, "center", path, vec_expected), join(path, "center"), dim);
+        mesh.radius = r.positive(r.require(v, "radius", path, "a positive number"), join(path, "radius"));
+    }
+    if (mesh.shape == SceneMesh::Shape::File) {
+        const std::string file = r.text(r.require(v, "file", path, "a mesh file (.msh)"), join(path, "file"));
+        if (file.empty()) r.fail(join(path, "file"), "expected a file path, got \"\"");
+        mesh.file = resolve_model_path(file, base_dir);
+        std::error_code error;
+        if (!fs::is_regular_file(mesh.file, error)) r.fail(join(path, "file"), mesh.file + ": no such file");
+    } else {
+        mesh.element_size =
+            r.positive(r.require(v, "element_size", path, "a positive number (m)"), join(path, "element_size"));
+    }
+    if (const json* k = Reader::find(v, "kinematic")) {
+        if (!k->is_boolean()) r.fail(join(path, "kinematic"), "expected true or false, got " + show(*k));
+        mesh.kinematic = k->get<bool>();
+    }
+    if (mesh.kinematic) {
+        for (const char* key : {"material", "model", "hardening"})
+            if (Reader::find(v, key))
+                r.fail(join(path, key), "a kinematic mesh is rigid: it takes no material, model or hardening");
+    } else {
+        mesh.material = read_material(r, r.require(v, "material", path, "a material object or a preset name"),
+                                      join(path, "material"));
+    }
+    if (const json* model = Reader::find(v, "model")) {
+        const std::string file = r.text(*model, join(path, "model"));
+        if (file.empty()) r.fail(join(path, "model"), "expected a file path, got \"\"");
+        mesh.model = resolve_model_path(file, base_dir);
+    }
+    mesh.velocity = Eigen::VectorXd::Zero(dim);
+    if (const json* velocity = Reader::find(v, "velocity")) mesh.velocity = r.vector(*velocity, join(path, "velocity"), dim);
+    if (const json* hardening = Reader::find(v, "hardening")) {
+        mesh.hardening = r.number(*hardening, join(path, "hardening"));
+        MaterialDescription start = mesh.material;
+        start.initial_hardening = *mesh.hardening;
+        try {
+            start.validate();
+        } catch (const std::invalid_argument& e) {
+            r.fail(join(path, "hardening"), e.what());
+        }
+    }
+    return mesh;
+}
+
+void read_contact(const Reader& r, const json& j, Scene& scene) {
+    if (const json* ground = Reader::find(j, "ground")) {
+        r.require_object(*ground, "ground");
+        r.reject_unknown_keys(*ground, "ground", {"height"});
+        scene.contact.ground_height = r.number(r.require(*ground, "height", "ground", "a number (m)"), "ground.height");
+    }
+    const json* contact = Reader::find(j, "contact");
+    if (!contact) return;
+    r.require_object(*contact, "contact");
+    r.reject_unknown_keys(*contact, "contact", {"dhat", "kappa", "kappa_scale", "friction", "friction_eps_v"});
+    if (const json* v = Reader::find(*contact, "dhat")) scene.contact.dhat = r.positive(*v, "contact.dhat");
+    if (const json* v = Reader::find(*contact, "kappa")) scene.contact.kappa = r.positive(*v, "contact.kappa");
+    if (const json* v = Reader::find(*contact, "kappa_scale"))
+        scene.contact.kappa_scale = r.positive(*v, "contact.kappa_scale");
+    if (const json* v = Reader::find(*contact, "friction")) scene.contact.friction = r.non_negative(*v, "contact.friction");
+    if (const json* v = Reader::find(*contact, "friction_eps_v"))
+        scene.contact.friction_eps_v = r.positive(*v, "contact.friction_eps_v");
+}
+
 /// Particles within 2 cells of a wall would spread onto nodes outside the grid.
 void check_inside_domain(const Reader& r, const Scene& scene, const SceneObject& object) {
     const auto [lo, hi] = bounding_box(object);
@@ -361,7 +470,7 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
     r.require_object(j, "(top level)");
     r.reject_unknown_keys(j, "",
                           {"name", "description", "dim", "domain", "dx", "gravity", "frame_dt", "frames",
-                           "particles_per_cell", "boundary", "integrator", "objects"});
+                           "particles_per_cell", "boundary", "integrator", "objects", "meshes", "ground", "contact"});
     Scene scene;
     scene.file = file;
 
@@ -377,8 +486,12 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
     if (const json* v = Reader::find(j, "description")) scene.description = r.text(*v, "description");
 
     read_domain(r, j, scene);
-    scene.dx = r.positive(r.require(j, "dx", "", "a positive number, the grid spacing in m"), "dx");
-    check_cells(r, scene);
+    // A grid (dx) is needed for particles; a scene of meshes only may leave it out.
+    const bool particles = Reader::find(j, "objects") != nullptr || Reader::find(j, "meshes") == nullptr;
+    if (particles || Reader::find(j, "dx")) {
+        scene.dx = r.positive(r.require(j, "dx", "", "a positive number, the grid spacing in m"), "dx");
+        check_cells(r, scene);
+    }
 
     scene.gravity = Eigen::VectorXd::Zero(scene.dim);
     scene.gravity[1] = -9.8;  // m/s^2
@@ -387,15 +500,39 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
     if (const json* v = Reader::find(j, "frames")) scene.frames = r.integer(*v, "frames", 1);
     if (const json* v = Reader::find(j, "particles_per_cell"))
         scene.particles_per_cell = r.integer(*v, "particles_per_cell", 1);
-    read_boundary(r, j, scene);
+    if (particles) read_boundary(r, j, scene);
+    else if (Reader::find(j, "boundary")) r.fail("boundary", "grid boundary conditions need particle objects");
     read_integrator(r, j, scene);
 
-    const json& objects = r.require(j, "objects", "", "a non-empty array of objects");
-    if (!objects.is_array() || objects.empty())
-        r.fail("objects", "expected a non-empty array of objects, got " + show(objects));
-    for (std::size_t k = 0; k < objects.size(); ++k) {
-        scene.objects.push_back(read_object(r, objects[k], index_path("objects", k), scene, base_dir));
-        check_inside_domain(r, scene, scene.objects.back());
+    if (particles) {
+        const json& objects = r.require(j, "objects", "", "a non-empty array of objects (or meshes)");
+        if (!objects.is_array() || objects.empty())
+            r.fail("objects", "expected a non-empty array of objects, got " + show(objects));
+        for (std::size_t k = 0; k < objects.size(); ++k) {
+            scene.objects.push_back(read_object(r, objects[k], index_path("objects", k), scene, base_dir));
+            check_inside_domain(r, scene, scene.objects.back());
+        }
+    }
+    if (const json* meshes = Reader::find(j, "meshes")) {
+        if (scene.dim != 2) r.fail("meshes", "FEM meshes are 2D only in this version (3D FEM is not built yet)");
+        if (!meshes->is_array() || meshes->empty())
+            r.fail("meshes", "expected a non-empty array of meshes, got " + show(*meshes));
+        for (std::size_t k = 0; k < meshes->size(); ++k)
+            scene.meshes.push_back(read_mesh(r, (*meshes)[k], index_path("meshes", k), scene, base_dir));
+        if (std::all_of(scene.meshes.begin(), scene.meshes.end(), [](const SceneMesh& m) { return m.kinematic; }))
+            r.fail("meshes", "every mesh is kinematic: at least one must be a deformable body with a material");
+        if (!scene.objects.empty())
+            r.fail("meshes", "particles and meshes in one scene (MPM-FEM coupling) are not supported yet");
+    }
+    if (!scene.has_meshes()) {
+        for (const char* key : {"ground", "contact"})
+            if (Reader::find(j, key)) r.fail(key, "applies to FEM meshes; this scene has none (particles meet the "
+                                                  "domain's walls and floor, see boundary)");
+        if (scene.integrator.name == "analytic")
+            r.fail("integrator.name", "'analytic' is the closed-form FEM energy; particle scenes use explicit, "
+                                      "plasticitynet or lagged");
+    } else {
+        read_contact(r, j, scene);
     }
     return scene;
 }
@@ -456,16 +593,57 @@ json scene_to_json(const Scene& scene) {
     json j = {{"name", scene.name},
               {"dim", scene.dim},
               {"domain", {{"min", vector_json(scene.domain_min)}, {"max", vector_json(scene.domain_max)}}},
-              {"dx", scene.dx},
               {"gravity", vector_json(scene.gravity)},
               {"frame_dt", scene.frame_dt},
               {"frames", scene.frames},
-              {"particles_per_cell", scene.particles_per_cell},
-              {"boundary",
-               {{"walls", scene.boundary.slip_walls ? "slip" : "none"},
-                {"sticky_floor_cells", scene.boundary.sticky_floor_cells}}},
-              {"integrator", integrator},
-              {"objects", objects}};
+              {"integrator", integrator}};
+    if (scene.dx > 0.0) j["dx"] = scene.dx;
+    if (scene.has_particles()) {
+        j["particles_per_cell"] = scene.particles_per_cell;
+        j["boundary"] = {{"walls", scene.boundary.slip_walls ? "slip" : "none"},
+                         {"sticky_floor_cells", scene.boundary.sticky_floor_cells}};
+        j["objects"] = objects;
+    }
+    if (scene.has_meshes()) {
+        json meshes = json::array();
+        for (const SceneMesh& mesh : scene.meshes) {
+            json m;
+            switch (mesh.shape) {
+                case SceneMesh::Shape::Box:
+                case SceneMesh::Shape::Frame:
+                    m["shape"] = mesh.shape == SceneMesh::Shape::Box ? "box" : "frame";
+                    m["min"] = vector_json(mesh.min);
+                    m["max"] = vector_json(mesh.max);
+                    if (mesh.shape == SceneMesh::Shape::Frame) m["thickness"] = mesh.thickness;
+                    break;
+                case SceneMesh::Shape::Disk:
+                    m["shape"] = "disk";
+                    m["center"] = vector_json(mesh.center);
+                    m["radius"] = mesh.radius;
+                    break;
+                case SceneMesh::Shape::File:
+                    m["shape"] = "file";
+                    m["file"] = mesh.file;
+                    break;
+            }
+            if (mesh.shape != SceneMesh::Shape::File) m["element_size"] = mesh.element_size;
+            m["kinematic"] = mesh.kinematic;
+            if (!mesh.kinematic) m["material"] = material_to_json(mesh.material);
+            if (!mesh.model.empty()) m["model"] = mesh.model;
+            m["velocity"] = vector_json(mesh.velocity);
+            if (mesh.hardening) m["hardening"] = *mesh.hardening;
+            meshes.push_back(m);
+        }
+        j["meshes"] = meshes;
+        json contact = {{"dhat", scene.contact.dhat},         {"kappa", scene.contact.kappa},
+                        {"kappa_scale", scene.contact.kappa_scale}, {"friction", scene.contact.friction},
+                        {"friction_eps_v", scene.contact.friction_eps_v}};
+        // 0 means "the default" for dhat and kappa, which the reader refuses as a value.
+        if (scene.contact.dhat == 0.0) contact.erase("dhat");
+        if (scene.contact.kappa == 0.0) contact.erase("kappa");
+        j["contact"] = contact;
+        if (scene.contact.ground_height) j["ground"] = {{"height", *scene.contact.ground_height}};
+    }
     if (!scene.description.empty()) j["description"] = scene.description;
     return j;
 }

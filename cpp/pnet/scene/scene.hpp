@@ -16,7 +16,7 @@
 //     "integrator": {"name": "plasticitynet", "dt": 1e-3, "cfl": 0.5, ...},
 //         // optional, default explicit with the CFL step; "name" is required when the block is given;
 //         // dt = 0 or absent: the CFL step; other keys are kept in Scene::Integrator::options
-//     "objects": [{                               // required, non-empty
+//     "objects": [{                               // particles (MPM); required unless "meshes" are given
 //       "shape": "disk",                          // "box" (min, max), "sphere" (center, radius; a disk in 2D),
 //                                                 // "disk" (2D only), "cylinder" (3D only, axis along y:
 //                                                 // center of the bottom face, radius, height)
@@ -27,6 +27,32 @@
 //       "hardening": -0.1                         // optional, default material.initial_hardening
 //     }]
 //   }
+//
+// FEM scenes (2D; DESIGN.md §4.2-4.3, §5) hold meshes instead of (and, with
+// coupling, beside) particle objects; "dx" and "objects" are then optional:
+//
+//     "meshes": [{
+//       "shape": "frame",                         // "box" (min, max), "frame" (min, max: the outer
+//                                                 // rectangle; thickness: its walls), "disk" (center,
+//                                                 // radius), each meshed by gmsh with triangles of
+//                                                 // ~element_size m; or "file" (file: a gmsh .msh,
+//                                                 // relative to the scene file's folder)
+//       "min": [0.45, 0.0001], "max": [0.55, 0.1801], "thickness": 0.012, "element_size": 0.003,
+//       "material": "metal",                      // required unless kinematic
+//       "model": "../models/metal_2d.pt",         // optional, as for objects
+//       "velocity": [0, 0],                       // m/s, optional
+//       "hardening": 0.05,                        // optional
+//       "kinematic": false                        // true: a rigid body moved at "velocity" (the plate)
+//     }],
+//     "ground": {"height": 0},                    // optional: the half-space y < height is solid
+//     "contact": {"dhat": 0.00025,                // m, optional, default 1e-3 x the meshes' bounding-box diagonal
+//                 "kappa": 2.2e12,                // J/m^4, optional, default kappa_scale x IPC's lower bound
+//                 "kappa_scale": 100,             //   for a 1e-2 s step (contact/adaptive_stiffness.hpp)
+//                 "friction": 0.3,                // Coulomb coefficient, default 0 (frictionless)
+//                 "friction_eps_v": 1e-4}         // m/s, slip velocity below which friction is smoothed
+//
+// The integrator "analytic" (the closed-form StVK-Hencky + von Mises energy) is
+// for meshes only.
 //
 // Unknown keys are rejected ("unknown field") everywhere except in the integrator
 // block, whose extra keys belong to the implicit solvers. Every object must lie
@@ -75,6 +101,27 @@ struct SceneObject {
     double initial_hardening() const { return hardening.value_or(material.initial_hardening); }
 };
 
+/// A FEM body (2D): a procedural shape meshed by gmsh or a mesh file.
+struct SceneMesh {
+    enum class Shape { Box, Frame, Disk, File };
+
+    Shape shape = Shape::Box;
+    Eigen::VectorXd min, max;   // box and frame: the outer rectangle, m
+    double thickness = 0.0;     // frame: wall thickness, m
+    Eigen::VectorXd center;     // disk, m
+    double radius = 0.0;        // disk, m
+    double element_size = 0.0;  // procedural shapes: target edge length, m
+    std::string file;           // File: the mesh file, absolute and normalized
+    bool kinematic = false;     // rigid, moved at `velocity` (no material)
+    MaterialDescription material;  // unused when kinematic
+    std::string model;             // energy model file, absolute; "" if none
+    Eigen::VectorXd velocity;      // initial (kinematic: prescribed) velocity, m/s
+    std::optional<double> hardening;
+    std::string json_path;         // "meshes[k]"
+
+    double initial_hardening() const { return hardening.value_or(material.initial_hardening); }
+};
+
 /// "box", "sphere" (also "disk" in 2D files) or "cylinder".
 std::string to_string(SceneObject::Shape shape);
 
@@ -99,13 +146,27 @@ struct Scene {
     } boundary;
 
     struct Integrator {
-        std::string name = "explicit";                      // "explicit" | "plasticitynet" | "lagged"
+        std::string name = "explicit";                      // "explicit" | "plasticitynet" | "lagged" | "analytic" (FEM)
         double dt = 0.0;                                    // s; 0: the CFL step
         double cfl = 0.5;                                   // dt = cfl dx / (max wave speed + max |v|) when dt = 0
         nlohmann::json options = nlohmann::json::object();  // the block's other keys, for the implicit solvers
     } integrator;
 
-    std::vector<SceneObject> objects;
+    std::vector<SceneObject> objects;  // particles (MPM)
+    std::vector<SceneMesh> meshes;     // FEM bodies
+
+    /// Contact between meshes and with the ground (FEM).
+    struct Contact {
+        std::optional<double> ground_height;  // m; unset: no ground
+        double dhat = 0.0;                    // m; 0: 1e-3 x the meshes' bounding-box diagonal
+        double kappa = 0.0;                   // J/m^4; 0: kappa_scale x IPC's lower bound at dt = 1e-2 s
+        double kappa_scale = 100.0;
+        double friction = 0.0;                // Coulomb coefficient
+        double friction_eps_v = 1e-4;         // m/s
+    } contact;
+
+    bool has_meshes() const { return !meshes.empty(); }
+    bool has_particles() const { return !objects.empty(); }
 
     /// Grid cells along `axis`: (domain_max - domain_min) / dx, validated to be a whole number.
     int cells(int axis) const;

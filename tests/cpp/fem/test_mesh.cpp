@@ -176,5 +176,16 @@ TEST(GmshMesher, ReadsMeshFilesAndRefusesBadOnes) {
     EXPECT_THROW(read_mesh_file<2>(garbage), MeshError);
 }
 
+TEST(GmshMesher, AnElementAsLargeAsTheShapeUpToRoundOffIsAccepted) {
+    // 0.1911 - 0.1811 is 0.00999999... in doubles: a 1 cm plate meshed with 1 cm triangles.
+    Shape2d plate;
+    plate.kind = Shape2d::Kind::Box;
+    plate.min = Vec<2>(0.42, 0.1811);
+    plate.max = Vec<2>(0.58, 0.1911);
+    plate.element_size = 0.01;
+    const Mesh<2> mesh = mesh_shape(plate, "plate");
+    EXPECT_GT(mesh.elements.size(), 0u);
+}
+
 }  // namespace
 }  // namespace pnet

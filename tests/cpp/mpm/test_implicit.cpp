@@ -14,7 +14,7 @@
 #include <memory>
 
 #include "pnet/mpm/implicit_integrator.hpp"
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/solver/newton.hpp"
 #include "pnet/scene/sampler.hpp"

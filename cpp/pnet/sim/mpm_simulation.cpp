@@ -1,4 +1,4 @@
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 
 #include <chrono>
 #include <cmath>
@@ -17,6 +17,8 @@ MpmSystem<dim> make_mpm_system(const Scene& scene) {
     if (scene.dim != dim)
         throw std::invalid_argument(scene.file + ": a " + std::to_string(scene.dim) + "D scene, not " +
                                     std::to_string(dim) + "D");
+    if (!scene.has_particles())
+        throw std::invalid_argument(scene.file + ": a FEM scene (meshes, no particles): run it with FemSimulation");
     MpmSystem<dim> s;
     for (int a = 0; a < dim; ++a) {
         s.origin[a] = scene.domain_min[a];
@@ -73,7 +75,8 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
                                                                   settings.implicit.regularizer_weight);
         std::vector<const LearnedReturnMap<dim>*> return_maps;
         for (std::size_t k = 0; k < scene.objects.size(); ++k)
-            return_maps.push_back(energy->object_energy(k).learned_return_map());
+            return_maps.push_back(settings.implicit.learned_return_map ? energy->object_energy(k).learned_return_map()
+                                                                       : nullptr);
         integrator_ = std::make_unique<ImplicitIntegrator<dim>>(system_, ImplicitMethod::PlasticityNet,
                                                                 settings.implicit, std::move(energy), return_maps);
     } else {

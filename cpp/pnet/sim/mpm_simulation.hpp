@@ -24,12 +24,13 @@ MpmSystem<dim> make_mpm_system(const Scene& scene);
 
 /// Which integrator a Simulation runs and how.
 struct IntegratorSettings {
-    std::string name = "explicit";  // "explicit" | "plasticitynet" | "lagged"
+    std::string name = "explicit";  // "explicit" | "plasticitynet" | "lagged" | "analytic" (FEM)
     double dt = 0.0;                // s; 0: the CFL step before every step
     double cfl = 0.5;
     ImplicitOptions implicit;       // plasticitynet, lagged
-    /// Energy model of each scene object (plasticitynet needs one for every
-    /// object; the others ignore them). Loading a model file needs LibTorch
+    /// Energy model of each scene object, or of each mesh in a FEM scene
+    /// (plasticitynet needs one for every object and deformable mesh; the
+    /// others ignore them). Loading a model file needs LibTorch
     /// (load_model_file in pnet_torch), so the caller does it.
     std::vector<std::shared_ptr<const ModelFile>> models;
 
@@ -56,6 +57,11 @@ struct FrameStats {
     long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
     long fixed_point_capped_steps = 0;   // plasticitynet: steps whose fixed point on F0 stopped above its tolerance
     std::size_t hardening_clamped = 0;   // most particles with a clamped hardening input in one step
+    // FEM contact: the most contact pairs closer than dhat at the end of a step, the smallest pair
+    // distance at the end of any step (m), and CCD queries / those that shortened a step.
+    std::size_t contact_pairs = 0;
+    double min_distance = 0.0;
+    long ccd_queries = 0, ccd_limited = 0;
 };
 
 template <int dim>

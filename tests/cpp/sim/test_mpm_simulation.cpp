@@ -5,7 +5,7 @@
 #include <cstring>
 #include <filesystem>
 
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 #include "support/temp_dir.hpp"
 
 namespace pnet {

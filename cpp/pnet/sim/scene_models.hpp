@@ -6,7 +6,7 @@
 // LibTorch (this header and its .cpp include none of it).
 #include <string>
 
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/scene/scene.hpp"
 
 namespace pnet {
@@ -18,11 +18,11 @@ namespace pnet {
 /// integrator name or a bad option in the scene.
 IntegratorSettings integrator_settings(const Scene& scene, const std::string& integrator = "");
 
-/// Loads every energy model the scene's objects name into settings.models (one
-/// entry per object, null where none is named), whatever the integrator: each
+/// Loads every energy model the scene's objects and meshes name into settings.models (one
+/// entry per object, then per mesh; null where none is named), whatever the integrator: each
 /// must exist, be trusted (pinned by its folder's MANIFEST, or trusted_models)
 /// and be an energy of the scene's dimension. Errors name
-/// "<scene file>: objects[k].model: " and keep their type: FileNotFoundError,
+/// "<scene file>: objects[k].model: " (meshes[k].model) and keep their type: FileNotFoundError,
 /// UntrustedModelError, otherwise SceneError.
 void load_scene_models(const Scene& scene, bool trusted_models, IntegratorSettings& settings);
 

@@ -1,0 +1,362 @@
+#include "pnet/sim/fem_simulation.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "pnet/contact/adaptive_stiffness.hpp"
+#include "pnet/energy/analytic_elastoplastic.hpp"
+#include "pnet/energy/neural_elastoplastic.hpp"
+#include "pnet/fem/gmsh_mesher.hpp"
+#include "pnet/io/atomic_file.hpp"
+#include "pnet/io/sha256.hpp"
+
+namespace pnet {
+
+namespace {
+
+constexpr double kKappaReferenceDt = 1e-2;  // s: the implicit FEM step of DESIGN.md §5
+
+Mesh<2> mesh_of(const Scene& scene, const SceneMesh& m) {
+    const std::string context = scene.file + ": " + m.json_path;
+    if (m.shape == SceneMesh::Shape::File) {
+        try {
+            return read_mesh_file<2>(m.file);
+        } catch (const MeshError& e) {
+            throw MeshError(context + ".file: " + e.what());
+        }
+    }
+    Shape2d shape;
+    shape.element_size = m.element_size;
+    switch (m.shape) {
+        case SceneMesh::Shape::Box:
+        case SceneMesh::Shape::Frame:
+            shape.kind = m.shape == SceneMesh::Shape::Box ? Shape2d::Kind::Box : Shape2d::Kind::Frame;
+            shape.min = Vec<2>(m.min[0], m.min[1]);
+            shape.max = Vec<2>(m.max[0], m.max[1]);
+            shape.thickness = m.thickness;
+            break;
+        case SceneMesh::Shape::Disk:
+            shape.kind = Shape2d::Kind::Disk;
+            shape.center = Vec<2>(m.center[0], m.center[1]);
+            shape.radius = m.radius;
+            break;
+        case SceneMesh::Shape::File:
+            break;
+    }
+    return mesh_shape(shape, context);
+}
+
+/// Whether p lies in triangle (a, b, c) or on its boundary.
+bool in_triangle(const Vec<2>& p, const Vec<2>& a, const Vec<2>& b, const Vec<2>& c) {
+    auto orient = [](const Vec<2>& u, const Vec<2>& v, const Vec<2>& w) {
+        return (v - u)[0] * (w - u)[1] - (v - u)[1] * (w - u)[0];
+    };
+    const double d1 = orient(a, b, p), d2 = orient(b, c, p), d3 = orient(c, a, p);
+    const bool negative = d1 < 0 || d2 < 0 || d3 < 0, positive = d1 > 0 || d2 > 0 || d3 > 0;
+    return !(negative && positive);
+}
+
+/// An intersection of the meshes at positions x, as text naming the meshes, or "".
+std::string find_intersection(const FemSceneSystem& s, const Contact2d& contact, const std::vector<Vec<2>>& x) {
+    std::string pair = contact.first_intersection(x);
+    if (pair.empty()) {
+        // A body wholly inside another crosses no boundary edge: test one node of each.
+        const Mesh<2>& mesh = s.system.mesh;
+        const std::size_t meshes = s.first_node.size() - 1;
+        for (std::size_t k = 0; k < meshes && pair.empty(); ++k) {
+            const Vec<2>& p = x[s.first_node[k]];
+            for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+                const auto& el = mesh.elements[e];
+                if (s.mesh_of_node(el[0]) == static_cast<int>(k)) continue;
+                if (in_triangle(p, x[el[0]], x[el[1]], x[el[2]])) {
+                    pair = "node " + std::to_string(s.first_node[k]) + " inside element " + std::to_string(e);
+                    break;
+                }
+            }
+        }
+    }
+    if (pair.empty()) return "";
+    // Which mesh each node belongs to.
+    std::string legend = " (nodes";
+    const std::size_t meshes = s.first_node.size() - 1;
+    for (std::size_t k = 0; k < meshes; ++k)
+        legend += std::string(k ? ";" : "") + " " + std::to_string(s.first_node[k]) + "-" +
+                  std::to_string(s.first_node[k + 1] - 1) + ": meshes[" + std::to_string(k) + "]";
+    return pair + legend + ")";
+}
+
+std::unique_ptr<Contact2d> make_contact(const Scene& scene, const FemSceneSystem& s) {
+    auto contact = std::make_unique<Contact2d>(s.system.mesh.boundary, s.dhat, s.kappa);
+    if (scene.contact.ground_height) contact->add_half_space({Vec<2>(0.0, *scene.contact.ground_height), Vec<2>(0.0, 1.0)});
+    return contact;
+}
+
+}  // namespace
+
+int FemSceneSystem::mesh_of_node(int node) const {
+    const auto it = std::upper_bound(first_node.begin(), first_node.end(), node);
+    return static_cast<int>(it - first_node.begin()) - 1;
+}
+
+FemSceneSystem make_fem_system(const Scene& scene) {
+    if (scene.dim != 2) throw SceneError(scene.file + ": meshes: FEM scenes are 2D only in this version");
+    if (!scene.has_meshes()) throw SceneError(scene.file + ": meshes: the scene has no meshes");
+    FemSceneSystem out;
+    FemSystem<2>& s = out.system;
+    // A kinematic mesh is rigid: its elements carry the first deformable mesh's
+    // material (and model), under which a rigid translation has no energy.
+    int deformable = -1;
+    for (std::size_t k = 0; k < scene.meshes.size() && deformable < 0; ++k)
+        if (!scene.meshes[k].kinematic) deformable = static_cast<int>(k);
+    for (std::size_t k = 0; k < scene.meshes.size(); ++k) {
+        const SceneMesh& m = scene.meshes[k];
+        out.first_node.push_back(static_cast<int>(s.mesh.nodes()));
+        out.first_element.push_back(static_cast<int>(s.mesh.elements.size()));
+        s.mesh.append(mesh_of(scene, m));
+        s.materials.emplace_back(scene.meshes[m.kinematic ? deformable : k].material);
+        s.element_object.resize(s.mesh.elements.size(), static_cast<int>(k));
+        s.fixed_node.resize(s.mesh.nodes(), m.kinematic ? 1 : 0);
+        s.prescribed_velocity.resize(s.mesh.nodes(), m.kinematic ? Vec<2>(m.velocity[0], m.velocity[1]) : Vec<2>::Zero());
+    }
+    out.first_node.push_back(static_cast<int>(s.mesh.nodes()));
+    out.first_element.push_back(static_cast<int>(s.mesh.elements.size()));
+    s.mesh.finalize(scene.file + ": meshes");
+    s.gravity = Vec<2>(scene.gravity[0], scene.gravity[1]);
+    s.make_rest();
+
+    const auto [lo, hi] = s.mesh.bounding_box();
+    out.diagonal = (hi - lo).norm();
+    out.dhat = scene.contact.dhat > 0.0 ? scene.contact.dhat : 1e-3 * out.diagonal;
+    if (scene.contact.kappa > 0.0) {
+        out.kappa = scene.contact.kappa;
+    } else {
+        double mass = 0.0;
+        for (double m : s.rest.node_mass) mass += m;
+        const BarrierStiffness k = initial_barrier_stiffness(out.diagonal, out.dhat, mass / s.mesh.nodes(),
+                                                             kKappaReferenceDt, Eigen::VectorXd::Zero(2),
+                                                             Eigen::VectorXd::Zero(2));
+        out.kappa = scene.contact.kappa_scale * k.kappa;
+    }
+    const std::unique_ptr<Contact2d> contact = make_contact(scene, out);
+    const std::string pair = find_intersection(out, *contact, s.mesh.x);
+    if (!pair.empty())
+        throw SceneError(scene.file + ": meshes: the start state intersects or touches: " + pair +
+                         (scene.contact.ground_height ? " (half-space 0 is the ground)" : ""));
+    return out;
+}
+
+FemSimulation::FemSimulation(const Scene& scene, const IntegratorSettings& settings)
+    : scene_(scene),
+      scene_digest_(sha256_hex(scene_to_json(scene).dump())),
+      built_(make_fem_system(scene)),
+      settings_(settings) {
+    if (!std::isfinite(settings.dt) || settings.dt < 0.0) throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
+    if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
+    const FemSystem<2>& s = built_.system;
+    contact_ = make_contact(scene, built_);
+    friction_ = std::make_unique<Friction2d>(scene.contact.friction, scene.contact.friction_eps_v);
+    const bool frictional = scene.contact.friction > 0.0;
+
+    state_ = FemState<2>::at_rest(s);
+    for (std::size_t k = 0; k < scene.meshes.size(); ++k) {
+        const SceneMesh& m = scene.meshes[k];
+        for (int i = built_.first_node[k]; i < built_.first_node[k + 1]; ++i) state_.v[i] = Vec<2>(m.velocity[0], m.velocity[1]);
+        if (m.hardening)
+            for (int e = built_.first_element[k]; e < built_.first_element[k + 1]; ++e) state_.hardening[e] = *m.hardening;
+    }
+
+    if (settings.name == "explicit") {
+        explicit_ = std::make_unique<FemExplicitIntegrator<2>>(s, contact_.get());
+        if (frictional) explicit_->set_friction(friction_.get(), contact_.get());
+        dt_ = settings.dt > 0.0 ? settings.dt : explicit_->cfl_time_step(settings.cfl);
+    } else {
+        if (!(settings.dt > 0.0))
+            throw std::invalid_argument("dt must be > 0 for the implicit integrator " + settings.name +
+                                        " (the CFL step is explicit's)");
+        dt_ = settings.dt;
+        std::vector<std::string> context;
+        for (const SceneMesh& m : scene.meshes) context.push_back(scene.file + ": " + m.json_path + ".model");
+        std::unique_ptr<ParticleEnergy<2>> energy;
+        FemMethod method = FemMethod::Lagged;
+        if (settings.name == "lagged") {
+            energy = std::make_unique<ElasticParticleEnergy<2>>(s.materials);
+        } else if (settings.name == "analytic") {
+            method = FemMethod::Analytic;
+            for (auto& c : context) c = c.substr(0, c.size() - 6) + ".material";
+            energy = std::make_unique<AnalyticElastoplasticEnergy<2>>(s.materials, context);
+        } else if (settings.name == "plasticitynet") {
+            method = FemMethod::PlasticityNet;
+            std::vector<std::shared_ptr<const ModelFile>> models(scene.meshes.size());
+            const std::size_t offset = scene.objects.size();  // settings.models: objects first, then meshes
+            int deformable = -1;
+            for (std::size_t k = 0; k < scene.meshes.size(); ++k) {
+                if (offset + k < settings.models.size()) models[k] = settings.models[offset + k];
+                if (deformable < 0 && !scene.meshes[k].kinematic) deformable = static_cast<int>(k);
+            }
+            for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+                if (scene.meshes[k].kinematic) {
+                    models[k] = models[deformable];
+                    context[k] = context[deformable];
+                }
+            auto neural = std::make_unique<NeuralParticleEnergy<2>>(models, s.materials, context,
+                                                                    settings.implicit.regularizer_weight);
+            built_.system.return_maps.clear();
+            for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+                built_.system.return_maps.push_back(
+                    settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);
+            energy = std::move(neural);
+        } else {
+            throw std::invalid_argument("unknown integrator \"" + settings.name +
+                                        "\" (expected explicit, plasticitynet, lagged or analytic)");
+        }
+        implicit_ = std::make_unique<FemImplicitIntegrator<2>>(s, method, settings.implicit, std::move(energy),
+                                                               contact_.get());
+        if (frictional) implicit_->set_friction(friction_.get(), contact_.get());
+    }
+}
+
+StepStats FemSimulation::step() {
+    const double frame_end = (frame_ + 1) * scene_.frame_dt;
+    double dt = dt_;
+    if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
+    StepStats s = implicit_ ? implicit_->step(state_, dt, steps_) : explicit_->step(state_, dt, steps_);
+    s.contact_pairs = contact_->active_pairs(state_.x);
+    s.min_distance = contact_->min_distance(state_.x);
+    time_ += dt;
+    ++steps_;
+    if (time_ >= frame_end * (1.0 - 1e-12)) {
+        time_ = frame_end;
+        ++frame_;
+    }
+    return s;
+}
+
+FrameStats FemSimulation::advance_frame(const std::function<void()>& after_step) {
+    const auto start = std::chrono::steady_clock::now();
+    FrameStats stats;
+    const int target = frame_ + 1;
+    stats.dt_min = 1e300;
+    stats.min_distance = 1e300;
+    frame_steps_.clear();
+    while (frame_ < target) {
+        const StepStats s = step();
+        ++stats.steps;
+        stats.dt_min = std::min(stats.dt_min, s.dt);
+        stats.dt_max = std::max(stats.dt_max, s.dt);
+        stats.newton_iterations += s.newton_iterations;
+        stats.cg_iterations += s.cg_iterations;
+        stats.line_search_steps += s.line_search_steps;
+        stats.fixed_point_iterations += s.fixed_point_iterations;
+        stats.max_residual = std::max(stats.max_residual, s.residual);
+        stats.converged = stats.converged && s.converged;
+        stats.unconverged_steps += !s.converged;
+        stats.fixed_point_capped_steps += !s.fixed_point_converged;
+        stats.hardening_clamped = std::max(stats.hardening_clamped, s.hardening_clamped);
+        stats.contact_pairs = std::max(stats.contact_pairs, s.contact_pairs);
+        stats.min_distance = std::min(stats.min_distance, s.min_distance);
+        stats.ccd_queries += s.ccd_queries;
+        stats.ccd_limited += s.ccd_limited;
+        frame_steps_.push_back(s);
+        if (after_step) after_step();
+    }
+    const std::string pair = find_intersection(built_, *contact_, state_.x);
+    if (!pair.empty())
+        throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
+    stats.frame = frame_;
+    stats.time = time_;
+    const FemSystem<2>& s = built_.system;
+    for (std::size_t i = 0; i < s.mesh.nodes(); ++i) {
+        if (s.fixed_node[i]) continue;  // kinematic bodies carry no physical momentum here
+        const double m = s.rest.node_mass[i];
+        stats.kinetic += 0.5 * m * state_.v[i].squaredNorm();
+        stats.potential -= m * s.gravity.dot(state_.x[i]);
+        for (int a = 0; a < 2; ++a) stats.momentum[a] += m * state_.v[i][a];
+    }
+    stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
+}
+
+namespace {
+
+constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'F', 'E', 'M', '1'};
+constexpr std::size_t kNameBytes = 16;
+
+template <typename T>
+void write_array(std::ostream& out, const std::vector<T>& a) {
+    out.write(reinterpret_cast<const char*>(a.data()), static_cast<std::streamsize>(a.size() * sizeof(T)));
+}
+
+template <typename T>
+void read_array(std::istream& in, std::vector<T>& a, std::size_t n, const std::string& path) {
+    a.resize(n);
+    in.read(reinterpret_cast<char*>(a.data()), static_cast<std::streamsize>(n * sizeof(T)));
+    if (!in) throw std::invalid_argument(path + ": truncated checkpoint");
+}
+
+}  // namespace
+
+void FemSimulation::save_checkpoint(const std::string& path) const {
+    write_file_atomically(path, [&](std::ostream& out) {
+        out.write(kMagic, sizeof kMagic);
+        const std::int64_t header[5] = {kDim, static_cast<std::int64_t>(state_.x.size()),
+                                        static_cast<std::int64_t>(state_.hardening.size()), frame_, steps_};
+        out.write(reinterpret_cast<const char*>(header), sizeof header);
+        out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
+        out.write(scene_digest_.data(), 64);
+        std::string name = settings_.name;
+        name.resize(kNameBytes, '\0');
+        out.write(name.data(), kNameBytes);
+        write_array(out, state_.x);
+        write_array(out, state_.v);
+        write_array(out, state_.plastic_inverse);
+        write_array(out, state_.hardening);
+    });
+}
+
+void FemSimulation::load_checkpoint(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        std::error_code ec;
+        if (!std::filesystem::exists(path, ec)) throw FileNotFoundError(path + ": no such checkpoint file");
+        throw std::invalid_argument(path + ": cannot open the checkpoint");
+    }
+    char magic[8];
+    std::int64_t header[5];
+    double time;
+    std::string digest(64, '\0'), name(kNameBytes, '\0');
+    in.read(magic, sizeof magic);
+    in.read(reinterpret_cast<char*>(header), sizeof header);
+    in.read(reinterpret_cast<char*>(&time), sizeof time);
+    in.read(digest.data(), 64);
+    in.read(name.data(), kNameBytes);
+    if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
+        throw std::invalid_argument(path + ": not a PlasticityNet FEM checkpoint");
+    if (header[0] != kDim) throw std::invalid_argument(path + ": a " + std::to_string(header[0]) + "D checkpoint");
+    if (digest != scene_digest_)
+        throw std::invalid_argument(path + ": written for a different scene (or a changed scene file)");
+    name.resize(name.find('\0') == std::string::npos ? name.size() : name.find('\0'));
+    if (name != settings_.name)
+        throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " + settings_.name);
+    if (header[1] != static_cast<std::int64_t>(state_.x.size()) ||
+        header[2] != static_cast<std::int64_t>(state_.hardening.size()) || header[3] < 0 || header[4] < 0)
+        throw std::invalid_argument(path + ": holds " + std::to_string(header[1]) + " nodes and " +
+                                    std::to_string(header[2]) + " elements, the scene's mesh has " +
+                                    std::to_string(state_.x.size()) + " and " + std::to_string(state_.hardening.size()));
+    FemState<2> s;
+    read_array(in, s.x, state_.x.size(), path);
+    read_array(in, s.v, state_.v.size(), path);
+    read_array(in, s.plastic_inverse, state_.plastic_inverse.size(), path);
+    read_array(in, s.hardening, state_.hardening.size(), path);
+    in.peek();
+    if (!in.eof()) throw std::invalid_argument(path + ": longer than its header says (corrupt checkpoint)");
+    state_ = std::move(s);
+    frame_ = static_cast<int>(header[3]);
+    steps_ = header[4];
+    time_ = time;
+}
+
+}  // namespace pnet

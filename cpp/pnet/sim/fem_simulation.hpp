@@ -1,0 +1,98 @@
+#pragma once
+// A FEM run of a scene (DESIGN.md §4.2-4.3, §5; 2D): the meshes of the scene's
+// "meshes" (gmsh shapes or .msh files) joined into one mesh, one material per
+// mesh, kinematic meshes (the plate) as prescribed-velocity nodes; IPC contact
+// over the joined boundary (bodies, self-contact, the ground) with lagged
+// friction; the integrator of the settings (explicit, plasticitynet, lagged,
+// analytic); frame-by-frame advance with contact statistics and an exact
+// intersection test at every frame end; checkpoints that resume bit-identically.
+//
+// The barrier stiffness is a property of the scene, not of the run: the same
+// kappa for every integrator and step (Scene::Contact: by default 100 x IPC's
+// lower bound for a 1e-2 s step), so that runs at different dt solve the same
+// physics and can be compared.
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "pnet/contact/friction.hpp"
+#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/fem/fem_integrator.hpp"
+#include "pnet/scene/scene.hpp"
+#include "pnet/sim/mpm_simulation.hpp"  // IntegratorSettings, FrameStats
+
+namespace pnet {
+
+/// The FEM system a scene describes, and where each mesh lies in it.
+struct FemSceneSystem {
+    FemSystem<2> system;
+    std::vector<int> first_node;     // per mesh, and the node count at the end
+    std::vector<int> first_element;  // per mesh, and the element count at the end
+    double diagonal = 0.0;           // bounding-box diagonal of the rest positions, m
+    double dhat = 0.0;               // m
+    double kappa = 0.0;              // J/m^4
+
+    /// Index of the mesh that holds `node`.
+    int mesh_of_node(int node) const;
+};
+
+/// Meshes the scene (gmsh), builds the system and the contact parameters and
+/// checks the start state: a mesh that intersects another, itself or the
+/// ground is refused (SceneError naming the file, the meshes and the pair), as
+/// is an empty mesh file (MeshError naming it).
+FemSceneSystem make_fem_system(const Scene& scene);
+
+class FemSimulation {
+public:
+    static constexpr int kDim = 2;
+
+    /// Throws std::invalid_argument for an unknown integrator, a bad dt, or a
+    /// model that is missing or unfit ("<scene file>: meshes[k].model: ...");
+    /// SceneError for an intersecting start.
+    FemSimulation(const Scene& scene, const IntegratorSettings& settings);
+
+    /// One step of the integrator's dt (explicit with dt = 0: the CFL step of
+    /// the elements), shortened to land on the end of the frame. Throws
+    /// SimulationError on a failed solve or a blow-up.
+    StepStats step();
+    /// Advances to the end of the next frame (see Simulation::advance_frame),
+    /// then tests the meshes for intersection exactly (SimulationError if any).
+    FrameStats advance_frame(const std::function<void()>& after_step = {});
+
+    const FemState<2>& state() const { return state_; }
+    const FemSceneSystem& scene_system() const { return built_; }
+    const FemSystem<2>& system() const { return built_.system; }
+    const Mesh<2>& mesh() const { return built_.system.mesh; }
+    const Contact2d& contact() const { return *contact_; }
+    const Scene& scene() const { return scene_; }
+    int frame() const { return frame_; }
+    double time() const { return time_; }
+    long total_steps() const { return steps_; }
+    /// The step the integrator takes (explicit with dt = 0: the CFL step), s.
+    double step_size() const { return dt_; }
+    const IntegratorSettings& settings() const { return settings_; }
+    const std::vector<StepStats>& last_frame_steps() const { return frame_steps_; }
+
+    /// As Simulation: atomic, refuses another scene, integrator or mesh size.
+    void save_checkpoint(const std::string& path) const;
+    void load_checkpoint(const std::string& path);
+
+private:
+    Scene scene_;
+    std::string scene_digest_;
+    FemSceneSystem built_;
+    IntegratorSettings settings_;
+    FemState<2> state_;
+    std::unique_ptr<Contact2d> contact_;
+    std::unique_ptr<Friction2d> friction_;
+    std::unique_ptr<FemImplicitIntegrator<2>> implicit_;
+    std::unique_ptr<FemExplicitIntegrator<2>> explicit_;
+    std::vector<StepStats> frame_steps_;
+    double dt_ = 0.0;
+    int frame_ = 0;
+    long steps_ = 0;
+    double time_ = 0.0;
+};
+
+}  // namespace pnet

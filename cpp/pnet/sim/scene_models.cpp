@@ -1,0 +1,55 @@
+#include "pnet/sim/scene_models.hpp"
+
+#include <memory>
+
+#include "pnet/nn/model_file.hpp"
+
+namespace pnet {
+
+IntegratorSettings integrator_settings(const Scene& scene, const std::string& integrator) {
+    IntegratorSettings settings = IntegratorSettings::from_scene(scene);
+    if (!integrator.empty() && integrator != scene.integrator.name) {
+        // The scene's dt belongs to the scene's integrator.
+        settings.name = integrator;
+        // DESIGN.md §5: implicit MPM at 1e-3 s, implicit FEM at 1e-2 s (the paper's).
+        settings.dt = integrator == "explicit" ? 0.0 : scene.has_meshes() ? 1e-2 : 1e-3;
+    }
+    if (scene.has_meshes()) {
+        if (settings.name != "explicit" && settings.name != "plasticitynet" && settings.name != "lagged" &&
+            settings.name != "analytic")
+            throw std::invalid_argument("integrator: expected explicit, plasticitynet, lagged or analytic, got \"" +
+                                        settings.name + "\"");
+    } else if (settings.name != "explicit" && settings.name != "plasticitynet" && settings.name != "lagged") {
+        throw std::invalid_argument("integrator: expected explicit, plasticitynet or lagged" +
+                                    std::string(settings.name == "analytic" ? " ('analytic' is for FEM meshes)" : "") +
+                                    ", got \"" + settings.name + "\"");
+    }
+    return settings;
+}
+
+void load_scene_models(const Scene& scene, bool trusted_models, IntegratorSettings& settings) {
+    settings.models.clear();
+    std::vector<std::pair<std::string, std::string>> models;  // (file, json path) per object or mesh
+    for (const SceneObject& object : scene.objects) models.emplace_back(object.model, object.json_path);
+    for (const SceneMesh& mesh : scene.meshes) models.emplace_back(mesh.model, mesh.json_path);
+    for (const auto& [model, json_path] : models) {
+        settings.models.emplace_back();
+        if (model.empty()) continue;
+        LoadOptions load;
+        load.expected_dim = scene.dim;
+        load.expected_kind = ModelKind::Energy;
+        load.trusted = trusted_models;
+        const std::string where = scene.file + ": " + json_path + ".model: ";
+        try {
+            settings.models.back() = std::make_shared<const ModelFile>(load_model_file(model, load));
+        } catch (const FileNotFoundError& e) {
+            throw FileNotFoundError(where + e.what());
+        } catch (const UntrustedModelError& e) {
+            throw UntrustedModelError(where + e.what());
+        } catch (const std::exception& e) {
+            throw SceneError(where + e.what());
+        }
+    }
+}
+
+}  // namespace pnet
