@@ -8,8 +8,8 @@
 
 #include "common.hpp"
 #include "pnet/metrics/iou.hpp"
-#include "pnet/mpm/scene_models.hpp"
-#include "pnet/mpm/simulation.hpp"
+#include "pnet/sim/scene_models.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 
 namespace pnet::bindings {
 

@@ -44,6 +44,8 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
         read_option(block, "fixed_point_tolerance", o.fixed_point_tolerance, context, 0.0, "a number >= 0");
     o.max_fixed_point_iterations =
         read_option(block, "max_fixed_point_iterations", o.max_fixed_point_iterations, context, 1, "an integer >= 1");
+    o.fixed_point_anderson =
+        read_option(block, "fixed_point_anderson", o.fixed_point_anderson, context, 0, "an integer >= 0");
     o.regularizer_weight = read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
     o.lazy_hessian = read_option(block, "lazy_hessian", o.lazy_hessian, context, 0.0, "a number in [0, 1)");
     if (o.lazy_hessian >= 1.0)
@@ -79,6 +81,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"cg_tolerance", cg_tolerance},
             {"fixed_point_tolerance", fixed_point_tolerance},
             {"max_fixed_point_iterations", max_fixed_point_iterations},
+            {"fixed_point_anderson", fixed_point_anderson},
             {"regularizer_weight", regularizer_weight},
             {"preconditioner", preconditioner},
             {"lazy_hessian", lazy_hessian},
@@ -130,6 +133,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     solve.fixed_point = method_ == ImplicitMethod::PlasticityNet;
     solve.max_solves = options_.max_fixed_point_iterations;
     solve.tolerance = options_.fixed_point_tolerance;
+    solve.anderson_depth = options_.fixed_point_anderson;
     solve.fail_on_unconverged = options_.fail_on_unconverged;
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);

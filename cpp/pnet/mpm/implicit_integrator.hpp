@@ -60,6 +60,9 @@ struct ImplicitOptions {
     // at CFL +3.7%); converged it is +1.7%, at 3.6x the cost (about 3 solves
     // per step; notebooks/results/implicit_eval).
     int max_fixed_point_iterations = 8;
+    // Anderson acceleration of the fixed point over this many iterates (0: the
+    // plain iteration; solver/fixed_point.hpp).
+    int fixed_point_anderson = 0;
     double regularizer_weight = 1.0;     // w of eq. 11 (plasticitynet; 0: the ablation)
     // PCG preconditioner: "jacobi" or "block_jacobi" (the d x d block of each
     // node). Jacobi is the default: block Jacobi saved 2-3% of the CG

@@ -1,8 +1,46 @@
 #include "pnet/solver/fixed_point.hpp"
 
+#include <Eigen/QR>
+#include <cstring>
 #include <limits>
 
 namespace pnet {
+
+namespace {
+
+/// F0 <- the Anderson combination, from F0 (the last reference) and F = G(F0) (its image).
+template <int dim>
+void anderson_update(ReferenceSolveWork<dim>& work, int depth, int iteration) {
+    constexpr int kEntries = dim * dim;
+    const Eigen::Index n = static_cast<Eigen::Index>(work.F.size()) * kEntries;
+    const Eigen::Map<const VecX> g(work.F.data()->data(), n);
+    const Eigen::Map<const VecX> f0(work.F0.data()->data(), n);
+    const VecX r = g - f0;
+    if (iteration == 0) {
+        work.dR.resize(n, 0);
+        work.dG.resize(n, 0);
+    } else {
+        // Append the newest differences, dropping the oldest beyond the depth.
+        const Eigen::Index kept = std::min<Eigen::Index>(work.dR.cols(), depth - 1);
+        Eigen::MatrixXd dR(n, kept + 1), dG(n, kept + 1);
+        dR.leftCols(kept) = work.dR.rightCols(kept);
+        dG.leftCols(kept) = work.dG.rightCols(kept);
+        dR.col(kept) = r - work.last_r;
+        dG.col(kept) = g - work.last_g;
+        work.dR.swap(dR);
+        work.dG.swap(dG);
+    }
+    work.last_r = r;
+    work.last_g = g;
+    VecX next = g;
+    if (work.dR.cols() > 0) {
+        const VecX gamma = work.dR.colPivHouseholderQr().solve(r);
+        if (gamma.allFinite()) next -= work.dG * gamma;
+    }
+    Eigen::Map<VecX>(work.F0.data()->data(), n) = next;
+}
+
+}  // namespace
 
 template <int dim>
 ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
@@ -44,9 +82,16 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
             work.best_v = v;
         }
         stats.change = best_change;
-        if (change <= options.tolerance || change > previous_change) break;
-        previous_change = change;
-        work.F0.swap(work.F);  // F0^{j+1} = F(v^{j+1})
+        if (change <= options.tolerance) break;
+        if (options.anderson_depth <= 0) {
+            if (change > previous_change) break;
+            previous_change = change;
+            work.F0.swap(work.F);  // F0^{j+1} = F(v^{j+1})
+        } else {
+            // Accelerated: not monotone, so stop only when far above the best (diverging).
+            if (change > 10.0 * best_change) break;
+            anderson_update(work, options.anderson_depth, j);
+        }
     }
     if (fixed_point) {
         v.swap(work.best_v);

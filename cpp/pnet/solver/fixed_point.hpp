@@ -35,6 +35,11 @@ struct ReferenceSolveOptions {
     int max_solves = 8;             // fixed point: the cap
     double tolerance = 1e-3;        // fixed point: on max_p ||F(v) - F0||_F
     bool fail_on_unconverged = false;  // an unconverged Newton solve throws NewtonError
+    // Fixed point: Anderson acceleration of the map F0 -> F(v(F0)) over the last
+    // `anderson_depth` iterates (0: the plain iteration of eq. 10). The next
+    // reference is the combination of the last images F(v) whose residuals
+    // F(v) - F0, combined alike, are smallest (least squares; Walker and Ni 2011).
+    int anderson_depth = 0;
 };
 
 /// Totals over the step's solves.
@@ -67,6 +72,9 @@ template <int dim>
 struct ReferenceSolveWork {
     std::vector<Mat<dim>> F0, F;
     VecX best_v;
+    // Anderson acceleration: differences of the last iterates' residuals and images (columns).
+    Eigen::MatrixXd dR, dG;
+    VecX last_r, last_g;
 };
 
 /// Solves the step from v (updated). `after_reference`, if given, runs after
