@@ -88,7 +88,9 @@ Mesh<2> mesh_shape(const Shape2d& shape, const std::string& context) {
         case Shape2d::Kind::Frame:
             if (!(size.minCoeff() > 0.0) || !size.allFinite()) fail("the box must have max > min on both axes");
             extent = size.minCoeff();
-            if (shape.kind == Shape2d::Kind::Frame && !(shape.thickness > 0.0 && 2.0 * shape.thickness < extent))
+            // A hole narrower than round-off (0.55 - 0.45 - 2 x 0.05 = 3e-17) is none: gmsh would fail to cut it.
+            if (shape.kind == Shape2d::Kind::Frame &&
+                !(shape.thickness > 0.0 && 2.0 * shape.thickness < extent * (1.0 - 1e-6)))
                 fail("the frame's thickness must be > 0 and leave a hole (less than half of " + std::to_string(extent) +
                      " m)");
             break;

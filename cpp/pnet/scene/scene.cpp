@@ -342,7 +342,7 @@ SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, con
     if (mesh.shape == SceneMesh::Shape::Frame) {
         mesh.thickness = r.positive(r.require(v, "thickness", path, "a positive number"), join(path, "thickness"));
         const double narrowest = (mesh.max - mesh.min).minCoeff();
-        if (!(2.0 * mesh.thickness < narrowest))
+        if (!(2.0 * mesh.thickness < narrowest * (1.0 - 1e-6)))  // not a hole of round-off width
             r.fail(join(path, "thickness"), "two walls of " + show(mesh.thickness) + " m leave no hole in a frame " +
                                                 show(narrowest) + " m wide");
     }
