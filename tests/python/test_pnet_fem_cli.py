@@ -1,0 +1,134 @@
+"""`pnet simulate` on the FEM scenes (issue 15): the tiny metal frames with every integrator,
+mesh frames (PLY triangles + PNG), stats and steps with contact columns, resume, and errors
+that name the file and the JSON path."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from test_pnet_cli import PNET, ROOT, TINY, pnet
+
+sys.path.insert(0, str(ROOT / "python"))
+from plasticitynet.mesh_ply import read_mesh_ply  # noqa: E402
+
+
+def fem_scene(name: str) -> dict:
+    scene = json.loads((TINY / f"{name}.json").read_text())
+    for mesh in scene["meshes"]:
+        if "model" in mesh:
+            mesh["model"] = str((TINY / mesh["model"]).resolve())
+    return scene
+
+
+def write(tmp_path: Path, scene: dict, name="scene.json") -> Path:
+    path = tmp_path / name
+    path.write_text(json.dumps(scene))
+    return path
+
+
+def csv_rows(path: Path) -> list[dict]:
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    return [dict(zip(header, line.split(","))) for line in lines[1:]]
+
+
+@pytest.mark.parametrize("integrator", ["plasticitynet", "lagged", "analytic", "explicit"])
+@pytest.mark.parametrize("name", ["metal_frame_2d", "metal_nh_frame_2d"])
+def test_every_integrator_runs_the_tiny_frames(tmp_path, name, integrator):
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / f"{name}.json", "--integrator", integrator, "--out", out)
+    if integrator == "analytic" and name == "metal_nh_frame_2d":
+        assert r.returncode == 2
+        assert "meshes[0].material: the analytic integrator needs StVK-Hencky elasticity" in r.stderr
+        return
+    assert r.returncode == 0, r.stderr
+    assert "contact: no intersection at any frame" in r.stdout and "wrote 2 frames" in r.stdout
+    run = json.loads((out / "run.json").read_text())
+    assert run["integrator"] == integrator and run["elements"] > 100 and run["kappa"] > 0
+    frames = [read_mesh_ply(out / f"frame_{f:05d}.ply") for f in range(3)]
+    rest = frames[0]
+    for frame in frames:
+        assert frame.triangles.shape == (run["elements"], 3) and np.array_equal(frame.triangles, rest.triangles)
+        assert frame.position.shape == (run["nodes"], 2)
+    for f in range(3):
+        assert (out / f"frame_{f:05d}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The plate (the second mesh) moved 0.05 m/s x 0.04 s down; nothing went below the ground.
+    plate = slice(run["mesh_first_node"][1], run["mesh_first_node"][2])
+    assert np.allclose(frames[2].position[plate, 1] - rest.position[plate, 1], -0.002, atol=1e-12)
+    assert frames[2].position[:, 1].min() > 0
+    stats = csv_rows(out / "stats.csv")
+    assert [int(s["frame"]) for s in stats] == [1, 2]
+    assert all(float(s["min_distance_m"]) > 0 and int(s["contact_pairs"]) > 0 for s in stats)
+    steps = csv_rows(out / "steps.csv")
+    assert {"kinematic_stages", "ccd_queries", "ccd_limited", "contact_pairs", "min_distance_m"} <= set(steps[0])
+    if integrator != "explicit":
+        assert len(steps) == 4 and all(s["converged"] == "1" for s in steps)
+        assert sum(int(s["ccd_queries"]) for s in steps) > 0
+        # From frame 2 on the plate presses the frame: CCD holds its first move back.
+        assert int(steps[-1]["kinematic_stages"]) > 0 and steps[-1]["kinematic_reached"] == "1"
+    if integrator == "plasticitynet":
+        assert int(steps[-1]["fixed_point_iterations"]) > 1 and steps[-1]["fixed_point_converged"] == "1"
+
+
+def test_learned_and_exact_return_maps_differ_slightly(tmp_path):
+    runs = {}
+    for rm in ("learned", "exact"):
+        out = tmp_path / rm
+        # The tiny frame first yields in frame 6 (the plate 5 mm in); positions differ from frame 7.
+        r = pnet("simulate", TINY / "metal_nh_frame_2d.json", "--return-map", rm, "--frames", 7, "--out", out)
+        assert r.returncode == 0, r.stderr
+        assert json.loads((out / "run.json").read_text())["solver"]["learned_return_map"] == (rm == "learned")
+        runs[rm] = read_mesh_ply(out / "frame_00007.ply")
+    assert runs["exact"].hardening.max() > 0.05  # elements yielded
+    gap = np.linalg.norm(runs["learned"].position - runs["exact"].position, axis=1).max()
+    assert 0 < gap < 1e-4  # the same physics; the network's dgamma is not the root-find's
+
+
+def test_resume_continues_bit_identically(tmp_path):
+    scene = TINY / "metal_frame_2d.json"
+    full, part = tmp_path / "full", tmp_path / "part"
+    assert pnet("simulate", scene, "--out", full, "--frames", 3).returncode == 0
+    assert pnet("simulate", scene, "--out", part, "--frames", 1, "--checkpoint-every", 1).returncode == 0
+    r = pnet("simulate", scene, "--out", part, "--frames", 3, "--resume")
+    assert r.returncode == 0, r.stderr
+    assert "resumed at frame 1" in r.stderr
+    for f in range(4):
+        assert (full / f"frame_{f:05d}.ply").read_bytes() == (part / f"frame_{f:05d}.ply").read_bytes()
+    strip = lambda rows: [{k: v for k, v in row.items() if not k.endswith("_s") or k == "time_s"} for row in rows]
+    assert strip(csv_rows(full / "stats.csv")) == strip(csv_rows(part / "stats.csv"))
+
+
+@pytest.mark.parametrize("case", ["plate_through_frame", "no_material", "bad_element_size", "mesh_file_missing",
+                                  "garbage_mesh_file", "no_model"])
+def test_bad_fem_scenes_exit_2_naming_file_and_path(tmp_path, case):
+    scene = fem_scene("metal_frame_2d")
+    args = []
+    if case == "plate_through_frame":
+        scene["meshes"][1]["min"][1], scene["meshes"][1]["max"][1] = 0.1711, 0.1811
+        expected = "meshes: the start state intersects or touches: "
+    elif case == "no_material":
+        del scene["meshes"][0]["material"]
+        expected = "meshes[0].material: missing"
+    elif case == "bad_element_size":
+        scene["meshes"][0]["element_size"] = 0.5
+        expected = "meshes[0]: element_size must be > 0 and at most the shape's size"
+    elif case == "mesh_file_missing":
+        scene["meshes"][0] = {"shape": "file", "file": "nope.msh", "material": "metal"}
+        expected = "meshes[0].file: "
+    elif case == "garbage_mesh_file":
+        (tmp_path / "junk.msh").write_text("$MeshFormat\nthis is not a mesh\n")
+        scene["meshes"][0] = {"shape": "file", "file": "junk.msh", "material": "metal"}
+        expected = "meshes[0].file: "
+    else:
+        del scene["meshes"][0]["model"]
+        args = ["--integrator", "plasticitynet"]
+        expected = "meshes[0].model"
+    path = write(tmp_path, scene)
+    r = pnet("simulate", path, "--out", tmp_path / "out", *args)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert f"{path}: " in r.stderr and expected in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and "terminate" not in r.stderr
