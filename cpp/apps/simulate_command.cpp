@@ -266,7 +266,7 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
         "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
         "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged" +
-        std::string(fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m" : "") +
+        std::string(fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,substeps" : "") +
         "\n";
     const fs::path steps_path = out / "steps.csv";
     auto keep_rows = [&](const fs::path& path, std::string& text) {
@@ -329,9 +329,9 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
                           s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped,
                           s.fixed_point_converged ? 1 : 0);
             if (fem)
-                n += std::snprintf(row + n, sizeof row - n, ",%d,%d,%d,%d,%zu,%.6g", s.kinematic_stages,
+                n += std::snprintf(row + n, sizeof row - n, ",%d,%d,%d,%d,%zu,%.6g,%d", s.kinematic_stages,
                                    s.kinematic_reached ? 1 : 0, s.ccd_queries, s.ccd_limited, s.contact_pairs,
-                                   s.min_distance);
+                                   s.min_distance, s.substeps);
             std::snprintf(row + n, sizeof row - n, "\n");
             steps_csv += row;
         }

@@ -1,3 +1,4 @@
+#include <limits>
 #include "pnet/contact/ipc_contact.hpp"
 
 #include <algorithm>
@@ -61,6 +62,31 @@ double Contact2d::energy(const std::vector<Vec<2>>& x, double scale, Eigen::Vect
         }
     }
     return kappa_ * sum;
+}
+
+double Contact2d::stable_time_step(const std::vector<Vec<2>>& x, const std::vector<double>& free_mass) const {
+    double omega2 = 0.0;
+    for (const Pair& pair : active(x)) {
+        double s = 0.0, inverse_mass = 0.0;
+        auto add = [&](int node) {
+            if (free_mass[node] > 0.0) inverse_mass += 1.0 / free_mass[node];
+        };
+        add(pair.node);
+        if (pair.edge >= 0) {
+            const int a = edges_[pair.edge][0], b = edges_[pair.edge][1];
+            s = point_edge_distance_sq(x[pair.node], x[a], x[b]);
+            add(a);
+            add(b);
+        } else {
+            const HalfSpace2d& h = half_spaces_[-pair.edge - 1];
+            const double d = h.normal.dot(x[pair.node] - h.origin);
+            s = d * d;
+        }
+        // d^2/dd^2 b(d^2) = 4 s b''(s) + 2 b'(s).
+        const double k = kappa_ * std::abs(4.0 * s * barrier_.second(s) + 2.0 * barrier_.first(s));
+        omega2 = std::max(omega2, k * inverse_mass);
+    }
+    return omega2 > 0.0 ? 1.0 / std::sqrt(omega2) : std::numeric_limits<double>::infinity();
 }
 
 double Contact2d::value(const std::vector<Vec<2>>& x) const { return energy(x, 0.0, nullptr); }

@@ -42,6 +42,9 @@ public:
                              std::vector<Eigen::Triplet<double>>& triplets, bool project_psd) const = 0;
     /// The largest t in (0, 1] such that x + t dx keeps every pair apart (1 if nothing collides).
     virtual double max_step(const std::vector<Vec<dim>>& x, const std::vector<Vec<dim>>& dx) const = 0;
+    /// The largest stable explicit step of the barrier forces at x (s), given each node's mass
+    /// (0 for kinematic nodes); infinity when nothing is in contact.
+    virtual double stable_time_step(const std::vector<Vec<dim>>& x, const std::vector<double>& free_mass) const = 0;
 };
 
 class Contact2d final : public ContactPotential<2> {
@@ -60,6 +63,12 @@ public:
     void add_hessian(const std::vector<Vec<2>>& x, double scale, std::vector<Eigen::Triplet<double>>& triplets,
                      bool project_psd) const override;
     double max_step(const std::vector<Vec<2>>& x, const std::vector<Vec<2>>& dx) const override;
+
+    /// The largest stable explicit step of the barrier at x, s: 1 / omega_max over the active
+    /// pairs, omega^2 = k sum_j 1/m_j with k = kappa |d^2 b(d^2)/dd^2| the pair's normal stiffness
+    /// and j its free nodes (mass > 0; kinematic nodes have mass 0 here). Half the limit 2/omega
+    /// of symplectic Euler for a lone spring. Infinity when no pair is active.
+    double stable_time_step(const std::vector<Vec<2>>& x, const std::vector<double>& free_mass) const override;
 
     /// The smallest distance of any pair (node-edge, node-plane), m.
     double min_distance(const std::vector<Vec<2>>& x) const;

@@ -223,11 +223,36 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     return stats;
 }
 
+constexpr int kMaxSubsteps = 100000;
+
 template <int dim>
 StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
     StepStats stats;
     stats.dt = dt;
+    stats.substeps = 0;
+    if (contact_ && free_mass_.empty()) {
+        free_mass_ = system_.rest.node_mass;
+        for (std::size_t i = 0; i < free_mass_.size(); ++i)
+            if (system_.fixed_node[i]) free_mass_[i] = 0.0;
+    }
+    double remaining = dt;
+    while (remaining > 1e-12 * dt) {
+        const double h = contact_ ? std::min(remaining, contact_->stable_time_step(state.x, free_mass_)) : remaining;
+        remaining -= substep(state, h, step_index, stats);
+        // A barrier too soft for the impact lets a gap close towards 0 (the stable substep
+        // shrinks with it): stop instead of crawling.
+        if (++stats.substeps > kMaxSubsteps)
+            throw SimulationError("step " + std::to_string(step_index) + ": contact needed more than " +
+                                  std::to_string(kMaxSubsteps) + " explicit substeps (a gap is closing to 0: "
+                                  "the barrier stiffness kappa is too low for this impact)");
+    }
+    stats.wall_seconds = seconds_since(start);
+    return stats;
+}
+
+template <int dim>
+double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long step_index, StepStats& stats) {
     const Mesh<dim>& mesh = system_.mesh;
     const std::size_t n = mesh.nodes();
     VecX force = VecX::Zero(dim * n);
@@ -251,32 +276,41 @@ StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
             force -= friction_gradient;
         }
     }
-    std::vector<Vec<dim>> dx(n);
-    double max_speed = 0.0;
+    std::vector<Vec<dim>> v(n), dx(n), twice(n);
+    // The step is shortened until it closes no gap by more than half (CCD on twice the motion):
+    // the barrier's stiffness, ~1/d^2, then at most quadruples before the next substep's
+    // stability bound sees it.
+    for (int attempt = 0;; ++attempt) {
+        double max_speed = 0.0;
+        for (std::size_t i = 0; i < n; ++i) {
+            v[i] = system_.fixed_node[i]
+                       ? system_.prescribed_velocity[i]
+                       : Vec<dim>(state.v[i] + h * (force.template segment<dim>(dim * i) / system_.rest.node_mass[i] +
+                                                    system_.gravity));
+            if (!v[i].allFinite())
+                throw SimulationError("step " + std::to_string(step_index) + ": node " + std::to_string(i) +
+                                      " has a non-finite velocity (the simulation blew up; try a smaller dt)");
+            dx[i] = h * v[i];
+            twice[i] = 2.0 * dx[i];
+            max_speed = std::max(max_speed, v[i].norm());
+        }
+        stats.max_grid_speed = std::max(stats.max_grid_speed, max_speed);
+        if (!contact_) break;
+        const double t = contact_->max_step(state.x, twice);
+        ++stats.ccd_queries;
+        if (t >= 1.0) break;
+        ++stats.ccd_limited;
+        if (attempt == 60 || !(h > 0.0))
+            throw SimulationError("step " + std::to_string(step_index) + ": the explicit step cannot avoid "
+                                  "intersecting the mesh (CCD allows " + std::to_string(t) + " of it)");
+        h *= std::min(0.5, t);
+    }
     for (std::size_t i = 0; i < n; ++i) {
-        if (system_.fixed_node[i])
-            state.v[i] = system_.prescribed_velocity[i];
-        else
-            state.v[i] += dt * (force.template segment<dim>(dim * i) / system_.rest.node_mass[i] + system_.gravity);
-        dx[i] = dt * state.v[i];
-        max_speed = std::max(max_speed, state.v[i].norm());
-        if (!state.v[i].allFinite())
-            throw SimulationError("step " + std::to_string(step_index) + ": node " + std::to_string(i) +
-                                  " has a non-finite velocity (the simulation blew up; try a smaller dt)");
+        state.v[i] = v[i];
+        state.x[i] += dx[i];
     }
-    if (contact_) {
-        const double t = contact_->max_step(state.x, dx);
-        stats.ccd_queries = 1;
-        stats.ccd_limited = t < 1.0;
-        if (t < 1.0)
-            throw SimulationError("step " + std::to_string(step_index) + ": the explicit step would make the mesh "
-                                  "intersect (CCD allows " + std::to_string(t) + " of it); use a smaller dt");
-    }
-    for (std::size_t i = 0; i < n; ++i) state.x[i] += dx[i];
     fem_return_mapping(system_, state);
-    stats.max_grid_speed = max_speed;
-    stats.wall_seconds = seconds_since(start);
-    return stats;
+    return h;
 }
 
 template <int dim>

@@ -42,6 +42,7 @@ struct StepStats {
     // FEM contact: CCD queries of the step (line search and starts) and how many shortened a step;
     // contact pairs closer than dhat and the smallest pair distance (m) at the end of the step.
     int ccd_queries = 0, ccd_limited = 0;
+    int substeps = 1;  // explicit FEM: substeps the barrier's stability needed
     std::size_t contact_pairs = 0;
     double min_distance = 0.0;
     // Where an implicit step's time went (parts of grid_seconds).

@@ -140,5 +140,64 @@ TEST(FemIntegrator, KinematicPlatePressesABlockWithoutPenetration) {
     RecordProperty("newton_iterations", newton);
 }
 
+TEST(FemIntegrator, ExplicitSubstepsWhereTheBarrierStiffensAndLandsWithoutPenetration) {
+    // A stiff square (E 1e7 Pa, 5 mm elements) hits the ground at 10 m/s. Its explicit step
+    // (the elements' CFL step) is stable for the elasticity, but the barrier's stiffness
+    // grows like kappa dhat^4 / d^2 as the gap d closes: with a fixed step the square goes
+    // unstable on the barrier and CCD finds the step intersecting (the bug: metal_frame_2d
+    // at 1e-5 s failed at frame 47).
+    Shape2d box;
+    box.kind = Shape2d::Kind::Box;
+    box.min = Vec<2>(0.0, 0.0005);
+    box.max = Vec<2>(0.02, 0.0205);
+    box.element_size = 0.005;
+    FemSystem<2> system;
+    system.mesh = mesh_shape(box, "square");
+    MaterialDescription steel;
+    steel.density = 7800.0;
+    steel.elasticity = ElasticityModel::StvkHencky;
+    steel.elastic.E = 1e7;
+    steel.elastic.nu = 0.3;
+    system.materials = {Material<2>(steel)};
+    system.element_object.assign(system.mesh.elements.size(), 0);
+    system.gravity = Vec<2>(0.0, -9.8);
+    system.make_rest();
+    // kappa: the barrier's energy at the closest approach, kappa dhat^4 ln(dhat^2 / d^2) summed
+    // over the bottom nodes, must take the square's kinetic energy (156 J/m) at a gap d well
+    // above round-off. (With a fixed step, CCD finds step 5 intersecting.)
+    Contact2d contact(system.mesh.boundary, 1e-3, 1e12);
+    contact.add_half_space({Vec<2>(0.0, 0.0), Vec<2>(0.0, 1.0)});
+    FemExplicitIntegrator<2> integrator(system, &contact);
+    FemState<2> state = FemState<2>::at_rest(system);
+    for (Vec<2>& v : state.v) v = Vec<2>(0.0, -10.0);
+    const double dt = integrator.cfl_time_step(0.5);
+    int most_substeps = 1;
+    double lowest = 1.0;
+    for (int step = 0; step * dt < 5e-3; ++step) {
+        StepStats stats;
+        ASSERT_NO_THROW(stats = integrator.step(state, dt, step)) << "step " << step;
+        most_substeps = std::max(most_substeps, stats.substeps);
+        lowest = std::min(lowest, contact.min_distance(state.x));
+    }
+    EXPECT_GT(most_substeps, 1) << "the barrier needed substeps";
+    EXPECT_GT(lowest, 1e-7);
+    double vy = 0.0;
+    for (const Vec<2>& v : state.v) vy += v[1] / state.v.size();
+    EXPECT_GT(vy, 0.0) << "bounced back up";  // elastic impact, no friction
+
+    // With a barrier far too soft for the impact the gap closes towards 0: a clear error, not a hang.
+    Contact2d soft(system.mesh.boundary, 1e-3, 1e6);
+    soft.add_half_space({Vec<2>(0.0, 0.0), Vec<2>(0.0, 1.0)});
+    FemExplicitIntegrator<2> doomed(system, &soft);
+    FemState<2> falling = FemState<2>::at_rest(system);
+    for (Vec<2>& v : falling.v) v = Vec<2>(0.0, -1.0);
+    try {
+        for (int step = 0; step * dt < 5e-3; ++step) doomed.step(falling, dt, step);
+        ADD_FAILURE() << "no error";
+    } catch (const SimulationError& e) {
+        EXPECT_NE(std::string(e.what()).find("kappa is too low"), std::string::npos) << e.what();
+    }
+}
+
 }  // namespace
 }  // namespace pnet
