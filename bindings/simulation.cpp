@@ -1,14 +1,18 @@
-// A running MPM simulation: stepping with the GIL released, Ctrl-C between
-// steps, particle arrays as numpy views, per-step statistics, checkpoints.
+// A running simulation (MPM particles or FEM meshes): stepping with the GIL
+// released, Ctrl-C between steps, particle arrays as numpy views (meshes: node
+// and element arrays as copies), per-step statistics, checkpoints.
 #include <omp.h>
 
 #include <chrono>
 #include <memory>
+#include <type_traits>
+#include <utility>
 #include <variant>
 
 #include "common.hpp"
 #include "pnet/metrics/iou.hpp"
 #include "pnet/sim/scene_models.hpp"
+#include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 
 namespace pnet::bindings {
@@ -43,6 +47,12 @@ void for_each_step_field(F&& f) {
     f("clamped", &StepStats::clamped);
     f("hardening_clamped", &StepStats::hardening_clamped);
     f("max_grid_speed", &StepStats::max_grid_speed);
+    f("kinematic_stages", &StepStats::kinematic_stages);
+    f("ccd_queries", &StepStats::ccd_queries);
+    f("ccd_limited", &StepStats::ccd_limited);
+    f("contact_pairs", &StepStats::contact_pairs);
+    f("min_distance", &StepStats::min_distance);
+    f("substeps", &StepStats::substeps);
 }
 
 py::dict to_dict(const StepStats& s) {
@@ -70,7 +80,16 @@ py::dict to_dict(const FrameStats& f) {
     d["unconverged_steps"] = f.unconverged_steps;
     d["clamped"] = f.clamped;
     d["hardening_clamped"] = f.hardening_clamped;
+    d["contact_pairs"] = f.contact_pairs;
+    d["min_distance"] = f.min_distance;
     return d;
+}
+
+template <typename Sim>
+constexpr bool is_fem = std::is_same_v<std::decay_t<Sim>, FemSimulation>;
+
+[[noreturn]] void no_particles() {
+    throw py::value_error("a FEM scene (meshes) has no particles: see nodes, node_velocities, elements");
 }
 
 /// One column of the step history as a numpy array: float64, int64 or bool.
@@ -117,7 +136,9 @@ public:
         }
         load_scene_models(scene_, trust_models, settings);
         py::gil_scoped_release release;
-        if (scene_.dim == 2)
+        if (scene_.has_meshes())
+            sim_ = std::make_unique<FemSimulation>(scene_, settings);
+        else if (scene_.dim == 2)
             sim_ = std::make_unique<Simulation<2>>(scene_, settings);
         else
             sim_ = std::make_unique<Simulation<3>>(scene_, settings);
@@ -127,13 +148,19 @@ public:
     int dim() const { return scene_.dim; }
     template <typename Fn>
     decltype(auto) visit(Fn&& fn) const {
-        if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
-        return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
+        if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation>>(&sim_)) return fn(std::as_const(**s));
+        return fn(std::as_const(*std::get<std::unique_ptr<Simulation<3>>>(sim_)));
     }
     template <typename Fn>
     decltype(auto) visit(Fn&& fn) {
         if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation>>(&sim_)) return fn(**s);
         return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
+    }
+    const FemSimulation& fem() const {
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation>>(&sim_)) return **s;
+        throw py::value_error("an MPM scene (particles) has no mesh: see positions, velocities");
     }
 
     py::dict step() {
@@ -207,6 +234,10 @@ public:
 
     py::array grid_mass() const {
         GridField g = visit([&](const auto& sim) {
+            if constexpr (is_fem<decltype(sim)>) {
+                no_particles();
+                return GridField{};
+            } else {
             constexpr int d = std::decay_t<decltype(sim)>::kDim;
             const auto& p = sim.particles();
             std::vector<double> x(p.size() * d);
@@ -214,6 +245,7 @@ public:
                 for (int a = 0; a < d; ++a) x[k * d + a] = p.x[k][a];
             py::gil_scoped_release release;
             return rasterize_mass(d, x, p.mass, scene_.domain_min.data(), scene_.domain_max.data(), scene_.dx);
+            }
         });
         return to_numpy(g);
     }
@@ -239,7 +271,7 @@ private:
     }
 
     Scene scene_;
-    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>> sim_;
+    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation>> sim_;
     std::vector<StepStats> history_;  // every step since construction or the last load_checkpoint()
 };
 
@@ -248,6 +280,9 @@ template <typename Member>
 py::array particle_view(const py::object& self, Member member) {
     const PySimulation& s = self.cast<const PySimulation&>();
     return s.visit([&](const auto& sim) -> py::array {
+        if constexpr (is_fem<decltype(sim)>) {
+            no_particles();
+        } else {
         constexpr int d = std::decay_t<decltype(sim)>::kDim;
         const auto& array = member(sim.particles());
         using Element = typename std::decay_t<decltype(array)>::value_type;
@@ -261,13 +296,25 @@ py::array particle_view(const py::object& self, Member member) {
         } else {
             return view(array.data(), {n}, {record}, self);
         }
+        }
     });
+}
+
+/// Rows of `count` d-vectors as a new (count, d) float64 array.
+template <int d>
+py::array_t<double> rows(const std::vector<Vec<d>>& v) {
+    py::array_t<double> a({static_cast<py::ssize_t>(v.size()), static_cast<py::ssize_t>(d)});
+    double* out = a.mutable_data();
+    for (std::size_t i = 0; i < v.size(); ++i)
+        for (int k = 0; k < d; ++k) out[d * i + k] = v[i][k];
+    return a;
 }
 
 }  // namespace
 
 void define_simulation(py::module_& m) {
-    py::class_<PySimulation>(m, "Simulation", R"doc(An MPM simulation of a scene with one of the integrators.
+    py::class_<PySimulation>(m, "Simulation", R"doc(A simulation of a scene with one of the integrators: MPM
+(particles) or, for a scene of meshes, FEM with IPC contact (is_fem).
 
     sim = pns.Simulation("scenes/snowball_2d.json", integrator="plasticitynet", dt=1e-3)
     sim.advance(10, callback=lambda sim, frame: print(frame["frame"], frame["wall_s"]))
@@ -286,9 +333,9 @@ snapshot. grid_mass() and step_stats() return new arrays.)doc")
              py::arg("cfl") = py::none(), py::arg("solver") = py::none(), py::arg("trust_models") = false,
              R"doc(scene: a Scene, a scene file path, or a scene dict (relative model paths
 resolved against the working directory).
-integrator: "explicit", "plasticitynet" or "lagged" (default: the scene's); another
-integrator than the scene's starts from its own default dt (explicit: the CFL
-step; implicit: 1e-3 s).
+integrator: "explicit", "plasticitynet", "lagged" or (FEM) "analytic" (default: the
+scene's); another integrator than the scene's starts from its own default dt
+(explicit: the CFL step; implicit: 1e-3 s for MPM, 1e-2 s for FEM).
 dt: time step, s (0: the CFL step); cfl: the CFL number of that step.
 solver: implicit solver options overriding the scene's integrator block, e.g.
 {"newton_tolerance": 1e-3, "max_fixed_point_iterations": 2, "regularizer_weight": 1}.
@@ -306,7 +353,45 @@ Every model the scene names is loaded and checked.)doc")
                                "Frames completed.")
         .def_property_readonly("time", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.time(); }); }, "s.")
         .def_property_readonly("total_steps", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.total_steps(); }); })
-        .def_property_readonly("num_particles", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.particles().size(); }); })
+        .def_property_readonly("num_particles", [](const PySimulation& s) {
+            return s.visit([](const auto& sim) -> std::size_t {
+                if constexpr (is_fem<decltype(sim)>) return 0;
+                else return sim.particles().size();
+            });
+        }, "Particles (0 in a FEM scene).")
+        .def_property_readonly("is_fem", [](const PySimulation& s) { return s.scene().has_meshes(); },
+                               "Whether the scene is of FEM meshes (node and element arrays) rather than particles.")
+        .def_property_readonly("nodes", [](const PySimulation& s) { return rows<2>(s.fem().state().x); },
+                               "FEM: (n, 2) float64 node positions, m (a new array).")
+        .def_property_readonly("node_velocities", [](const PySimulation& s) { return rows<2>(s.fem().state().v); },
+                               "FEM: (n, 2) float64 node velocities, m/s (a new array).")
+        .def_property_readonly("rest_nodes", [](const PySimulation& s) { return rows<2>(s.fem().mesh().x); },
+                               "FEM: (n, 2) float64 rest positions, m.")
+        .def_property_readonly("elements", [](const PySimulation& s) {
+            const auto& elements = s.fem().mesh().elements;
+            py::array_t<std::int64_t> a({static_cast<py::ssize_t>(elements.size()), py::ssize_t{3}});
+            std::int64_t* out = a.mutable_data();
+            for (std::size_t e = 0; e < elements.size(); ++e)
+                for (int k = 0; k < 3; ++k) out[3 * e + k] = elements[e][k];
+            return a;
+        }, "FEM: (m, 3) int64 triangle node indices (positively oriented at rest).")
+        .def_property_readonly("element_hardening", [](const PySimulation& s) {
+            const auto& h = s.fem().state().hardening;
+            return py::array_t<double>(static_cast<py::ssize_t>(h.size()), h.data());
+        }, "FEM: (m,) float64 hardening state per element (von Mises h).")
+        .def_property_readonly("mesh_first_node", [](const PySimulation& s) { return s.fem().scene_system().first_node; },
+                               "FEM: the first node of each scene mesh, and the node count at the end.")
+        .def_property_readonly("contact", [](const PySimulation& s) {
+            const FemSimulation& f = s.fem();
+            py::dict d;
+            d["dhat"] = f.scene_system().dhat;
+            d["kappa"] = f.scene_system().kappa;
+            d["bbox_diagonal"] = f.scene_system().diagonal;
+            d["min_distance"] = f.contact().min_distance(f.state().x);
+            d["active_pairs"] = f.contact().active_pairs(f.state().x);
+            return d;
+        }, "FEM: barrier dhat (m), kappa (J/m^4), the bounding-box diagonal (m), and now the smallest pair "
+           "distance (m) and the pairs within dhat.")
         .def("step", &PySimulation::step,
              "One time step (shortened to land on the end of the frame); returns its statistics as a dict.")
         .def("advance",
@@ -348,8 +433,14 @@ max_grid_speed (m/s).)doc")
         .def_property_readonly("object", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.object; }); }, "(n,) int32: the scene object of each particle.")
         .def("__repr__", [](const PySimulation& s) {
             return s.visit([&](const auto& sim) {
+                std::string size;
+                if constexpr (is_fem<decltype(sim)>)
+                    size = std::to_string(sim.mesh().nodes()) + " nodes, " +
+                           std::to_string(sim.mesh().elements.size()) + " elements";
+                else
+                    size = std::to_string(sim.particles().size()) + " particles";
                 return "<plasticitynet_sim.Simulation " + s.scene().name + ": " + sim.settings().name + ", frame " +
-                       std::to_string(sim.frame()) + ", " + std::to_string(sim.particles().size()) + " particles>";
+                       std::to_string(sim.frame()) + ", " + size + ">";
             });
         });
 

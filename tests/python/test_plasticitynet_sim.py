@@ -455,3 +455,41 @@ def test_a_model_for_other_plasticity_parameters_raises_value_error():
     with pytest.raises(ValueError, match=r"trained for material\.plasticity\.friction_angle_deg = 30\.0, the object's "
                                          r"material has 35\.0"):
         pns.Simulation(scene, integrator="plasticitynet")
+
+
+# FEM scenes (meshes): the same Simulation class, with node and element arrays.
+
+def test_fem_scene_steps_with_mesh_arrays_and_contact_stats(tmp_path):
+    sim = pns.Simulation(str(TINY / "metal_frame_2d.json"), integrator="analytic")
+    assert sim.is_fem and sim.num_particles == 0 and sim.dt == 1e-2
+    rest = sim.rest_nodes
+    first = sim.mesh_first_node
+    frames = sim.advance(2)
+    assert [f["frame"] for f in frames] == [1, 2]
+    assert all(f["converged"] and f["contact_pairs"] > 0 and f["min_distance"] > 0 for f in frames)
+    nodes, elements = sim.nodes, sim.elements
+    assert nodes.shape == rest.shape and elements.shape[1] == 3 and elements.max() < len(nodes)
+    # The plate moved 2 mm down along its prescribed path.
+    assert np.allclose(nodes[first[1]:first[2], 1] - rest[first[1]:first[2], 1], -0.002, atol=1e-12)
+    assert sim.element_hardening.shape == (len(elements),)
+    contact = sim.contact
+    assert 0 < contact["min_distance"] and contact["dhat"] == pytest.approx(1e-3 * contact["bbox_diagonal"])
+    stats = sim.step_stats()
+    assert len(stats["kinematic_stages"]) == 4 and stats["ccd_queries"].sum() > 0
+    with pytest.raises(ValueError, match="has no particles"):
+        sim.positions
+    with pytest.raises(ValueError, match="has no mesh"):
+        pns.Simulation(str(TINY / "sand_column_2d.json")).nodes
+    # Checkpoints resume bit-identically.
+    sim.save_checkpoint(tmp_path / "state.bin")
+    more = sim.advance(1)
+    again = pns.Simulation(str(TINY / "metal_frame_2d.json"), integrator="analytic")
+    again.load_checkpoint(tmp_path / "state.bin")
+    assert again.frame == 2
+    again.advance(1)
+    assert np.array_equal(again.nodes, sim.nodes) and more[0]["frame"] == 3
+
+
+def test_fem_analytic_is_refused_for_neo_hookean_metal():
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.material: the analytic integrator needs StVK-Hencky"):
+        pns.Simulation(str(TINY / "metal_nh_frame_2d.json"), integrator="analytic")
