@@ -92,6 +92,9 @@ void FemImplicitIntegrator<dim>::set_friction(Friction2d* friction, const Contac
     predictor_.set_friction(friction);
 }
 
+// The fixed point's tolerance in the solves that only lead kinematic nodes to their targets.
+constexpr double kStageTolerance = 1e-4;
+
 template <int dim>
 StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
@@ -143,9 +146,13 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     solve.anderson_depth = options_.fixed_point_anderson;
     solve.fail_on_unconverged = options_.fail_on_unconverged;
     if (!solve.fixed_point) potential_.set_reference({});  // the elastic and analytic energies need no F0
+    // When CCD held the kinematic nodes back, this first solve only starts the
+    // stages below: its fixed point stops at their tolerance (kStageTolerance).
+    ReferenceSolveOptions first_solve = solve;
+    if (has_kinematic_ && alpha < 1.0) first_solve.tolerance = std::max(solve.tolerance, kStageTolerance);
     ReferenceSolveStats s;
     try {
-        s = solve_with_reference<dim>(potential_, v, newton, solve, "step " + std::to_string(step_index), work_,
+        s = solve_with_reference<dim>(potential_, v, newton, first_solve, "step " + std::to_string(step_index), work_,
                                       [&] { stats.hardening_clamped = std::max(stats.hardening_clamped,
                                                                                energy_->hardening_clamped()); });
     } catch (const NewtonError& e) {
@@ -177,7 +184,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
             // against 0.0001%; at 1e-3 the result moved to 0.025% (one solve per stage, the
             // fixed point only at the end: 0.090%, 5 frames).
             ReferenceSolveOptions stage_solve = solve;
-            stage_solve.tolerance = std::max(solve.tolerance, 1e-4);
+            stage_solve.tolerance = std::max(solve.tolerance, kStageTolerance);
             for (int stage = 0; stage < options_.max_kinematic_stages && deviation() > 1e-9; ++stage, weight *= 10.0) {
                 potential_.soften_fixed(weight);
                 NewtonOptions soft = newton;
