@@ -1,8 +1,8 @@
-#include <limits>
 #include "pnet/contact/ipc_contact.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -20,23 +20,69 @@ Contact2d::Contact2d(const std::vector<std::array<int, 2>>& boundary_edges, doub
     nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
 }
 
+template <typename F>
+void Contact2d::for_each_candidate(const std::vector<Vec<2>>& x, const std::vector<Vec<2>>* dx, double margin,
+                                   F&& f) const {
+    // Sort and sweep along x: the edges' boxes (swept over dx, grown by margin) sorted by their
+    // lower x; a node's candidates are the edges whose lower x lies in [node lo - widest box,
+    // node hi]; those whose boxes overlap the node's are visited in ascending edge order, as
+    // the all-pairs loop did, so that sums over pairs keep their order (and their bits).
+    const std::size_t m = edges_.size();
+    box_lo_.resize(m);
+    box_hi_.resize(m);
+    double widest = 0.0;
+    for (std::size_t k = 0; k < m; ++k) {
+        const auto& e = edges_[k];
+        Vec<2> lo = x[e[0]].cwiseMin(x[e[1]]), hi = x[e[0]].cwiseMax(x[e[1]]);
+        if (dx) {
+            const Vec<2> a1 = x[e[0]] + (*dx)[e[0]], b1 = x[e[1]] + (*dx)[e[1]];
+            lo = lo.cwiseMin(a1).cwiseMin(b1);
+            hi = hi.cwiseMax(a1).cwiseMax(b1);
+        }
+        box_lo_[k] = lo.array() - margin;
+        box_hi_[k] = hi.array() + margin;
+        widest = std::max(widest, box_hi_[k][0] - box_lo_[k][0]);
+    }
+    order_.resize(m);
+    for (std::size_t k = 0; k < m; ++k) order_[k] = static_cast<int>(k);
+    std::sort(order_.begin(), order_.end(), [&](int a, int b) { return box_lo_[a][0] < box_lo_[b][0]; });
+    sorted_lo_.resize(m);
+    for (std::size_t k = 0; k < m; ++k) sorted_lo_[k] = box_lo_[order_[k]][0];
+    std::vector<int>& found = found_;
+    for (int node : nodes_) {
+        const Vec<2>& p = x[node];
+        Vec<2> lo = p, hi = p;
+        if (dx) {
+            lo = lo.cwiseMin(p + (*dx)[node]);
+            hi = hi.cwiseMax(p + (*dx)[node]);
+        }
+        const auto first = std::lower_bound(sorted_lo_.begin(), sorted_lo_.end(), lo[0] - widest);
+        const auto last = std::upper_bound(first, sorted_lo_.end(), hi[0]);
+        found.clear();
+        for (auto it = first; it != last; ++it) {
+            const int k = order_[it - sorted_lo_.begin()];
+            const auto& e = edges_[k];
+            if (e[0] == node || e[1] == node) continue;
+            if ((hi.array() < box_lo_[k].array()).any() || (lo.array() > box_hi_[k].array()).any()) continue;
+            found.push_back(k);
+        }
+        std::sort(found.begin(), found.end());
+        f(node, found);
+    }
+}
+
 std::vector<Contact2d::Pair> Contact2d::active(const std::vector<Vec<2>>& x) const {
     std::vector<Pair> pairs;
     const double s_hat = dhat_ * dhat_;
-    for (int node : nodes_) {
+    for_each_candidate(x, nullptr, dhat_, [&](int node, const std::vector<int>& edges) {
         const Vec<2>& p = x[node];
-        for (std::size_t k = 0; k < edges_.size(); ++k) {
-            const auto& e = edges_[k];
-            if (e[0] == node || e[1] == node) continue;
-            const Vec<2> lo = x[e[0]].cwiseMin(x[e[1]]).array() - dhat_, hi = x[e[0]].cwiseMax(x[e[1]]).array() + dhat_;
-            if ((p.array() < lo.array()).any() || (p.array() > hi.array()).any()) continue;
-            if (point_edge_distance_sq(p, x[e[0]], x[e[1]]) < s_hat) pairs.push_back({node, static_cast<int>(k)});
-        }
+        for (int k : edges)
+            if (point_edge_distance_sq(p, x[edges_[k][0]], x[edges_[k][1]]) < s_hat) pairs.push_back({node, k});
         for (std::size_t h = 0; h < half_spaces_.size(); ++h) {
             const double d = half_spaces_[h].normal.dot(p - half_spaces_[h].origin);
             if (d < dhat_) pairs.push_back({node, -static_cast<int>(h) - 1});
         }
-    }
+    });
     return pairs;
 }
 
@@ -165,26 +211,26 @@ std::vector<Contact2d::LaggedPair> Contact2d::lagged_pairs(const std::vector<Vec
 
 double Contact2d::max_step(const std::vector<Vec<2>>& x, const std::vector<Vec<2>>& dx) const {
     double t = 1.0;
-    for (int node : nodes_) {
+    for_each_candidate(x, &dx, 0.0, [&](int node, const std::vector<int>& edges) {
         const Vec<2>& p = x[node];
-        const Vec<2> p1 = p + dx[node];
-        const Vec<2> lo = p.cwiseMin(p1), hi = p.cwiseMax(p1);
-        for (const auto& e : edges_) {
-            if (e[0] == node || e[1] == node) continue;
-            const Vec<2> a1 = x[e[0]] + dx[e[0]], b1 = x[e[1]] + dx[e[1]];
-            const Vec<2> elo = x[e[0]].cwiseMin(x[e[1]]).cwiseMin(a1).cwiseMin(b1);
-            const Vec<2> ehi = x[e[0]].cwiseMax(x[e[1]]).cwiseMax(a1).cwiseMax(b1);
-            if ((hi.array() < elo.array()).any() || (lo.array() > ehi.array()).any()) continue;  // swept boxes apart
+        for (int k : edges) {
+            const auto& e = edges_[k];
             t = std::min(t, point_edge_time_of_impact(p, x[e[0]], x[e[1]], dx[node], dx[e[0]], dx[e[1]], 0.0, t));
         }
         for (const HalfSpace2d& h : half_spaces_)
             t = std::min(t, point_plane_time_of_impact(p, dx[node], h.origin, h.normal, t));
-    }
+    });
     return t;
 }
 
 double Contact2d::min_distance(const std::vector<Vec<2>>& x) const {
+    // The pairs within dhat first (the broad phase); only when none is that close, all pairs.
     double d = kNoImpact;
+    for_each_candidate(x, nullptr, dhat_, [&](int node, const std::vector<int>& edges) {
+        for (int k : edges) d = std::min(d, std::sqrt(point_edge_distance_sq(x[node], x[edges_[k][0]], x[edges_[k][1]])));
+        for (const HalfSpace2d& h : half_spaces_) d = std::min(d, h.normal.dot(x[node] - h.origin));
+    });
+    if (d < dhat_) return d;
     for (int node : nodes_) {
         for (const auto& e : edges_)
             if (e[0] != node && e[1] != node)

@@ -8,9 +8,11 @@
 // b' d2s), is projected to PSD before assembly. max_step() is the CCD filter
 // of the line search: the largest step fraction that keeps every pair apart.
 //
-// Pairs are found by testing every node against every edge's bounding box (a
-// quadratic broad phase: fine for the meshes of the 2D scenes, a hash grid is
-// the 3D issue's).
+// Pairs are found by a sort-and-sweep broad phase along x over the edges'
+// (swept, for CCD) bounding boxes, visiting each node's candidate edges in
+// ascending order so that every sum keeps the order of an all-pairs loop.
+// (Measured on metal_frame_2d: the all-pairs test was 14% of a plasticitynet
+// run's time, and CCD 5%.)
 #include <array>
 #include <vector>
 
@@ -102,8 +104,17 @@ private:
     /// B(x), and g += scale dB/dx when g is given: one pass over the active pairs.
     double energy(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd* g) const;
 
+    /// Calls f(node, edges) for every boundary node with the edges (ascending, the node's own
+    /// excluded) whose boxes, swept over dx when given and grown by margin, overlap its own.
+    template <typename F>
+    void for_each_candidate(const std::vector<Vec<2>>& x, const std::vector<Vec<2>>* dx, double margin, F&& f) const;
+
     std::vector<std::array<int, 2>> edges_;
     std::vector<int> nodes_;  // boundary nodes, ascending
+    // Broad-phase work arrays (a Contact2d is used by one thread at a time).
+    mutable std::vector<Vec<2>> box_lo_, box_hi_;
+    mutable std::vector<int> order_, found_;
+    mutable std::vector<double> sorted_lo_;
     std::vector<HalfSpace2d> half_spaces_;
     double dhat_, kappa_;
     Barrier barrier_;
