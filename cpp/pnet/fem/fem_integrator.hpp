@@ -113,11 +113,13 @@ public:
         friction_contact_ = contact;
     }
 
-    /// One step of dt, in as many substeps as contact needs: a pair closing in stiffens
-    /// without bound (k ~ kappa dhat^4 / d^2), so a fixed explicit step that is stable at the
-    /// start fails once contact tightens (measured: metal_frame_2d at 1e-5 s failed at step
-    /// 93299, frame 47). Each substep is at most the barrier's stable step at its start
-    /// (Contact2d::stable_time_step) and closes no gap by more than half (CCD).
+    /// One step of dt, in as many substeps as stability needs: a contact pair closing in
+    /// stiffens without bound (k ~ kappa dhat^4 / d^2), and crushed elements stiffen and
+    /// shrink, so a fixed explicit step that is stable at the start fails once the plate
+    /// presses (measured: metal_frame_2d at 1e-5 s failed at frame 47, at 2e-5 s and at the
+    /// rest CFL step at frame 7). Each substep is at most 1 / sqrt(omega_e^2 + omega_c^2)
+    /// (element_frequency() of the step's start, Contact2d::stable_time_step of the
+    /// substep's) and closes no gap by more than about a fifth (CCD).
     /// StepStats::substeps counts them. Throws SimulationError naming the step if a value is
     /// not finite or no substep avoids intersection.
     StepStats step(FemState<dim>& state, double dt, long step_index);
@@ -126,6 +128,8 @@ public:
     double cfl_time_step(double cfl = 0.5) const;
 
 private:
+    /// The highest frequency of the free elements at positions x, 1/s.
+    double element_frequency(const std::vector<Vec<dim>>& x) const;
     /// Symplectic Euler over at most h; returns the time advanced.
     double substep(FemState<dim>& state, double h, long step_index, StepStats& stats);
 

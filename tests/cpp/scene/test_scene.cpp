@@ -346,9 +346,9 @@ json example_fem() {
         "dim": 2,
         "integrator": {"name": "analytic", "dt": 1e-2},
         "meshes": [
-            {"shape": "frame", "min": [0.45, 0.0001], "max": [0.55, 0.1801], "thickness": 0.012,
+            {"shape": "frame", "min": [0.45, 0.0003], "max": [0.55, 0.1803], "thickness": 0.012,
              "element_size": 0.008, "material": "metal", "hardening": 0.06},
-            {"shape": "box", "min": [0.42, 0.1811], "max": [0.58, 0.1911], "element_size": 0.01,
+            {"shape": "box", "min": [0.42, 0.1813], "max": [0.58, 0.1913], "element_size": 0.01,
              "kinematic": true, "velocity": [0, -0.05]}
         ],
         "ground": {"height": 0},
