@@ -68,4 +68,19 @@ void Friction2d::add_hessian(const Eigen::VectorXd& v, double scale,
     }
 }
 
+void Friction2d::apply_impulses(Eigen::VectorXd& v, double h, const std::vector<double>& inverse_mass) const {
+    for (const Pair& p : pairs_) {
+        double u = 0.0, w = 0.0;  // slip and 1 / m_eff
+        for (int k = 0; k < p.count; ++k) {
+            u += p.weight[k] * p.tangent.dot(v.segment<2>(2 * p.node[k]));
+            w += p.weight[k] * p.weight[k] * inverse_mass[p.node[k]];
+        }
+        if (u == 0.0 || !(w > 0.0)) continue;
+        const double impulse = std::min(mu_ * p.normal_force * h, std::abs(u) / w);
+        const double sign = u > 0.0 ? 1.0 : -1.0;
+        for (int k = 0; k < p.count; ++k)
+            v.segment<2>(2 * p.node[k]) -= sign * impulse * p.weight[k] * inverse_mass[p.node[k]] * p.tangent;
+    }
+}
+
 }  // namespace pnet

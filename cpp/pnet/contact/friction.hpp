@@ -49,6 +49,14 @@ public:
         double normal_force = 0.0;  // lambda, N (per unit depth in 2D)
     };
     const std::vector<Pair>& lagged() const { return pairs_; }
+    double mu() const { return mu_; }
+
+    /// Explicit integration (the ground truth): Coulomb friction as impulses on velocities v
+    /// (dim values per node) over a step h, pair by pair in order (Gauss-Seidel), each
+    /// opposing its tangential slip u and at most mu lambda h, and at most what stops the slip
+    /// (m_eff |u|, 1 / m_eff = sum_j w_j^2 / m_j over the nodes with mass > 0): sticking is
+    /// exact and no step overshoots, whatever h. inverse_mass: 1/m per node, 0 for kinematic.
+    void apply_impulses(Eigen::VectorXd& v, double h, const std::vector<double>& inverse_mass) const;
 
 private:
     double slip(const Pair& p, const Eigen::VectorXd& v) const;

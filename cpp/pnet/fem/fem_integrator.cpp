@@ -240,10 +240,13 @@ StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     StepStats stats;
     stats.dt = dt;
     stats.substeps = 0;
-    if (contact_ && free_mass_.empty()) {
+    if (free_mass_.empty()) {
         free_mass_ = system_.rest.node_mass;
-        for (std::size_t i = 0; i < free_mass_.size(); ++i)
+        inverse_mass_.assign(free_mass_.size(), 0.0);
+        for (std::size_t i = 0; i < free_mass_.size(); ++i) {
             if (system_.fixed_node[i]) free_mass_[i] = 0.0;
+            if (free_mass_[i] > 0.0) inverse_mass_[i] = 1.0 / free_mass_[i];
+        }
     }
     // Each substep is at most 1 / sqrt(omega_e^2 + omega_c^2): the elements' highest frequency
     // in their current shape (once per step) with the stiffest contact pair's (per substep).
@@ -288,13 +291,7 @@ double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long 
         force -= barrier;
     }
     if constexpr (dim == 2) {
-        if (friction_) {
-            friction_->lag(*friction_contact_, state.x);
-            VecX v(dim * n), friction_gradient = VecX::Zero(dim * n);
-            for (std::size_t i = 0; i < n; ++i) v.template segment<dim>(dim * i) = state.v[i];
-            friction_->add_gradient(v, 1.0, friction_gradient);
-            force -= friction_gradient;
-        }
+        if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
     }
     std::vector<Vec<dim>> v(n), dx(n), ahead(n);
     // The step is shortened until it closes no gap by more than about a fifth (CCD on 5 times
@@ -313,6 +310,16 @@ double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long 
             if (!v[i].allFinite())
                 throw SimulationError("step " + std::to_string(step_index) + ": node " + std::to_string(i) +
                                       " has a non-finite velocity (the simulation blew up; try a smaller dt)");
+        }
+        if constexpr (dim == 2) {
+            if (friction_) {
+                VecX flat(dim * n);
+                for (std::size_t i = 0; i < n; ++i) flat.template segment<dim>(dim * i) = v[i];
+                friction_->apply_impulses(flat, h, inverse_mass_);
+                for (std::size_t i = 0; i < n; ++i) v[i] = flat.template segment<dim>(dim * i);
+            }
+        }
+        for (std::size_t i = 0; i < n; ++i) {
             dx[i] = h * v[i];
             ahead[i] = kLookAhead * dx[i];
             max_speed = std::max(max_speed, v[i].norm());

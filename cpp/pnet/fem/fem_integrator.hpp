@@ -105,9 +105,11 @@ public:
     FemExplicitIntegrator(const FemSystem<dim>& system, const ContactPotential<dim>* contact)
         : system_(system), contact_(contact) {}
 
-    /// The same lagged friction as the implicit integrators (2D): its force
-    /// -dD/dv at the start-of-step velocities, with the normal forces of the
-    /// start-of-step positions.
+    /// The same lagged friction pairs as the implicit integrators (2D: normal forces,
+    /// tangents and weights of the start of the step), applied as Coulomb impulses after
+    /// the other forces (Friction2d::apply_impulses): exact sticking, and stable at any
+    /// step, where the smoothed force of the potential at the start-of-step velocity is
+    /// stable only for mu lambda dt / (m eps_v) < 2.
     void set_friction(Friction2d* friction, const Contact2d* contact) {
         friction_ = friction;
         friction_contact_ = contact;
@@ -137,7 +139,8 @@ private:
     const ContactPotential<dim>* contact_;
     Friction2d* friction_ = nullptr;
     const Contact2d* friction_contact_ = nullptr;
-    std::vector<double> free_mass_;  // node masses, 0 on kinematic nodes
+    std::vector<double> free_mass_;     // node masses, 0 on kinematic nodes
+    std::vector<double> inverse_mass_;  // 1 / mass, 0 on kinematic nodes
 };
 
 /// The return mapping of every element after a step: F^E_tr = F(x) (F^P)^-1 -> Z, (F^P)^-1, h
