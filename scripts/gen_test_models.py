@@ -42,7 +42,7 @@ from plasticitynet.training.export import (  # noqa: E402
     return_map_metadata,
     script_network,
 )
-from plasticitynet.training.nets import MLP, make_mlp  # noqa: E402
+from plasticitynet.training.nets import MLP, energy_input, make_energy_net, make_mlp  # noqa: E402
 from plasticitynet.training.targets import nondimensional_material  # noqa: E402
 
 DEFAULT_OUT = ROOT / "tests" / "data" / "models"
@@ -68,6 +68,18 @@ DESCRIPTIONS = {
     "wrong_input_width.pt": "energy metadata input_width 9 for dim 2, but widths [7,8,8,8,1] and "
     "layers.0.weight (8, 7) use 7 inputs",
     "bad_material.pt": "metadata material.elasticity.E = -1 (negative Young's modulus); the network is valid",
+    "valid_principal_energy_2d.pt": "valid: random principal-input energy (EnergyNet, MLP [7,32,32,32,1]) for snow "
+    "2D, forward takes [F, F0, h] (9)",
+    "valid_principal_energy_3d.pt": "valid: random principal-input energy (EnergyNet, MLP [13,64,64,64,1]) for snow "
+    "3D, forward takes [F, F0, h] (19)",
+    "wrong_representation.pt": "metadata representation \"fancy\" (the principal network itself is valid)",
+}
+
+#: The principal-input files: an EnergyNet (parameters mlp.layers.*), MLP widths per dimension.
+PRINCIPAL = {
+    "valid_principal_energy_2d.pt": (2, 13),
+    "valid_principal_energy_3d.pt": (3, 14),
+    "wrong_representation.pt": (2, 15),
 }
 
 
@@ -211,6 +223,16 @@ def bad_material(path: Path) -> None:
     export(path, net, meta)
 
 
+def principal_energy(path: Path) -> None:
+    dim, seed = PRINCIPAL[path.name]
+    net = make_energy_net(dim, True, "principal", seed)
+    meta = energy_metadata(nondimensional_material("snow", dim), net, True, recipe(seed, DESCRIPTIONS[path.name]))
+    meta["created"] = CREATED
+    if path.name == "wrong_representation.pt":
+        meta["representation"] = "fancy"
+    export(path, net, meta)
+
+
 BUILDERS = {
     "valid_energy_2d.pt": valid_energy_2d,
     "valid_return_map_2d.pt": valid_return_map_2d,
@@ -224,6 +246,7 @@ BUILDERS = {
     "float32.pt": float32,
     "wrong_input_width.pt": wrong_input_width,
     "bad_material.pt": bad_material,
+    **{name: principal_energy for name in PRINCIPAL},
 }
 assert BUILDERS.keys() == DESCRIPTIONS.keys()
 
@@ -276,6 +299,37 @@ def _inspect(path: Path) -> dict:
     return info
 
 
+def _check_principal(path: Path) -> bool:
+    """A principal file: forward([F, F0, h]) is the MLP of its parameters at [U^T F V, Sigma0, h]; the
+    valid ones load, the other is refused for its representation only."""
+    from plasticitynet.model import load_model
+    from plasticitynet.training.frames import principal_frame, to_frame
+
+    dim, _ = PRINCIPAL[path.name]
+    extra = {METADATA_KEY: ""}
+    module = torch.jit.load(str(path), map_location="cpu", _extra_files=extra).double()
+    meta = json.loads(extra[METADATA_KEY])
+    state = {n.removeprefix("mlp."): p.detach().double() for n, p in module.named_parameters()}
+    g = torch.Generator().manual_seed(0)
+    F0 = torch.randn(16, dim, dim, dtype=torch.float64, generator=g)
+    F = F0 + 0.1 * torch.randn(16, dim, dim, dtype=torch.float64, generator=g)
+    h = torch.rand(16, dtype=torch.float64, generator=g)
+    U, S, V = principal_frame(F0)
+    x = torch.cat([to_frame(F, U, V).reshape(16, -1), S, h[:, None]], 1)
+    diff = float((module(energy_input(F, F0, h)) - _reference_forward(state, x)).abs().max())
+    try:
+        load_model(path)
+        accepted, why = True, "accepted"
+    except ValueError as err:
+        accepted, why = False, f"rejected ({str(err).replace(str(path), '<file>')})"
+    valid = path.name.startswith("valid_")
+    good = diff < 1e-12 and accepted == valid and (valid or meta["representation"] == "fancy")
+    print(f"{'ok' if good else 'UNEXPECTED':10s} {path.name:24s} {path.stat().st_size:6d} B  "
+          f"|forward - MLP(frame)| = {diff:.2e}; load_model: {why}")
+    print(f"{'':10s} {DESCRIPTIONS[path.name]}")
+    return good
+
+
 def check(out: Path) -> bool:
     from plasticitynet.model import load_model
 
@@ -283,6 +337,9 @@ def check(out: Path) -> bool:
     ok = True
     for name in BUILDERS:
         path = out / name
+        if name in PRINCIPAL:
+            ok = _check_principal(path) and ok
+            continue
         info = _inspect(path)  # every file is a loadable TorchScript archive
         meta = info["meta"]
         try:

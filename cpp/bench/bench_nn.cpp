@@ -3,10 +3,11 @@
 //
 //   bench_nn [--particles N] [--seconds S] [--models DIR]
 //
-// For the 2D net (snow_2d: 9 inputs, width 32) and the 3D net (snow_3d: 19
-// inputs, width 64): nanoseconds per particle for N (value), N + grad and
-// N + grad + Hessian (with respect to F), with 1 and 2 threads, fused and
-// LibTorch (the model file's TorchScript forward, torch::autograd::grad: one
+// For the 2D net (snow_2d, width 32) and the 3D net (snow_3d, width 64):
+// nanoseconds per particle for N (value), N + grad and N + grad + Hessian
+// (with respect to F), with 1 and 2 threads, fused (EnergyNetwork: the fused
+// MLP and, for a principal-input model, the change of frame) and LibTorch (the
+// model file's TorchScript forward on [F, F0, h], torch::autograd::grad: one
 // reverse pass for the gradient, one more per entry of F for the Hessian), on
 // the same batch; the ratio; the fused kernel's GFLOP/s (matrix-product flops,
 // FusedMlp::flops_per_row) as a fraction of the FMA peak of the same thread
@@ -20,11 +21,13 @@
 #include <cstdio>
 #include <cstring>
 #include <functional>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "pnet/energy/neural_elastoplastic.hpp"
+#include "pnet/nn/energy_network.hpp"
 #include "pnet/nn/simd.hpp"
 #include "pnet/nn/torchscript.hpp"
 
@@ -109,20 +112,57 @@ const char* order_name(FusedMlp::Order order) {
     return order == FusedMlp::Order::Value ? "N" : order == FusedMlp::Order::Gradient ? "N+grad" : "N+grad+Hess";
 }
 
+/// The rows [vec F, vec F0, (h)] of make_inputs() as matrices.
+template <int dim>
+struct Batch {
+    std::vector<pnet::Mat<dim>> F, F0;
+    std::vector<double> h;
+};
+
+template <int dim>
+Batch<dim> unpack(const std::vector<double>& x, int in, std::size_t n) {
+    constexpr int m = dim * dim;
+    Batch<dim> b{std::vector<pnet::Mat<dim>>(n), std::vector<pnet::Mat<dim>>(n), std::vector<double>(n, 0.0)};
+    for (std::size_t p = 0; p < n; ++p) {
+        for (int k = 0; k < m; ++k) {
+            b.F[p](k / dim, k % dim) = x[p * in + k];
+            b.F0[p](k / dim, k % dim) = x[p * in + m + k];
+        }
+        if (in > 2 * m) b.h[p] = x[p * in + 2 * m];
+    }
+    return b;
+}
+
+/// The fused evaluation of N and its derivatives in F, frame included.
+struct FusedEvaluator {
+    std::function<void(FusedMlp::Order, double*, double*, double*)> evaluate;
+    double flops_per_row[3];
+};
+
+template <int dim>
+FusedEvaluator fused_evaluator(const pnet::ModelFile& model, const std::vector<double>& x, std::size_t n) {
+    auto batch = std::make_shared<Batch<dim>>(unpack<dim>(x, model.metadata.forward_input_width(), n));
+    auto network = std::make_shared<pnet::EnergyNetwork<dim>>(model.weights, model.metadata.representation,
+                                                              model.metadata.has_hardening, model.path);
+    network->set_reference(batch->F0.data(), batch->h.data(), n);
+    FusedEvaluator e;
+    e.evaluate = [batch, network](FusedMlp::Order order, double* value, double* gradient, double* hessian) {
+        network->evaluate(batch->F.data(), order, value, gradient, hessian);
+    };
+    for (FusedMlp::Order order : {FusedMlp::Order::Value, FusedMlp::Order::Gradient, FusedMlp::Order::Hessian})
+        e.flops_per_row[static_cast<int>(order)] = network->mlp().flops_per_row(order);
+    return e;
+}
+
 template <int dim>
 void energy_rows(const pnet::ModelFile& model, const std::vector<double>& x, std::size_t n, double seconds,
                  int threads) {
     using pnet::Mat;
-    constexpr int m = dim * dim;
-    const int in = model.metadata.input_width();
-    std::vector<Mat<dim>> F(n), F0(n);
-    std::vector<double> h(n, 0.0), psi(n);
-    for (std::size_t p = 0; p < n; ++p)
-        for (int k = 0; k < m; ++k) {
-            F[p](k / dim, k % dim) = x[p * in + k];
-            F0[p](k / dim, k % dim) = x[p * in + m + k];
-            if (in > 2 * m) h[p] = x[p * in + 2 * m];
-        }
+    Batch<dim> b = unpack<dim>(x, model.metadata.forward_input_width(), n);
+    std::vector<Mat<dim>>& F = b.F;
+    std::vector<Mat<dim>>& F0 = b.F0;
+    std::vector<double>& h = b.h;
+    std::vector<double> psi(n);
     pnet::NeuralElastoplasticEnergy<dim> energy(model, {1.4e5, 1.0});
     energy.set_reference(F0.data(), h.data(), n);
     std::vector<Mat<dim>> grad(n);
@@ -169,15 +209,19 @@ int main(int argc, char** argv) {
     std::printf("| net | quantity | threads | fused ns/particle | LibTorch ns/particle | LibTorch / fused | fused "
                 "GFLOP/s | %% of peak | max rel. diff |\n|---|---|---|---|---|---|---|---|---|\n");
 
-    const Net nets[] = {{"2D snow_2d [9,32,32,32,1]", models + "/snow_2d.pt", 2},
-                        {"3D snow_3d [19,64,64,64,1]", models + "/snow_3d.pt", 3}};
+    const Net nets[] = {{"2D snow_2d", models + "/snow_2d.pt", 2}, {"3D snow_3d", models + "/snow_3d.pt", 3}};
     std::vector<std::pair<const Net*, pnet::ModelFile>> loaded;
     for (const Net& net : nets) {
         const pnet::ModelFile model = pnet::load_model_file(net.file);
-        const pnet::FusedMlp fused(model.weights, model.metadata.derivative_inputs());
         const pnet::TorchAutograd torch_ref = pnet::TorchAutograd::from_file(net.file);
-        const int in = model.metadata.input_width(), m = model.metadata.derivative_inputs();
+        const int in = model.metadata.forward_input_width(), m = model.metadata.derivative_inputs();
         const std::vector<double> x = make_inputs(net.dim, in, particles, 7);
+        const FusedEvaluator fused =
+            net.dim == 2 ? fused_evaluator<2>(model, x, particles) : fused_evaluator<3>(model, x, particles);
+        std::string label = std::string(net.label) + " " + pnet::to_string(model.metadata.representation) + " [";
+        for (std::size_t k = 0; k < model.metadata.widths.size(); ++k)
+            label += (k ? "," : "") + std::to_string(model.metadata.widths[k]);
+        label += "]";
         std::vector<double> value(particles), gradient(particles * m), hessian(particles * m * m);
         std::vector<double> tvalue(particles), tgradient(particles * m), thessian(particles * m * m);
         for (FusedMlp::Order order : {FusedMlp::Order::Value, FusedMlp::Order::Gradient, FusedMlp::Order::Hessian}) {
@@ -186,7 +230,7 @@ int main(int argc, char** argv) {
                 omp_set_num_threads(threads);
                 pnet::TorchAutograd::set_threads(threads);
                 const double tf = time_per_call(
-                    [&] { fused.evaluate(x.data(), particles, order, value.data(), gradient.data(), hessian.data()); },
+                    [&] { fused.evaluate(order, value.data(), gradient.data(), hessian.data()); },
                     seconds);
                 const double tt = time_per_call(
                     [&] {
@@ -207,19 +251,19 @@ int main(int argc, char** argv) {
                 if (order != FusedMlp::Order::Value) diff = std::max(diff, rel(gradient, tgradient));
                 if (order == FusedMlp::Order::Hessian) diff = std::max(diff, rel(hessian, thessian));
                 fused_ns[threads] = tf / particles * 1e9;
-                const double gflops = fused.flops_per_row(order) * particles / tf / 1e9;
-                std::printf("| %s | %s | %d | %.1f | %.1f | %.1fx | %.1f | %.0f%% | %.1e |\n", net.label,
+                const double gflops = fused.flops_per_row[static_cast<int>(order)] * particles / tf / 1e9;
+                std::printf("| %s | %s | %d | %.1f | %.1f | %.1fx | %.1f | %.0f%% | %.1e |\n", label.c_str(),
                             order_name(order), threads, fused_ns[threads], tt / particles * 1e9, tt / tf, gflops,
                             100.0 * gflops / peak[threads], diff);
             }
-            std::printf("| %s | %s | 2 vs 1 thread | speed-up %.2fx | | | | | |\n", net.label, order_name(order),
+            std::printf("| %s | %s | 2 vs 1 thread | speed-up %.2fx | | | | | |\n", label.c_str(), order_name(order),
                         fused_ns[1] / fused_ns[2]);
         }
         loaded.emplace_back(&net, model);
     }
     std::printf("\n| energy | threads | ns/particle | |\n|---|---|---|---|\n");
     for (auto& [net, model] : loaded) {
-        const std::vector<double> x = make_inputs(net->dim, model.metadata.input_width(), particles, 7);
+        const std::vector<double> x = make_inputs(net->dim, model.metadata.forward_input_width(), particles, 7);
         for (int threads : {1, 2}) {
             if (net->dim == 2)
                 energy_rows<2>(model, x, particles, seconds, threads);

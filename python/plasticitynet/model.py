@@ -26,7 +26,7 @@ from .materials import Material
 from .materials.validation import as_batch_F, as_batch_hardening, as_batch_Sigma
 from .training import energy, return_map_net
 from .training.export import FORMAT, FORMAT_VERSION, KINDS, METADATA_KEY, sha256_of
-from .training.nets import energy_input, energy_input_width
+from .training.nets import REPRESENTATIONS, energy_input, mlp_input_width
 from .training.targets import TRAINING_E, ElastoplasticStress, with_young_modulus
 
 _REQUIRED = ("format", "format_version", "kind", "material", "dim", "widths", "input_width", "activation", "output")
@@ -56,7 +56,10 @@ def _check_metadata(meta, where: str) -> dict:
     if widths[-1] != 1 or widths[0] != meta["input_width"]:
         raise bad(f"widths = {widths} do not match input_width = {meta['input_width']} and one output")
     if meta["kind"] == "energy":
-        allowed = (energy_input_width(d, False), energy_input_width(d, True))
+        representation = meta.get("representation", "raw")
+        if representation not in REPRESENTATIONS:
+            raise bad(f"representation = {representation!r}, expected one of {', '.join(REPRESENTATIONS)}")
+        allowed = (mlp_input_width(d, False, representation), mlp_input_width(d, True, representation))
     else:
         allowed = (d + 1,)
     if meta["input_width"] not in allowed:
@@ -151,7 +154,9 @@ class LearnedEnergy:
         self.metadata = metadata
         self.path = path
         self.dim = metadata["dim"]
-        self.has_hardening = metadata["input_width"] == energy_input_width(self.dim, True)
+        #: "raw" (the paper's [F, F0, h]) or "principal" (frame-indifferent; nets.EnergyNet).
+        self.representation = metadata.get("representation", "raw")
+        self.has_hardening = metadata["input_width"] == mlp_input_width(self.dim, True, self.representation)
         self.training_material = Material.from_dict(metadata["material"], self.dim)
         self.E = float(metadata.get("training_E", TRAINING_E) if E is None else E)
         #: The material at the requested E (Pa).

@@ -17,16 +17,12 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
           if (meta.dim != dim)
               throw std::invalid_argument(model.path + ": a " + std::to_string(meta.dim) + "D energy where a " +
                                           std::to_string(dim) + "D one is needed");
-          if (!FusedMlp::supports(model.weights.widths, kM))
-              throw std::invalid_argument(model.path + ": no fused kernel for this architecture; compiled: " +
-                                          FusedMlp::supported_architectures());
-          return FusedMlp(model.weights, kM);
+          return EnergyNetwork<dim>(model.weights, meta.representation, meta.has_hardening, model.path);
       }()),
       training_material_(model.metadata.material),
       metadata_(model.metadata),
       has_hardening_(model.metadata.has_hardening),
       relative_(options.relative_to_reference),
-      input_width_(model.metadata.input_width()),
       E_(options.youngs_modulus / model.metadata.training_E),
       w_(options.regularizer_weight),
       mu_train_(model.metadata.material.elastic.mu()) {
@@ -55,26 +51,24 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
     F0_.assign(F0, F0 + n);
     c_.resize(n);
     offset_.assign(n, 0.0);
-    inputs_.resize(n * input_width_);
     net_value_.resize(n);
     net_gradient_.resize(n * kM);
     const double h0 = training_material_.description().initial_hardening;
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+    std::vector<double> network_h(has_hardening_ ? n : 0);
     std::size_t clamped = 0;
+    if (has_hardening_) {
 #pragma omp parallel for schedule(static) reduction(+ : clamped) if (count >= 1024)
-    for (std::ptrdiff_t p = 0; p < count; ++p) {
-        double* x = &inputs_[p * input_width_];
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j) x[i * dim + j] = x[kM + i * dim + j] = F0[p](i, j);
-        if (has_hardening_) {
+        for (std::ptrdiff_t p = 0; p < count; ++p) {
             bool outside = false;
-            x[2 * kM] = metadata_.network_hardening(hardening ? hardening[p] : h0, &outside);
+            network_h[p] = metadata_.network_hardening(hardening ? hardening[p] : h0, &outside);
             clamped += outside;
         }
     }
+    net_.set_reference(F0, has_hardening_ ? network_h.data() : nullptr, n);
     hardening_clamped_ = clamped;
     // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
-    net_.evaluate(inputs_.data(), n, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
+    net_.evaluate(F0, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
 #pragma omp parallel for schedule(static) if (count >= 64)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
         const double h = hardening ? hardening[p] : h0;
@@ -90,17 +84,6 @@ Mat<dim> NeuralElastoplasticEnergy<dim>::correction(std::size_t p) const {
     Mat<dim> c;
     for (int k = 0; k < kM; ++k) c(k / dim, k % dim) = E_ * c_.at(p)[k];
     return c;
-}
-
-template <int dim>
-void NeuralElastoplasticEnergy<dim>::load_inputs(const Mat<dim>* F) const {
-    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
-#pragma omp parallel for schedule(static) if (count >= 1024)
-    for (std::ptrdiff_t p = 0; p < count; ++p) {
-        double* x = &inputs_[p * input_width_];
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j) x[i * dim + j] = F[p](i, j);
-    }
 }
 
 /// psi = E (N - c : F + w mu/2 |F - F0|^2); gradient = E (grad N - c + w mu (F - F0)). Relative to the
@@ -125,15 +108,13 @@ void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const {
-    load_inputs(F);
-    net_.evaluate(inputs_.data(), size(), FusedMlp::Order::Value, net_value_.data());
+    net_.evaluate(F, FusedMlp::Order::Value, net_value_.data());
     finish(F, psi, nullptr);
 }
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
-    load_inputs(F);
-    net_.evaluate(inputs_.data(), size(), FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
+    net_.evaluate(F, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
     finish(F, psi, gradient);
 }
 
@@ -141,10 +122,9 @@ template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, double* psi, Mat<dim>* gradient,
                                                             Tensor4<dim>* hessian, bool project_psd) const {
     static_assert(sizeof(Tensor4<dim>) == kM * kM * sizeof(double), "Tensor4 must be a plain d^2 x d^2 array");
-    load_inputs(F);
-    // Hess_F N is symmetric, so the kernel's row-major output is also the
-    // column-major Eigen matrix.
-    net_.evaluate(inputs_.data(), size(), FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
+    // Hess_F N is symmetric, so the row-major output is also the column-major
+    // Eigen matrix.
+    net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
                   reinterpret_cast<double*>(hessian));
     finish(F, psi, gradient);
     const double wmu = w_ * mu_train_;

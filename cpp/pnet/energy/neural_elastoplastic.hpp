@@ -20,7 +20,7 @@
 
 #include "pnet/material/material.hpp"
 #include "pnet/math/types.hpp"
-#include "pnet/nn/fused_mlp.hpp"
+#include "pnet/nn/energy_network.hpp"
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/nn/model_file.hpp"
 
@@ -70,22 +70,19 @@ public:
     double youngs_modulus() const { return E_; }
     /// Shear modulus of the scene's material, Pa.
     double mu() const { return E_ * mu_train_; }
-    const FusedMlp& network() const { return net_; }
+    const EnergyNetwork<dim>& network() const { return net_; }
     bool has_hardening() const { return has_hardening_; }
     const LearnedReturnMap<dim>* learned_return_map() const { return return_map_.get(); }
 
 private:
-    /// Writes vec(F) of every particle into the network inputs.
-    void load_inputs(const Mat<dim>* F) const;
     void finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const;
 
-    FusedMlp net_;
+    EnergyNetwork<dim> net_;
     Material<dim> training_material_;
     std::shared_ptr<const LearnedReturnMap<dim>> return_map_;
     ModelMetadata metadata_;
     bool has_hardening_;
     bool relative_;
-    int input_width_;
     double E_;          // scene E / training E
     double w_;
     double mu_train_;   // shear modulus at the training E
@@ -96,7 +93,7 @@ private:
     std::size_t hardening_clamped_ = 0;
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
-    mutable std::vector<double> inputs_, net_value_, net_gradient_;
+    mutable std::vector<double> net_value_, net_gradient_;
 };
 
 }  // namespace pnet

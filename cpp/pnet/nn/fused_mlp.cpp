@@ -235,10 +235,14 @@ std::shared_ptr<const FusedMlp::Kernel> make_kernel(const MlpWeights& w) {
 }
 
 // The shapes of Table 2: energy nets [2d^2 (+1 for h), W, W, W, 1] with
-// derivatives in the d^2 entries of F, and return-mapping nets [d + 1, W, W, W, 1].
+// derivatives in the d^2 entries of F (raw input) or [d^2 + d (+1), W, W, W, 1]
+// with derivatives in the d^2 entries of G (principal input,
+// energy_network.hpp), and return-mapping nets [d + 1, W, W, W, 1].
 constexpr Architecture kArchitectures[] = {
     {8, 32, 4, make_kernel<8, 32, 4>},    {9, 32, 4, make_kernel<9, 32, 4>},
     {18, 64, 9, make_kernel<18, 64, 9>},  {19, 64, 9, make_kernel<19, 64, 9>},
+    {6, 32, 4, make_kernel<6, 32, 4>},    {7, 32, 4, make_kernel<7, 32, 4>},
+    {12, 64, 9, make_kernel<12, 64, 9>},  {13, 64, 9, make_kernel<13, 64, 9>},
     {3, 32, 0, make_kernel<3, 32, 0>},    {4, 64, 0, make_kernel<4, 64, 0>},
 };
 

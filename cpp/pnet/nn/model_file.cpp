@@ -49,6 +49,10 @@ std::string widths_string(const std::vector<int>& widths) {
 
 std::string to_string(ModelKind kind) { return kind == ModelKind::Energy ? "energy" : "return_map"; }
 
+std::string to_string(EnergyRepresentation representation) {
+    return representation == EnergyRepresentation::Raw ? "raw" : "principal";
+}
+
 ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
     if (!j.is_object()) throw std::invalid_argument(context + ": metadata.json is not a JSON object");
     ModelMetadata meta;
@@ -90,12 +94,23 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
         const json& h = field(j, "has_hardening", context);
         if (!h.is_boolean()) fail(context, "has_hardening", "expected true or false");
         meta.has_hardening = h.get<bool>();
-        const int expected = 2 * d * d + (meta.has_hardening ? 1 : 0);
+        if (j.contains("representation")) {  // files written before it existed are raw
+            const std::string representation = text(j, "representation", context);
+            if (representation == "raw")
+                meta.representation = EnergyRepresentation::Raw;
+            else if (representation == "principal")
+                meta.representation = EnergyRepresentation::Principal;
+            else
+                fail(context, "representation", "\"" + representation + "\" is not \"raw\" or \"principal\"");
+        }
+        const bool raw = meta.representation == EnergyRepresentation::Raw;
+        const int expected = (raw ? 2 * d * d : d * d + d) + (meta.has_hardening ? 1 : 0);
         if (input_width != expected)
             fail(context, "input_width",
-                 std::to_string(input_width) + ": a " + std::to_string(d) + "D energy " +
-                     (meta.has_hardening ? "with" : "without") + " hardening takes [vec F, vec F0" +
-                     (meta.has_hardening ? ", h" : "") + "], " + std::to_string(expected) + " inputs");
+                 std::to_string(input_width) + ": a " + std::to_string(d) + "D " + to_string(meta.representation) +
+                     " energy " + (meta.has_hardening ? "with" : "without") + " hardening takes [" +
+                     (raw ? "vec F, vec F0" : "vec G, Sigma0") + (meta.has_hardening ? ", h" : "") + "], " +
+                     std::to_string(expected) + " inputs");
     } else if (input_width != d + 1) {
         fail(context, "input_width",
              std::to_string(input_width) + ": a " + std::to_string(d) + "D return map takes [Sigma, h], " +

@@ -39,11 +39,21 @@ enum class ModelKind { Energy, ReturnMap };
 /// "energy" or "return_map".
 std::string to_string(ModelKind kind);
 
+/// What an energy's MLP sees (metadata "representation"; energy_network.hpp):
+/// Raw, the paper's [vec F, vec F0, h]; Principal, [vec(U^T F V), Sigma0, h]
+/// in the frame of F0 = U diag(Sigma0) V^T (frame-indifferent). The file's
+/// forward() takes [vec F, vec F0, h] either way.
+enum class EnergyRepresentation { Raw, Principal };
+
+/// "raw" or "principal".
+std::string to_string(EnergyRepresentation representation);
+
 struct ModelMetadata {
     ModelKind kind = ModelKind::Energy;
     int dim = 2;
     std::vector<int> widths;
     bool has_hardening = false;         // energy: the input ends with h
+    EnergyRepresentation representation = EnergyRepresentation::Raw;  // energy
     /// The range of the network's hardening input h it was trained on
     /// (recipe.distribution.h_range; energies with hardening and return maps).
     /// Models that do not record it get the training distribution of DESIGN.md
@@ -56,7 +66,13 @@ struct ModelMetadata {
     std::string return_map_file, return_map_sha256;
     nlohmann::json json;                // the whole metadata entry
 
+    /// The MLP's input width (widths.front()).
     int input_width() const { return widths.empty() ? 0 : widths.front(); }
+    /// The width of the file's forward() input: 2 d^2 (+1) for an energy in
+    /// any representation, the MLP's for a return map.
+    int forward_input_width() const {
+        return kind == ModelKind::Energy ? 2 * dim * dim + (has_hardening ? 1 : 0) : input_width();
+    }
     /// Inputs the simulator differentiates in: d^2 (F) for an energy, 0 otherwise.
     int derivative_inputs() const { return kind == ModelKind::Energy ? dim * dim : 0; }
     bool learned_return_map() const { return !return_map_file.empty(); }
@@ -69,8 +85,8 @@ struct ModelMetadata {
 
 /// Parses and validates the metadata entry; std::invalid_argument naming
 /// `context` (the file) and the field on any problem: unknown format or
-/// version, kind, dim, widths (input width 2d^2 or 2d^2+1 for an energy, d+1
-/// for a return map; output 1), activation other than "silu", layer parameter
+/// version, kind, dim, representation, widths (input width 2d^2 (+1) for a raw
+/// energy, d^2 + d (+1) for a principal one, d+1 for a return map; output 1), activation other than "silu", layer parameter
 /// names, material (validated as a material description of this dimension),
 /// training_E, return_map reference.
 ModelMetadata parse_model_metadata(const nlohmann::json& j, const std::string& context);

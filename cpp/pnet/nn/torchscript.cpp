@@ -1,6 +1,8 @@
 // The only translation unit that includes LibTorch (see torchscript.hpp).
 #include "pnet/nn/torchscript.hpp"
 
+#include "pnet/nn/energy_network.hpp"
+
 #include <ATen/Parallel.h>
 #include <torch/csrc/autograd/autograd.h>
 #include <torch/script.h>
@@ -172,10 +174,21 @@ Archive read_archive(const std::string& path, const LoadOptions& options, const 
 
     // forward() must be the MLP of those weights (a SiLU MLP, nothing added),
     // run in the precision of its parameters.
-    const int in = meta.input_width();
+    const int in = meta.forward_input_width(), mlp_in = meta.input_width();
     const torch::ScalarType dtype = parameters_dtype;
     const double tolerance = dtype == torch::kFloat64 ? 1e-9 : 1e-4;
     std::vector<double> x = probe_inputs(in);
+    std::vector<double> mlp_x(static_cast<std::size_t>(kProbeRows) * mlp_in);
+    for (int r = 0; r < kProbeRows; ++r) {
+        const double* row = &x[static_cast<std::size_t>(r) * in];
+        double* out = &mlp_x[static_cast<std::size_t>(r) * mlp_in];
+        if (meta.kind == ModelKind::ReturnMap)
+            std::copy(row, row + in, out);
+        else if (meta.dim == 2)
+            EnergyNetwork<2>::mlp_input(meta.representation, meta.has_hardening, row, out);
+        else
+            EnergyNetwork<3>::mlp_input(meta.representation, meta.has_hardening, row, out);
+    }
     torch::Tensor out;
     try {
         torch::NoGradGuard no_grad;
@@ -192,7 +205,7 @@ Archive read_archive(const std::string& path, const LoadOptions& options, const 
                                     std::to_string(kProbeRows) + ", 1]");
     out = out.to(torch::kFloat64).contiguous();
     for (int r = 0; r < kProbeRows; ++r) {
-        const double expected = w.evaluate_reference(&x[static_cast<std::size_t>(r) * in]);
+        const double expected = w.evaluate_reference(&mlp_x[static_cast<std::size_t>(r) * mlp_in]);
         const double got = out.data_ptr<double>()[r];
         if (!(std::abs(got - expected) <= tolerance * (1.0 + std::abs(expected))))
             throw std::invalid_argument(path + ": forward(x) is not the SiLU MLP of its layer parameters (probe " +
@@ -233,7 +246,7 @@ struct TorchAutograd::Impl {
 TorchAutograd TorchAutograd::from_file(const std::string& path, const LoadOptions& options) {
     Archive archive = read_archive(path, options, "");
     auto impl = std::make_shared<Impl>();
-    impl->input_width = archive.model.metadata.input_width();
+    impl->input_width = archive.model.metadata.forward_input_width();
     auto module = std::make_shared<torch::jit::Module>(std::move(archive.module));
     impl->forward = [module](const torch::Tensor& x) { return module->forward({x}).toTensor(); };
     TorchAutograd reference;

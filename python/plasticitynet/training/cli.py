@@ -13,11 +13,13 @@ exit with code 2 and a message.
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import sys
 from pathlib import Path
 
 from .evaluate import format_errors
+from .nets import REPRESENTATIONS
 from .return_map_net import RESIDUALS
 from .sampling import SAMPLINGS
 from .trainer import MATERIALS, RETURN_MAP_MATERIAL, TrainConfig, Trainer
@@ -53,6 +55,16 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be finite and >= 0, got {text}")
+    return value
+
+
 def _decay(text: str) -> float:
     value = _positive_float(text)
     if value > 1:
@@ -79,6 +91,19 @@ def build_parser() -> argparse.ArgumentParser:
         choices=RESIDUALS,
         default="radius",
         help="metal_nh_rm: the yield residual of eq. 13, radius = ||dev tau||/(2 mu) - h, or paper = y/(2 mu)^2 (radius)",
+    )
+    p.add_argument(
+        "--representation",
+        choices=REPRESENTATIONS,
+        default="principal",
+        help="energies: the MLP's input, principal = [U^T F V, Sigma0, h] in the frame of F0 = U Sigma0 V^T "
+        "(frame-indifferent), raw = [F, F0, h] as in the paper (principal)",
+    )
+    p.add_argument(
+        "--hessian-weight",
+        type=_non_negative_float,
+        default=0.0,
+        help="energies: weight of the loss on Hess Psi against sym(d Ptilde/dF) beside eq. 9 (0: off)",
     )
     p.add_argument("--out", default=None, help="model file (default models/{material}_{dim}d.pt)")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint OUT.ckpt")
@@ -130,6 +155,8 @@ def main(argv=None, root: str | Path | None = None) -> int:
         seed=args.seed,
         sampling=args.sampling,
         rm_loss=args.rm_loss,
+        representation=args.representation,
+        hessian_weight=args.hessian_weight,
         out=str(out),
         checkpoint_every=args.checkpoint_every,
         resume=args.resume,
@@ -148,6 +175,11 @@ def main(argv=None, root: str | Path | None = None) -> int:
     print(
         f"training the {args.dim}D {args.material} {kind}: {config.epochs} steps of batch {config.batch}, "
         f"lr {config.lr} x{config.lr_decay} every {config.decay_steps}, sampling {config.sampling}, seed {config.seed}"
+        + (
+            f", {config.representation} input, Hessian weight {config.hessian_weight}"
+            if args.material != RETURN_MAP_MATERIAL
+            else ""
+        )
         + (f" (resuming at step {trainer.step})" if args.resume else "")
     )
     try:

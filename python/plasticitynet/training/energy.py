@@ -13,6 +13,16 @@ derivative with respect to the first d^2 inputs only. The regularizer weight w i
 Training loss (eq. 9): L = mean_batch ||grad_F Psi(F, F0, h) - Ptilde(F, h)||_F^2, with grad_F N
 taken by autograd and kept in the graph (create_graph=True): the loss is differentiated with respect
 to the network's parameters through the input gradient (double backward).
+
+Hessian-aware training (beyond the paper; its future work 3), `hessian_weight` w_H > 0:
+    L = eq. 9 + w_H mean ||Hess_F Psi(F, F0, h) v - J(F, h) v||^2 / ||v||^2,  J = d Ptilde/dF,
+with one random direction v per sample (E_v ||A v||^2 / ||v||^2 = ||A||_F^2 / d^2 for v ~ N(0, I), so
+this is the Frobenius loss up to a factor at the cost of one more backward pass instead of d^2).
+Hess_F Psi = Hess_F N at w = 0. The target is only the symmetric part of J = d Ptilde/dF (a return
+mapping's J is not symmetric; only its symmetric part is the Hessian of some energy), and it needs no
+symmetrization: for a symmetric H, ||H - J||_F^2 = ||H - sym J||_F^2 + ||skew J||_F^2, so the loss is
+taken against J v itself (`stress_directional_derivative`: two stress evaluations, not 2 d^2) and differs
+from the loss against sym(J) v by a constant of the network (E ||skew(J) v||^2 / ||v||^2).
 """
 
 from __future__ import annotations
@@ -92,11 +102,19 @@ def energy_loss(
     h: torch.Tensor | None,
     Ptilde: torch.Tensor,
     Ptilde0: torch.Tensor,
+    hessian_weight: float = 0.0,
+    direction: torch.Tensor | None = None,
+    S_direction: torch.Tensor | None = None,
+    parts: dict | None = None,
 ) -> torch.Tensor:
     """Eq. 9: mean ||grad_F Psi(F, F0, h) - Ptilde(F, h)||_F^2 with
     grad_F Psi = grad_F N(F, F0, h) - grad_F N(F0, F0, h) + Ptilde(F0, h).
     Both input gradients come from one forward/backward pass over the 2B inputs
-    [F, F0, h] and [F0, F0, h], kept in the graph for the parameter gradient."""
+    [F, F0, h] and [F0, F0, h], kept in the graph for the parameter gradient.
+
+    With hessian_weight > 0, plus hessian_weight * mean ||Hess_F N(F, F0, h) v - J v||^2 / ||v||^2 for the
+    directions v = `direction` (B, d, d) and the targets J v = `S_direction` (B, d, d), J = d Ptilde/dF
+    (see the module docstring). `parts`, if given, receives the two terms' values (floats)."""
     B = F.shape[0]
     first = torch.cat([F, F0]).detach().requires_grad_(True)
     second = torch.cat([F0, F0])
@@ -105,4 +123,23 @@ def energy_loss(
     (dN,) = torch.autograd.grad(N.sum(), first, create_graph=True)
     grad_psi = dN[:B] - dN[B:] + Ptilde0
     residual = grad_psi - Ptilde
-    return _frob_inner(residual, residual).mean()
+    loss = _frob_inner(residual, residual).mean()
+    if parts is not None:
+        parts["gradient"] = float(loss.detach())
+    if hessian_weight > 0.0:
+        if direction is None or S_direction is None:
+            raise ValueError("hessian_weight > 0 needs the directions and their targets S v")
+        (Hv,) = torch.autograd.grad(_frob_inner(dN[:B], direction).sum(), first, create_graph=True)
+        r = Hv[:B] - S_direction
+        hess = (_frob_inner(r, r) / _frob_inner(direction, direction)).mean()
+        if parts is not None:
+            parts["hessian"] = float(hess.detach())
+        loss = loss + hessian_weight * hess
+    return loss
+
+
+def stress_directional_derivative(stress, F: torch.Tensor, h: torch.Tensor, v: torch.Tensor, step: float = 1e-6) -> torch.Tensor:
+    """J v = (d Ptilde/dF)[v] at (F, h) by central differences of `stress(F, h)` in float64, (B, d, d)."""
+    F = F.to(torch.float64)
+    v = v.to(torch.float64)
+    return (stress(F + step * v, h) - stress(F - step * v, h)) / (2.0 * step)

@@ -1,6 +1,8 @@
 """Export of a trained network as a TorchScript file for the C++ simulator (and `load_model`).
 
-The file's forward(x: Tensor) -> Tensor is the raw MLP N(x), shape (B, 1), in float64; the
+The file's forward(x: Tensor) -> Tensor is the network N(x), shape (B, 1), in float64 (for an energy,
+x = [vec F, vec F0, h] whatever its representation: a "principal" energy maps x to the MLP's input inside
+forward, see nets.EnergyNet; metadata.widths and input_width are the MLP's); the
 consumer applies the rest: for kind "energy" the correction of eq. 8 (c = grad_F N(F0, F0, h) -
 Ptilde(F0, h)), the regularizer of eq. 11 and the scale E; for kind "return_map" the clamp
 dgamma = min(N, ||dev eps||) of eq. 12. A JSON metadata entry "metadata.json" in `_extra_files`
@@ -93,11 +95,24 @@ def energy_metadata(
     """Metadata of an energy model. `return_map`: {"type": "analytic"} (default) or
     {"type": "learned", "file": path relative to the model's folder, "sha256": ...}."""
     d = material.dim
-    layout = [f"F (row-major, {d * d})", f"F0 (row-major, {d * d})"] + (["h"] if has_hardening else [])
+    representation = getattr(net, "representation", "raw")
+    forward_layout = [f"F (row-major, {d * d})", f"F0 (row-major, {d * d})"] + (["h"] if has_hardening else [])
+    if representation == "raw":
+        layout = forward_layout
+    else:
+        layout = [f"G = U^T F V (row-major, {d * d})", f"Sigma0 ({d})"] + (["h"] if has_hardening else [])
     meta = _common("energy", material, net, recipe, errors)
     meta.update(
         rescale=ENERGY_RESCALE,
+        representation=representation,
         input_layout=layout,
+        forward_input_layout=forward_layout,
+        frame=(
+            "F0 = U diag(Sigma0) V^T, the polar SVD of pnet::polar_svd (plasticitynet.training.frames); "
+            "forward(x) computes the frame itself"
+            if representation == "principal"
+            else "none: the MLP takes forward's input"
+        ),
         has_hardening=has_hardening,
         energy=(
             "Psi(F, F0, h) = E [N(F, F0, h) - (grad_F N(F0, F0, h) - Ptilde(F0, h)) : F + w mu/2 ||F - F0||^2] "

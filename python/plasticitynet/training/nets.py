@@ -8,12 +8,19 @@ and the return-mapping net (in = d + 1).
 
 Energy input (row-major vec): x = [vec(F), vec(F0), h], i.e.
 x[0 : d^2] = F_ij at i*d + j, x[d^2 : 2 d^2] = F0_ij at d^2 + i*d + j, x[2 d^2] = h.
+An energy network (`EnergyNet`) always takes this x; its representation decides what the MLP sees:
+  "raw"        (the paper's)  the MLP takes x itself, 2 d^2 (+1) inputs;
+  "principal"  (frames.py)    the MLP takes [vec(U^T F V), Sigma0, h], d^2 + d (+1) inputs, with
+                              F0 = U diag(Sigma0) V^T: frame-indifferent by construction.
+In both, the inputs the simulator differentiates in (F, or G) come first.
 """
 
 from __future__ import annotations
 
 import torch
 from torch import nn
+
+from .frames import principal_frame, to_frame
 
 #: Hidden widths per dimension (Table 2).
 HIDDEN_WIDTHS = {2: (32, 32, 32), 3: (64, 64, 64)}
@@ -40,13 +47,25 @@ class MLP(nn.Module):
         return self.layers(x)
 
 
+#: Energy input representations (see the module docstring); "principal" is the default of training.
+REPRESENTATIONS = ("raw", "principal")
+
+
 def energy_input_width(dim: int, has_hardening: bool) -> int:
-    """2 d^2 (+ 1 for h): 8/9 in 2D, 18/19 in 3D."""
+    """Width of an energy network's input x = [vec F, vec F0, h]: 2 d^2 (+ 1 for h), 8/9 in 2D, 18/19 in 3D."""
     return 2 * dim * dim + (1 if has_hardening else 0)
 
 
-def energy_widths(dim: int, has_hardening: bool) -> list[int]:
-    return [energy_input_width(dim, has_hardening), *HIDDEN_WIDTHS[dim], 1]
+def mlp_input_width(dim: int, has_hardening: bool, representation: str = "raw") -> int:
+    """Width of the MLP's input: 2 d^2 (+1) raw; d^2 + d (+1) principal (6/7 in 2D, 12/13 in 3D)."""
+    if representation not in REPRESENTATIONS:
+        raise ValueError(f"representation = {representation!r}: expected one of {', '.join(REPRESENTATIONS)}")
+    base = 2 * dim * dim if representation == "raw" else dim * dim + dim
+    return base + (1 if has_hardening else 0)
+
+
+def energy_widths(dim: int, has_hardening: bool, representation: str = "raw") -> list[int]:
+    return [mlp_input_width(dim, has_hardening, representation), *HIDDEN_WIDTHS[dim], 1]
 
 
 def return_map_widths(dim: int) -> list[int]:
@@ -59,6 +78,40 @@ def make_mlp(widths, seed: int) -> MLP:
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         return MLP(widths)
+
+
+class EnergyNet(nn.Module):
+    """An energy network: forward(x = [vec F, vec F0, h]) -> N (B, 1) whatever the representation, so that
+    every model is called the same way from PyTorch, TorchScript and LibTorch. Parameters are the MLP's,
+    named mlp.layers.{2k}.weight / .bias; `widths` are the MLP's."""
+
+    def __init__(self, mlp: MLP, dim: int, representation: str = "raw"):
+        super().__init__()
+        if representation not in REPRESENTATIONS:
+            raise ValueError(f"representation = {representation!r}: expected one of {', '.join(REPRESENTATIONS)}")
+        self.mlp = mlp
+        self.dim = int(dim)
+        self.representation = representation
+        self.widths = list(mlp.widths)
+        self.has_hardening = self.widths[0] == mlp_input_width(dim, True, representation)
+        if not self.has_hardening and self.widths[0] != mlp_input_width(dim, False, representation):
+            raise ValueError(f"widths = {self.widths}: not a {dim}D {representation} energy network")
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.representation == "raw":
+            return self.mlp(x)
+        d = self.dim
+        m = d * d
+        B = x.shape[0]
+        F = x[:, :m].reshape(B, d, d)
+        U, Sigma0, V = principal_frame(x[:, m : 2 * m].reshape(B, d, d))
+        G = to_frame(F, U, V).reshape(B, m)
+        return self.mlp(torch.cat([G, Sigma0, x[:, 2 * m :]], dim=1))
+
+
+def make_energy_net(dim: int, has_hardening: bool, representation: str, seed: int) -> EnergyNet:
+    """An energy network with PyTorch's default initialisation drawn from `seed`."""
+    return EnergyNet(make_mlp(energy_widths(dim, has_hardening, representation), seed), dim, representation)
 
 
 def energy_input(F: torch.Tensor, F0: torch.Tensor, h: torch.Tensor | None) -> torch.Tensor:

@@ -35,7 +35,7 @@ from ..materials import Material
 SAMPLINGS = ("paper", "near")
 
 #: Independent random streams: training batches never share a seed with evaluation samples.
-STREAMS = {"train": 0, "eval": 1, "test": 2}
+STREAMS = {"train": 0, "eval": 1, "test": 2, "hessian": 3}
 
 #: Log-singular values eps ~ U[-EPS_RANGE, EPS_RANGE]^d (sec. 5.1).
 EPS_RANGE = 1.0

@@ -26,10 +26,10 @@ from pathlib import Path
 import torch
 
 from . import return_map_net
-from .energy import energy_loss, psi_gradient
+from .energy import energy_loss, psi_gradient, stress_directional_derivative
 from .export import energy_metadata, export_model, return_map_metadata, script_network, sha256_of
-from .nets import MLP, energy_widths, make_mlp, return_map_widths
-from .sampling import SAMPLINGS, sample_batch, sample_return_map_states, sampling_spec
+from .nets import MLP, REPRESENTATIONS, make_energy_net, make_mlp, return_map_widths
+from .sampling import SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec
 from .targets import ElastoplasticStress, nondimensional_material
 
 #: --material choices: the energies of the four presets and the learned return mapping of metal_nh.
@@ -37,7 +37,13 @@ MATERIALS = ("sand", "snow", "metal", "metal_nh", "metal_nh_rm")
 RETURN_MAP_MATERIAL = "metal_nh_rm"
 
 #: Fields that must agree between a checkpoint and the run resuming it (epochs may grow).
-_RESUME_FIELDS = ("material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss")
+_RESUME_FIELDS = (
+    "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
+    "representation", "hessian_weight",
+)
+
+#: What checkpoints written before a field existed were trained with.
+_LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0}
 
 #: Held-out samples of the in-training error curve (eval_every), "eval" stream at this step index
 #: (disjoint from the final evaluation, which uses steps 0, 1, ...).
@@ -57,6 +63,8 @@ class TrainConfig:
     seed: int = 0
     sampling: str = "paper"
     rm_loss: str = "radius"  # metal_nh_rm: residual of eq. 13 (return_map_net.RESIDUALS)
+    representation: str = "principal"  # energies: nets.REPRESENTATIONS
+    hessian_weight: float = 0.0  # energies: weight of the Hessian loss (energy.hessian_loss); 0: eq. 9 only
     out: str = ""  # model path; "" -> models/{material}_{dim}d.pt
     checkpoint_every: int = 500
     resume: bool = False
@@ -85,6 +93,12 @@ class TrainConfig:
             raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(SAMPLINGS)}")
         if self.rm_loss not in return_map_net.RESIDUALS:
             raise ValueError(f"rm_loss = {self.rm_loss!r}: expected one of {', '.join(return_map_net.RESIDUALS)}")
+        if self.representation not in REPRESENTATIONS:
+            raise ValueError(
+                f"representation = {self.representation!r}: expected one of {', '.join(REPRESENTATIONS)}"
+            )
+        if not (math.isfinite(self.hessian_weight) and self.hessian_weight >= 0):
+            raise ValueError(f"hessian_weight = {self.hessian_weight!r}: must be finite and >= 0")
         if self.eval_every < 0 or self.eval_samples < 0:
             raise ValueError("eval_every and eval_samples must be >= 0")
         if self.material == "metal_nh" and not self.return_map:
@@ -126,7 +140,8 @@ class EnergyTask:
             rel = os.path.relpath(Path(config.return_map).resolve(), Path(config.out).resolve().parent)
             self.return_map_info = {"type": "learned", "file": rel, "sha256": sha256_of(config.return_map)}
         self.stress = ElastoplasticStress(self.material, self.return_map)
-        self.net = make_mlp(energy_widths(config.dim, self.spec.has_hardening), config.seed)
+        self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed)
+        self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
 
     def _h(self, h: torch.Tensor):
         return h if self.spec.has_hardening else None
@@ -138,7 +153,17 @@ class EnergyTask:
             P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h)
             P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
         b32 = b.to(torch.float32)
-        return energy_loss(self.net, b32.F, b32.F0, self._h(b32.h), P.float(), P0.float())
+        weight = self.config.hessian_weight
+        v = Sv = None
+        if weight > 0.0:
+            d = self.config.dim
+            v = torch.randn(len(b), d, d, dtype=torch.float64, generator=generator_for(self.config.seed, step, "hessian"))
+            with torch.no_grad():
+                Sv = stress_directional_derivative(self.stress, b.F, b.h, v).float()
+            v = v.float()
+        return energy_loss(
+            self.net, b32.F, b32.F0, self._h(b32.h), P.float(), P0.float(), weight, v, Sv, self.loss_parts
+        )
 
     def curve_error(self) -> dict:
         """Relative RMS gradient error of the float32 net on CURVE_SAMPLES held-out samples, per sampling."""
@@ -312,10 +337,9 @@ class Trainer:
         except Exception as err:
             raise ValueError(f"{path}: unreadable checkpoint ({err})") from None
         for key in _RESUME_FIELDS:
-            if state["config"][key] != getattr(self.config, key):
-                raise ValueError(
-                    f"{path}: checkpoint has {key} = {state['config'][key]!r}, this run {getattr(self.config, key)!r}"
-                )
+            saved = state["config"].get(key, _LEGACY_FIELDS.get(key))
+            if saved != getattr(self.config, key):
+                raise ValueError(f"{path}: checkpoint has {key} = {saved!r}, this run {getattr(self.config, key)!r}")
         self.net.load_state_dict(state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "pnet/io/sha256.hpp"
+#include "pnet/nn/energy_network.hpp"
 #include "pnet/nn/fused_mlp.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/nn/torchscript.hpp"
@@ -32,6 +33,83 @@ const std::vector<std::string> kShipped = {"sand_2d.pt",      "snow_2d.pt",  "me
 
 class ShippedModel : public ::testing::TestWithParam<std::string> {};
 
+/// Max |a - b| per row relative to the row's largest |b|, checked against `tolerance`.
+void expect_rows_close(const std::vector<double>& a, const std::vector<double>& b, std::size_t rows,
+                       std::size_t size, double tolerance, const char* what) {
+    for (std::size_t r = 0; r < rows; ++r) {
+        double diff = 0.0, scale = 0.0;
+        for (std::size_t k = r * size; k < (r + 1) * size; ++k) {
+            diff = std::max(diff, std::abs(a[k] - b[k]));
+            scale = std::max(scale, std::abs(b[k]));
+        }
+        EXPECT_LE(diff, tolerance * scale) << what << " of row " << r;
+    }
+}
+
+/// The simulator's evaluation of an energy file (EnergyNetwork: the frame of F0
+/// for a principal model, the fused MLP, the change of frame back) against the
+/// file's own forward([F, F0, h]) under LibTorch autograd in F: value,
+/// gradient and Hessian to 1e-10.
+template <int dim>
+void expect_energy_matches_libtorch(const std::string& path, const ModelFile& model, const std::vector<Mat<dim>>& F0,
+                                    std::uint64_t seed) {
+    constexpr int m = dim * dim;
+    const ModelMetadata& meta = model.metadata;
+    const std::size_t rows = F0.size();
+    const int in = meta.forward_input_width();
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> normal;
+    std::uniform_real_distribution<double> uniform(0.0, 1.0);
+    std::vector<Mat<dim>> F(rows);
+    std::vector<double> h(rows, 0.0), x(rows * in);
+    for (std::size_t r = 0; r < rows; ++r) {
+        for (int k = 0; k < m; ++k) F[r](k / dim, k % dim) = F0[r](k / dim, k % dim) + 0.1 * normal(rng);
+        h[r] = meta.has_hardening ? -0.3 * uniform(rng) : 0.0;
+        for (int k = 0; k < m; ++k) {
+            x[r * in + k] = F[r](k / dim, k % dim);
+            x[r * in + m + k] = F0[r](k / dim, k % dim);
+        }
+        if (meta.has_hardening) x[r * in + 2 * m] = h[r];
+    }
+    EnergyNetwork<dim> network(model.weights, meta.representation, meta.has_hardening, path);
+    network.set_reference(F0.data(), h.data(), rows);
+    std::vector<double> v(rows), g(rows * m), H(rows * m * m), rv(rows), rg(rows * m), rH(rows * m * m);
+    network.evaluate(F.data(), FusedMlp::Order::Hessian, v.data(), g.data(), H.data());
+    const TorchAutograd reference = TorchAutograd::from_file(path, LoadOptions{true});
+    ASSERT_EQ(reference.input_width(), in);
+    reference.evaluate(x.data(), rows, m, FusedMlp::Order::Hessian, rv.data(), rg.data(), rH.data());
+    expect_rows_close(v, rv, rows, 1, 1e-10, "value");
+    expect_rows_close(g, rg, rows, m, 1e-10, "gradient");
+    expect_rows_close(H, rH, rows, m * m, 1e-10, "Hessian");
+    // Order::Value and Order::Gradient give the same numbers as Order::Hessian.
+    std::vector<double> v1(rows), g1(rows * m);
+    network.evaluate(F.data(), FusedMlp::Order::Gradient, v1.data(), g1.data());
+    EXPECT_EQ(v1, v);
+    EXPECT_EQ(g1, g);
+}
+
+/// Generic F0 (random stretch and rotation) and the states where the frame is
+/// not unique: F0 = I, diagonal F0 with repeated entries, and (3D) a rotated
+/// F0 with two equal singular values.
+template <int dim>
+std::vector<Mat<dim>> reference_states(std::size_t generic, std::uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> normal;
+    std::vector<Mat<dim>> F0;
+    for (std::size_t r = 0; r < generic; ++r) {
+        Mat<dim> A = Mat<dim>::Identity();
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) A(i, j) += 0.3 * normal(rng);
+        F0.push_back(A);
+    }
+    F0.push_back(Mat<dim>::Identity());
+    Vec<dim> s = Vec<dim>::Constant(1.2);
+    s[dim - 1] = 0.8;
+    F0.push_back(s.asDiagonal());
+    F0.push_back(Mat<dim>(Vec<dim>::Constant(0.9).asDiagonal()));
+    return F0;
+}
+
 TEST_P(ShippedModel, LoadsPinnedAndMatchesLibTorch) {
     const std::string path = kModels + "/" + GetParam();
     const ModelFile model = load_model_file(path);
@@ -39,36 +117,48 @@ TEST_P(ShippedModel, LoadsPinnedAndMatchesLibTorch) {
     EXPECT_EQ(model.sha256, sha256_file_hex(path));
     const ModelMetadata& meta = model.metadata;
     EXPECT_EQ(meta.widths, model.weights.widths);
-    EXPECT_EQ(meta.input_width(), meta.kind == ModelKind::Energy ? 2 * meta.dim * meta.dim + meta.has_hardening
-                                                                  : meta.dim + 1);
+    const int d = meta.dim;
+    const int mlp_in = meta.kind == ModelKind::ReturnMap                          ? d + 1
+                       : meta.representation == EnergyRepresentation::Principal ? d * d + d + meta.has_hardening
+                                                                                 : 2 * d * d + meta.has_hardening;
+    EXPECT_EQ(meta.input_width(), mlp_in);
     EXPECT_EQ(meta.learned_return_map(), model.return_map != nullptr);
 
-    // The fused kernel against the file's own forward() under autograd.
-    const int m = meta.derivative_inputs(), in = meta.input_width();
-    const FusedMlp fused(model.weights, m);
+    if (meta.kind == ModelKind::Energy) {
+        if (d == 2)
+            expect_energy_matches_libtorch<2>(path, model, reference_states<2>(18, 3), 4);
+        else
+            expect_energy_matches_libtorch<3>(path, model, reference_states<3>(18, 3), 4);
+        return;
+    }
+    // A return map: the fused kernel against the file's forward() (values only).
+    const int in = meta.input_width();
+    const FusedMlp fused(model.weights, 0);
     const TorchAutograd reference = TorchAutograd::from_file(path);
     const std::size_t rows = 21;
     std::mt19937_64 rng(3);
     std::uniform_real_distribution<double> uniform(-1.2, 1.2);
     std::vector<double> x(rows * in);
     for (double& v : x) v = uniform(rng);
-    std::vector<double> v(rows), g(rows * m), H(rows * m * m), rv(rows), rg(rows * m), rH(rows * m * m);
-    fused.evaluate(x.data(), rows, FusedMlp::Order::Hessian, v.data(), g.data(), H.data());
-    reference.evaluate(x.data(), rows, m, FusedMlp::Order::Hessian, rv.data(), rg.data(), rH.data());
-    auto check = [&](const std::vector<double>& a, const std::vector<double>& b, std::size_t size, const char* what) {
-        for (std::size_t r = 0; r < rows; ++r) {
-            double diff = 0.0, scale = 0.0;
-            for (std::size_t k = r * size; k < (r + 1) * size; ++k) {
-                diff = std::max(diff, std::abs(a[k] - b[k]));
-                scale = std::max(scale, std::abs(b[k]));
-            }
-            EXPECT_LE(diff, 1e-10 * scale) << what << " of row " << r;
-        }
-    };
-    check(v, rv, 1, "value");
-    if (m > 0) {
-        check(g, rg, m, "gradient");
-        check(H, rH, m * m, "Hessian");
+    std::vector<double> v(rows), rv(rows);
+    fused.evaluate(x.data(), rows, FusedMlp::Order::Value, v.data());
+    reference.evaluate(x.data(), rows, 0, FusedMlp::Order::Value, rv.data(), nullptr, nullptr);
+    expect_rows_close(v, rv, rows, 1, 1e-10, "value");
+}
+
+TEST(ModelFile, PrincipalEnergiesMatchLibTorchIncludingRepeatedSingularValues) {
+    LoadOptions trusted;
+    trusted.trusted = true;
+    for (const char* name : {"valid_principal_energy_2d.pt", "valid_principal_energy_3d.pt"}) {
+        const std::string path = kTestModels + "/" + name;
+        ASSERT_TRUE(fs::exists(path)) << path << " (regenerate with scripts/gen_test_models.py)";
+        const ModelFile model = load_model_file(path, trusted);
+        EXPECT_EQ(model.metadata.representation, EnergyRepresentation::Principal);
+        EXPECT_EQ(model.metadata.forward_input_width(), 2 * model.metadata.dim * model.metadata.dim + 1);
+        if (model.metadata.dim == 2)
+            expect_energy_matches_libtorch<2>(path, model, reference_states<2>(40, 5), 6);
+        else
+            expect_energy_matches_libtorch<3>(path, model, reference_states<3>(40, 5), 6);
     }
 }
 
@@ -169,7 +259,9 @@ INSTANTIATE_TEST_SUITE_P(
                       BadFile{"shape_mismatch.pt", "layers.2.weight has shape [8, 7], expected [8, 8]"},
                       BadFile{"nonfinite_weights.pt", "layer 1 weight entry (3, 5) is not finite"},
                       BadFile{"wrong_input_width.pt", "metadata.input_width: 9 differs from widths [7"},
-                      BadFile{"bad_material.pt", "metadata.material.elasticity"}),
+                      BadFile{"bad_material.pt", "metadata.material.elasticity"},
+                      BadFile{"wrong_representation.pt",
+                              "metadata.representation: \"fancy\" is not \"raw\" or \"principal\""}),
     [](const auto& info) { return info.param.file.substr(0, info.param.file.size() - 3); });
 
 TEST(ModelFile, ValidTestFilesLoadWhenTrusted) {

@@ -1,0 +1,131 @@
+#include "pnet/nn/energy_network.hpp"
+
+#include <stdexcept>
+
+#include "pnet/math/svd.hpp"
+
+namespace pnet {
+
+namespace {
+
+template <int dim>
+int mlp_width(EnergyRepresentation representation, bool has_hardening) {
+    const int base = representation == EnergyRepresentation::Raw ? 2 * dim * dim : dim * dim + dim;
+    return base + (has_hardening ? 1 : 0);
+}
+
+template <int dim>
+Mat<dim> row_matrix(const double* x) {
+    Mat<dim> A;
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j) A(i, j) = x[i * dim + j];
+    return A;
+}
+
+}  // namespace
+
+template <int dim>
+EnergyNetwork<dim>::EnergyNetwork(const MlpWeights& weights, EnergyRepresentation representation,
+                                  bool has_hardening, const std::string& context)
+    : mlp_([&] {
+          const int expected = mlp_width<dim>(representation, has_hardening);
+          if (weights.input_width() != expected)
+              throw std::invalid_argument(context + ": a " + std::to_string(dim) + "D " + to_string(representation) +
+                                          " energy network takes " + std::to_string(expected) + " inputs, not " +
+                                          std::to_string(weights.input_width()));
+          if (!FusedMlp::supports(weights.widths, kM))
+              throw std::invalid_argument(context + ": no fused kernel for this architecture; compiled: " +
+                                          FusedMlp::supported_architectures());
+          return FusedMlp(weights, kM);
+      }()),
+      representation_(representation),
+      has_hardening_(has_hardening),
+      input_width_(weights.input_width()) {}
+
+template <int dim>
+void EnergyNetwork<dim>::mlp_input(EnergyRepresentation representation, bool has_hardening, const double* x,
+                                   double* out) {
+    const int h_at = 2 * kM;
+    if (representation == EnergyRepresentation::Raw) {
+        std::copy(x, x + h_at + (has_hardening ? 1 : 0), out);
+        return;
+    }
+    const PolarSVD<dim> frame = polar_svd<dim>(row_matrix<dim>(x + kM));
+    const Mat<dim> G = frame.U.transpose() * row_matrix<dim>(x) * frame.V;
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j) out[i * dim + j] = G(i, j);
+    for (int i = 0; i < dim; ++i) out[kM + i] = frame.Sigma[i];
+    if (has_hardening) out[kM + dim] = x[h_at];
+}
+
+template <int dim>
+void EnergyNetwork<dim>::set_reference(const Mat<dim>* F0, const double* h, std::size_t n) {
+    size_ = n;
+    inputs_.resize(n * input_width_);
+    const bool principal = representation_ == EnergyRepresentation::Principal;
+    U_.resize(principal ? n : 0);
+    V_.resize(principal ? n : 0);
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+#pragma omp parallel for schedule(static) if (count >= 1024)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        double* x = &inputs_[p * input_width_];
+        int next;
+        if (principal) {
+            const PolarSVD<dim> frame = polar_svd<dim>(F0[p]);
+            U_[p] = frame.U;
+            V_[p] = frame.V;
+            for (int i = 0; i < dim; ++i) x[kM + i] = frame.Sigma[i];
+            next = kM + dim;
+        } else {
+            for (int i = 0; i < dim; ++i)
+                for (int j = 0; j < dim; ++j) x[kM + i * dim + j] = F0[p](i, j);
+            next = 2 * kM;
+        }
+        if (has_hardening_) x[next] = h ? h[p] : 0.0;
+    }
+}
+
+template <int dim>
+void EnergyNetwork<dim>::evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient,
+                                  double* hessian) const {
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size_);
+    const bool principal = representation_ == EnergyRepresentation::Principal;
+#pragma omp parallel for schedule(static) if (count >= 1024)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        double* x = &inputs_[p * input_width_];
+        const Mat<dim> G = principal ? Mat<dim>(U_[p].transpose() * F[p] * V_[p]) : F[p];
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) x[i * dim + j] = G(i, j);
+    }
+    if (!principal || order == FusedMlp::Order::Value) {
+        mlp_.evaluate(inputs_.data(), size_, order, value, gradient, hessian);
+        return;
+    }
+    const bool second = order == FusedMlp::Order::Hessian;
+    mlp_gradient_.resize(size_ * kM);
+    if (second) mlp_hessian_.resize(size_ * kM * kM);
+    mlp_.evaluate(inputs_.data(), size_, order, value, mlp_gradient_.data(), second ? mlp_hessian_.data() : nullptr);
+    using Map = Eigen::Matrix<double, kM, kM, Eigen::RowMajor>;
+#pragma omp parallel for schedule(static) if (count >= 256)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        const Mat<dim>& U = U_[p];
+        const Mat<dim>& V = V_[p];
+        const Mat<dim> gF = U * row_matrix<dim>(&mlp_gradient_[p * kM]) * V.transpose();
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) gradient[p * kM + i * dim + j] = gF(i, j);
+        if (!second) continue;
+        Map M;  // vec G = M vec F: M((ij), (kl)) = U_ki V_lj
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j)
+                for (int k = 0; k < dim; ++k)
+                    for (int l = 0; l < dim; ++l) M(i * dim + j, k * dim + l) = U(k, i) * V(l, j);
+        const Eigen::Map<const Map> HG(&mlp_hessian_[p * kM * kM]);
+        Eigen::Map<Map> HF(hessian + p * kM * kM);
+        HF.noalias() = M.transpose() * (HG * M);
+    }
+}
+
+template class EnergyNetwork<2>;
+template class EnergyNetwork<3>;
+
+}  // namespace pnet

@@ -1,0 +1,64 @@
+#pragma once
+// The network N(F, F0, h) of a PlasticityNet energy and its derivatives in F,
+// whatever the model's input representation (ModelMetadata::representation):
+//
+//   Raw:       the MLP takes x = [vec F, vec F0, h] (the paper's);
+//   Principal: the MLP takes x = [vec G, Sigma0, h] with G = U^T F V and
+//              F0 = U diag(Sigma0) V^T (polar_svd), frame-indifferent by
+//              construction (python/plasticitynet/training/frames.py).
+//
+// In both the differentiated inputs come first, so the fused kernel is the
+// same; for Principal, with vec G = M vec F (M_(ij),(kl) = U_ki V_lj),
+//   grad_F N = U (grad_G N) V^T,   Hess_F N = M^T (Hess_G N) M.
+// U, V depend on F0 only, which is constant within an optimization: they, and
+// the inputs Sigma0 and h, are computed once in set_reference().
+#include <cstddef>
+#include <vector>
+
+#include "pnet/math/types.hpp"
+#include "pnet/nn/fused_mlp.hpp"
+#include "pnet/nn/model_file.hpp"
+
+namespace pnet {
+
+template <int dim>
+class EnergyNetwork {
+public:
+    static constexpr int kM = dim * dim;
+
+    /// Throws std::invalid_argument (naming `context`) unless the weights are
+    /// those of a dim-D energy MLP in `representation` with a compiled kernel.
+    EnergyNetwork(const MlpWeights& weights, EnergyRepresentation representation, bool has_hardening,
+                  const std::string& context);
+
+    /// The reference state of n rows: F0 and the network's hardening input h
+    /// (ignored without hardening; null: 0).
+    void set_reference(const Mat<dim>* F0, const double* h, std::size_t n);
+    std::size_t size() const { return size_; }
+
+    /// N(F_r, F0_r, h_r) per row, and for Order >= Gradient its gradient in F
+    /// (gradient[r kM + k], row-major vec), for Order::Hessian its Hessian
+    /// (hessian[(r kM + k) kM + l], symmetric). Threaded like FusedMlp.
+    void evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient = nullptr,
+                  double* hessian = nullptr) const;
+
+    /// The MLP's input for one forward() row [vec F, vec F0, (h)] of a model
+    /// file: what the loader checks forward() against.
+    static void mlp_input(EnergyRepresentation representation, bool has_hardening, const double* forward_row,
+                          double* mlp_row);
+
+    EnergyRepresentation representation() const { return representation_; }
+    const FusedMlp& mlp() const { return mlp_; }
+
+private:
+    FusedMlp mlp_;
+    EnergyRepresentation representation_;
+    bool has_hardening_;
+    int input_width_;
+    std::size_t size_ = 0;
+    std::vector<Mat<dim>> U_, V_;  // Principal: the frame of each row's F0
+    mutable std::vector<double> inputs_;
+    mutable std::vector<double> mlp_gradient_, mlp_hessian_;  // Principal: in G, before the change of frame
+};
+
+}  // namespace pnet
