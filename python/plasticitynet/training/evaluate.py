@@ -75,6 +75,29 @@ def error_at_F0(model, samples: int, seed: int) -> float:
     return worst
 
 
+#: Samples of the Hessian error (d^2 backward passes each, and 2 d^2 stress evaluations for the target).
+HESSIAN_SAMPLES = 2000
+
+
+def hessian_error(model, samples: int, seed: int, sampling: str = "near") -> float:
+    """sqrt(sum ||Hess_F Psi - sym(d Ptilde/dF)||^2 / sum ||sym(d Ptilde/dF)||^2) at w = 0, the Jacobian of
+    the training target by central differences (float64). "near" sampling: the states a Newton solve visits."""
+    spec = sampling_spec(model.training_material, sampling)
+    b = sample_batch(spec, samples, seed, step=0, stream="eval")
+    H = model.hessian(b.F, b.F0, b.h) / model.E
+    n, d = b.F.shape[0], model.dim
+    columns = []
+    with torch.no_grad():
+        for k in range(d * d):
+            E = torch.zeros(d * d, dtype=torch.float64)
+            E[k] = 1e-6
+            E = E.reshape(d, d)
+            columns.append(((model.stress_nd(b.F + E, b.h) - model.stress_nd(b.F - E, b.h)) / 2e-6).reshape(n, -1))
+    J = torch.stack(columns, -1)
+    S = 0.5 * (J + J.transpose(1, 2))
+    return float(((H - S) ** 2).sum() / (S**2).sum()) ** 0.5
+
+
 def evaluate_energy(model, samples: int = 100_000, seed: int = EVAL_SEED) -> dict:
     """The errors of an energy model (a LearnedEnergy) as a JSON-ready dict."""
     t0 = time.perf_counter()
@@ -89,6 +112,7 @@ def evaluate_energy(model, samples: int = 100_000, seed: int = EVAL_SEED) -> dic
             s: {_scale_key(1.0): relative_rms_error(model, s, 1.0, samples, seed, stress=exact)} for s in SAMPLINGS
         }
     out["at_F0_max_rel"] = error_at_F0(model, samples, seed)
+    out["hessian_rel_rms_near"] = hessian_error(model, min(samples, HESSIAN_SAMPLES), seed)
     out["wall_seconds"] = round(time.perf_counter() - t0, 2)
     return out
 
@@ -145,6 +169,10 @@ def format_errors(errors: dict, title: str = "") -> str:
                 + ", ".join(f"{s} {100 * v['1x']:.3f}%" for s, v in vs.items())
             )
         lines.append(f"  at F = F0 (max relative, float64): {errors['at_F0_max_rel']:.3e}")
+        if "hessian_rel_rms_near" in errors:
+            lines.append(
+                f"  Hessian vs sym(d Ptilde/dF), near sampling (relative RMS): {100 * errors['hessian_rel_rms_near']:.3f}%"
+            )
     else:
         lines.append(f"learned return mapping on {errors['yielding']} yielding of {errors['samples']} samples:")
         lines.append(f"  mean |y(Z)| / (2 mu h)^2 (h >= 0.05):   {errors['mean_abs_y_rel']:.3e}")
