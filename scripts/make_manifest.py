@@ -36,6 +36,14 @@ def entry(path: Path) -> dict:
         "dim": meta["dim"],
         "widths": meta["widths"],
         "command": recipe.get("command"),
+        **(
+            {
+                "representation": meta.get("representation", "raw"),
+                "hessian_weight": recipe.get("hessian_weight", 0.0),
+            }
+            if meta["kind"] == "energy"
+            else {}
+        ),
         "epochs": recipe.get("epochs"),
         "batch": recipe.get("batch"),
         "lr": recipe.get("lr"),

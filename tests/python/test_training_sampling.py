@@ -153,3 +153,22 @@ def test_bad_arguments():
         sample_batch(sampling_spec(m), 0, seed=0)
     with pytest.raises(ValueError, match="stream"):
         generator_for(0, 0, "validation")
+
+
+def test_mixed_batches_are_half_paper_half_near():
+    """A "mixed" batch is a paper batch of n - n//2 followed by a near batch of n//2 drawn from their own
+    streams: reproducible by (seed, step), and its near half has F close to F0."""
+    from plasticitynet.training import nondimensional_material, sample_batch, sampling_spec
+
+    m = nondimensional_material("sand", 3)
+    spec = sampling_spec(m, "mixed")
+    b = sample_batch(spec, 101, seed=4, step=7)
+    again = sample_batch(spec, 101, seed=4, step=7)
+    assert len(b) == 101 and torch.equal(b.F, again.F) and torch.equal(b.F0, again.F0)
+    paper = sample_batch(spec.with_(sampling="paper"), 51, seed=4, step=7)
+    assert torch.equal(b.F[:51], paper.F) and torch.equal(b.F0[:51], paper.F0)
+    gap = torch.linalg.matrix_norm(b.F - b.F0) / torch.linalg.matrix_norm(b.F0)
+    assert float(gap[51:].max()) < 0.5 < float(gap[:51].median())
+    assert sampling_spec(m, "mixed").to_dict()["near_max_angle"] is not None
+    with pytest.raises(ValueError, match="sampling"):
+        sampling_spec(m, "fancy")

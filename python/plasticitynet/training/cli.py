@@ -21,7 +21,7 @@ from pathlib import Path
 from .evaluate import format_errors
 from .nets import REPRESENTATIONS
 from .return_map_net import RESIDUALS
-from .sampling import SAMPLINGS
+from .sampling import TRAINING_SAMPLINGS
 from .trainer import MATERIALS, RETURN_MAP_MATERIAL, TrainConfig, Trainer
 
 
@@ -85,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lr-decay", type=_decay, default=0.95, help="learning-rate factor per decay period (0.95)")
     p.add_argument("--decay-steps", type=_positive_int, default=1000, help="steps per decay period (1000)")
     p.add_argument("--seed", type=_non_negative_int, default=0, help="seed of the initialisation and batches (0)")
-    p.add_argument("--sampling", choices=SAMPLINGS, default="paper", help="(F, F0) distribution (paper)")
+    p.add_argument("--sampling", choices=TRAINING_SAMPLINGS, default="paper", help="(F, F0) distribution: paper, near, or mixed (half each) (paper)")
     p.add_argument(
         "--rm-loss",
         choices=RESIDUALS,

@@ -33,6 +33,11 @@ import torch
 from ..materials import Material
 
 SAMPLINGS = ("paper", "near")
+#: Training may also draw "mixed" batches: half "paper", half "near" (beyond the paper: the states a
+#: Newton solve visits, F close to F0, beside the paper's far-apart pairs).
+TRAINING_SAMPLINGS = (*SAMPLINGS, "mixed")
+#: Step offset of the "near" half of a mixed batch (its own stream of random numbers).
+_MIXED_NEAR_STEP = 1 << 40
 
 #: Independent random streams: training batches never share a seed with evaluation samples.
 STREAMS = {"train": 0, "eval": 1, "test": 2, "hessian": 3}
@@ -55,8 +60,8 @@ class SamplingSpec:
     deps_scale: float = 1.0
 
     def __post_init__(self):
-        if self.sampling not in SAMPLINGS:
-            raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(SAMPLINGS)}")
+        if self.sampling not in TRAINING_SAMPLINGS:
+            raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(TRAINING_SAMPLINGS)}")
         if not (self.deps_scale > 0 and math.isfinite(self.deps_scale)):
             raise ValueError(f"deps_scale = {self.deps_scale!r}: must be finite and > 0")
 
@@ -73,7 +78,7 @@ class SamplingSpec:
             "eps_range": [-EPS_RANGE, EPS_RANGE],
             "deps_range": [-self.deps * self.deps_scale, self.deps * self.deps_scale],
             "h_range": None if self.h_range is None else list(self.h_range),
-            "near_max_angle": NEAR_MAX_ANGLE if self.sampling == "near" else None,
+            "near_max_angle": NEAR_MAX_ANGLE if self.sampling in ("near", "mixed") else None,
         }
 
 
@@ -182,6 +187,14 @@ def sample_batch(
     """n samples (F, F0, h) of `spec`, determined by (seed, step, stream); built in float64 and cast."""
     if n <= 0:
         raise ValueError(f"n = {n}: must be > 0")
+    if spec.sampling == "mixed":
+        paper = sample_batch(spec.with_(sampling="paper"), n - n // 2, seed, step, stream, dtype)
+        if n < 2:
+            return paper
+        near = sample_batch(spec.with_(sampling="near"), n // 2, seed, step + _MIXED_NEAR_STEP, stream, dtype)
+        return DeformationBatch(
+            **{k: torch.cat([getattr(paper, k), getattr(near, k)]) for k in DeformationBatch.__dataclass_fields__}
+        )
     g = generator_for(seed, step, stream)
     d = spec.dim
     r = spec.deps * spec.deps_scale

@@ -29,7 +29,7 @@ from . import return_map_net
 from .energy import energy_loss, psi_gradient, stress_directional_derivative
 from .export import energy_metadata, export_model, return_map_metadata, script_network, sha256_of
 from .nets import MLP, REPRESENTATIONS, make_energy_net, make_mlp, return_map_widths
-from .sampling import SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec
+from .sampling import SAMPLINGS, TRAINING_SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec
 from .targets import ElastoplasticStress, nondimensional_material
 
 #: --material choices: the energies of the four presets and the learned return mapping of metal_nh.
@@ -89,8 +89,8 @@ class TrainConfig:
             raise ValueError(f"lr_decay = {self.lr_decay!r}: must be in (0, 1]")
         if self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be >= 0")
-        if self.sampling not in SAMPLINGS:
-            raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(SAMPLINGS)}")
+        if self.sampling not in TRAINING_SAMPLINGS:
+            raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(TRAINING_SAMPLINGS)}")
         if self.rm_loss not in return_map_net.RESIDUALS:
             raise ValueError(f"rm_loss = {self.rm_loss!r}: expected one of {', '.join(return_map_net.RESIDUALS)}")
         if self.representation not in REPRESENTATIONS:
@@ -427,6 +427,8 @@ class Trainer:
         }
         if hasattr(self.task, "spec"):
             recipe["distribution"] = self.task.spec.to_dict()
+            recipe["representation"] = cfg.representation
+            recipe["hessian_weight"] = cfg.hessian_weight
         else:  # the return-map net
             recipe["distribution"] = {"eps_range": [-1.0, 1.0], "h_range": [0.0, 1.0]}
             recipe["rm_loss"] = cfg.rm_loss
