@@ -73,7 +73,14 @@ def run_marker(scene: str, command: list, explicit: bool) -> dict:
     i = command.index("--out")
     command = command[2:i] + command[i + 2:]
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    return {"command": command, "scene_sha256": scene_sha, "commit": commit}  # commit: for the record only
+    marker = {"command": command, "scene_sha256": scene_sha, "commit": commit}  # commit: for the record only
+    if not explicit:  # an implicit run also depends on its model files (retrained models are re-run)
+        scene_dir = ROOT / "scenes"
+        marker["models"] = {
+            o["model"]: hashlib.sha256((scene_dir / o["model"]).read_bytes()).hexdigest()
+            for o in scene_json.get("objects", []) if "model" in o
+        }
+    return marker
 
 
 def run_dir_complete(out: Path, marker: dict, frames: int) -> bool:
@@ -81,7 +88,7 @@ def run_dir_complete(out: Path, marker: dict, frames: int) -> bool:
     if not path.exists() or not (out / f"frame_{frames:05d}.ply").exists():
         return False
     old = json.loads(path.read_text())
-    return isinstance(old, dict) and all(old.get(k) == marker[k] for k in ("command", "scene_sha256"))
+    return isinstance(old, dict) and all(old.get(k) == marker.get(k) for k in ("command", "scene_sha256", "models"))
 
 
 def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force: bool, pnet: Path = None) -> Path:

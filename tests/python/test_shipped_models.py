@@ -44,6 +44,7 @@ def test_shipped_model_matches_manifest_and_is_exact_at_F0(name):
         errors = evaluate_return_map(model, samples=SAMPLES, seed=EVAL_SEED)
         assert errors["mean_abs_dgamma_error"] <= 1.2 * entry["errors"]["mean_abs_dgamma_error"] + 1e-4
         return
+    assert model.representation == entry["representation"] == model.metadata["representation"]
     # grad Psi(F0, F0, h) = Ptilde(F0, h) by construction (eq. 8), to round-off in float64.
     spec = sampling_spec(model.training_material, "paper")
     b = sample_batch(spec, 512, seed=7, step=0, stream="eval")

@@ -103,7 +103,8 @@ def test_train_py_end_to_end(tmp_path):
     run = subprocess.run(
         [sys.executable, str(TRAIN_PY), "--material", "metal_nh", "--epochs", "20", "--batch", "128",
          "--return-map", str(rm), "--out", str(out), "--eval-every", "10", "--lr-decay", "0.9",
-         "--decay-steps", "5", "--sampling", "near", *common], capture_output=True, text=True, timeout=300,
+         "--decay-steps", "5", "--sampling", "mixed", "--hessian-weight", "0.2", *common],
+        capture_output=True, text=True, timeout=300,
     )
     assert run.returncode == 0, run.stderr
     for p in (out, out.with_suffix(".csv"), out.with_suffix(".ckpt"), out.with_name("metal_nh_2d_loss.png"),
@@ -115,7 +116,11 @@ def test_train_py_end_to_end(tmp_path):
     assert meta["return_map"]["type"] == "learned" and meta["return_map"]["file"] == "../rm/metal_nh_rm_2d.pt"
     recipe = meta["recipe"]
     assert (recipe["epochs"], recipe["batch"], recipe["decay"], recipe["decay_steps"], recipe["sampling"]) == (
-        20, 128, 0.9, 5, "near")
+        20, 128, 0.9, 5, "mixed")
+    assert (recipe["representation"], recipe["hessian_weight"]) == ("principal", 0.2)
+    assert meta["representation"] == "principal" and model.representation == "principal"
+    assert 0 < meta["errors"]["hessian_rel_rms_near"] < 10
+    assert "principal input, Hessian weight 0.2" in run.stdout
     assert recipe["command"].startswith("python train.py --material metal_nh")
     assert meta["errors"]["at_F0_max_rel"] < 1e-10 and meta["errors"]["samples"] == 2000
     assert json.loads(json.dumps(meta)) == meta
@@ -134,6 +139,10 @@ def test_train_py_end_to_end(tmp_path):
         (["--material", "sand", "--dim", "2", "--return-map", "x.pt"], "applies to --material metal_nh only"),
         (["--material", "sand", "--dim", "2", "--resume", "--out", "/no/such/dir/m.pt"], "no checkpoint"),
         (["--material", "sand", "--dim", "2", "--out", "model.bin"], "must end in .pt"),
+        (["--material", "sand", "--dim", "2", "--representation", "polar"], "invalid choice: 'polar'"),
+        (["--material", "sand", "--dim", "2", "--hessian-weight", "-1"], "must be finite and >= 0, got -1"),
+        (["--material", "sand", "--dim", "2", "--hessian-weight", "inf"], "must be finite and >= 0, got inf"),
+        (["--material", "sand", "--dim", "2", "--sampling", "far"], "invalid choice: 'far'"),
     ],
 )
 def test_bad_arguments_exit_2(args, message, capsys):
