@@ -78,7 +78,7 @@ def run_marker(scene: str, command: list, explicit: bool) -> dict:
         scene_dir = ROOT / "scenes"
         marker["models"] = {
             o["model"]: hashlib.sha256((scene_dir / o["model"]).read_bytes()).hexdigest()
-            for o in scene_json.get("objects", []) if "model" in o
+            for o in scene_json.get("objects", []) + scene_json.get("meshes", []) if "model" in o
         }
     return marker
 

@@ -101,7 +101,9 @@ void check_model(const std::string& file) {
             return Eigen::VectorXd(as_vec<dim>(g[p]));
         };
         const Eigen::VectorXd x = as_vec<dim>(b.F[p]);
-        EXPECT_TRUE(test::check_gradient(value, as_vec<dim>(grad[p]), x, stats, 1e-6, 1e-6, 1e-3 * E));
+        // Step 1e-5 for the value: Psi is a difference of O(E) terms (eq. 8), so at 1e-6 the
+        // round-off of the quotient (eps |Psi| / h) reaches the 1e-6 tolerance on metal_3d.
+        EXPECT_TRUE(test::check_gradient(value, as_vec<dim>(grad[p]), x, stats, 1e-5, 1e-6, 1e-3 * E));
         EXPECT_TRUE(test::check_jacobian(gradient, Eigen::MatrixXd(hess[p]), x, stats, 1e-6, 1e-6, 1e-3 * E));
     }
     EXPECT_EQ(stats.checks, static_cast<int>(n) * (m + m * m));
