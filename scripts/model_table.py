@@ -76,11 +76,10 @@ def row(name: str, label: str, entry: dict, folder: Path, hessian: float | None)
 
 def table(old: Path, new: Path, old_hessian: dict) -> str:
     before, after = manifest(old), manifest(new)
-    lines = [
-        "| model | | input | training sampling | Hessian weight | steps | training s | paper 0.5x % | paper 1x % "
-        "| paper 2x % | near 0.5x % | near 1x % | near 2x % | Hessian (near) % | at F0 |",
-        "|" + "---|" * 16,
-    ]
+    header = ["model", "", "input", "training sampling", "Hessian weight", "steps", "training s",
+              "paper 0.5x %", "paper 1x %", "paper 2x %", "near 0.5x %", "near 1x %", "near 2x %",
+              "Hessian (near) %", "at F0"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for name in after:
         stem = name[:-3]
         if name in before:
