@@ -50,6 +50,8 @@ void for_each_step_field(F&& f) {
     f("kinematic_stages", &StepStats::kinematic_stages);
     f("ccd_queries", &StepStats::ccd_queries);
     f("ccd_limited", &StepStats::ccd_limited);
+    f("broad_phase_s", &StepStats::broad_phase_seconds);
+    f("ccd_s", &StepStats::ccd_seconds);
     f("contact_pairs", &StepStats::contact_pairs);
     f("min_distance", &StepStats::min_distance);
     f("substeps", &StepStats::substeps);
@@ -86,7 +88,8 @@ py::dict to_dict(const FrameStats& f) {
 }
 
 template <typename Sim>
-constexpr bool is_fem = std::is_same_v<std::decay_t<Sim>, FemSimulation>;
+constexpr bool is_fem = std::is_same_v<std::decay_t<Sim>, FemSimulation<2>> ||
+                        std::is_same_v<std::decay_t<Sim>, FemSimulation<3>>;
 
 [[noreturn]] void no_particles() {
     throw py::value_error("a FEM scene (meshes) has no particles: see nodes, node_velocities, elements");
@@ -136,8 +139,10 @@ public:
         }
         load_scene_models(scene_, trust_models, settings);
         py::gil_scoped_release release;
-        if (scene_.has_meshes())
-            sim_ = std::make_unique<FemSimulation>(scene_, settings);
+        if (scene_.has_meshes() && scene_.dim == 2)
+            sim_ = std::make_unique<FemSimulation<2>>(scene_, settings);
+        else if (scene_.has_meshes())
+            sim_ = std::make_unique<FemSimulation<3>>(scene_, settings);
         else if (scene_.dim == 2)
             sim_ = std::make_unique<Simulation<2>>(scene_, settings);
         else
@@ -149,17 +154,22 @@ public:
     template <typename Fn>
     decltype(auto) visit(Fn&& fn) const {
         if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
         return fn(std::as_const(*std::get<std::unique_ptr<Simulation<3>>>(sim_)));
     }
     template <typename Fn>
     decltype(auto) visit(Fn&& fn) {
         if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation>>(&sim_)) return fn(**s);
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(**s);
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(**s);
         return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
     }
-    const FemSimulation& fem() const {
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation>>(&sim_)) return **s;
+    /// fn(the FEM simulation, 2D or 3D); ValueError for an MPM scene.
+    template <typename Fn>
+    decltype(auto) visit_fem(Fn&& fn) const {
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
         throw py::value_error("an MPM scene (particles) has no mesh: see positions, velocities");
     }
 
@@ -271,7 +281,9 @@ private:
     }
 
     Scene scene_;
-    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation>> sim_;
+    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation<2>>,
+                 std::unique_ptr<FemSimulation<3>>>
+        sim_;
     std::vector<StepStats> history_;  // every step since construction or the last load_checkpoint()
 };
 
@@ -307,6 +319,16 @@ py::array_t<double> rows(const std::vector<Vec<d>>& v) {
     double* out = a.mutable_data();
     for (std::size_t i = 0; i < v.size(); ++i)
         for (int k = 0; k < d; ++k) out[d * i + k] = v[i][k];
+    return a;
+}
+
+/// Rows of node indices (elements, boundary facets) as an (m, k) int64 array.
+template <std::size_t k>
+py::array_t<std::int64_t> index_rows(const std::vector<std::array<int, k>>& v) {
+    py::array_t<std::int64_t> a({static_cast<py::ssize_t>(v.size()), static_cast<py::ssize_t>(k)});
+    std::int64_t* out = a.mutable_data();
+    for (std::size_t e = 0; e < v.size(); ++e)
+        for (std::size_t c = 0; c < k; ++c) out[k * e + c] = v[e][c];
     return a;
 }
 
@@ -361,35 +383,40 @@ Every model the scene names is loaded and checked.)doc")
         }, "Particles (0 in a FEM scene).")
         .def_property_readonly("is_fem", [](const PySimulation& s) { return s.scene().has_meshes(); },
                                "Whether the scene is of FEM meshes (node and element arrays) rather than particles.")
-        .def_property_readonly("nodes", [](const PySimulation& s) { return rows<2>(s.fem().state().x); },
-                               "FEM: (n, 2) float64 node positions, m (a new array).")
-        .def_property_readonly("node_velocities", [](const PySimulation& s) { return rows<2>(s.fem().state().v); },
-                               "FEM: (n, 2) float64 node velocities, m/s (a new array).")
-        .def_property_readonly("rest_nodes", [](const PySimulation& s) { return rows<2>(s.fem().mesh().x); },
-                               "FEM: (n, 2) float64 rest positions, m.")
+        .def_property_readonly("nodes", [](const PySimulation& s) {
+            return s.visit_fem([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.state().x); });
+        }, "FEM: (n, d) float64 node positions, m (a new array).")
+        .def_property_readonly("node_velocities", [](const PySimulation& s) {
+            return s.visit_fem([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.state().v); });
+        }, "FEM: (n, d) float64 node velocities, m/s (a new array).")
+        .def_property_readonly("rest_nodes", [](const PySimulation& s) {
+            return s.visit_fem([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.mesh().x); });
+        }, "FEM: (n, d) float64 rest positions, m.")
         .def_property_readonly("elements", [](const PySimulation& s) {
-            const auto& elements = s.fem().mesh().elements;
-            py::array_t<std::int64_t> a({static_cast<py::ssize_t>(elements.size()), py::ssize_t{3}});
-            std::int64_t* out = a.mutable_data();
-            for (std::size_t e = 0; e < elements.size(); ++e)
-                for (int k = 0; k < 3; ++k) out[3 * e + k] = elements[e][k];
-            return a;
-        }, "FEM: (m, 3) int64 triangle node indices (positively oriented at rest).")
+            return s.visit_fem([](const auto& f) { return index_rows(f.mesh().elements); });
+        }, "FEM: (m, d + 1) int64 node indices of the triangles (2D) or tetrahedra (3D), positively oriented at rest.")
+        .def_property_readonly("boundary_faces", [](const PySimulation& s) {
+            return s.visit_fem([](const auto& f) { return index_rows(f.mesh().boundary); });
+        }, "FEM: (k, d) int64 node indices of the boundary edges (2D) or triangles (3D), outward oriented.")
         .def_property_readonly("element_hardening", [](const PySimulation& s) {
-            const auto& h = s.fem().state().hardening;
-            return py::array_t<double>(static_cast<py::ssize_t>(h.size()), h.data());
+            return s.visit_fem([](const auto& f) {
+                const auto& h = f.state().hardening;
+                return py::array_t<double>(static_cast<py::ssize_t>(h.size()), h.data());
+            });
         }, "FEM: (m,) float64 hardening state per element (von Mises h).")
-        .def_property_readonly("mesh_first_node", [](const PySimulation& s) { return s.fem().scene_system().first_node; },
-                               "FEM: the first node of each scene mesh, and the node count at the end.")
+        .def_property_readonly("mesh_first_node", [](const PySimulation& s) {
+            return s.visit_fem([](const auto& f) { return f.scene_system().first_node; });
+        }, "FEM: the first node of each scene mesh, and the node count at the end.")
         .def_property_readonly("contact", [](const PySimulation& s) {
-            const FemSimulation& f = s.fem();
-            py::dict d;
-            d["dhat"] = f.scene_system().dhat;
-            d["kappa"] = f.scene_system().kappa;
-            d["bbox_diagonal"] = f.scene_system().diagonal;
-            d["min_distance"] = f.contact().min_distance(f.state().x);
-            d["active_pairs"] = f.contact().active_pairs(f.state().x);
-            return d;
+            return s.visit_fem([](const auto& f) {
+                py::dict d;
+                d["dhat"] = f.scene_system().dhat;
+                d["kappa"] = f.scene_system().kappa;
+                d["bbox_diagonal"] = f.scene_system().diagonal;
+                d["min_distance"] = f.contact().min_distance(f.state().x);
+                d["active_pairs"] = f.contact().active_pairs(f.state().x);
+                return d;
+            });
         }, "FEM: barrier dhat (m), kappa (J/m^4), the bounding-box diagonal (m), and now the smallest pair "
            "distance (m) and the pairs within dhat.")
         .def("step", &PySimulation::step,

@@ -41,7 +41,7 @@ from evaluate_implicit import read_csv, run_dir_complete, run_marker  # noqa: E4
 from plasticitynet.mesh_ply import read_mesh_ply  # noqa: E402
 
 PNET = ROOT / "build" / "cpp" / "pnet"
-SCENES = ["metal_frame_2d", "metal_nh_frame_2d"]
+SCENES = ["metal_frame_2d", "metal_nh_frame_2d", "metal_frame_3d"]
 
 # name: (integrator, dt, extra options, scenes it applies to (None: all))
 # The regularizer ablation runs the first FRAMES_CAP frames only (w = 0 took ~10x the solves:
@@ -51,7 +51,7 @@ RUNS = {
     "gt": ("explicit", 1e-5, [], None),
     "explicit_2e-5": ("explicit", 2e-5, [], None),
     "explicit_cfl": ("explicit", 0.0, [], None),
-    "analytic_1e-2": ("analytic", 1e-2, [], {"metal_frame_2d"}),
+    "analytic_1e-2": ("analytic", 1e-2, [], {"metal_frame_2d", "metal_frame_3d"}),
     "plasticitynet_1e-2": ("plasticitynet", 1e-2, [], None),
     "plasticitynet_1e-3": ("plasticitynet", 1e-3, [], None),
     "lagged_1e-2": ("lagged", 1e-2, [], None),
@@ -59,7 +59,8 @@ RUNS = {
     "plasticitynet_1e-2_exact_rm": ("plasticitynet", 1e-2, ["--return-map", "exact"], {"metal_nh_frame_2d"}),
 }
 # The same-dt reference each implicit run is also compared with.
-REFERENCE = {"metal_frame_2d": "analytic_1e-2", "metal_nh_frame_2d": "plasticitynet_1e-2_exact_rm"}
+REFERENCE = {"metal_frame_2d": "analytic_1e-2", "metal_nh_frame_2d": "plasticitynet_1e-2_exact_rm",
+             "metal_frame_3d": "analytic_1e-2"}
 
 
 def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force: bool) -> Path:

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -17,6 +18,7 @@
 #include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
 #include "pnet/io/render.hpp"
+#include "pnet/io/vtu.hpp"
 #include "pnet/sim/scene_models.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
@@ -180,7 +182,7 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
     write_png((out / frame_name(sim.frame(), "png")).string(), image);
 }
 
-void write_frame(const FemSimulation& sim, const Scene& scene, const Options& o, const fs::path& out) {
+void write_frame(const FemSimulation<2>& sim, const Scene& scene, const Options& o, const fs::path& out) {
     const FemState<2>& state = sim.state();
     const Mesh<2>& mesh = sim.mesh();
     PlyMesh ply;
@@ -216,10 +218,79 @@ void write_frame(const FemSimulation& sim, const Scene& scene, const Options& o,
     write_png((out / frame_name(sim.frame(), "png")).string(), render_mesh_2d(ply.position, ply.triangles, colour, r));
 }
 
+/// The element each boundary facet of a 3D mesh belongs to (the one element that has it).
+std::vector<int> boundary_owner(const Mesh<3>& mesh) {
+    std::map<std::array<int, 3>, int> owner;
+    for (std::size_t e = 0; e < mesh.elements.size(); ++e)
+        for (int skip = 0; skip < 4; ++skip) {
+            std::array<int, 3> face;
+            for (int k = 0, j = 0; k < 4; ++k)
+                if (k != skip) face[j++] = mesh.elements[e][k];
+            std::sort(face.begin(), face.end());
+            owner[face] = static_cast<int>(e);
+        }
+    std::vector<int> out;
+    for (std::array<int, 3> face : mesh.boundary) {
+        std::sort(face.begin(), face.end());
+        out.push_back(owner.at(face));
+    }
+    return out;
+}
+
+/// A 3D FEM frame: every node with the boundary triangles (PLY), the whole tetrahedral
+/// mesh (VTU, for ParaView), and a shaded render of the surface (PNG).
+void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Options& o, const fs::path& out) {
+    const FemState<3>& state = sim.state();
+    const Mesh<3>& mesh = sim.mesh();
+    const std::vector<int> owner = boundary_owner(mesh);
+    PlyMesh ply;
+    ply.dim = 3;
+    for (std::size_t i = 0; i < state.x.size(); ++i)
+        for (int a = 0; a < 3; ++a) {
+            ply.position.push_back(state.x[i][a]);
+            ply.velocity.push_back(state.v[i][a]);
+        }
+    std::vector<double> colour(mesh.boundary.size());
+    for (std::size_t f = 0; f < mesh.boundary.size(); ++f) {
+        const int e = owner[f];
+        for (int a = 0; a < 3; ++a) ply.triangles.push_back(mesh.boundary[f][a]);
+        ply.hardening.push_back(state.hardening[e]);
+        Vec<3> v = Vec<3>::Zero();
+        for (int a = 0; a < 4; ++a) v += state.v[mesh.elements[e][a]] / 4.0;
+        colour[f] = o.color == "speed" ? v.norm() : state.hardening[e];
+    }
+    write_mesh_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
+    VtuMesh vtu;
+    vtu.dim = 3;
+    vtu.position = ply.position;
+    for (const auto& el : mesh.elements) vtu.cells.insert(vtu.cells.end(), el.begin(), el.end());
+    vtu.point_data.push_back({"velocity", 3, ply.velocity});
+    vtu.cell_data.push_back({"hardening", 1, state.hardening});
+    write_vtu((out / frame_name(sim.frame(), "vtu")).string(), vtu);
+    ParticleRenderOptions r;
+    double speed_scale = 0.0;
+    for (const SceneMesh& m : scene.meshes) speed_scale = std::max(speed_scale, m.velocity.norm());
+    r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
+    r.value_max = o.color == "speed" ? std::max(0.1, 2.0 * speed_scale)
+                                     : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
+    for (int a = 0; a < 3; ++a) {
+        r.domain_min[a] = scene.domain_min[a];
+        r.domain_max[a] = scene.domain_max[a];
+    }
+    char caption[128];
+    std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
+    r.caption = caption;
+    r.width_px = 720;
+    write_png((out / frame_name(sim.frame(), "png")).string(), render_mesh_3d(ply.position, ply.triangles, colour, r));
+}
+
+template <class Sim>
+constexpr bool is_fem = std::is_same_v<Sim, FemSimulation<2>> || std::is_same_v<Sim, FemSimulation<3>>;
+
 template <class Sim>
 nlohmann::json describe_run(const Sim& sim) {
-    if constexpr (std::is_same_v<Sim, FemSimulation>) {
-        const FemSceneSystem& s = sim.scene_system();
+    if constexpr (is_fem<Sim>) {
+        const auto& s = sim.scene_system();
         return {{"nodes", sim.mesh().nodes()}, {"elements", sim.mesh().elements.size()},
                 {"mesh_first_node", s.first_node}, {"mesh_first_element", s.first_element},
                 {"bbox_diagonal", s.diagonal}, {"dhat", s.dhat}, {"kappa", s.kappa}, {"step", sim.step_size()}};
@@ -231,7 +302,7 @@ nlohmann::json describe_run(const Sim& sim) {
 template <class Sim>
 int run(const Scene& scene, const Options& o, const IntegratorSettings& settings) {
     constexpr int dim = Sim::kDim;
-    constexpr bool fem = std::is_same_v<Sim, FemSimulation>;
+    constexpr bool fem = is_fem<Sim>;
     const fs::path out(o.out);
     fs::create_directories(out);
     const int frames = o.frames > 0 ? o.frames : scene.frames;
@@ -266,7 +337,8 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
         "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
         "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged" +
-        std::string(fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,substeps" : "") +
+        std::string(fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,substeps,"
+                          "broad_phase_s,ccd_s" : "") +
         "\n";
     const fs::path steps_path = out / "steps.csv";
     auto keep_rows = [&](const fs::path& path, std::string& text) {
@@ -329,9 +401,9 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
                           s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped,
                           s.fixed_point_converged ? 1 : 0);
             if (fem)
-                n += std::snprintf(row + n, sizeof row - n, ",%d,%d,%d,%d,%zu,%.6g,%d", s.kinematic_stages,
+                n += std::snprintf(row + n, sizeof row - n, ",%d,%d,%d,%d,%zu,%.6g,%d,%.6g,%.6g", s.kinematic_stages,
                                    s.kinematic_reached ? 1 : 0, s.ccd_queries, s.ccd_limited, s.contact_pairs,
-                                   s.min_distance, s.substeps);
+                                   s.min_distance, s.substeps, s.broad_phase_seconds, s.ccd_seconds);
             std::snprintf(row + n, sizeof row - n, "\n");
             steps_csv += row;
         }
@@ -426,7 +498,8 @@ int simulate_command(int argc, char** argv) {
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";
         load_scene_models(scene, o.trust_model, settings);
-        if (scene.has_meshes()) return run<FemSimulation>(scene, o, settings);
+        if (scene.has_meshes())
+            return scene.dim == 2 ? run<FemSimulation<2>>(scene, o, settings) : run<FemSimulation<3>>(scene, o, settings);
         return scene.dim == 2 ? run<Simulation<2>>(scene, o, settings) : run<Simulation<3>>(scene, o, settings);
     } catch (const UsageError& e) {
         std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);

@@ -3,7 +3,9 @@
 // 1e-5 s (the paper's ground-truth step) and at its CFL step, on the same
 // scene, in one run. Rows: sand_column_2d, snowball_2d (MPM), metal_frame_2d
 // ("Von-Mises metal") and metal_nh_frame_2d ("Neo-hookean metal", with the
-// learned return mapping), and with --3d the 3D MPM scenes.
+// learned return mapping), and with --3d the 3D MPM scenes and metal_frame_3d.
+// FEM rows also give the share of the step time spent in contact's broad phase
+// and CCD (measured by the 3D contact).
 //
 //   bench_table1 [--frames N] [--fem-frames N] [--threads T] [--scenes DIR] [--only NAME]
 //                [--dt-implicit S] [--with-lagged] [--with-one-solve] [--3d] [--no-fem]
@@ -47,6 +49,7 @@ struct Row {
     double seconds_per_frame = 0.0, mean_dt = 0.0;
     double newton = 0.0, cg = 0.0, fixed_point = 0.0;  // per step
     double energy_share = 0.0, cg_share = 0.0;
+    double contact_share = -1.0;  // broad phase + CCD (3D FEM); < 0: not measured
     int frames = 0;             // frames completed
     std::string failure;        // why the run stopped early ("" if it did not)
 };
@@ -57,7 +60,7 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
     row.integrator = settings.name;
     row.dt = settings.dt;
     Sim sim(scene, settings);
-    double wall = 0.0, energy = 0.0, cg = 0.0;
+    double wall = 0.0, energy = 0.0, cg = 0.0, contact = 0.0;
     long steps = 0, newton = 0, cg_iterations = 0, fixed_point = 0;
     for (int f = 0; f < frames; ++f) {
         const auto start = std::chrono::steady_clock::now();
@@ -78,6 +81,7 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
         for (const pnet::StepStats& step : sim.last_frame_steps()) {
             energy += step.energy_seconds;
             cg += step.cg_seconds;
+            contact += step.broad_phase_seconds + step.ccd_seconds;
         }
         std::fprintf(stderr, "\r  %s dt %s: frame %d/%d (%.2f s/frame)   ", settings.name.c_str(),
                      settings.dt > 0 ? std::to_string(settings.dt).c_str() : "CFL", f + 1, frames, wall / (f + 1));
@@ -92,6 +96,7 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
     row.fixed_point = static_cast<double>(fixed_point) / steps;
     row.energy_share = energy / wall;
     row.cg_share = cg / wall;
+    if (contact > 0.0) row.contact_share = contact / wall;
     return row;
 }
 
@@ -129,7 +134,9 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
 }
 
 /// The metal rows: the scene's own implicit settings (dt 1e-2) against explicit at 1e-5 and CFL.
+template <int dim>
 std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with_lagged) {
+    using Sim = pnet::FemSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
     auto with = [&](const char* name, double dt) {
@@ -139,14 +146,14 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with
         return s;
     };
     std::vector<Row> rows;
-    rows.push_back(measure<pnet::FemSimulation>(scene, base, frames));
+    rows.push_back(measure<Sim>(scene, base, frames));
     if (with_lagged) {
         if (scene.meshes[0].material.name == "metal")
-            rows.push_back(measure<pnet::FemSimulation>(scene, with("analytic", base.dt), frames));
-        rows.push_back(measure<pnet::FemSimulation>(scene, with("lagged", base.dt), frames));
+            rows.push_back(measure<Sim>(scene, with("analytic", base.dt), frames));
+        rows.push_back(measure<Sim>(scene, with("lagged", base.dt), frames));
     }
-    rows.push_back(measure<pnet::FemSimulation>(scene, with("explicit", 1e-5), frames));
-    rows.push_back(measure<pnet::FemSimulation>(scene, with("explicit", 0.0), frames));
+    rows.push_back(measure<Sim>(scene, with("explicit", 1e-5), frames));
+    rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
     return rows;
 }
 
@@ -196,14 +203,15 @@ int main(int argc, char** argv) {
     std::vector<std::string> names = {"sand_column_2d", "snowball_2d"};
     if (fem) names.insert(names.end(), {"metal_frame_2d", "metal_nh_frame_2d"});
     if (three_d) names.insert(names.end(), {"sand_column_3d", "snowball_3d"});
+    if (three_d && fem) names.push_back("metal_frame_3d");
 
     std::printf("Table 1: seconds per frame (0.02 s) over frames 0-%d from the initial state (the metal frames: "
                 "%s), %d threads\n\n",
                 frames, fem_frames > 0 ? ("0-" + std::to_string(fem_frames)).c_str() : "all the scene's frames",
                 omp_get_max_threads());
     std::printf("| scene | integrator | dt (s) | s/frame | Newton/step | CG/step | fixed-point/step | energy %% | CG %% |"
-                " speed-up vs explicit 1e-5 | paper s/frame | paper speed-up |\n"
-                "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+                " contact %% | speed-up vs explicit 1e-5 | paper s/frame | paper speed-up |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const std::string& name : names) {
         if (!only.empty() && only != name) continue;
         std::vector<Row> rows;
@@ -213,7 +221,8 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "%s:\n", name.c_str());
             if (scene.has_meshes()) {
                 scene_frames = fem_frames > 0 ? fem_frames : scene.frames;
-                rows = bench_fem_scene(scene, scene_frames, with_lagged);
+                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, with_lagged)
+                                      : bench_fem_scene<3>(scene, scene_frames, with_lagged);
             } else {
                 rows = scene.dim == 2 ? bench_scene<2>(scene, frames, dt_implicit, with_lagged, with_one_solve)
                                       : bench_scene<3>(scene, frames, dt_implicit, with_lagged, with_one_solve);
@@ -246,14 +255,16 @@ int main(int argc, char** argv) {
             // No speed-up of a run that did not cover the interval.
             char speedup[32] = "-";
             if (r.failure.empty()) std::snprintf(speedup, sizeof speedup, "%.2fx", explicit_1e5 / r.seconds_per_frame);
-            std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", name.c_str(),
+            const std::string contact =
+                r.contact_share >= 0.0 ? std::to_string(static_cast<int>(100 * r.contact_share + 0.5)) : "-";
+            std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", name.c_str(),
                         r.integrator.c_str(), dt, seconds.c_str(),
                         implicit ? std::to_string(r.newton).substr(0, 4).c_str() : "-",
                         implicit ? std::to_string(static_cast<int>(r.cg + 0.5)).c_str() : "-",
                         implicit ? std::to_string(r.fixed_point).substr(0, 4).c_str() : "-",
                         implicit ? std::to_string(static_cast<int>(100 * r.energy_share + 0.5)).c_str() : "-",
                         implicit ? std::to_string(static_cast<int>(100 * r.cg_share + 0.5)).c_str() : "-",
-                        speedup, paper_cells);
+                        contact.c_str(), speedup, paper_cells);
             std::fflush(stdout);
         }
     }

@@ -1,9 +1,12 @@
 """Reader for the FEM mesh frames `pnet simulate` writes (cpp/pnet/io/ply.hpp, PlyMesh).
 
-    ply / format binary_little_endian 1.0 / comment plasticitynet mesh / comment dim 2
+    ply / format binary_little_endian 1.0 / comment plasticitynet mesh / comment dim D
     element vertex n    property double x y z vx vy vz
     element face m      property list uchar int vertex_indices, property double hardening
     end_header
+
+2D frames hold every node and the triangles (z = 0); 3D frames every node and the
+boundary triangles, each with the hardening of the tetrahedron it bounds.
 
 Anything else is refused with ValueError naming the file and the problem.
 """
@@ -20,10 +23,11 @@ _FACE = np.dtype([("count", "u1"), ("nodes", "<i4", (3,)), ("hardening", "<f8")]
 
 @dataclass
 class MeshFrame:
-    position: np.ndarray   # (n, 2), m
-    velocity: np.ndarray   # (n, 2), m/s
-    triangles: np.ndarray  # (m, 3) node indices
+    position: np.ndarray   # (n, dim), m
+    velocity: np.ndarray   # (n, dim), m/s
+    triangles: np.ndarray  # (m, 3) node indices (3D: the boundary faces)
     hardening: np.ndarray  # (m,)
+    dim: int = 2
 
 
 def read_mesh_ply(path: str | Path) -> MeshFrame:
@@ -56,6 +60,9 @@ def read_mesh_ply(path: str | Path) -> MeshFrame:
     faces = np.frombuffer(body, _FACE, m, offset=n * _VERTEX.itemsize)
     if m and (np.any(faces["count"] != 3) or faces["nodes"].min() < 0 or faces["nodes"].max() >= n):
         raise ValueError(f"{path}: a face is not a triangle of existing vertices")
-    return MeshFrame(position=np.stack([vertices["x"], vertices["y"]], axis=1),
-                     velocity=np.stack([vertices["vx"], vertices["vy"]], axis=1),
-                     triangles=faces["nodes"].astype(np.int64), hardening=faces["hardening"].copy())
+    dims = [line.split()[2] for line in header if line.startswith("comment dim ") and len(line.split()) == 3]
+    dim = int(dims[0]) if dims and dims[0] in ("2", "3") else 2
+    axes = ("x", "y", "z")[:dim]
+    return MeshFrame(position=np.stack([vertices[a] for a in axes], axis=1),
+                     velocity=np.stack([vertices["v" + a] for a in axes], axis=1),
+                     triangles=faces["nodes"].astype(np.int64), hardening=faces["hardening"].copy(), dim=dim)

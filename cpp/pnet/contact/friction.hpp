@@ -1,53 +1,52 @@
 #pragma once
 // Lagged smoothed Coulomb friction of IPC (Li et al. 2020; DESIGN.md §4.3) in
-// velocity form: for every contact pair active at the start of the step, its
-// normal force lambda_k = kappa |b'(s)| 2 d, its tangent t_k and the weights
-// of its relative velocity are frozen (lagged); the dissipative potential is
-//   D(v) = sum_k mu lambda_k f0(|u_k|),   u_k = t_k . sum_j w_kj v_j  (m/s),
+// velocity form, in 2D and 3D: for every contact pair active at the start of
+// the step, its normal force lambda_k = kappa |b'(s)| 2 d, its tangent basis
+// T_k (dim x (dim - 1), orthonormal columns) and the weights of its relative
+// velocity are frozen (lagged); the dissipative potential is
+//   D(v) = sum_k mu lambda_k f0(|u_k|),   u_k = T_k^T sum_j w_kj v_j  (m/s),
 //   f0(x) = -x^3 / (3 eps^2) + x^2 / eps + eps / 3 for x < eps, x otherwise,
-// so that -dD/du = -mu lambda f1(|u|) sign(u), f1 = f0' (a Coulomb force
+// so that -dD/du = -mu lambda f1(|u|) u / |u|, f1 = f0' (a Coulomb force
 // smoothed below the slip velocity eps_v). The incremental potential gets
-// dt D(v). Its Hessian, dt mu lambda f1'(|u|) (t w)(t w)^T in 2D, is PSD.
-#include <array>
+// dt D(v). Its Hessian in u,
+//   mu lambda [f1'(|u|) u u^T / |u|^2 + f1(|u|) / |u| (I - u u^T / |u|^2)],
+// is PSD (f1' >= 0, f1 >= 0) and tends to 2 mu lambda / eps I as u -> 0.
 #include <vector>
 
 #include <Eigen/SparseCore>
 
+#include "pnet/contact/ipc_contact.hpp"
 #include "pnet/math/types.hpp"
 
 namespace pnet {
-
-class Contact2d;
 
 /// f0, f1 = f0' and f1' of the smoothed friction (eps > 0, x >= 0).
 double friction_f0(double x, double eps);
 double friction_f1(double x, double eps);
 double friction_f1_derivative(double x, double eps);
+/// f1(x) / x, continuous at 0 (2 / eps).
+double friction_f1_over_x(double x, double eps);
 
-class Friction2d {
+template <int dim>
+class Friction {
 public:
+    using Pair = FrictionPair<dim>;
+    using Slip = Eigen::Matrix<double, dim - 1, 1>;
+
     /// mu: Coulomb coefficient; eps_v: the slip velocity below which friction is smoothed, m/s.
-    Friction2d(double mu, double eps_v);
+    Friction(double mu, double eps_v);
 
     /// Lags the pairs of `contact` active at positions x (the start of the step).
-    void lag(const Contact2d& contact, const std::vector<Vec<2>>& x);
+    void lag(const ContactPotential<dim>& contact, const std::vector<Vec<dim>>& x);
     std::size_t pairs() const { return pairs_.size(); }
 
-    /// D(v), W (v: 2 values per node).
+    /// D(v), W (v: dim values per node).
     double value(const Eigen::VectorXd& v) const;
     /// g += scale dD/dv.
     void add_gradient(const Eigen::VectorXd& v, double scale, Eigen::VectorXd& g) const;
     /// Triplets of scale d2D/dv2.
     void add_hessian(const Eigen::VectorXd& v, double scale, std::vector<Eigen::Triplet<double>>& triplets) const;
 
-    /// A lagged pair: u = tangent . sum_j weight_j v_node_j.
-    struct Pair {
-        std::array<int, 3> node{};
-        std::array<double, 3> weight{};
-        int count = 0;
-        Vec<2> tangent = Vec<2>::Zero();
-        double normal_force = 0.0;  // lambda, N (per unit depth in 2D)
-    };
     const std::vector<Pair>& lagged() const { return pairs_; }
     double mu() const { return mu_; }
 
@@ -59,9 +58,12 @@ public:
     void apply_impulses(Eigen::VectorXd& v, double h, const std::vector<double>& inverse_mass) const;
 
 private:
-    double slip(const Pair& p, const Eigen::VectorXd& v) const;
+    Slip slip(const Pair& p, const Eigen::VectorXd& v) const;
     double mu_, eps_v_;
     std::vector<Pair> pairs_;
 };
+
+using Friction2d = Friction<2>;
+using Friction3d = Friction<3>;
 
 }  // namespace pnet

@@ -171,11 +171,11 @@ void Contact2d::add_hessian(const std::vector<Vec<2>>& x, double scale,
     }
 }
 
-std::vector<Contact2d::LaggedPair> Contact2d::lagged_pairs(const std::vector<Vec<2>>& x) const {
-    std::vector<LaggedPair> out;
+std::vector<FrictionPair<2>> Contact2d::lagged_pairs(const std::vector<Vec<2>>& x) const {
+    std::vector<FrictionPair<2>> out;
     const Eigen::Matrix2d R = (Eigen::Matrix2d() << 0.0, -1.0, 1.0, 0.0).finished();  // +90 degrees
     for (const Pair& pair : active(x)) {
-        LaggedPair l;
+        FrictionPair<2> l;
         const Vec<2>& p = x[pair.node];
         double s = 0.0;
         if (pair.edge >= 0) {
@@ -183,15 +183,15 @@ std::vector<Contact2d::LaggedPair> Contact2d::lagged_pairs(const std::vector<Vec
             const PointEdgeCase c = point_edge_case(p, x[a], x[b]);
             s = point_edge_distance_sq(p, x[a], x[b], c);
             l.count = 3;
-            l.node = {pair.node, a, b};
+            l.node = {pair.node, a, b, 0};
             if (c == PointEdgeCase::Interior) {
                 const Vec<2> e = x[b] - x[a];
                 const double alpha = (p - x[a]).dot(e) / e.squaredNorm();
-                l.weight = {1.0, -(1.0 - alpha), -alpha};
+                l.weight = {1.0, -(1.0 - alpha), -alpha, 0.0};
                 l.tangent = e.normalized();
             } else {
                 const int end = c == PointEdgeCase::EndpointA ? a : b;
-                l.weight = {1.0, end == a ? -1.0 : 0.0, end == b ? -1.0 : 0.0};
+                l.weight = {1.0, end == a ? -1.0 : 0.0, end == b ? -1.0 : 0.0, 0.0};
                 l.tangent = (R * (p - x[end])).normalized();
             }
         } else {
@@ -199,8 +199,8 @@ std::vector<Contact2d::LaggedPair> Contact2d::lagged_pairs(const std::vector<Vec
             const double d = h.normal.dot(p - h.origin);
             s = d * d;
             l.count = 1;
-            l.node = {pair.node, 0, 0};
-            l.weight = {1.0, 0.0, 0.0};
+            l.node = {pair.node, 0, 0, 0};
+            l.weight = {1.0, 0.0, 0.0, 0.0};
             l.tangent = R * h.normal;
         }
         l.normal_force = -kappa_ * barrier_.first(s) * 2.0 * std::sqrt(s);

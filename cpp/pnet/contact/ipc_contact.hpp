@@ -14,6 +14,7 @@
 // (Measured on metal_frame_2d: the all-pairs test was 14% of a plasticitynet
 // run's time, and CCD 5%.)
 #include <array>
+#include <string>
 #include <vector>
 
 #include <Eigen/SparseCore>
@@ -23,10 +24,25 @@
 
 namespace pnet {
 
-/// The region n.(x - origin) < 0 is solid; n is a unit vector.
-struct HalfSpace2d {
-    Vec<2> origin = Vec<2>::Zero();
-    Vec<2> normal = Vec<2>(0.0, 1.0);
+/// The region n.(x - origin) < 0 is solid; n is a unit vector (default: the ground y < 0).
+template <int dim>
+struct HalfSpace {
+    Vec<dim> origin = Vec<dim>::Zero();
+    Vec<dim> normal = Vec<dim>::Unit(1);
+};
+using HalfSpace2d = HalfSpace<2>;
+
+/// An active contact pair as lagged friction sees it (friction.hpp): the nodes and weights of
+/// its relative velocity sum_j w_j v_j (the point minus the closest point of the other
+/// primitive), its tangent basis (dim x (dim - 1), orthonormal columns, orthogonal to the
+/// contact normal) and its normal force kappa |b'(s)| 2 d (N; per unit depth in 2D).
+template <int dim>
+struct FrictionPair {
+    std::array<int, 4> node{};
+    std::array<double, 4> weight{};
+    int count = 0;
+    Eigen::Matrix<double, dim, dim - 1> tangent = Eigen::Matrix<double, dim, dim - 1>::Zero();
+    double normal_force = 0.0;
 };
 
 /// The contact potential of positions x (all nodes of a mesh, m), added to an
@@ -47,6 +63,30 @@ public:
     /// The largest stable explicit step of the barrier forces at x (s), given each node's mass
     /// (0 for kinematic nodes); infinity when nothing is in contact.
     virtual double stable_time_step(const std::vector<Vec<dim>>& x, const std::vector<double>& free_mass) const = 0;
+    /// The pairs active at x with their friction data, in a fixed order.
+    virtual std::vector<FrictionPair<dim>> lagged_pairs(const std::vector<Vec<dim>>& x) const = 0;
+    /// The smallest distance of any pair, m.
+    virtual double min_distance(const std::vector<Vec<dim>>& x) const = 0;
+    /// Pairs closer than dhat.
+    virtual std::size_t active_pairs(const std::vector<Vec<dim>>& x) const = 0;
+    /// An intersecting or touching pair at x as text naming its nodes, or "" (exact predicates).
+    virtual std::string first_intersection(const std::vector<Vec<dim>>& x) const = 0;
+    virtual double dhat() const = 0;
+    virtual double kappa() const = 0;
+    virtual void set_kappa(double kappa) = 0;
+
+    /// Seconds spent in the broad phase and in narrow-phase CCD since the last reset, and the
+    /// CCD pair queries (measured by the 3D contact; zero in 2D).
+    struct Timing {
+        double broad_phase_seconds = 0.0;
+        double ccd_seconds = 0.0;
+        long ccd_pairs = 0;
+    };
+    const Timing& timing() const { return timing_; }
+    void reset_timing() const { timing_ = Timing{}; }
+
+protected:
+    mutable Timing timing_;
 };
 
 class Contact2d final : public ContactPotential<2> {
@@ -56,9 +96,9 @@ public:
     Contact2d(const std::vector<std::array<int, 2>>& boundary_edges, double dhat, double kappa);
 
     void add_half_space(const HalfSpace2d& half_space) { half_spaces_.push_back(half_space); }
-    double dhat() const { return dhat_; }
-    double kappa() const { return kappa_; }
-    void set_kappa(double kappa) { kappa_ = kappa; }
+    double dhat() const override { return dhat_; }
+    double kappa() const override { return kappa_; }
+    void set_kappa(double kappa) override { kappa_ = kappa; }
 
     double value(const std::vector<Vec<2>>& x) const override;
     double add_gradient(const std::vector<Vec<2>>& x, double scale, Eigen::VectorXd& g) const override;
@@ -73,27 +113,16 @@ public:
     double stable_time_step(const std::vector<Vec<2>>& x, const std::vector<double>& free_mass) const override;
 
     /// The smallest distance of any pair (node-edge, node-plane), m.
-    double min_distance(const std::vector<Vec<2>>& x) const;
-    /// Pairs closer than dhat.
-    std::size_t active_pairs(const std::vector<Vec<2>>& x) const;
-    /// An active pair's lagged friction data at x (friction.hpp): the nodes and
-    /// weights of its relative velocity (node minus the closest point of the
-    /// edge; the node alone against a half-space), its tangent and its normal
-    /// force kappa |b'(s)| 2 d (N per unit depth).
-    struct LaggedPair {
-        std::array<int, 3> node{};
-        std::array<double, 3> weight{};
-        int count = 0;
-        Vec<2> tangent = Vec<2>::Zero();
-        double normal_force = 0.0;
-    };
-    std::vector<LaggedPair> lagged_pairs(const std::vector<Vec<2>>& x) const;
+    double min_distance(const std::vector<Vec<2>>& x) const override;
+    std::size_t active_pairs(const std::vector<Vec<2>>& x) const override;
+    /// Node-edge pairs: the node minus the closest point of the edge; node-plane: the node.
+    std::vector<FrictionPair<2>> lagged_pairs(const std::vector<Vec<2>>& x) const override;
 
     /// A node-edge pair (or node inside a half-space) that intersects or touches at x, or two
     /// boundary edges that cross, as text ("node 12 and edge 30-31", "edge 3-4 and edge 30-31"),
     /// or empty if none: a start state must have none. (A body wholly inside another crosses no
     /// edge: the caller tests containment.) Exact predicates, all pairs: O(edges^2).
-    std::string first_intersection(const std::vector<Vec<2>>& x) const;
+    std::string first_intersection(const std::vector<Vec<2>>& x) const override;
 
 private:
     struct Pair {
@@ -115,7 +144,7 @@ private:
     mutable std::vector<Vec<2>> box_lo_, box_hi_;
     mutable std::vector<int> order_, found_;
     mutable std::vector<double> sorted_lo_;
-    std::vector<HalfSpace2d> half_spaces_;
+    std::vector<HalfSpace<2>> half_spaces_;
     double dhat_, kappa_;
     Barrier barrier_;
 };

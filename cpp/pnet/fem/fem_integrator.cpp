@@ -85,8 +85,7 @@ FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, 
 }
 
 template <int dim>
-void FemImplicitIntegrator<dim>::set_friction(Friction2d* friction, const Contact2d* contact) {
-    if (dim != 2) throw std::invalid_argument("FemImplicitIntegrator: friction is 2D only");
+void FemImplicitIntegrator<dim>::set_friction(Friction<dim>* friction, const ContactPotential<dim>* contact) {
     friction_ = friction;
     friction_contact_ = contact;
     potential_.set_friction(friction);
@@ -99,9 +98,7 @@ constexpr double kStageTolerance = 1e-4;
 template <int dim>
 StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
-    if constexpr (dim == 2) {
-        if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
-    }
+    if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
     StepStats stats;
     stats.dt = dt;
     const std::size_t n = system_.mesh.nodes();
@@ -293,9 +290,7 @@ double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long 
         contact_->add_gradient(state.x, 1.0, barrier);
         force -= barrier;
     }
-    if constexpr (dim == 2) {
-        if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
-    }
+    if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
     std::vector<Vec<dim>> v(n), dx(n), ahead(n);
     // The step is shortened until it closes no gap by more than about a fifth (CCD on 5 times
     // the motion): the barrier's stiffness, ~1/d^2, then grows at most 1.5-fold before the
@@ -314,13 +309,11 @@ double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long 
                 throw SimulationError("step " + std::to_string(step_index) + ": node " + std::to_string(i) +
                                       " has a non-finite velocity (the simulation blew up; try a smaller dt)");
         }
-        if constexpr (dim == 2) {
-            if (friction_) {
-                VecX flat(dim * n);
-                for (std::size_t i = 0; i < n; ++i) flat.template segment<dim>(dim * i) = v[i];
-                friction_->apply_impulses(flat, h, inverse_mass_);
-                for (std::size_t i = 0; i < n; ++i) v[i] = flat.template segment<dim>(dim * i);
-            }
+        if (friction_) {
+            VecX flat(dim * n);
+            for (std::size_t i = 0; i < n; ++i) flat.template segment<dim>(dim * i) = v[i];
+            friction_->apply_impulses(flat, h, inverse_mass_);
+            for (std::size_t i = 0; i < n; ++i) v[i] = flat.template segment<dim>(dim * i);
         }
         for (std::size_t i = 0; i < n; ++i) {
             dx[i] = h * v[i];

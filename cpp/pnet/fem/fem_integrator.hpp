@@ -76,8 +76,8 @@ public:
     FemImplicitIntegrator(const FemSystem<dim>& system, FemMethod method, const ImplicitOptions& options,
                           std::unique_ptr<ParticleEnergy<dim>> energy, const ContactPotential<dim>* contact);
 
-    /// Lagged friction on the pairs of `contact` (2D), lagged at the start of every step.
-    void set_friction(Friction2d* friction, const Contact2d* contact);
+    /// Lagged friction on the pairs of `contact`, lagged at the start of every step.
+    void set_friction(Friction<dim>* friction, const ContactPotential<dim>* contact);
 
     /// Throws SimulationError naming the step on a failed solve.
     StepStats step(FemState<dim>& state, double dt, long step_index);
@@ -95,8 +95,8 @@ private:
     ReferenceSolveWork<dim> work_;
     std::vector<char> fixed_components_;
     bool has_kinematic_ = false;
-    Friction2d* friction_ = nullptr;
-    const Contact2d* friction_contact_ = nullptr;
+    Friction<dim>* friction_ = nullptr;
+    const ContactPotential<dim>* friction_contact_ = nullptr;
 };
 
 template <int dim>
@@ -105,12 +105,12 @@ public:
     FemExplicitIntegrator(const FemSystem<dim>& system, const ContactPotential<dim>* contact)
         : system_(system), contact_(contact) {}
 
-    /// The same lagged friction pairs as the implicit integrators (2D: normal forces,
+    /// The same lagged friction pairs as the implicit integrators (normal forces,
     /// tangents and weights of the start of the step), applied as Coulomb impulses after
-    /// the other forces (Friction2d::apply_impulses): exact sticking, and stable at any
+    /// the other forces (Friction::apply_impulses): exact sticking, and stable at any
     /// step, where the smoothed force of the potential at the start-of-step velocity is
     /// stable only for mu lambda dt / (m eps_v) < 2.
-    void set_friction(Friction2d* friction, const Contact2d* contact) {
+    void set_friction(Friction<dim>* friction, const ContactPotential<dim>* contact) {
         friction_ = friction;
         friction_contact_ = contact;
     }
@@ -137,8 +137,8 @@ private:
 
     const FemSystem<dim>& system_;
     const ContactPotential<dim>* contact_;
-    Friction2d* friction_ = nullptr;
-    const Contact2d* friction_contact_ = nullptr;
+    Friction<dim>* friction_ = nullptr;
+    const ContactPotential<dim>* friction_contact_ = nullptr;
     std::vector<double> free_mass_;     // node masses, 0 on kinematic nodes
     std::vector<double> inverse_mass_;  // 1 / mass, 0 on kinematic nodes
 };

@@ -160,7 +160,7 @@ double FemPotential<dim>::assemble_gradient(const VecX& v, VecX& gradient) {
         positions(v, x_);
         e += contact_->add_gradient(x_, dt_, gradient);
     }
-    if (friction_ && dim == 2) {
+    if (friction_) {
         e += dt_ * friction_->value(v);
         friction_->add_gradient(v, dt_, gradient);
     }
@@ -175,7 +175,7 @@ double FemPotential<dim>::contact_value(const VecX& v) {
         positions(v, x_);
         e += contact_->value(x_);
     }
-    if (friction_ && dim == 2) e += dt_ * friction_->value(v);
+    if (friction_) e += dt_ * friction_->value(v);
     return e;
 }
 
@@ -220,7 +220,7 @@ void FemPotential<dim>::prepare_hessian(const VecX& v) {
         positions(v, x_);
         const std::size_t first = triplets_.size();
         if (contact_) contact_->add_hessian(x_, dt_ * dt_, triplets_, project_psd_);
-        if (friction_ && dim == 2) friction_->add_hessian(v, dt_, triplets_);
+        if (friction_) friction_->add_hessian(v, dt_, triplets_);
         // Fixed components keep only their mass.
         triplets_.erase(std::remove_if(triplets_.begin() + first, triplets_.end(),
                                        [&](const Eigen::Triplet<double>& t) {

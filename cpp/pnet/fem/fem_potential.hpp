@@ -74,8 +74,8 @@ public:
     /// The contact potential (not owned; null: no contact).
     void set_contact(const ContactPotential<dim>* contact) { contact_ = contact; }
 
-    /// Lagged friction (not owned; null: none; 2D): dt D(v) is added to E.
-    void set_friction(const Friction2d* friction) { friction_ = friction; }
+    /// Lagged friction (not owned; null: none): dt D(v) is added to E.
+    void set_friction(const Friction<dim>* friction) { friction_ = friction; }
 
     /// x(v) = x^n + dt v.
     void positions(const VecX& v, std::vector<Vec<dim>>& x) const;
@@ -129,7 +129,7 @@ private:
     const ElementRest<dim>& rest_;
     ParticleEnergy<dim>& energy_;
     const ContactPotential<dim>* contact_ = nullptr;
-    const Friction2d* friction_ = nullptr;
+    const Friction<dim>* friction_ = nullptr;
     std::vector<Vec<dim>> x_start_, x_, dx_;
     std::vector<int> object_;
     std::vector<double> hardening_;

@@ -5,6 +5,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <mutex>
 #include <unordered_map>
 
@@ -136,6 +138,160 @@ Mesh<2> mesh_shape(const Shape2d& shape, const std::string& context) {
         fail("gmsh failed");
     }
     return {};
+}
+
+Mesh<3> mesh_shape(const Shape3d& shape, const std::string& context) {
+    auto fail = [&](const std::string& what) { throw MeshError(context + ": " + what); };
+    const Vec<3> size = shape.max - shape.min;
+    double extent = 0.0;
+    switch (shape.kind) {
+        case Shape3d::Kind::Box:
+        case Shape3d::Kind::Frame:
+            if (!(size.minCoeff() > 0.0) || !size.allFinite()) fail("the box must have max > min on every axis");
+            extent = size.minCoeff();
+            if (shape.kind == Shape3d::Kind::Frame) {
+                const double narrowest = size.head<2>().minCoeff();  // the hole runs along z
+                if (!(shape.thickness > 0.0 && 2.0 * shape.thickness < narrowest * (1.0 - 1e-6)))
+                    fail("the frame's thickness must be > 0 and leave a hole (less than half of " +
+                         std::to_string(narrowest) + " m)");
+                extent = std::min(shape.thickness, size[2]);
+            }
+            break;
+        case Shape3d::Kind::Sphere:
+            if (!(shape.radius > 0.0) || !shape.center.allFinite()) fail("the sphere's radius must be > 0");
+            extent = 2.0 * shape.radius;
+            break;
+    }
+    if (!(shape.element_size > 0.0) || !(shape.element_size <= 4.0 * extent * (1.0 + 1e-9)))
+        fail("element_size must be > 0 and at most 4 x the shape's thinnest part (" + std::to_string(extent) + " m)");
+
+    std::lock_guard<std::mutex> lock(gmsh_mutex);
+    GmshSession session;
+    try {
+        gmsh::model::add("shape");
+        int volume = 0;
+        if (shape.kind == Shape3d::Kind::Sphere) {
+            volume = gmsh::model::occ::addSphere(shape.center[0], shape.center[1], shape.center[2], shape.radius);
+        } else {
+            volume = gmsh::model::occ::addBox(shape.min[0], shape.min[1], shape.min[2], size[0], size[1], size[2]);
+            if (shape.kind == Shape3d::Kind::Frame) {
+                // The hole box overshoots both ends along z so that the cut goes cleanly through.
+                const double t = shape.thickness;
+                const int hole = gmsh::model::occ::addBox(shape.min[0] + t, shape.min[1] + t, shape.min[2] - size[2],
+                                                          size[0] - 2.0 * t, size[1] - 2.0 * t, 3.0 * size[2]);
+                gmsh::vectorpair out;
+                std::vector<gmsh::vectorpair> map;
+                gmsh::model::occ::cut({{3, volume}}, {{3, hole}}, out, map);
+                if (out.size() != 1) fail("gmsh could not cut the frame's hole");
+                volume = out[0].second;
+            }
+        }
+        gmsh::model::occ::synchronize();
+        gmsh::option::setNumber("Mesh.CharacteristicLengthMin", shape.element_size);
+        gmsh::option::setNumber("Mesh.CharacteristicLengthMax", shape.element_size);
+        gmsh::option::setNumber("Mesh.Algorithm3D", 1);  // Delaunay
+        gmsh::model::mesh::generate(3);
+        return collect<3>(4, context);
+    } catch (const MeshError&) {
+        throw;
+    } catch (const std::exception& e) {
+        fail(std::string("gmsh failed: ") + e.what());
+    } catch (...) {
+        fail("gmsh failed");
+    }
+    return {};
+}
+
+namespace {
+
+/// The triangles of a Wavefront OBJ file (v and f lines; polygons fan-triangulated; texture
+/// and normal indices ignored; negative indices count from the end), as nodes and triangles.
+void read_obj(const std::string& path, std::vector<double>& xyz, std::vector<std::size_t>& triangles) {
+    std::ifstream in(path);
+    if (!in) throw MeshError(path + ": cannot open it");
+    std::string line;
+    int number = 0;
+    while (std::getline(in, line)) {
+        ++number;
+        std::istringstream words(line);
+        std::string key;
+        words >> key;
+        if (key == "v") {
+            double c[3];
+            if (!(words >> c[0] >> c[1] >> c[2]) || !std::isfinite(c[0] + c[1] + c[2]))
+                throw MeshError(path + ": line " + std::to_string(number) + ": a vertex needs 3 finite coordinates");
+            xyz.insert(xyz.end(), c, c + 3);
+        } else if (key == "f") {
+            std::vector<std::size_t> face;
+            for (std::string corner; words >> corner;) {
+                long index = 0;
+                try {
+                    index = std::stol(corner.substr(0, corner.find('/')));
+                } catch (const std::exception&) {
+                    throw MeshError(path + ": line " + std::to_string(number) + ": bad face index '" + corner + "'");
+                }
+                const long vertices = static_cast<long>(xyz.size() / 3);
+                if (index < 0) index += vertices + 1;
+                if (index < 1 || index > vertices)
+                    throw MeshError(path + ": line " + std::to_string(number) + ": face index " + corner +
+                                    " out of range (" + std::to_string(vertices) + " vertices so far)");
+                face.push_back(static_cast<std::size_t>(index));  // gmsh node tags start at 1 too
+            }
+            if (face.size() < 3) throw MeshError(path + ": line " + std::to_string(number) + ": a face needs 3 corners");
+            for (std::size_t k = 1; k + 1 < face.size(); ++k) triangles.insert(triangles.end(), {face[0], face[k], face[k + 1]});
+        }
+    }
+    if (triangles.empty()) throw MeshError(path + ": no faces (expected a closed triangle surface)");
+}
+
+}  // namespace
+
+Mesh<3> tetrahedralize_surface_file(const std::string& path, double element_size) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) throw MeshError(path + ": no such surface file");
+    if (!(element_size > 0.0) || !std::isfinite(element_size)) throw MeshError(path + ": element_size must be > 0");
+    const std::string extension = std::filesystem::path(path).extension().string();
+    std::vector<double> xyz;
+    std::vector<std::size_t> triangles;
+    if (extension == ".obj") read_obj(path, xyz, triangles);
+    std::lock_guard<std::mutex> lock(gmsh_mutex);
+    GmshSession session;
+    try {
+        gmsh::model::add("surface");
+        if (extension == ".obj") {
+            const int surface = gmsh::model::addDiscreteEntity(2);
+            std::vector<std::size_t> tags(xyz.size() / 3);
+            for (std::size_t i = 0; i < tags.size(); ++i) tags[i] = i + 1;
+            gmsh::model::mesh::addNodes(2, surface, tags, xyz);
+            gmsh::model::mesh::addElementsByType(surface, 2, {}, triangles);
+        } else {
+            gmsh::merge(path);  // .stl, .ply (gmsh's readers)
+        }
+        gmsh::model::mesh::removeDuplicateNodes();
+        // Surfaces split at sharp (> 40 degree) creases, remeshed to element_size; then the volume
+        // they close.
+        gmsh::model::mesh::classifySurfaces(40.0 * M_PI / 180.0, true, false, M_PI);
+        gmsh::model::mesh::createGeometry();
+        gmsh::vectorpair surfaces;
+        gmsh::model::getEntities(surfaces, 2);
+        if (surfaces.empty()) throw MeshError(path + ": no surface in the file");
+        std::vector<int> tags;
+        for (const auto& [d, tag] : surfaces) tags.push_back(tag);
+        const int loop = gmsh::model::geo::addSurfaceLoop(tags);
+        gmsh::model::geo::addVolume({loop});
+        gmsh::model::geo::synchronize();
+        gmsh::option::setNumber("Mesh.CharacteristicLengthMin", element_size);
+        gmsh::option::setNumber("Mesh.CharacteristicLengthMax", element_size);
+        gmsh::option::setNumber("Mesh.Algorithm3D", 1);
+        gmsh::model::mesh::generate(3);
+        return collect<3>(4, path);
+    } catch (const MeshError&) {
+        throw;
+    } catch (const std::exception& e) {
+        throw MeshError(path + ": gmsh could not tetrahedralize it (is the surface closed?): " + e.what());
+    } catch (...) {
+        throw MeshError(path + ": gmsh could not tetrahedralize it (is the surface closed?)");
+    }
 }
 
 template <int dim>

@@ -1,7 +1,8 @@
 #pragma once
-// Meshes from gmsh (Debian libgmsh-dev; DESIGN.md §4.2): procedural 2D shapes
-// meshed with linear triangles of a target size, and user mesh files (.msh,
-// any version gmsh reads) with triangles (2D) or tetrahedra (3D).
+// Meshes from gmsh (Debian libgmsh-dev; DESIGN.md §4.2): procedural 2D and 3D
+// shapes meshed with linear triangles / tetrahedra of a target size, user mesh
+// files (.msh, any version gmsh reads) with triangles (2D) or tetrahedra (3D),
+// and closed surfaces (.obj, .stl) tetrahedralized.
 //
 // gmsh is a process-wide library with global state: every call here holds one
 // lock, opens a gmsh session and closes it, runs gmsh with one thread and a
@@ -27,6 +28,26 @@ struct Shape2d {
 /// MeshError naming `context` for a shape that makes no sense (empty box, a
 /// frame with no hole, a size <= 0 or above the shape) or that gmsh cannot mesh.
 Mesh<2> mesh_shape(const Shape2d& shape, const std::string& context);
+
+/// A procedural 3D shape, m.
+struct Shape3d {
+    enum class Kind { Box, Frame, Sphere } kind = Kind::Box;
+    Vec<3> min = Vec<3>::Zero(), max = Vec<3>::Zero();  // box, frame: the outer box
+    double thickness = 0.0;  // frame: wall thickness; the hole (inset by it in x and y) runs along z
+    Vec<3> center = Vec<3>::Zero();                      // sphere
+    double radius = 0.0;                                 // sphere
+    double element_size = 0.0;                           // target edge length
+};
+
+/// Meshes `shape` with linear tetrahedra (gmsh's Delaunay, one thread: deterministic); the
+/// result is finalized. Throws MeshError naming `context` for a shape that makes no sense.
+Mesh<3> mesh_shape(const Shape3d& shape, const std::string& context);
+
+/// Tetrahedralizes the volume a closed triangle surface bounds (.obj read here, .stl and .ply
+/// by gmsh), remeshing the surface to element_size (split at creases sharper than 40 degrees).
+/// Throws MeshError "<path>: ..." for a missing file, one without faces, a bad index, or a
+/// surface gmsh cannot close into a volume.
+Mesh<3> tetrahedralize_surface_file(const std::string& path, double element_size);
 
 /// Reads a mesh file with gmsh: its triangles (dim 2; z must be 0) or
 /// tetrahedra (dim 3); other elements (points, lines, boundary triangles) are

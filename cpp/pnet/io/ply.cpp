@@ -254,10 +254,10 @@ std::int32_t get_le_int32(const char* src) {
 }  // namespace
 
 void write_mesh_ply(const std::string& path, const PlyMesh& m) {
-    if (m.dim != 2) throw std::invalid_argument(path + ": mesh frames are 2D (triangles), got dim " + std::to_string(m.dim));
-    const std::size_t n = m.position.size() / 2, f = m.triangles.size() / 3;
-    check_size(path, "position", m.position.size(), 2 * n, "2 per node");
-    check_size(path, "velocity", m.velocity.size(), 2 * n, std::to_string(n) + " nodes x 2");
+    if (m.dim != 2 && m.dim != 3) throw std::invalid_argument(path + ": dim must be 2 or 3, got " + std::to_string(m.dim));
+    const std::size_t d = static_cast<std::size_t>(m.dim), n = m.position.size() / d, f = m.triangles.size() / 3;
+    check_size(path, "position", m.position.size(), d * n, std::to_string(d) + " per node");
+    check_size(path, "velocity", m.velocity.size(), d * n, std::to_string(n) + " nodes x " + std::to_string(d));
     check_size(path, "triangles", m.triangles.size(), 3 * f, "3 per triangle");
     check_size(path, "hardening", m.hardening.size(), f, std::to_string(f) + " triangles");
     for (int t : m.triangles)
@@ -265,19 +265,17 @@ void write_mesh_ply(const std::string& path, const PlyMesh& m) {
             throw std::invalid_argument(path + ": triangle node " + std::to_string(t) + " out of range (" +
                                         std::to_string(n) + " nodes)");
     std::ostringstream header;
-    header << "ply\nformat binary_little_endian 1.0\ncomment plasticitynet mesh\ncomment dim 2\n"
+    header << "ply\nformat binary_little_endian 1.0\ncomment plasticitynet mesh\ncomment dim " << d << "\n"
            << "element vertex " << n << "\n";
     for (const char* name : kMeshVertexProperties) header << "property double " << name << "\n";
     header << "element face " << f << "\nproperty list uchar int vertex_indices\nproperty double hardening\nend_header\n";
     std::string data(n * kMeshVertexBytes + f * kFaceBytes, '\0');
     for (std::size_t i = 0; i < n; ++i) {
         char* row = &data[i * kMeshVertexBytes];
-        for (std::size_t k = 0; k < 2; ++k) {
-            put_le_double(row + 8 * k, m.position[2 * i + k]);
-            put_le_double(row + 8 * (3 + k), m.velocity[2 * i + k]);
+        for (std::size_t k = 0; k < 3; ++k) {
+            put_le_double(row + 8 * k, k < d ? m.position[d * i + k] : 0.0);
+            put_le_double(row + 8 * (3 + k), k < d ? m.velocity[d * i + k] : 0.0);
         }
-        put_le_double(row + 16, 0.0);
-        put_le_double(row + 40, 0.0);
     }
     for (std::size_t k = 0; k < f; ++k) {
         char* row = &data[n * kMeshVertexBytes + k * kFaceBytes];
@@ -302,15 +300,18 @@ PlyMesh read_mesh_ply(const std::string& path) {
     expected.insert(expected.end(), {"element face #", "property list uchar int vertex_indices",
                                      "property double hardening", "end_header"});
     std::uint64_t counts[2] = {0, 0};
-    int count_index = 0, line_number = 0;
+    int count_index = 0, line_number = 0, dim = 2;
     std::size_t next = 0, header_bytes = 0;
     for (std::string line; next < expected.size() && read_header_line(in, line, header_bytes);) {
         ++line_number;
         if (!line.empty() && line.back() == '\r') line.pop_back();
         const std::vector<std::string> w = split_words(line);
         if (line_number > 1 && !w.empty() && (w[0] == "comment" || w[0] == "obj_info")) {
-            if (w.size() >= 2 && w[1] == "dim" && (w.size() != 3 || w[2] != "2"))
-                throw fail("header line " + std::to_string(line_number) + ": mesh frames are 2D ('comment dim 2')");
+            if (w.size() >= 2 && w[1] == "dim") {
+                if (w.size() != 3 || (w[2] != "2" && w[2] != "3"))
+                    throw fail("header line " + std::to_string(line_number) + ": 'comment dim' must be 2 or 3");
+                dim = w[2][0] - '0';
+            }
             continue;
         }
         const std::string& want = expected[next];
@@ -341,17 +342,19 @@ PlyMesh read_mesh_ply(const std::string& path) {
     in.read(&data[0], std::streamsize(available));
     if (!in) throw fail("reading the data failed");
     PlyMesh m;
-    m.position.resize(2 * n);
-    m.velocity.resize(2 * n);
+    m.dim = dim;
+    const std::size_t d = static_cast<std::size_t>(dim);
+    m.position.resize(d * n);
+    m.velocity.resize(d * n);
     m.triangles.resize(3 * f);
     m.hardening.resize(f);
     for (std::size_t i = 0; i < n; ++i) {
         const char* row = &data[i * kMeshVertexBytes];
-        for (std::size_t k = 0; k < 2; ++k) {
-            m.position[2 * i + k] = get_le_double(row + 8 * k);
-            m.velocity[2 * i + k] = get_le_double(row + 8 * (3 + k));
+        for (std::size_t k = 0; k < d; ++k) {
+            m.position[d * i + k] = get_le_double(row + 8 * k);
+            m.velocity[d * i + k] = get_le_double(row + 8 * (3 + k));
         }
-        if (get_le_double(row + 16) != 0.0 || get_le_double(row + 40) != 0.0)
+        if (d == 2 && (get_le_double(row + 16) != 0.0 || get_le_double(row + 40) != 0.0))
             throw fail("vertex " + std::to_string(i) + " has z or vz != 0 in a 2D mesh");
     }
     for (std::size_t k = 0; k < f; ++k) {

@@ -56,22 +56,24 @@ void write_particles_ply(const std::string& path, const PlyParticles& p);
 /// longer than the header announces.
 PlyParticles read_particles_ply(const std::string& path, int dim = 0);
 
-/// A 2D FEM frame: the mesh's nodes and triangles. Layout (binary little-endian;
-/// Blender, ParaView and MeshLab open it as a surface):
+/// A FEM frame: the mesh's nodes and triangles (2D: the elements; 3D: the boundary
+/// triangles of the tetrahedral mesh, each with the hardening of its tetrahedron; every
+/// node is kept, so node i of the frame is node i of the simulation). Layout (binary
+/// little-endian; Blender, ParaView and MeshLab open it as a surface):
 ///
-///     ply / format binary_little_endian 1.0 / comment plasticitynet mesh / comment dim 2
-///     element vertex <n>    property double x y z vx vy vz   (z = vz = 0)
+///     ply / format binary_little_endian 1.0 / comment plasticitynet mesh / comment dim D
+///     element vertex <n>    property double x y z vx vy vz   (2D: z = vz = 0)
 ///     element face <m>      property list uchar int vertex_indices
 ///                           property double hardening          (the element's state)
 ///     end_header
 struct PlyMesh {
     int dim = 2;
-    std::vector<double> position;   // n * 2, m
-    std::vector<double> velocity;   // n * 2, m/s
+    std::vector<double> position;   // n * dim, m
+    std::vector<double> velocity;   // n * dim, m/s
     std::vector<int> triangles;     // m * 3 node indices
     std::vector<double> hardening;  // m
 
-    std::size_t nodes() const { return position.size() / 2; }
+    std::size_t nodes() const { return position.size() / dim; }
 };
 
 /// Writes m atomically. Throws std::invalid_argument "<path>: ..." for sizes that disagree or

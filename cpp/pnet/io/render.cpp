@@ -632,6 +632,101 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
     return img;
 }
 
+Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>& triangles,
+                     const std::vector<double>& value, const ParticleRenderOptions& options) {
+    constexpr const char* who = "render_mesh_3d";
+    check_particle_input(position, {}, 3, options, who);
+    const std::size_t n = position.size() / 3, m = triangles.size() / 3;
+    if (triangles.size() % 3 != 0) throw std::invalid_argument(std::string(who) + ": triangles is not a multiple of 3");
+    if (!value.empty() && value.size() != m)
+        throw std::invalid_argument(std::string(who) + ": " + std::to_string(value.size()) + " values for " +
+                                    std::to_string(m) + " triangles");
+    for (int t : triangles)
+        if (t < 0 || static_cast<std::size_t>(t) >= n)
+            throw std::invalid_argument(std::string(who) + ": triangle node " + std::to_string(t) + " out of range");
+    using V3 = Eigen::Vector3d;
+    const V3 lo(options.domain_min[0], options.domain_min[1], options.domain_min[2]);
+    const V3 hi(options.domain_max[0], options.domain_max[1], options.domain_max[2]);
+    const V3 centre = 0.5 * (lo + hi);
+    // The camera of render_particles_3d: from direction (1, 0.8, 1.5), y up on screen.
+    const V3 forward = -V3(1.0, 0.8, 1.5).normalized();
+    const V3 right = forward.cross(V3::UnitY()).normalized();
+    const V3 up = right.cross(forward);
+    auto view = [&](const V3& p) {
+        const V3 d = p - centre;
+        return V3(d.dot(right), d.dot(up), d.dot(forward));
+    };
+    std::array<V3, 8> corners;
+    for (int c = 0; c < 8; ++c)
+        corners[std::size_t(c)] = view(V3(c & 1 ? hi.x() : lo.x(), c & 2 ? hi.y() : lo.y(), c & 4 ? hi.z() : lo.z()));
+    V3 vlo = corners[0], vhi = corners[0];
+    for (const V3& c : corners) {
+        vlo = vlo.cwiseMin(c);
+        vhi = vhi.cwiseMax(c);
+    }
+    const int margin = 4;
+    const double s = (options.width_px - 2 * margin) / (vhi.x() - vlo.x());
+    Image img(options.width_px, image_height((vhi.y() - vlo.y()) * s, margin, who), {255, 255, 255});
+    auto to_px = [&](const V3& q) { return V3(margin + (q.x() - vlo.x()) * s, margin + (vhi.y() - q.y()) * s, q.z()); };
+    const Rect whole{0, 0, img.width - 1, img.height - 1};
+    const int nearest_corner =
+        int(std::min_element(corners.begin(), corners.end(), [](const V3& a, const V3& b) { return a.z() < b.z(); }) -
+            corners.begin());
+    auto draw_box = [&](bool front) {
+        for (int a = 0; a < 8; ++a)
+            for (int bit = 1; bit < 8; bit <<= 1) {
+                const int b = a | bit;
+                if (b == a || (a == nearest_corner || b == nearest_corner) != front) continue;
+                const V3 pa = to_px(corners[std::size_t(a)]), pb = to_px(corners[std::size_t(b)]);
+                draw_segment(img, pa.x(), pa.y(), pb.x(), pb.y(), 1.0, {150, 150, 150}, whole, front ? 0.5 : 1.0);
+            }
+    };
+    draw_box(false);
+    std::vector<V3> screen(n);
+    for (std::size_t i = 0; i < n; ++i) screen[i] = to_px(view(V3(position[3 * i], position[3 * i + 1], position[3 * i + 2])));
+    // Flat-shaded triangles into a depth buffer (depth interpolated in screen space: the view is
+    // orthographic), Lambert with ambient light, darkened with depth; both sides lit.
+    std::vector<double> depth(std::size_t(img.width) * std::size_t(img.height), std::numeric_limits<double>::infinity());
+    const V3 light = V3(-0.4, 0.7, -0.6).normalized();  // towards the light, in screen axes (x right, y up, z away)
+    const double depth_range = std::max(vhi.z() - vlo.z(), 1e-300);
+    for (std::size_t k = 0; k < m; ++k) {
+        const V3 &a = screen[triangles[3 * k]], &b = screen[triangles[3 * k + 1]], &c = screen[triangles[3 * k + 2]];
+        if (!(a.allFinite() && b.allFinite() && c.allFinite())) continue;
+        const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+        if (area == 0.0) continue;  // seen edge-on
+        // The face normal in screen axes (y flipped back to up).
+        const V3 e1(b.x() - a.x(), -(b.y() - a.y()), (b.z() - a.z()) * s), e2(c.x() - a.x(), -(c.y() - a.y()), (c.z() - a.z()) * s);
+        const V3 normal = e1.cross(e2).normalized();
+        const double diffuse = std::abs(normal.dot(light));
+        const double fog = std::clamp(((a.z() + b.z() + c.z()) / 3.0 - vlo.z()) / depth_range, 0.0, 1.0);
+        const Rgb colour = scaled(particle_colour(value, k, options), (0.35 + 0.65 * diffuse) * (1.0 - 0.35 * fog));
+        const int x0 = std::max(0, int(std::floor(std::min({a.x(), b.x(), c.x()}))));
+        const int x1 = std::min(img.width - 1, int(std::ceil(std::max({a.x(), b.x(), c.x()}))));
+        const int y0 = std::max(0, int(std::floor(std::min({a.y(), b.y(), c.y()}))));
+        const int y1 = std::min(img.height - 1, int(std::ceil(std::max({a.y(), b.y(), c.y()}))));
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+                const double px = x + 0.5, py = y + 0.5;
+                const double wa = ((b.x() - px) * (c.y() - py) - (b.y() - py) * (c.x() - px)) / area;
+                const double wb = ((c.x() - px) * (a.y() - py) - (c.y() - py) * (a.x() - px)) / area;
+                const double wc = 1.0 - wa - wb;
+                if (wa < 0.0 || wb < 0.0 || wc < 0.0) continue;
+                const double z = wa * a.z() + wb * b.z() + wc * c.z();
+                double& zbuf = depth[std::size_t(y) * std::size_t(img.width) + std::size_t(x)];
+                if (z >= zbuf) continue;
+                zbuf = z;
+                // Thin dark edges: pixels within about one pixel of the triangle's border.
+                const double edge = std::min({wa * std::abs(area) / (b - c).head<2>().norm(),
+                                              wb * std::abs(area) / (c - a).head<2>().norm(),
+                                              wc * std::abs(area) / (a - b).head<2>().norm()});
+                img.set(x, y, edge < 0.6 ? scaled(colour, 0.55) : colour);
+            }
+    }
+    draw_box(true);
+    draw_caption(img, options, margin);
+    return img;
+}
+
 Image render_line_plot(const LinePlot& plot) {
     const int W = plot.width_px, H = plot.height_px;
     if (W < 64 || H < 64 || W > 8192 || H > 8192) {

@@ -58,6 +58,14 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
 Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>& triangles,
                      const std::vector<double>& value, const ParticleRenderOptions& options);
 
+/// A 3D triangle surface (position n x 3, triangles m x 3 node indices: a tetrahedral mesh's
+/// boundary) in the view of render_particles_3d (the domain box as a wireframe): z-buffered
+/// flat-shaded triangles, Lambert-lit from both sides with ambient light and darkened with
+/// depth, with thin dark edges, triangle k coloured by viridis of value[k] (may be empty: one
+/// colour). Same errors as render_mesh_2d.
+Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>& triangles,
+                     const std::vector<double>& value, const ParticleRenderOptions& options);
+
 /// One polyline of a line plot; points with a non-finite coordinate break the line.
 struct PlotSeries {
     std::string label;  // legend entry; a plot whose labels are all empty has no legend

@@ -43,6 +43,7 @@ struct StepStats {
     // contact pairs closer than dhat and the smallest pair distance (m) at the end of the step.
     int ccd_queries = 0, ccd_limited = 0;
     int substeps = 1;  // explicit FEM: substeps the barrier's stability needed
+    double broad_phase_seconds = 0.0, ccd_seconds = 0.0;  // FEM contact (3D): parts of wall_seconds
     std::size_t contact_pairs = 0;
     double min_distance = 0.0;
     // Where an implicit step's time went (parts of grid_seconds).

@@ -309,7 +309,9 @@ SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, con
     SceneMesh mesh;
     mesh.json_path = path;
     const std::string shape_path = join(path, "shape");
-    const std::string shape = r.text(r.require(v, "shape", path, "box, frame, disk or file"), shape_path);
+    const std::string shape =
+        r.text(r.require(v, "shape", path, dim == 2 ? "box, frame, disk or file" : "box, frame, sphere or file"),
+               shape_path);
     std::vector<std::string> keys = {"shape", "material", "model", "velocity", "hardening", "kinematic"};
     if (shape == "box") {
         mesh.shape = SceneMesh::Shape::Box;
@@ -317,14 +319,17 @@ SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, con
     } else if (shape == "frame") {
         mesh.shape = SceneMesh::Shape::Frame;
         keys.insert(keys.begin() + 1, {"min", "max", "thickness", "element_size"});
-    } else if (shape == "disk") {
+    } else if (shape == "disk" || shape == "sphere") {
+        if (shape == "disk" && dim == 3) r.fail(shape_path, "'disk' is 2D only; in 3D use 'sphere'");
+        if (shape == "sphere" && dim == 2) r.fail(shape_path, "'sphere' is 3D only; in 2D use 'disk'");
         mesh.shape = SceneMesh::Shape::Disk;
         keys.insert(keys.begin() + 1, {"center", "radius", "element_size"});
     } else if (shape == "file") {
         mesh.shape = SceneMesh::Shape::File;
-        keys.insert(keys.begin() + 1, "file");
+        keys.insert(keys.begin() + 1, {"file", "element_size"});
     } else {
-        r.fail(shape_path, "unknown mesh shape '" + shape + "' (expected box, frame, disk or file)");
+        r.fail(shape_path, "unknown mesh shape '" + shape + "' (expected box, frame, " +
+                               (dim == 2 ? "disk" : "sphere") + " or file)");
     }
     std::string hint = " (a " + shape + " mesh takes";
     for (std::size_t i = 0; i < keys.size(); ++i) hint += (i ? ", " : " ") + keys[i];
@@ -341,7 +346,7 @@ SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, con
     }
     if (mesh.shape == SceneMesh::Shape::Frame) {
         mesh.thickness = r.positive(r.require(v, "thickness", path, "a positive number"), join(path, "thickness"));
-        const double narrowest = (mesh.max - mesh.min).minCoeff();
+        const double narrowest = (mesh.max - mesh.min).head<2>().minCoeff();  // 3D: the hole runs along z
         if (!(2.0 * mesh.thickness < narrowest * (1.0 - 1e-6)))  // not a hole of round-off width
             r.fail(join(path, "thickness"), "two walls of " + show(mesh.thickness) + " m leave no hole in a frame " +
                                                 show(narrowest) + " m wide");
@@ -351,11 +356,23 @@ SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, con
         mesh.radius = r.positive(r.require(v, "radius", path, "a positive number"), join(path, "radius"));
     }
     if (mesh.shape == SceneMesh::Shape::File) {
-        const std::string file = r.text(r.require(v, "file", path, "a mesh file (.msh)"), join(path, "file"));
+        const std::string expected = dim == 2 ? "a mesh file (.msh)" : "a mesh file (.msh) or a closed surface (.obj, .stl)";
+        const std::string file = r.text(r.require(v, "file", path, expected), join(path, "file"));
         if (file.empty()) r.fail(join(path, "file"), "expected a file path, got \"\"");
         mesh.file = resolve_model_path(file, base_dir);
         std::error_code error;
         if (!fs::is_regular_file(mesh.file, error)) r.fail(join(path, "file"), mesh.file + ": no such file");
+        const std::string extension = fs::path(mesh.file).extension().string();
+        const bool surface = extension == ".obj" || extension == ".stl" || extension == ".ply";
+        if (surface && dim == 2) r.fail(join(path, "file"), mesh.file + ": a surface file is 3D only; 2D takes a .msh");
+        if (surface) {
+            mesh.element_size = r.positive(r.require(v, "element_size", path, "a positive number (m): a surface file is "
+                                                                              "tetrahedralized with elements of that size"),
+                                           join(path, "element_size"));
+        } else if (Reader::find(v, "element_size")) {
+            r.fail(join(path, "element_size"), "a .msh file is used as it is meshed; element_size is for shapes and "
+                                               "surface files");
+        }
     } else {
         mesh.element_size =
             r.positive(r.require(v, "element_size", path, "a positive number (m)"), join(path, "element_size"));
@@ -514,7 +531,6 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
         }
     }
     if (const json* meshes = Reader::find(j, "meshes")) {
-        if (scene.dim != 2) r.fail("meshes", "FEM meshes are 2D only in this version (3D FEM is not built yet)");
         if (!meshes->is_array() || meshes->empty())
             r.fail("meshes", "expected a non-empty array of meshes, got " + show(*meshes));
         for (std::size_t k = 0; k < meshes->size(); ++k)
@@ -617,7 +633,7 @@ json scene_to_json(const Scene& scene) {
                     if (mesh.shape == SceneMesh::Shape::Frame) m["thickness"] = mesh.thickness;
                     break;
                 case SceneMesh::Shape::Disk:
-                    m["shape"] = "disk";
+                    m["shape"] = scene.dim == 2 ? "disk" : "sphere";
                     m["center"] = vector_json(mesh.center);
                     m["radius"] = mesh.radius;
                     break;
@@ -626,7 +642,7 @@ json scene_to_json(const Scene& scene) {
                     m["file"] = mesh.file;
                     break;
             }
-            if (mesh.shape != SceneMesh::Shape::File) m["element_size"] = mesh.element_size;
+            if (mesh.element_size > 0.0) m["element_size"] = mesh.element_size;
             m["kinematic"] = mesh.kinematic;
             if (!mesh.kinematic) m["material"] = material_to_json(mesh.material);
             if (!mesh.model.empty()) m["model"] = mesh.model;

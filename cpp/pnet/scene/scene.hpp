@@ -28,15 +28,19 @@
 //     }]
 //   }
 //
-// FEM scenes (2D; DESIGN.md §4.2-4.3, §5) hold meshes instead of (and, with
+// FEM scenes (2D and 3D; DESIGN.md §4.2-4.3, §5) hold meshes instead of (and, with
 // coupling, beside) particle objects; "dx" and "objects" are then optional:
 //
 //     "meshes": [{
 //       "shape": "frame",                         // "box" (min, max), "frame" (min, max: the outer
 //                                                 // rectangle; thickness: its walls), "disk" (center,
-//                                                 // radius), each meshed by gmsh with triangles of
-//                                                 // ~element_size m; or "file" (file: a gmsh .msh,
-//                                                 // relative to the scene file's folder)
+//                                                 // radius; "sphere" in 3D), each meshed by gmsh
+//                                                 // with triangles (tetrahedra) of ~element_size m;
+//                                                 // or "file" (file: a gmsh .msh, or in 3D a closed
+//                                                 // surface .obj/.stl/.ply tetrahedralized with
+//                                                 // element_size; relative to the scene file's folder).
+//                                                 // A 3D frame is the 2D frame (min, max in x-y)
+//                                                 // extruded from min.z to max.z
 //       "min": [0.45, 0.0001], "max": [0.55, 0.1801], "thickness": 0.012, "element_size": 0.003,
 //       "material": "metal",                      // required unless kinematic
 //       "model": "../models/metal_2d.pt",         // optional, as for objects
@@ -101,17 +105,17 @@ struct SceneObject {
     double initial_hardening() const { return hardening.value_or(material.initial_hardening); }
 };
 
-/// A FEM body (2D): a procedural shape meshed by gmsh or a mesh file.
+/// A FEM body: a procedural shape meshed by gmsh or a mesh file.
 struct SceneMesh {
     enum class Shape { Box, Frame, Disk, File };
 
     Shape shape = Shape::Box;
-    Eigen::VectorXd min, max;   // box and frame: the outer rectangle, m
+    Eigen::VectorXd min, max;   // box and frame: the outer rectangle (3D: box; the frame's hole runs along z), m
     double thickness = 0.0;     // frame: wall thickness, m
-    Eigen::VectorXd center;     // disk, m
-    double radius = 0.0;        // disk, m
-    double element_size = 0.0;  // procedural shapes: target edge length, m
-    std::string file;           // File: the mesh file, absolute and normalized
+    Eigen::VectorXd center;     // disk (2D) / sphere (3D), m
+    double radius = 0.0;        // disk / sphere, m
+    double element_size = 0.0;  // procedural shapes and surface files: target edge length, m (0: a .msh file)
+    std::string file;           // File: a .msh, or (3D) a closed surface .obj/.stl/.ply, absolute and normalized
     bool kinematic = false;     // rigid, moved at `velocity` (no material)
     MaterialDescription material;  // unused when kinematic
     std::string model;             // energy model file, absolute; "" if none

@@ -20,59 +20,96 @@ namespace {
 
 constexpr double kKappaReferenceDt = 1e-2;  // s: the implicit FEM step of DESIGN.md §5
 
-Mesh<2> mesh_of(const Scene& scene, const SceneMesh& m) {
+template <int dim>
+Mesh<dim> mesh_of(const Scene& scene, const SceneMesh& m) {
     const std::string context = scene.file + ": " + m.json_path;
     if (m.shape == SceneMesh::Shape::File) {
         try {
-            return read_mesh_file<2>(m.file);
+            if (m.element_size > 0.0) {
+                if constexpr (dim == 3) return tetrahedralize_surface_file(m.file, m.element_size);
+            }
+            return read_mesh_file<dim>(m.file);
         } catch (const MeshError& e) {
             throw MeshError(context + ".file: " + e.what());
         }
     }
-    Shape2d shape;
-    shape.element_size = m.element_size;
-    switch (m.shape) {
-        case SceneMesh::Shape::Box:
-        case SceneMesh::Shape::Frame:
-            shape.kind = m.shape == SceneMesh::Shape::Box ? Shape2d::Kind::Box : Shape2d::Kind::Frame;
-            shape.min = Vec<2>(m.min[0], m.min[1]);
-            shape.max = Vec<2>(m.max[0], m.max[1]);
-            shape.thickness = m.thickness;
-            break;
-        case SceneMesh::Shape::Disk:
-            shape.kind = Shape2d::Kind::Disk;
-            shape.center = Vec<2>(m.center[0], m.center[1]);
-            shape.radius = m.radius;
-            break;
-        case SceneMesh::Shape::File:
-            break;
+    if constexpr (dim == 2) {
+        Shape2d shape;
+        shape.element_size = m.element_size;
+        switch (m.shape) {
+            case SceneMesh::Shape::Box:
+            case SceneMesh::Shape::Frame:
+                shape.kind = m.shape == SceneMesh::Shape::Box ? Shape2d::Kind::Box : Shape2d::Kind::Frame;
+                shape.min = Vec<2>(m.min[0], m.min[1]);
+                shape.max = Vec<2>(m.max[0], m.max[1]);
+                shape.thickness = m.thickness;
+                break;
+            case SceneMesh::Shape::Disk:
+                shape.kind = Shape2d::Kind::Disk;
+                shape.center = Vec<2>(m.center[0], m.center[1]);
+                shape.radius = m.radius;
+                break;
+            case SceneMesh::Shape::File:
+                break;
+        }
+        return mesh_shape(shape, context);
+    } else {
+        Shape3d shape;
+        shape.element_size = m.element_size;
+        switch (m.shape) {
+            case SceneMesh::Shape::Box:
+            case SceneMesh::Shape::Frame:
+                shape.kind = m.shape == SceneMesh::Shape::Box ? Shape3d::Kind::Box : Shape3d::Kind::Frame;
+                shape.min = Vec<3>(m.min[0], m.min[1], m.min[2]);
+                shape.max = Vec<3>(m.max[0], m.max[1], m.max[2]);
+                shape.thickness = m.thickness;
+                break;
+            case SceneMesh::Shape::Disk:
+                shape.kind = Shape3d::Kind::Sphere;
+                shape.center = Vec<3>(m.center[0], m.center[1], m.center[2]);
+                shape.radius = m.radius;
+                break;
+            case SceneMesh::Shape::File:
+                break;
+        }
+        return mesh_shape(shape, context);
     }
-    return mesh_shape(shape, context);
 }
 
-/// Whether p lies in triangle (a, b, c) or on its boundary.
-bool in_triangle(const Vec<2>& p, const Vec<2>& a, const Vec<2>& b, const Vec<2>& c) {
-    auto orient = [](const Vec<2>& u, const Vec<2>& v, const Vec<2>& w) {
-        return (v - u)[0] * (w - u)[1] - (v - u)[1] * (w - u)[0];
-    };
-    const double d1 = orient(a, b, p), d2 = orient(b, c, p), d3 = orient(c, a, p);
-    const bool negative = d1 < 0 || d2 < 0 || d3 < 0, positive = d1 > 0 || d2 > 0 || d3 > 0;
+/// Whether p lies in the simplex `corner` (triangle or tetrahedron) or on its boundary:
+/// the signs of the d + 1 sub-simplices' volumes agree (zeros allowed).
+template <int dim>
+bool in_simplex(const Vec<dim>& p, const std::array<Vec<dim>, dim + 1>& corner) {
+    bool negative = false, positive = false;
+    for (int k = 0; k <= dim; ++k) {
+        Mat<dim> D;
+        std::array<Vec<dim>, dim + 1> c = corner;
+        c[k] = p;
+        for (int a = 0; a < dim; ++a) D.col(a) = c[a + 1] - c[0];
+        const double v = D.determinant();
+        negative = negative || v < 0.0;
+        positive = positive || v > 0.0;
+    }
     return !(negative && positive);
 }
 
 /// An intersection of the meshes at positions x, as text naming the meshes, or "".
-std::string find_intersection(const FemSceneSystem& s, const Contact2d& contact, const std::vector<Vec<2>>& x) {
+template <int dim>
+std::string find_intersection(const FemSceneSystem<dim>& s, const ContactPotential<dim>& contact,
+                              const std::vector<Vec<dim>>& x) {
     std::string pair = contact.first_intersection(x);
+    const std::size_t meshes = s.first_node.size() - 1;
     if (pair.empty()) {
-        // A body wholly inside another crosses no boundary edge: test one node of each.
-        const Mesh<2>& mesh = s.system.mesh;
-        const std::size_t meshes = s.first_node.size() - 1;
+        // A body wholly inside another crosses no boundary: test one node of each.
+        const Mesh<dim>& mesh = s.system.mesh;
         for (std::size_t k = 0; k < meshes && pair.empty(); ++k) {
-            const Vec<2>& p = x[s.first_node[k]];
+            const Vec<dim>& p = x[s.first_node[k]];
             for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
                 const auto& el = mesh.elements[e];
                 if (s.mesh_of_node(el[0]) == static_cast<int>(k)) continue;
-                if (in_triangle(p, x[el[0]], x[el[1]], x[el[2]])) {
+                std::array<Vec<dim>, dim + 1> corner;
+                for (int a = 0; a <= dim; ++a) corner[a] = x[el[a]];
+                if (in_simplex<dim>(p, corner)) {
                     pair = "node " + std::to_string(s.first_node[k]) + " inside element " + std::to_string(e);
                     break;
                 }
@@ -82,31 +119,47 @@ std::string find_intersection(const FemSceneSystem& s, const Contact2d& contact,
     if (pair.empty()) return "";
     // Which mesh each node belongs to.
     std::string legend = " (nodes";
-    const std::size_t meshes = s.first_node.size() - 1;
     for (std::size_t k = 0; k < meshes; ++k)
         legend += std::string(k ? ";" : "") + " " + std::to_string(s.first_node[k]) + "-" +
                   std::to_string(s.first_node[k + 1] - 1) + ": meshes[" + std::to_string(k) + "]";
     return pair + legend + ")";
 }
 
-std::unique_ptr<Contact2d> make_contact(const Scene& scene, const FemSceneSystem& s) {
-    auto contact = std::make_unique<Contact2d>(s.system.mesh.boundary, s.dhat, s.kappa);
-    if (scene.contact.ground_height) contact->add_half_space({Vec<2>(0.0, *scene.contact.ground_height), Vec<2>(0.0, 1.0)});
-    return contact;
+template <int dim>
+std::unique_ptr<ContactPotential<dim>> make_contact(const Scene& scene, const FemSceneSystem<dim>& s) {
+    HalfSpace<dim> ground;
+    if (scene.contact.ground_height) ground.origin[1] = *scene.contact.ground_height;
+    if constexpr (dim == 2) {
+        auto contact = std::make_unique<Contact2d>(s.system.mesh.boundary, s.dhat, s.kappa);
+        if (scene.contact.ground_height) contact->add_half_space(ground);
+        return contact;
+    } else {
+        auto contact = std::make_unique<Contact3d>(s.system.mesh.boundary, s.system.mesh.x, s.dhat, s.kappa);
+        if (scene.contact.ground_height) contact->add_half_space(ground);
+        return contact;
+    }
+}
+
+template <int dim>
+Vec<dim> to_vec(const Eigen::VectorXd& v) {
+    return Vec<dim>(v.head<dim>());
 }
 
 }  // namespace
 
-int FemSceneSystem::mesh_of_node(int node) const {
+template <int dim>
+int FemSceneSystem<dim>::mesh_of_node(int node) const {
     const auto it = std::upper_bound(first_node.begin(), first_node.end(), node);
     return static_cast<int>(it - first_node.begin()) - 1;
 }
 
-FemSceneSystem make_fem_system(const Scene& scene) {
-    if (scene.dim != 2) throw SceneError(scene.file + ": meshes: FEM scenes are 2D only in this version");
+template <int dim>
+FemSceneSystem<dim> make_fem_system(const Scene& scene) {
+    if (scene.dim != dim)
+        throw SceneError(scene.file + ": a " + std::to_string(scene.dim) + "D scene run as " + std::to_string(dim) + "D");
     if (!scene.has_meshes()) throw SceneError(scene.file + ": meshes: the scene has no meshes");
-    FemSceneSystem out;
-    FemSystem<2>& s = out.system;
+    FemSceneSystem<dim> out;
+    FemSystem<dim>& s = out.system;
     // A kinematic mesh is rigid: its elements carry the first deformable mesh's
     // material (and model), under which a rigid translation has no energy.
     int deformable = -1;
@@ -116,16 +169,16 @@ FemSceneSystem make_fem_system(const Scene& scene) {
         const SceneMesh& m = scene.meshes[k];
         out.first_node.push_back(static_cast<int>(s.mesh.nodes()));
         out.first_element.push_back(static_cast<int>(s.mesh.elements.size()));
-        s.mesh.append(mesh_of(scene, m));
+        s.mesh.append(mesh_of<dim>(scene, m));
         s.materials.emplace_back(scene.meshes[m.kinematic ? deformable : k].material);
         s.element_object.resize(s.mesh.elements.size(), static_cast<int>(k));
         s.fixed_node.resize(s.mesh.nodes(), m.kinematic ? 1 : 0);
-        s.prescribed_velocity.resize(s.mesh.nodes(), m.kinematic ? Vec<2>(m.velocity[0], m.velocity[1]) : Vec<2>::Zero());
+        s.prescribed_velocity.resize(s.mesh.nodes(), m.kinematic ? to_vec<dim>(m.velocity) : Vec<dim>::Zero());
     }
     out.first_node.push_back(static_cast<int>(s.mesh.nodes()));
     out.first_element.push_back(static_cast<int>(s.mesh.elements.size()));
     s.mesh.finalize(scene.file + ": meshes");
-    s.gravity = Vec<2>(scene.gravity[0], scene.gravity[1]);
+    s.gravity = to_vec<dim>(scene.gravity);
     s.make_rest();
 
     const auto [lo, hi] = s.mesh.bounding_box();
@@ -137,11 +190,11 @@ FemSceneSystem make_fem_system(const Scene& scene) {
         double mass = 0.0;
         for (double m : s.rest.node_mass) mass += m;
         const BarrierStiffness k = initial_barrier_stiffness(out.diagonal, out.dhat, mass / s.mesh.nodes(),
-                                                             kKappaReferenceDt, Eigen::VectorXd::Zero(2),
-                                                             Eigen::VectorXd::Zero(2));
+                                                             kKappaReferenceDt, Eigen::VectorXd::Zero(dim),
+                                                             Eigen::VectorXd::Zero(dim));
         out.kappa = scene.contact.kappa_scale * k.kappa;
     }
-    const std::unique_ptr<Contact2d> contact = make_contact(scene, out);
+    const std::unique_ptr<ContactPotential<dim>> contact = make_contact<dim>(scene, out);
     const std::string pair = find_intersection(out, *contact, s.mesh.x);
     if (!pair.empty())
         throw SceneError(scene.file + ": meshes: the start state intersects or touches: " + pair +
@@ -149,28 +202,29 @@ FemSceneSystem make_fem_system(const Scene& scene) {
     return out;
 }
 
-FemSimulation::FemSimulation(const Scene& scene, const IntegratorSettings& settings)
+template <int dim>
+FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& settings)
     : scene_(scene),
       scene_digest_(sha256_hex(scene_to_json(scene).dump())),
-      built_(make_fem_system(scene)),
+      built_(make_fem_system<dim>(scene)),
       settings_(settings) {
     if (!std::isfinite(settings.dt) || settings.dt < 0.0) throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
     if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
-    const FemSystem<2>& s = built_.system;
-    contact_ = make_contact(scene, built_);
-    friction_ = std::make_unique<Friction2d>(scene.contact.friction, scene.contact.friction_eps_v);
+    const FemSystem<dim>& s = built_.system;
+    contact_ = make_contact<dim>(scene, built_);
+    friction_ = std::make_unique<Friction<dim>>(scene.contact.friction, scene.contact.friction_eps_v);
     const bool frictional = scene.contact.friction > 0.0;
 
-    state_ = FemState<2>::at_rest(s);
+    state_ = FemState<dim>::at_rest(s);
     for (std::size_t k = 0; k < scene.meshes.size(); ++k) {
         const SceneMesh& m = scene.meshes[k];
-        for (int i = built_.first_node[k]; i < built_.first_node[k + 1]; ++i) state_.v[i] = Vec<2>(m.velocity[0], m.velocity[1]);
+        for (int i = built_.first_node[k]; i < built_.first_node[k + 1]; ++i) state_.v[i] = to_vec<dim>(m.velocity);
         if (m.hardening)
             for (int e = built_.first_element[k]; e < built_.first_element[k + 1]; ++e) state_.hardening[e] = *m.hardening;
     }
 
     if (settings.name == "explicit") {
-        explicit_ = std::make_unique<FemExplicitIntegrator<2>>(s, contact_.get());
+        explicit_ = std::make_unique<FemExplicitIntegrator<dim>>(s, contact_.get());
         if (frictional) explicit_->set_friction(friction_.get(), contact_.get());
         dt_ = settings.dt > 0.0 ? settings.dt : explicit_->cfl_time_step(settings.cfl);
     } else {
@@ -180,14 +234,14 @@ FemSimulation::FemSimulation(const Scene& scene, const IntegratorSettings& setti
         dt_ = settings.dt;
         std::vector<std::string> context;
         for (const SceneMesh& m : scene.meshes) context.push_back(scene.file + ": " + m.json_path + ".model");
-        std::unique_ptr<ParticleEnergy<2>> energy;
+        std::unique_ptr<ParticleEnergy<dim>> energy;
         FemMethod method = FemMethod::Lagged;
         if (settings.name == "lagged") {
-            energy = std::make_unique<ElasticParticleEnergy<2>>(s.materials);
+            energy = std::make_unique<ElasticParticleEnergy<dim>>(s.materials);
         } else if (settings.name == "analytic") {
             method = FemMethod::Analytic;
             for (auto& c : context) c = c.substr(0, c.size() - 6) + ".material";
-            energy = std::make_unique<AnalyticElastoplasticEnergy<2>>(s.materials, context);
+            energy = std::make_unique<AnalyticElastoplasticEnergy<dim>>(s.materials, context);
         } else if (settings.name == "plasticitynet") {
             method = FemMethod::PlasticityNet;
             std::vector<std::shared_ptr<const ModelFile>> models(scene.meshes.size());
@@ -202,7 +256,7 @@ FemSimulation::FemSimulation(const Scene& scene, const IntegratorSettings& setti
                     models[k] = models[deformable];
                     context[k] = context[deformable];
                 }
-            auto neural = std::make_unique<NeuralParticleEnergy<2>>(models, s.materials, context,
+            auto neural = std::make_unique<NeuralParticleEnergy<dim>>(models, s.materials, context,
                                                                     settings.implicit.regularizer_weight);
             built_.system.return_maps.clear();
             for (std::size_t k = 0; k < scene.meshes.size(); ++k)
@@ -213,17 +267,21 @@ FemSimulation::FemSimulation(const Scene& scene, const IntegratorSettings& setti
             throw std::invalid_argument("unknown integrator \"" + settings.name +
                                         "\" (expected explicit, plasticitynet, lagged or analytic)");
         }
-        implicit_ = std::make_unique<FemImplicitIntegrator<2>>(s, method, settings.implicit, std::move(energy),
+        implicit_ = std::make_unique<FemImplicitIntegrator<dim>>(s, method, settings.implicit, std::move(energy),
                                                                contact_.get());
         if (frictional) implicit_->set_friction(friction_.get(), contact_.get());
     }
 }
 
-StepStats FemSimulation::step() {
+template <int dim>
+StepStats FemSimulation<dim>::step() {
     const double frame_end = (frame_ + 1) * scene_.frame_dt;
     double dt = dt_;
     if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
+    contact_->reset_timing();
     StepStats s = implicit_ ? implicit_->step(state_, dt, steps_) : explicit_->step(state_, dt, steps_);
+    s.broad_phase_seconds = contact_->timing().broad_phase_seconds;
+    s.ccd_seconds = contact_->timing().ccd_seconds;
     s.contact_pairs = contact_->active_pairs(state_.x);
     s.min_distance = contact_->min_distance(state_.x);
     time_ += dt;
@@ -235,7 +293,8 @@ StepStats FemSimulation::step() {
     return s;
 }
 
-FrameStats FemSimulation::advance_frame(const std::function<void()>& after_step) {
+template <int dim>
+FrameStats FemSimulation<dim>::advance_frame(const std::function<void()>& after_step) {
     const auto start = std::chrono::steady_clock::now();
     FrameStats stats;
     const int target = frame_ + 1;
@@ -268,13 +327,13 @@ FrameStats FemSimulation::advance_frame(const std::function<void()>& after_step)
         throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
     stats.frame = frame_;
     stats.time = time_;
-    const FemSystem<2>& s = built_.system;
+    const FemSystem<dim>& s = built_.system;
     for (std::size_t i = 0; i < s.mesh.nodes(); ++i) {
         if (s.fixed_node[i]) continue;  // kinematic bodies carry no physical momentum here
         const double m = s.rest.node_mass[i];
         stats.kinetic += 0.5 * m * state_.v[i].squaredNorm();
         stats.potential -= m * s.gravity.dot(state_.x[i]);
-        for (int a = 0; a < 2; ++a) stats.momentum[a] += m * state_.v[i][a];
+        for (int a = 0; a < dim; ++a) stats.momentum[a] += m * state_.v[i][a];
     }
     stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return stats;
@@ -299,7 +358,8 @@ void read_array(std::istream& in, std::vector<T>& a, std::size_t n, const std::s
 
 }  // namespace
 
-void FemSimulation::save_checkpoint(const std::string& path) const {
+template <int dim>
+void FemSimulation<dim>::save_checkpoint(const std::string& path) const {
     write_file_atomically(path, [&](std::ostream& out) {
         out.write(kMagic, sizeof kMagic);
         const std::int64_t header[5] = {kDim, static_cast<std::int64_t>(state_.x.size()),
@@ -317,7 +377,8 @@ void FemSimulation::save_checkpoint(const std::string& path) const {
     });
 }
 
-void FemSimulation::load_checkpoint(const std::string& path) {
+template <int dim>
+void FemSimulation<dim>::load_checkpoint(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
     if (!in) {
         std::error_code ec;
@@ -346,7 +407,7 @@ void FemSimulation::load_checkpoint(const std::string& path) {
         throw std::invalid_argument(path + ": holds " + std::to_string(header[1]) + " nodes and " +
                                     std::to_string(header[2]) + " elements, the scene's mesh has " +
                                     std::to_string(state_.x.size()) + " and " + std::to_string(state_.hardening.size()));
-    FemState<2> s;
+    FemState<dim> s;
     read_array(in, s.x, state_.x.size(), path);
     read_array(in, s.v, state_.v.size(), path);
     read_array(in, s.plastic_inverse, state_.plastic_inverse.size(), path);
@@ -358,5 +419,12 @@ void FemSimulation::load_checkpoint(const std::string& path) {
     steps_ = header[4];
     time_ = time;
 }
+
+template struct FemSceneSystem<2>;
+template struct FemSceneSystem<3>;
+template FemSceneSystem<2> make_fem_system<2>(const Scene&);
+template FemSceneSystem<3> make_fem_system<3>(const Scene&);
+template class FemSimulation<2>;
+template class FemSimulation<3>;
 
 }  // namespace pnet

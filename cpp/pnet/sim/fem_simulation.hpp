@@ -1,5 +1,5 @@
 #pragma once
-// A FEM run of a scene (DESIGN.md §4.2-4.3, §5; 2D): the meshes of the scene's
+// A FEM run of a scene (DESIGN.md §4.2-4.3, §5; 2D and 3D): the meshes of the scene's
 // "meshes" (gmsh shapes or .msh files) joined into one mesh, one material per
 // mesh, kinematic meshes (the plate) as prescribed-velocity nodes; IPC contact
 // over the joined boundary (bodies, self-contact, the ground) with lagged
@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "pnet/contact/friction.hpp"
+#include "pnet/contact/contact3d.hpp"
 #include "pnet/contact/ipc_contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/scene/scene.hpp"
@@ -25,8 +26,9 @@
 namespace pnet {
 
 /// The FEM system a scene describes, and where each mesh lies in it.
+template <int dim>
 struct FemSceneSystem {
-    FemSystem<2> system;
+    FemSystem<dim> system;
     std::vector<int> first_node;     // per mesh, and the node count at the end
     std::vector<int> first_element;  // per mesh, and the element count at the end
     double diagonal = 0.0;           // bounding-box diagonal of the rest positions, m
@@ -41,11 +43,13 @@ struct FemSceneSystem {
 /// checks the start state: a mesh that intersects another, itself or the
 /// ground is refused (SceneError naming the file, the meshes and the pair), as
 /// is an empty mesh file (MeshError naming it).
-FemSceneSystem make_fem_system(const Scene& scene);
+template <int dim>
+FemSceneSystem<dim> make_fem_system(const Scene& scene);
 
+template <int dim>
 class FemSimulation {
 public:
-    static constexpr int kDim = 2;
+    static constexpr int kDim = dim;
 
     /// Throws std::invalid_argument for an unknown integrator, a bad dt, or a
     /// model that is missing or unfit ("<scene file>: meshes[k].model: ...");
@@ -60,11 +64,11 @@ public:
     /// then tests the meshes for intersection exactly (SimulationError if any).
     FrameStats advance_frame(const std::function<void()>& after_step = {});
 
-    const FemState<2>& state() const { return state_; }
-    const FemSceneSystem& scene_system() const { return built_; }
-    const FemSystem<2>& system() const { return built_.system; }
-    const Mesh<2>& mesh() const { return built_.system.mesh; }
-    const Contact2d& contact() const { return *contact_; }
+    const FemState<dim>& state() const { return state_; }
+    const FemSceneSystem<dim>& scene_system() const { return built_; }
+    const FemSystem<dim>& system() const { return built_.system; }
+    const Mesh<dim>& mesh() const { return built_.system.mesh; }
+    const ContactPotential<dim>& contact() const { return *contact_; }
     const Scene& scene() const { return scene_; }
     int frame() const { return frame_; }
     double time() const { return time_; }
@@ -81,13 +85,13 @@ public:
 private:
     Scene scene_;
     std::string scene_digest_;
-    FemSceneSystem built_;
+    FemSceneSystem<dim> built_;
     IntegratorSettings settings_;
-    FemState<2> state_;
-    std::unique_ptr<Contact2d> contact_;
-    std::unique_ptr<Friction2d> friction_;
-    std::unique_ptr<FemImplicitIntegrator<2>> implicit_;
-    std::unique_ptr<FemExplicitIntegrator<2>> explicit_;
+    FemState<dim> state_;
+    std::unique_ptr<ContactPotential<dim>> contact_;
+    std::unique_ptr<Friction<dim>> friction_;
+    std::unique_ptr<FemImplicitIntegrator<dim>> implicit_;
+    std::unique_ptr<FemExplicitIntegrator<dim>> explicit_;
     std::vector<StepStats> frame_steps_;
     double dt_ = 0.0;
     int frame_ = 0;

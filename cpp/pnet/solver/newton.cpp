@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <limits>
 
+#include <omp.h>
+
 #include <Eigen/CholmodSupport>
 
 #include "pnet/solver/pcg.hpp"
@@ -31,12 +33,27 @@ double residual_of(const VecX& g, const NewtonOptions& options, const VecX& diag
     return g.cwiseProduct(scale).lpNorm<Eigen::Infinity>();
 }
 
+/// The BLAS CHOLMOD calls (OpenBLAS, built on OpenMP) splits its sums by the OpenMP thread
+/// count, so results would change with it in the last bit (measured on the 3D tiny frame:
+/// 2.5e-16 m after one frame): factorizations and solves run with one thread.
+class OneBlasThread {
+public:
+    OneBlasThread() : saved_(omp_get_max_threads()) { omp_set_num_threads(1); }
+    ~OneBlasThread() { omp_set_num_threads(saved_); }
+    OneBlasThread(const OneBlasThread&) = delete;
+    OneBlasThread& operator=(const OneBlasThread&) = delete;
+
+private:
+    int saved_;
+};
+
 /// CHOLMOD's supernodal Cholesky of the objective's assembled Hessian, keeping
 /// the symbolic analysis while the sparsity pattern stays the same.
 class DirectSolver {
 public:
     /// Factorizes H; false if H is not positive definite.
     bool factorize(const SparseMatrix& H, NewtonStats& stats) {
+        const OneBlasThread one;
         if (!same_pattern(H)) {
             llt_.analyzePattern(H);
             outer_.assign(H.outerIndexPtr(), H.outerIndexPtr() + H.outerSize() + 1);
@@ -47,7 +64,10 @@ public:
         ++stats.factorizations;
         return llt_.info() == Eigen::Success;
     }
-    void solve(const VecX& b, VecX& x) { x = llt_.solve(b); }
+    void solve(const VecX& b, VecX& x) {
+        const OneBlasThread one;
+        x = llt_.solve(b);
+    }
 
 private:
     bool same_pattern(const SparseMatrix& H) const {

@@ -20,7 +20,8 @@ bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
 }
 
-void expect_identical(const FemState<2>& a, const FemState<2>& b) {
+template <int dim>
+void expect_identical(const FemState<dim>& a, const FemState<dim>& b) {
     EXPECT_TRUE(same_bytes(a.x, b.x));
     EXPECT_TRUE(same_bytes(a.v, b.v));
     EXPECT_TRUE(same_bytes(a.plastic_inverse, b.plastic_inverse));
@@ -35,6 +36,7 @@ IntegratorSettings settings_for(const Scene& scene, const std::string& integrato
 }
 
 const char* const kTinyFrame = PNET_SCENES_DIR "/tiny/metal_frame_2d.json";
+const char* const kTinyFrame3d = PNET_SCENES_DIR "/tiny/metal_frame_3d.json";
 
 TEST(FemSimulation, TinyFramesRunWithEveryIntegratorAndThePlateFollowsItsPath) {
     int ran = 0;
@@ -44,8 +46,8 @@ TEST(FemSimulation, TinyFramesRunWithEveryIntegratorAndThePlateFollowsItsPath) {
                  {"explicit", 0.0}, {"lagged", 1e-2}, {"analytic", 1e-2}}) {
             if (integrator == "analytic" && scene.meshes[0].material.name != "metal") continue;
             SCOPED_TRACE(std::string(file) + " " + integrator);
-            FemSimulation sim(scene, settings_for(scene, integrator, dt));
-            const FemSceneSystem& s = sim.scene_system();
+            FemSimulation<2> sim(scene, settings_for(scene, integrator, dt));
+            const FemSceneSystem<2>& s = sim.scene_system();
             double y0 = 0.0;
             for (int i = s.first_node[0]; i < s.first_node[1]; ++i) y0 += sim.state().x[i][1];
             for (int frame = 1; frame <= 2; ++frame) {
@@ -68,8 +70,8 @@ TEST(FemSimulation, TinyFramesRunWithEveryIntegratorAndThePlateFollowsItsPath) {
     EXPECT_EQ(ran, 5);
 }
 
-double mean_frame_distance(const FemSimulation& a, const FemSimulation& b) {
-    const FemSceneSystem& s = a.scene_system();
+double mean_frame_distance(const FemSimulation<2>& a, const FemSimulation<2>& b) {
+    const FemSceneSystem<2>& s = a.scene_system();
     double mean = 0.0;
     for (int i = s.first_node[0]; i < s.first_node[1]; ++i) mean += (a.state().x[i] - b.state().x[i]).norm();
     return mean / (s.first_node[1] - s.first_node[0]);
@@ -81,7 +83,7 @@ TEST(FemSimulation, ExplicitConvergesAndImplicitStaysCloseOnTheTinyFrame) {
     // step damps the frame's bounce on the stiff barrier: analytic at 1e-3 ends 0.26 mm (mean)
     // from explicit, at 1e-4 still 0.19 mm (measured; the frame moved ~0.2 mm in frame 1).
     const Scene scene = load_scene(kTinyFrame);
-    FemSimulation fine(scene, settings_for(scene, "explicit", 5e-6)), gt(scene, settings_for(scene, "explicit", 1e-5)),
+    FemSimulation<2> fine(scene, settings_for(scene, "explicit", 5e-6)), gt(scene, settings_for(scene, "explicit", 1e-5)),
         implicit(scene, settings_for(scene, "analytic", 1e-3));
     for (int f = 0; f < 2; ++f) {
         fine.advance_frame();
@@ -101,7 +103,7 @@ TEST(FemSimulation, CheckpointThenResumeEqualsAnUninterruptedRun) {
         const Scene scene = load_scene(kTinyFrame);
         const IntegratorSettings settings = settings_for(scene, integrator, integrator == "explicit" ? 0.0 : 1e-2);
         test::TempDir dir;
-        FemSimulation uninterrupted(scene, settings), first(scene, settings), resumed(scene, settings);
+        FemSimulation<2> uninterrupted(scene, settings), first(scene, settings), resumed(scene, settings);
         for (int f = 0; f < 3; ++f) uninterrupted.advance_frame();
         first.advance_frame();
         first.save_checkpoint(dir.file("state.bin"));
@@ -118,7 +120,7 @@ TEST(FemSimulation, CheckpointThenResumeEqualsAnUninterruptedRun) {
 TEST(FemSimulation, CheckpointOfAnotherIntegratorOrATruncatedFileIsRefused) {
     const Scene scene = load_scene(kTinyFrame);
     test::TempDir dir;
-    FemSimulation lagged(scene, settings_for(scene, "lagged", 1e-2)), analytic(scene, settings_for(scene, "analytic", 1e-2));
+    FemSimulation<2> lagged(scene, settings_for(scene, "lagged", 1e-2)), analytic(scene, settings_for(scene, "analytic", 1e-2));
     lagged.advance_frame();
     lagged.save_checkpoint(dir.file("lagged.bin"));
     test::expect_error<std::invalid_argument>([&] { analytic.load_checkpoint(dir.file("lagged.bin")); },
@@ -139,7 +141,7 @@ TEST(FemSimulation, OneAndTwoThreadsGiveIdenticalFrames) {
     std::vector<FemState<2>> results;
     for (int t : {1, 2}) {
         omp_set_num_threads(t);
-        FemSimulation sim(scene, settings_for(scene, "analytic", 1e-2));
+        FemSimulation<2> sim(scene, settings_for(scene, "analytic", 1e-2));
         sim.advance_frame();
         sim.advance_frame();
         results.push_back(sim.state());
@@ -179,7 +181,7 @@ TEST(FemSimulation, AnIntersectingStartIsRefusedNamingThePair) {
         SCOPED_TRACE(c.name);
         const Scene scene = edited_scene(c.edit);
         try {
-            make_fem_system(scene);
+            make_fem_system<2>(scene);
             ADD_FAILURE() << "no exception";
         } catch (const SceneError& e) {
             const std::string what = e.what();
@@ -188,8 +190,77 @@ TEST(FemSimulation, AnIntersectingStartIsRefusedNamingThePair) {
             EXPECT_NE(what.find(": meshes[0]"), std::string::npos) << what;  // the node ranges name the meshes
         }
     }
-    EXPECT_NO_THROW(make_fem_system(load_scene(kTinyFrame)));
+    EXPECT_NO_THROW(make_fem_system<2>(load_scene(kTinyFrame)));
+}
+
+// 3D: the tiny tetrahedral frame under the plate, every integrator without a network.
+TEST(FemSimulation3d, TinyFrameRunsWithEveryIntegratorWithoutIntersection) {
+    const Scene scene = load_scene(kTinyFrame3d);
+    int ran = 0;
+    for (const auto& [integrator, dt] :
+         std::vector<std::pair<std::string, double>>{{"explicit", 0.0}, {"lagged", 1e-2}, {"analytic", 1e-2}}) {
+        SCOPED_TRACE(integrator);
+        FemSimulation<3> sim(scene, settings_for(scene, integrator, dt));
+        const FemSceneSystem<3>& s = sim.scene_system();
+        ASSERT_EQ(s.first_node.size(), 3u);
+        EXPECT_GT(sim.mesh().boundary.size(), 0u);
+        double y0 = 0.0;
+        for (int i = s.first_node[0]; i < s.first_node[1]; ++i) y0 += sim.state().x[i][1];
+        for (int frame = 1; frame <= 2; ++frame) {
+            const FrameStats stats = sim.advance_frame();  // throws if the meshes intersect
+            EXPECT_GT(stats.min_distance, 0.0);
+            EXPECT_GT(stats.contact_pairs, 0u);
+            EXPECT_EQ(stats.unconverged_steps, 0);
+        }
+        for (int i = s.first_node[1]; i < s.first_node[2]; ++i)
+            EXPECT_NEAR(sim.state().x[i][1] - sim.mesh().x[i][1], -0.002, 1e-12) << "node " << i;
+        double y1 = 0.0;
+        for (int i = s.first_node[0]; i < s.first_node[1]; ++i) y1 += sim.state().x[i][1];
+        EXPECT_LT(y1, y0) << "the plate pressed the frame down";
+        EXPECT_EQ(sim.contact().first_intersection(sim.state().x), "");
+        ++ran;
+    }
+    EXPECT_EQ(ran, 3);
+}
+
+TEST(FemSimulation3d, CheckpointResumesBitIdenticallyAndThreadsDoNotChangeTheResult) {
+    const Scene scene = load_scene(kTinyFrame3d);
+    const IntegratorSettings settings = settings_for(scene, "lagged", 1e-2);
+    test::TempDir dir;
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    FemSimulation<3> one_thread(scene, settings);
+    for (int f = 0; f < 2; ++f) one_thread.advance_frame();
+    omp_set_num_threads(2);
+    FemSimulation<3> first(scene, settings), resumed(scene, settings);
+    first.advance_frame();
+    first.save_checkpoint(dir.file("state.bin"));
+    resumed.load_checkpoint(dir.file("state.bin"));
+    resumed.advance_frame();
+    omp_set_num_threads(threads);
+    expect_identical(resumed.state(), one_thread.state());
+    FemSimulation<2> two_d(load_scene(kTinyFrame), settings_for(load_scene(kTinyFrame), "lagged", 1e-2));
+    test::expect_error<std::invalid_argument>([&] { two_d.load_checkpoint(dir.file("state.bin")); },
+                                              dir.file("state.bin"), "");
+}
+
+TEST(FemSimulation3d, AnIntersectingStartIsRefusedNamingThePair) {
+    nlohmann::json j = scene_to_json(load_scene(kTinyFrame3d));
+    j["meshes"][1]["min"][1] = 0.1711;  // the plate 1 cm lower, through the frame's top wall
+    j["meshes"][1]["max"][1] = 0.1811;
+    try {
+        make_fem_system<3>(scene_from_json(j, "edited.json", ""));
+        ADD_FAILURE() << "no exception";
+    } catch (const SceneError& e) {
+        const std::string what = e.what();
+        EXPECT_EQ(what.rfind("edited.json: meshes: the start state intersects or touches: ", 0), 0u) << what;
+        EXPECT_NE(what.find(": meshes[1]"), std::string::npos) << what;
+    }
+    j = scene_to_json(load_scene(kTinyFrame3d));
+    j["ground"]["height"] = 0.001;  // the frame 1 mm into the ground
+    EXPECT_THROW(make_fem_system<3>(scene_from_json(j, "edited.json", "")), SceneError);
 }
 
 }  // namespace
 }  // namespace pnet
+
