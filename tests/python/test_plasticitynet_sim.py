@@ -490,6 +490,19 @@ def test_fem_scene_steps_with_mesh_arrays_and_contact_stats(tmp_path):
     assert np.array_equal(again.nodes, sim.nodes) and more[0]["frame"] == 3
 
 
+def test_3d_fem_scene_has_tetrahedra_and_boundary_triangles():
+    sim = pns.Simulation(str(TINY / "metal_frame_3d.json"), integrator="lagged")
+    rest, first = sim.rest_nodes, sim.mesh_first_node
+    frames = sim.advance(1)
+    assert frames[0]["converged"] and frames[0]["contact_pairs"] > 0 and frames[0]["min_distance"] > 0
+    nodes, elements, faces = sim.nodes, sim.elements, sim.boundary_faces
+    assert nodes.shape == rest.shape == (first[-1], 3)
+    assert elements.shape[1] == 4 and faces.shape[1] == 3 and elements.max() < len(nodes)
+    assert np.allclose(nodes[first[1]:first[2], 1] - rest[first[1]:first[2], 1], -0.001, atol=1e-12)
+    stats = sim.step_stats()
+    assert stats["broad_phase_s"].sum() > 0
+
+
 def test_fem_analytic_is_refused_for_neo_hookean_metal():
     with pytest.raises(ValueError, match=r"meshes\[0\]\.material: the analytic integrator needs StVK-Hencky"):
         pns.Simulation(str(TINY / "metal_nh_frame_2d.json"), integrator="analytic")

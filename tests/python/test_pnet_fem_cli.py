@@ -74,6 +74,29 @@ def test_every_integrator_runs_the_tiny_frames(tmp_path, name, integrator):
         assert int(steps[-1]["fixed_point_iterations"]) > 1 and steps[-1]["fixed_point_converged"] == "1"
 
 
+@pytest.mark.parametrize("integrator", ["plasticitynet", "lagged"])
+def test_the_tiny_3d_frame_writes_surface_ply_vtu_and_png(tmp_path, integrator):
+    out = tmp_path / "run3d"
+    r = pnet("simulate", TINY / "metal_frame_3d.json", "--integrator", integrator, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "contact: no intersection at any frame" in r.stdout and "wrote 2 frames" in r.stdout
+    run = json.loads((out / "run.json").read_text())
+    assert run["dim"] == 3 and run["elements"] > 100
+    frames = [read_mesh_ply(out / f"frame_{f:05d}.ply") for f in range(3)]
+    for frame in frames:
+        assert frame.dim == 3 and frame.position.shape == (run["nodes"], 3)
+        assert frame.triangles.shape[1] == 3 and frame.triangles.max() < run["nodes"]
+    plate = slice(run["mesh_first_node"][1], run["mesh_first_node"][2])
+    assert np.allclose(frames[2].position[plate, 1] - frames[0].position[plate, 1], -0.002, atol=1e-12)
+    assert frames[2].position[:, 1].min() > 0
+    vtu = (out / "frame_00002.vtu").read_text()
+    assert f'NumberOfPoints="{run["nodes"]}" NumberOfCells="{run["elements"]}"' in vtu
+    assert (out / "frame_00002.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    steps = csv_rows(out / "steps.csv")
+    assert len(steps) == 4 and all(s["converged"] == "1" for s in steps)
+    assert all(float(s["broad_phase_s"]) >= 0 and float(s["ccd_s"]) >= 0 for s in steps)
+
+
 def test_learned_and_exact_return_maps_differ_slightly(tmp_path):
     runs = {}
     for rm in ("learned", "exact"):

@@ -258,6 +258,20 @@ Contact3d::Terms Contact3d::terms(const Pair& pair, const std::vector<Vec<3>>& x
     return t;
 }
 
+double Contact3d::displacement_since_list(const std::vector<Vec<3>>& x) const {
+    if (!list_valid_ || list_x_.size() != x.size()) return std::numeric_limits<double>::infinity();
+    double worst = 0.0;
+    for (int node : nodes_) worst = std::max(worst, (x[node] - list_x_[node]).squaredNorm());
+    return std::sqrt(worst);
+}
+
+void Contact3d::rebuild_list(const std::vector<Vec<3>>& x) const {
+    list_.clear();
+    for_each_candidate(x, nullptr, kListMargin * dhat_, [&](const Pair& pair) { list_.push_back(pair); });
+    list_x_ = x;
+    list_valid_ = true;
+}
+
 const std::vector<Contact3d::Pair>& Contact3d::active(const std::vector<Vec<3>>& x) const {
     // Newton asks for the value, gradient and Hessian at the same x in turn: one broad phase.
     if (active_valid_ && active_x_.size() == x.size() &&
@@ -266,7 +280,12 @@ const std::vector<Contact3d::Pair>& Contact3d::active(const std::vector<Vec<3>>&
     std::vector<Pair>& pairs = active_pairs_;
     pairs.clear();
     const double s_hat = dhat_ * dhat_;
-    for_each_candidate(x, nullptr, dhat_, [&](const Pair& pair) {
+    // A pair closer than dhat at x was closer than dhat + 2 delta when the list was built, delta
+    // the largest node displacement since: the list (margin kListMargin dhat) holds it while
+    // delta <= (kListMargin - 1) dhat / 2.
+    if (!(displacement_since_list(x) <= 0.5 * (kListMargin - 1.0) * dhat_)) rebuild_list(x);
+    const Clock::time_point start = Clock::now();
+    for (const Pair& pair : list_) {
         double s = 0.0;
         switch (pair.kind) {
             case Kind::PointTriangle: {
@@ -286,7 +305,8 @@ const std::vector<Contact3d::Pair>& Contact3d::active(const std::vector<Vec<3>>&
             }
         }
         if (s < s_hat) pairs.push_back(pair);
-    });
+    }
+    timing_.broad_phase_seconds += seconds_since(start);
     active_x_ = x;
     active_valid_ = true;
     return pairs;
@@ -333,7 +353,7 @@ double Contact3d::max_step(const std::vector<Vec<3>>& x, const std::vector<Vec<3
     long queries = 0;
     Clock::time_point start;
     bool started = false;
-    for_each_candidate(x, &dx, 0.0, [&](const Pair& pair) {
+    auto toi = [&](const Pair& pair) {
         if (!started) start = Clock::now(), started = true;
         ++queries;
         switch (pair.kind) {
@@ -355,7 +375,47 @@ double Contact3d::max_step(const std::vector<Vec<3>>& x, const std::vector<Vec<3
                 break;
             }
         }
-    });
+    };
+    // A pair that touches along x -> x + dx was within 2 D of itself when the list was built (D:
+    // the largest displacement since, plus the largest of dx): the list holds every such pair
+    // while 2 D <= kListMargin dhat. Of those, exactly the pairs whose swept boxes overlap (the
+    // broad phase's own test) are checked, so the result does not depend on the list's age.
+    double step = 0.0;
+    for (int node : nodes_) step = std::max(step, dx[node].squaredNorm());
+    const double reach = displacement_since_list(x) + std::sqrt(step);
+    if (2.0 * reach <= kListMargin * dhat_) {
+        const Clock::time_point broad = Clock::now();
+        std::vector<Pair>& swept = candidates_;
+        swept.clear();
+        auto sweep = [&](const int* node, int count, Vec<3>& lo, Vec<3>& hi) {
+            lo = hi = x[node[0]];
+            for (int k = 0; k < count; ++k) {
+                const Vec<3> a = x[node[k]], b = x[node[k]] + dx[node[k]];
+                lo = lo.cwiseMin(a).cwiseMin(b);
+                hi = hi.cwiseMax(a).cwiseMax(b);
+            }
+        };
+        for (const Pair& pair : list_) {
+            if (pair.kind == Kind::PointPlane) {
+                swept.push_back(pair);
+                continue;
+            }
+            Vec<3> lo_a, hi_a, lo_b, hi_b;
+            if (pair.kind == Kind::PointTriangle) {
+                sweep(&pair.a, 1, lo_a, hi_a);
+                sweep(triangles_[pair.b].data(), 3, lo_b, hi_b);
+            } else {
+                sweep(edges_[pair.a].data(), 2, lo_a, hi_a);
+                sweep(edges_[pair.b].data(), 2, lo_b, hi_b);
+            }
+            if ((hi_a.array() < lo_b.array()).any() || (lo_a.array() > hi_b.array()).any()) continue;
+            swept.push_back(pair);
+        }
+        timing_.broad_phase_seconds += seconds_since(broad);
+        for (const Pair& pair : swept) toi(pair);
+    } else {
+        for_each_candidate(x, &dx, 0.0, toi);
+    }
     if (started) timing_.ccd_seconds += seconds_since(start);
     timing_.ccd_pairs += queries;
     return t;

@@ -13,9 +13,11 @@
 // filter (additive CCD, ccd3d.hpp) of the line search.
 //
 // Broad phase: uniform hash grids (hash_grid.hpp) of the triangles' and the edges' boxes
-// (swept over the motion for CCD, grown by dhat for the active pairs); the pairs are visited
-// in a fixed order (nodes ascending, then triangles ascending; edges ascending), so every sum
-// has the same bits on every run.
+// grown by 3 dhat give a list of candidate pairs (a Verlet list), reused until some node has
+// moved dhat: the active pairs and the CCD pairs (swept boxes overlapping) are filtered from
+// it; a motion too long for it gets its own swept broad phase. The pairs are visited in a
+// fixed order (nodes ascending, then triangles ascending; edges ascending) and the filters
+// are exact, so every sum has the same bits on every run, whatever the list's age.
 #include <array>
 #include <string>
 #include <vector>
@@ -36,7 +38,7 @@ public:
 
     void add_half_space(const HalfSpace<3>& half_space) {
         half_spaces_.push_back(half_space);
-        active_valid_ = false;
+        active_valid_ = list_valid_ = false;
     }
     double dhat() const override { return dhat_; }
     double kappa() const override { return kappa_; }
@@ -97,6 +99,14 @@ private:
     mutable std::vector<Vec<3>> lo_, hi_, edge_lo_, edge_hi_, grown_lo_, grown_hi_;
     mutable std::vector<int> found_;
     mutable std::vector<Pair> candidates_;
+    // A Verlet list: the candidate pairs within kListMargin dhat (box test) at list_x_, reused
+    // while no node has moved far enough to bring a pair outside it into reach.
+    static constexpr double kListMargin = 3.0;
+    double displacement_since_list(const std::vector<Vec<3>>& x) const;
+    void rebuild_list(const std::vector<Vec<3>>& x) const;
+    mutable std::vector<Pair> list_;
+    mutable std::vector<Vec<3>> list_x_;
+    mutable bool list_valid_ = false;
     mutable std::vector<Pair> active_pairs_;
     mutable std::vector<Vec<3>> active_x_;
     mutable bool active_valid_ = false;
