@@ -75,6 +75,7 @@ struct ReferenceSolveWork {
     // Anderson acceleration: differences of the last iterates' residuals and images (columns).
     Eigen::MatrixXd dR, dG;
     VecX last_r, last_g;
+    NewtonWorkspace newton;  // the direct solver's analysis, shared by the solves
 };
 
 /// Solves the step from v (updated). `after_reference`, if given, runs after

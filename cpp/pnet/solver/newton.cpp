@@ -89,7 +89,16 @@ std::string where(const std::string& context, int iteration, double residual) {
 
 }  // namespace
 
-NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options, const std::string& context) {
+struct NewtonWorkspace::Impl {
+    DirectSolver direct;
+};
+NewtonWorkspace::NewtonWorkspace() : impl_(std::make_unique<Impl>()) {}
+NewtonWorkspace::~NewtonWorkspace() = default;
+NewtonWorkspace::NewtonWorkspace(NewtonWorkspace&&) noexcept = default;
+NewtonWorkspace& NewtonWorkspace::operator=(NewtonWorkspace&&) noexcept = default;
+
+NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options, const std::string& context,
+                     NewtonWorkspace* workspace) {
     const Eigen::Index n = objective.size();
     if (x.size() != n) throw std::invalid_argument("minimize: x has the wrong size");
     if (options.residual_scale.size() != 0 && options.residual_scale.size() != n)
@@ -101,7 +110,9 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;
     PcgWorkspace pcg;
     Preconditioner preconditioner;
-    DirectSolver direct;
+    std::unique_ptr<NewtonWorkspace> local;
+    if (!workspace) workspace = (local = std::make_unique<NewtonWorkspace>()).get();
+    DirectSolver& direct = workspace->impl().direct;
     const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
     const bool lazy = options.lazy_hessian > 0.0;
     // Every iterate's Hessian is prepared before its direction is computed:

@@ -24,6 +24,7 @@
 // value_gradient(), about half the cost of a Hessian pass for a learned energy); any other iterate
 // (a backtracked step, or a full step that did not contract enough) gets its own Hessian before its
 // direction and convergence test are computed.
+#include <memory>
 #include <stdexcept>
 #include <string>
 
@@ -91,9 +92,28 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+/// What a sequence of solves of the same objective can share: CHOLMOD's
+/// symbolic analysis (ordering and supernodes), kept while the Hessian's
+/// sparsity pattern stays the same. The fixed point on F0 and the kinematic
+/// stages of a FEM step solve one system tens of times.
+class NewtonWorkspace {
+public:
+    NewtonWorkspace();
+    ~NewtonWorkspace();
+    NewtonWorkspace(NewtonWorkspace&&) noexcept;
+    NewtonWorkspace& operator=(NewtonWorkspace&&) noexcept;
+    struct Impl;
+    Impl& impl() { return *impl_; }
+
+private:
+    std::unique_ptr<Impl> impl_;
+};
+
 /// Minimizes `objective` from x (updated in place). Returns the statistics;
 /// not converging within max_iterations, or a failed line search, is not an
 /// error (stats.converged is false). Throws NewtonError as described above.
-NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options, const std::string& context = "");
+/// `workspace`, if given, carries the direct solver's analysis between calls.
+NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options, const std::string& context = "",
+                     NewtonWorkspace* workspace = nullptr);
 
 }  // namespace pnet
