@@ -205,9 +205,10 @@ def main() -> int:
 
 
 def write_summary(results: Path, rows: list):
-    # Keep the rows of scenes not run this time.
+    # Keep the rows of runs not made this time (other scenes, or runs left out with --runs).
     path = results / "summary.csv"
-    old = [r for r in read_csv(path) if r["scene"] not in {row["scene"] for row in rows}] if path.exists() else []
+    made = {(row["scene"], row["run"]) for row in rows}
+    old = [r for r in read_csv(path) if (r["scene"], r["run"]) not in made] if path.exists() else []
     keys = ["scene", "run", "integrator", "dt", "frames", "failed", "seconds_per_frame", "steps_per_frame",
             "newton_per_step", "solves_per_step", "kinematic_stages_per_step", "unconverged_steps",
             "min_contact_distance_m", "last_frame", "final_mean_pct", "final_max_pct", "worst_mean_pct",

@@ -291,13 +291,20 @@ template <int dim>
 double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long step_index, StepStats& stats) {
     const Mesh<dim>& mesh = system_.mesh;
     const std::size_t n = mesh.nodes();
-    VecX force = VecX::Zero(dim * n);
-    for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+    // The elements' stresses in parallel (an SVD each), gathered onto the nodes in element
+    // order (the same sums for any thread count).
+    const std::ptrdiff_t elements = static_cast<std::ptrdiff_t>(mesh.elements.size());
+    stress_.resize(mesh.elements.size());
+#pragma omp parallel for schedule(static) if (elements >= 256)
+    for (std::ptrdiff_t e = 0; e < elements; ++e) {
         const Mat<dim> FE = deformation_gradient(mesh, system_.rest, state.x, e) * state.plastic_inverse[e];
         const Mat<dim> P = system_.materials[system_.element_object[e]].elasticity().P(FE);
-        const Mat<dim> Q = system_.rest.volume[e] * P * state.plastic_inverse[e].transpose();
-        for (int a = 0; a <= dim; ++a) force.template segment<dim>(dim * mesh.elements[e][a]) -= Q * system_.rest.grad[e][a];
+        stress_[e] = system_.rest.volume[e] * P * state.plastic_inverse[e].transpose();
     }
+    VecX force = VecX::Zero(dim * n);
+    for (std::size_t e = 0; e < mesh.elements.size(); ++e)
+        for (int a = 0; a <= dim; ++a)
+            force.template segment<dim>(dim * mesh.elements[e][a]) -= stress_[e] * system_.rest.grad[e][a];
     if (contact_) {
         VecX barrier = VecX::Zero(dim * n);
         contact_->add_gradient(state.x, 1.0, barrier);
@@ -359,8 +366,10 @@ double FemExplicitIntegrator<dim>::element_frequency(const std::vector<Vec<dim>>
     // lambda log J term stiffens as 1/J), height = d V / (longest edge)^(d-1). Elements of
     // kinematic nodes only (the plate) move rigidly and do not count.
     const Mesh<dim>& mesh = system_.mesh;
+    const std::ptrdiff_t elements = static_cast<std::ptrdiff_t>(mesh.elements.size());
     double omega = 0.0;
-    for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+#pragma omp parallel for schedule(static) reduction(max : omega) if (elements >= 256)
+    for (std::ptrdiff_t e = 0; e < elements; ++e) {
         const auto& el = mesh.elements[e];
         bool rigid = true;
         for (int a = 0; a <= dim; ++a) rigid = rigid && system_.fixed_node[el[a]];
@@ -371,7 +380,10 @@ double FemExplicitIntegrator<dim>::element_frequency(const std::vector<Vec<dim>>
         for (int a = 0; a <= dim; ++a)
             for (int b = 0; b < a; ++b) longest = std::max(longest, (x[el[a]] - x[el[b]]).norm());
         const double volume = mesh.signed_volume(x, e);
-        if (!(volume > 0.0)) return std::numeric_limits<double>::infinity();  // inverted: no stable step
+        if (!(volume > 0.0)) {  // inverted: no stable step
+            omega = std::numeric_limits<double>::infinity();
+            continue;
+        }
         const double height = dim * volume / std::pow(longest, dim - 1);
         const double stiffening = std::sqrt(std::max(1.0, system_.rest.volume[e] / volume));
         omega = std::max(omega, 2.0 * c * stiffening / height);

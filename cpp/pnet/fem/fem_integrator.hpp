@@ -141,6 +141,7 @@ private:
     const ContactPotential<dim>* friction_contact_ = nullptr;
     std::vector<double> free_mass_;     // node masses, 0 on kinematic nodes
     std::vector<double> inverse_mass_;  // 1 / mass, 0 on kinematic nodes
+    std::vector<Mat<dim>> stress_;      // per element V0 P (F^P)^-T, the substep's work array
 };
 
 /// The return mapping of every element after a step: F^E_tr = F(x) (F^P)^-1 -> Z, (F^P)^-1, h
