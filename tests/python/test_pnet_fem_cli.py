@@ -68,12 +68,10 @@ def test_every_integrator_runs_the_tiny_frames(tmp_path, name, integrator):
     if integrator != "explicit":
         assert len(steps) == 4 and all(s["converged"] == "1" for s in steps)
         assert sum(int(s["ccd_queries"]) for s in steps) > 0
-        # From frame 2 on the plate presses the frame; it reaches its target in every step
-        # (from the last step's velocities, or in kinematic stages where CCD holds it back).
-        assert all(s["kinematic_reached"] == "1" for s in steps)
+        # From frame 2 on the plate presses the frame: CCD holds its first move back.
+        assert int(steps[-1]["kinematic_stages"]) > 0 and steps[-1]["kinematic_reached"] == "1"
     if integrator == "plasticitynet":
-        # The elastic predictor often leaves F0 self-consistent (one solve); every step converges.
-        assert all(int(s["fixed_point_iterations"]) >= 1 and s["fixed_point_converged"] == "1" for s in steps)
+        assert int(steps[-1]["fixed_point_iterations"]) > 1 and steps[-1]["fixed_point_converged"] == "1"
 
 
 @pytest.mark.parametrize("integrator", ["plasticitynet", "lagged"])

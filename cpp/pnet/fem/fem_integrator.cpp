@@ -118,32 +118,23 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     newton.lazy_hessian = options_.lazy_hessian;
     newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
 
-    // An intersection-free start. v* when CCD allows all of it; else the
-    // velocities of the last step with the kinematic nodes on their targets
-    // (a body resting on the ground or pushed by the plate keeps moving as it
-    // did, where v* lets it fall dt^2 g into what supports it); else v* as far
-    // as CCD allows from x^n (v = 0), and the kinematic nodes (fixed components,
-    // held where they start) reach their targets in stages below.
+    // An intersection-free start: v* as far as CCD allows from x^n (v = 0). The
+    // kinematic nodes (fixed components, held where they start) then reach
+    // their targets in stages below. (Starting instead from the last step's
+    // velocities with the plate on its target skips the stages, 2.7x faster, but
+    // lands the crushed frame in another minimum: metal_nh_frame_2d at 1e-2 ended
+    // 2.36% of the diagonal from the ground truth instead of 0.52%.)
     VecX v = v_star;
-    double alpha = potential_.max_step(VecX::Zero(v.size()), v_star);
-    if (alpha < 1.0) {
-        VecX v_last(dim * n);
-        for (std::size_t i = 0; i < n; ++i)
-            v_last.template segment<dim>(dim * i) = system_.fixed_node[i] ? system_.prescribed_velocity[i] : state.v[i];
-        if (potential_.max_step(VecX::Zero(v.size()), v_last) >= 1.0) {
-            v = v_last;
-            alpha = 1.0;
-        } else {
-            v *= alpha;
-        }
-    }
+    const double alpha = potential_.max_step(VecX::Zero(v.size()), v_star);
+    if (alpha < 1.0) v *= alpha;
 
     if (method_ == FemMethod::PlasticityNet) {
         predictor_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
         predictor_.set_material_state(system_.element_object, state.hardening);
         predictor_.set_reference({});
         try {
-            const NewtonStats p = minimize(predictor_, v, newton, "step " + std::to_string(step_index) + ", predictor", &work_.newton);
+            const NewtonStats p = minimize(predictor_, v, newton, "step " + std::to_string(step_index) + ", predictor",
+                                           &work_.newton);
             stats.newton_iterations += p.iterations;
             stats.line_search_steps += p.line_search_steps;
         } catch (const NewtonError& e) {
