@@ -10,6 +10,7 @@
 #include <variant>
 
 #include "common.hpp"
+#include "pnet/nn/torchscript.hpp"
 #include "pnet/metrics/iou.hpp"
 #include "pnet/sim/scene_models.hpp"
 #include "pnet/sim/fem_simulation.hpp"
@@ -473,7 +474,7 @@ max_grid_speed (m/s).)doc")
 
     m.def("set_threads", [](int n) {
         if (n < 1) throw py::value_error("threads: expected a number >= 1, got " + std::to_string(n));
-        omp_set_num_threads(n);
+        TorchAutograd::set_threads(n);  // OpenMP's count, which LibTorch would reset on loading a model
     }, py::arg("n"), "Number of OpenMP threads the simulator uses (all cores by default). Results do not depend on it.");
     m.def("threads", [] { return omp_get_max_threads(); }, "Number of OpenMP threads the simulator uses.");
 }

@@ -14,6 +14,7 @@
 #include <string>
 #include <type_traits>
 
+#include "pnet/nn/torchscript.hpp"
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
@@ -476,7 +477,9 @@ int simulate_command(int argc, char** argv) {
         std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
         return 2;
     }
-    if (o.threads > 0) omp_set_num_threads(o.threads);
+    // Through LibTorch: its first operation on this thread (loading a model) sets OpenMP's
+    // count to its own intra-op count (1 on this 2-core machine), which overrode --threads.
+    if (o.threads > 0) TorchAutograd::set_threads(o.threads);
     try {
         const Scene scene = load_scene(o.scene);
         IntegratorSettings settings;

@@ -35,6 +35,7 @@
 #include <string>
 #include <vector>
 
+#include "pnet/nn/torchscript.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/sim/scene_models.hpp"
@@ -194,7 +195,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "bench_table1: --frames must be >= 1, --fem-frames >= 0 and --dt-implicit > 0\n");
         return 2;
     }
-    if (threads > 0) omp_set_num_threads(threads);
+    if (threads > 0) pnet::TorchAutograd::set_threads(threads);  // OpenMP's count, which LibTorch would reset
     // The paper's Table 1 (2D, s/frame; their machine): ours (MPM 1e-3, FEM 1e-2) vs explicit at 1e-5.
     const std::map<std::string, std::pair<double, double>> paper = {{"sand_column_2d", {12.58, 6.20}},
                                                                     {"snowball_2d", {35.56, 6.78}},
