@@ -10,8 +10,8 @@
 #include <variant>
 
 #include "common.hpp"
-#include "pnet/nn/torchscript.hpp"
 #include "pnet/metrics/iou.hpp"
+#include "pnet/nn/torchscript.hpp"
 #include "pnet/sim/scene_models.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"

@@ -14,7 +14,6 @@
 #include <string>
 #include <type_traits>
 
-#include "pnet/nn/torchscript.hpp"
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
@@ -24,6 +23,7 @@
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/nn/model_file.hpp"
+#include "pnet/nn/torchscript.hpp"
 #include "pnet/scene/scene.hpp"
 
 namespace pnet::apps {

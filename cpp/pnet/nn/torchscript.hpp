@@ -29,7 +29,9 @@ public:
 
     int input_width() const;
 
-    /// LibTorch's intra-op thread count (torch::set_num_threads).
+    /// LibTorch's intra-op thread count (at::set_num_threads), which is also
+    /// OpenMP's: the way to set the simulator's thread count, since LibTorch's
+    /// first operation on a thread resets OpenMP's count to its own.
     static void set_threads(int threads);
 
     struct Impl;
