@@ -20,6 +20,7 @@
 #include "pnet/io/render.hpp"
 #include "pnet/io/vtu.hpp"
 #include "pnet/sim/scene_models.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/nn/model_file.hpp"
@@ -285,12 +286,82 @@ void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Options&
     write_png((out / frame_name(sim.frame(), "png")).string(), render_mesh_3d(ply.position, ply.triangles, colour, r));
 }
 
+/// Particles and a mesh (MPM-FEM coupling): the particles as frame_N.ply, the mesh as
+/// frame_N_mesh.ply, and one PNG with the mesh drawn over the particles.
+void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Options& o, const fs::path& out) {
+    const Particles<2>& P = sim.particles();
+    PlyParticles particles;
+    particles.dim = 2;
+    std::vector<double> colour(P.size());
+    for (std::size_t p = 0; p < P.size(); ++p) {
+        for (int a = 0; a < 2; ++a) {
+            particles.position.push_back(P.x[p][a]);
+            particles.velocity.push_back(P.v[p][a]);
+        }
+        particles.mass.push_back(P.mass[p]);
+        particles.hardening.push_back(P.hardening[p]);
+        colour[p] = o.color == "speed" ? P.v[p].norm() : P.hardening[p];
+    }
+    write_particles_ply((out / frame_name(sim.frame(), "ply")).string(), particles);
+    const FemState<2>& state = sim.state();
+    const Mesh<2>& mesh = sim.mesh();
+    PlyMesh ply;
+    for (std::size_t i = 0; i < state.x.size(); ++i)
+        for (int a = 0; a < 2; ++a) {
+            ply.position.push_back(state.x[i][a]);
+            ply.velocity.push_back(state.v[i][a]);
+        }
+    std::vector<double> mesh_colour(mesh.elements.size());
+    for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+        Vec<2> v = Vec<2>::Zero();
+        for (int a = 0; a < 3; ++a) {
+            ply.triangles.push_back(mesh.elements[e][a]);
+            v += state.v[mesh.elements[e][a]] / 3.0;
+        }
+        ply.hardening.push_back(state.hardening[e]);
+        mesh_colour[e] = o.color == "speed" ? v.norm() : state.hardening[e];
+    }
+    char mesh_name[64];
+    std::snprintf(mesh_name, sizeof mesh_name, "frame_%05d_mesh.ply", sim.frame());
+    write_mesh_ply((out / mesh_name).string(), ply);
+    ParticleRenderOptions r;
+    r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
+    r.value_max = o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
+    for (int a = 0; a < 2; ++a) {
+        r.domain_min[a] = scene.domain_min[a];
+        r.domain_max[a] = scene.domain_max[a];
+    }
+    char caption[128];
+    std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
+    r.caption = caption;
+    r.width_px = 640;
+    Image image = render_particles_2d(particles.position, colour, r);
+    if (o.color == "hardening") mesh_colour.clear();  // the mesh has no hardening: one colour
+    const Image drawn = render_mesh_2d(ply.position, ply.triangles, mesh_colour, r);
+    // The same frame and scale when both renders have the same margin (the particle disks are
+    // small): the mesh's pixels are copied over the particles.
+    if (drawn.width == image.width && drawn.height == image.height)
+        for (int y = 0; y < image.height; ++y)
+            for (int x = 0; x < image.width; ++x) {
+                const Rgb c = drawn.get(x, y);
+                if (!(c.r == 255 && c.g == 255 && c.b == 255)) image.set(x, y, c);
+            }
+    write_png((out / frame_name(sim.frame(), "png")).string(), image);
+}
+
 template <class Sim>
-constexpr bool is_fem = std::is_same_v<Sim, FemSimulation<2>> || std::is_same_v<Sim, FemSimulation<3>>;
+constexpr bool is_coupled = std::is_same_v<Sim, CoupledSimulation2d>;
+/// Runs with contact statistics (FEM meshes, alone or beside particles).
+template <class Sim>
+constexpr bool is_fem = std::is_same_v<Sim, FemSimulation<2>> || std::is_same_v<Sim, FemSimulation<3>> || is_coupled<Sim>;
 
 template <class Sim>
 nlohmann::json describe_run(const Sim& sim) {
-    if constexpr (is_fem<Sim>) {
+    if constexpr (is_coupled<Sim>) {
+        return {{"dx", sim.system().dx}, {"particles", sim.particles().size()}, {"nodes", sim.mesh().nodes()},
+                {"elements", sim.mesh().elements.size()}, {"particle_dhat", sim.coupling().dhat()},
+                {"particle_kappa", sim.coupling().kappa()}, {"step", sim.step_size()}};
+    } else if constexpr (is_fem<Sim>) {
         const auto& s = sim.scene_system();
         return {{"nodes", sim.mesh().nodes()}, {"elements", sim.mesh().elements.size()},
                 {"mesh_first_node", s.first_node}, {"mesh_first_element", s.first_element},
@@ -461,7 +532,10 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         }
         std::printf("contact: no intersection at any frame (exact test); smallest distance %.3g m (dhat %.3g m), "
                     "up to %zu pairs within dhat, %ld CCD-shortened steps\n",
-                    closest, sim.scene_system().dhat, most_pairs, ccd_limited);
+                    closest, [&] {
+                        if constexpr (is_coupled<Sim>) return sim.coupling().dhat();
+                        else return sim.scene_system().dhat;
+                    }(), most_pairs, ccd_limited);
     }
     std::printf("wrote %d frames (PLY + PNG), stats.csv, steps.csv and run.json to %s\n", frames, out.string().c_str());
     return 0;
@@ -501,6 +575,7 @@ int simulate_command(int argc, char** argv) {
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";
         load_scene_models(scene, o.trust_model, settings);
+        if (scene.has_meshes() && scene.has_particles()) return run<CoupledSimulation2d>(scene, o, settings);
         if (scene.has_meshes())
             return scene.dim == 2 ? run<FemSimulation<2>>(scene, o, settings) : run<FemSimulation<3>>(scene, o, settings);
         return scene.dim == 2 ? run<Simulation<2>>(scene, o, settings) : run<Simulation<3>>(scene, o, settings);

@@ -50,9 +50,11 @@ void fem_return_mapping(const FemSystem<dim>& system, FemState<dim>& state) {
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(system.mesh.elements.size());
 #pragma omp parallel for schedule(static) if (n >= 256)
     for (std::ptrdiff_t e = 0; e < n; ++e) {
+        const int object = system.element_object[e];
+        // Elastic bodies (the MPM-FEM coupling's disk) keep F^P = I: no decomposition needed.
+        if (system.materials[object].description().plasticity == PlasticityModel::None) continue;
         const Mat<dim> F = deformation_gradient(system.mesh, system.rest, state.x, e);
         const Mat<dim> FE_trial = F * state.plastic_inverse[e];
-        const int object = system.element_object[e];
         const LearnedReturnMap<dim>* learned =
             static_cast<std::size_t>(object) < system.return_maps.size() ? system.return_maps[object] : nullptr;
         const PolarSVD<dim> svd = clamped_svd<dim>(FE_trial);
@@ -301,6 +303,8 @@ double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long 
         contact_->add_gradient(state.x, 1.0, barrier);
         force -= barrier;
     }
+    if (external_force_)
+        for (std::size_t i = 0; i < n; ++i) force.template segment<dim>(dim * i) += (*external_force_)[i];
     if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
     std::vector<Vec<dim>> v(n), dx(n), ahead(n);
     // The step is shortened until it closes no gap by more than about a fifth (CCD on 5 times

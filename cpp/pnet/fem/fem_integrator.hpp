@@ -126,6 +126,10 @@ public:
     /// not finite or no substep avoids intersection.
     StepStats step(FemState<dim>& state, double dt, long step_index);
 
+    /// Nodal forces (N, per unit depth in 2D) added to the elastic and contact forces of every
+    /// substep (not owned; null: none): the MPM-FEM coupling's barrier forces.
+    void set_external_force(const std::vector<Vec<dim>>* force) { external_force_ = force; }
+
     /// The largest stable step of the elements: cfl h_min / c with c the fastest wave speed.
     double cfl_time_step(double cfl = 0.5) const;
 
@@ -142,6 +146,7 @@ private:
     std::vector<double> free_mass_;     // node masses, 0 on kinematic nodes
     std::vector<double> inverse_mass_;  // 1 / mass, 0 on kinematic nodes
     std::vector<Mat<dim>> stress_;      // per element V0 P (F^P)^-T, the substep's work array
+    const std::vector<Vec<dim>>* external_force_ = nullptr;
 };
 
 /// The return mapping of every element after a step: F^E_tr = F(x) (F^P)^-1 -> Z, (F^P)^-1, h

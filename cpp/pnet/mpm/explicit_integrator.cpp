@@ -94,6 +94,7 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     const auto after_p2g = std::chrono::steady_clock::now();
 
     stats.max_grid_speed = grid_.update_velocity(dt, system_.gravity, system_.boundary);
+    if (grid_hook_) grid_hook_(grid_, dt);
     const auto after_grid = std::chrono::steady_clock::now();
 
     // G2P, return mapping, advection; the projection's SVD gives the next step's stress.

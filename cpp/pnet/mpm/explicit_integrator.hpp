@@ -10,6 +10,7 @@
 // The SVD of the return mapping also gives the next step's stress, so each
 // particle is decomposed once per step.
 #include <cstddef>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -49,12 +50,18 @@ public:
     /// Computes the stresses of the particles' current F^E (done by step() when needed).
     void compute_stress(const Particles<dim>& particles);
 
+    /// Called by step() after the grid update (velocities with gravity and boundary conditions),
+    /// before G2P, with the grid and dt: the MPM-FEM coupling adds its barrier impulses there
+    /// and checks the motion with CCD. Empty: none.
+    void set_grid_hook(std::function<void(Grid<dim>&, double)> hook) { grid_hook_ = std::move(hook); }
+
 private:
     const MpmSystem<dim>& system_;
     Grid<dim> grid_;
     std::vector<Mat<dim>> scaled_stress_;  // V0_p tau_p, N m
     std::vector<Mat<dim>> force_matrix_;   // -dt V0_p tau_p
     bool stress_valid_ = false;
+    std::function<void(Grid<dim>&, double)> grid_hook_;
 };
 
 /// The largest stable explicit step: cfl dx / (c + max |v_p|) with c the

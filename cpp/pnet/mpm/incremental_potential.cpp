@@ -26,13 +26,15 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
     // Stencils (storage indices for now) and weight gradients.
     stencil_dof_.resize(n * kStencil);
     stencil_grad_.resize(n * kStencil);
+    stencil_weight_.resize(n * kStencil);
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t p = 0; p < n; ++p) {
         const StencilNodes<dim> st(grid, particles.x[p]);
         int s = 0;
-        st.for_each([&](std::int64_t node, double, const Vec<dim>& grad, const Vec<dim>&) {
+        st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Vec<dim>&) {
             stencil_dof_[p * kStencil + s] = static_cast<int>(node);
             stencil_grad_[p * kStencil + s] = grad;
+            stencil_weight_[p * kStencil + s] = w;
             ++s;
         });
     }
@@ -264,6 +266,74 @@ void IncrementalPotential<dim>::hessian_block_diagonal(VecX& blocks) const {
             B[a * dim + a] += mass_[dim * k + a];
         }
     }
+}
+
+template <int dim>
+void IncrementalPotential<dim>::particle_positions(const VecX& v, std::vector<Vec<dim>>& X, bool displacement) const {
+    const Particles<dim>& particles = *particles_;
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+    X.resize(n);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        Vec<dim> sum = Vec<dim>::Zero();
+        for (int s = 0; s < kStencil; ++s)
+            sum += stencil_weight_[p * kStencil + s] * v.template segment<dim>(dim * stencil_dof_[p * kStencil + s]);
+        X[p] = displacement ? Vec<dim>(dt_ * sum) : Vec<dim>(particles.x[p] + dt_ * sum);
+    }
+}
+
+namespace {
+
+/// Index of the offset t - s (each axis in [-2, 2]) of two nodes of a 3^d stencil,
+/// s and t in StencilNodes::for_each order, among the 5^d offsets.
+template <int dim>
+constexpr int stencil_offset(int s, int t) {
+    int index = 0;
+    for (int a = dim - 1, scale = 1, ss = s, tt = t; a >= 0; --a, scale *= 5, ss /= 3, tt /= 3)
+        index += (tt % 3 - ss % 3 + 2) * scale;
+    return index;
+}
+
+}  // namespace
+
+template <int dim>
+void IncrementalPotential<dim>::add_hessian_triplets(std::vector<Eigen::Triplet<double>>& triplets,
+                                                     Eigen::Index offset) const {
+    constexpr int kOffsets = dim == 2 ? 25 : 125;
+    constexpr int kB = dim * dim;
+    const std::size_t nodes = dof_node_.size();
+    pair_dof_.assign(nodes * kOffsets, -1);
+    pair_block_.assign(nodes * kOffsets * kB, 0.0);
+    grid_->for_each_particle_coloured([&](int p) {
+        const Tensor4<dim>& K = K_[p];
+        const int* dof = &stencil_dof_[p * kStencil];
+        const Vec<dim>* grad = &stencil_grad_[p * kStencil];
+        for (int t = 0; t < kStencil; ++t) {
+            // W(a d + c, b) = sum_e K(a d + c, b d + e) g_t[e]; block (s, t)(a, b) = sum_c g_s[c] W(a d + c, b).
+            Eigen::Matrix<double, kM, dim> W;
+            for (int b = 0; b < dim; ++b) W.col(b) = K.template middleCols<dim>(b * dim) * grad[t];
+            for (int s = 0; s < kStencil; ++s) {
+                const int slot = dof[s] * kOffsets + stencil_offset<dim>(s, t);
+                pair_dof_[slot] = dof[t];
+                double* B = &pair_block_[static_cast<std::size_t>(slot) * kB];
+                for (int a = 0; a < dim; ++a)
+                    for (int b = 0; b < dim; ++b) B[a * dim + b] += grad[s].dot(W.template block<dim, 1>(a * dim, b));
+            }
+        }
+    });
+    triplets.reserve(triplets.size() + nodes * kOffsets * kB / 2 + size());
+    for (std::size_t k = 0; k < nodes; ++k)
+        for (int o = 0; o < kOffsets; ++o) {
+            const int j = pair_dof_[k * kOffsets + o];
+            if (j < 0) continue;
+            const double* B = &pair_block_[(k * kOffsets + o) * kB];
+            for (int a = 0; a < dim; ++a)
+                for (int b = 0; b < dim; ++b) {
+                    const Eigen::Index row = dim * k + a, col = dim * j + b;
+                    if (free_[row] > 0.0 && free_[col] > 0.0) triplets.emplace_back(offset + row, offset + col, B[a * dim + b]);
+                }
+        }
+    for (Eigen::Index i = 0; i < size(); ++i) triplets.emplace_back(offset + i, offset + i, mass_[i]);
 }
 
 template class IncrementalPotential<2>;

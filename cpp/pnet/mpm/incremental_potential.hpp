@@ -20,6 +20,7 @@
 // moves them. Scatters run in the grid's block-colour order, so every sum has
 // a fixed order and results do not depend on the thread count.
 #include <cstdint>
+#include <Eigen/SparseCore>
 #include <vector>
 
 #include "pnet/energy/particle_energy.hpp"
@@ -76,6 +77,23 @@ public:
     /// components, plus the node mass on the diagonal.
     void hessian_block_diagonal(VecX& blocks) const override;
 
+    /// The particles' end-of-step positions X_p(v) = x_p^n + dt sum_i w_ip v_i
+    /// (what G2P's advection gives; linear in v). With `displacement`, the
+    /// motion dt sum_i w_ip d_i of a change d instead (no x_p^n).
+    void particle_positions(const VecX& v, std::vector<Vec<dim>>& X, bool displacement = false) const;
+    /// Particle p's stencil: kStencil dofs and weights w_ip (at x_p^n).
+    const int* stencil_dofs(std::size_t p) const { return &stencil_dof_[p * kStencil]; }
+    const double* stencil_weights(std::size_t p) const { return &stencil_weight_[p * kStencil]; }
+    double dt() const { return dt_; }
+    const VecX& free_components() const { return free_; }
+
+    /// Appends the PSD Hessian prepared last (as hessian_multiply() applies it) as
+    /// triplets, rows and columns shifted by `offset`, for an assembled solve
+    /// (MPM-FEM coupling). Node-pair blocks are summed first (in the colour
+    /// order, so the result does not depend on the thread count): (2 dx + 1)^d
+    /// neighbours per node, one triplet per entry.
+    void add_hessian_triplets(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset) const;
+
     /// Project the particles' Hessians to PSD (default; false gives the exact
     /// Hessian of E, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
@@ -104,6 +122,10 @@ private:
     VecX v_star_, free_, residual_scale_, residual_mass_;  // free_: 1 on free components, 0 on fixed ones
     std::vector<int> stencil_dof_;          // particle p, node s: dof of node s of p's stencil
     std::vector<Vec<dim>> stencil_grad_;    // grad w_ip, 1/m
+    std::vector<double> stencil_weight_;    // w_ip
+    // add_hessian_triplets(): per node and neighbour offset, the neighbour's dof and the d x d block.
+    mutable std::vector<int> pair_dof_;
+    mutable std::vector<double> pair_block_;
 
     // Per particle, at the last evaluation.
     std::vector<Mat<dim>> F_, P_;

@@ -418,11 +418,25 @@ void read_contact(const Reader& r, const json& j, Scene& scene) {
     const json* contact = Reader::find(j, "contact");
     if (!contact) return;
     r.require_object(*contact, "contact");
-    r.reject_unknown_keys(*contact, "contact", {"dhat", "kappa", "kappa_scale", "friction", "friction_eps_v"});
+    r.reject_unknown_keys(*contact, "contact",
+                          {"dhat", "kappa", "kappa_scale", "friction", "friction_eps_v", "particle_dhat", "particle_kappa"});
     if (const json* v = Reader::find(*contact, "dhat")) scene.contact.dhat = r.positive(*v, "contact.dhat");
     if (const json* v = Reader::find(*contact, "kappa")) scene.contact.kappa = r.positive(*v, "contact.kappa");
     if (const json* v = Reader::find(*contact, "kappa_scale"))
         scene.contact.kappa_scale = r.positive(*v, "contact.kappa_scale");
+    const bool coupled = !scene.objects.empty();
+    for (const char* key : {"particle_dhat", "particle_kappa"})
+        if (!coupled && Reader::find(*contact, key))
+            r.fail(std::string("contact.") + key, "applies to particles meeting meshes (MPM-FEM coupling); this scene "
+                                                   "has no particle objects");
+    if (const json* v = Reader::find(*contact, "particle_dhat")) {
+        scene.contact.particle_dhat = r.positive(*v, "contact.particle_dhat");
+        if (scene.contact.particle_dhat > 0.5 * scene.dx)
+            r.fail("contact.particle_dhat", "expected at most half the grid spacing (" + std::to_string(0.5 * scene.dx) +
+                                                " m), got " + show(*v));
+    }
+    if (const json* v = Reader::find(*contact, "particle_kappa"))
+        scene.contact.particle_kappa = r.positive(*v, "contact.particle_kappa");
     if (const json* v = Reader::find(*contact, "friction")) scene.contact.friction = r.non_negative(*v, "contact.friction");
     if (const json* v = Reader::find(*contact, "friction_eps_v"))
         scene.contact.friction_eps_v = r.positive(*v, "contact.friction_eps_v");
@@ -537,8 +551,13 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
             scene.meshes.push_back(read_mesh(r, (*meshes)[k], index_path("meshes", k), scene, base_dir));
         if (std::all_of(scene.meshes.begin(), scene.meshes.end(), [](const SceneMesh& m) { return m.kinematic; }))
             r.fail("meshes", "every mesh is kinematic: at least one must be a deformable body with a material");
-        if (!scene.objects.empty())
-            r.fail("meshes", "particles and meshes in one scene (MPM-FEM coupling) are not supported yet");
+        if (!scene.objects.empty()) {
+            if (scene.dim != 2) r.fail("meshes", "particles and meshes in one scene (MPM-FEM coupling) are 2D only");
+            for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+                if (scene.meshes[k].kinematic)
+                    r.fail(index_path("meshes", k) + ".kinematic",
+                           "kinematic meshes are not supported beside particles (MPM-FEM coupling)");
+        }
     }
     if (!scene.has_meshes()) {
         for (const char* key : {"ground", "contact"})
@@ -657,6 +676,8 @@ json scene_to_json(const Scene& scene) {
         // 0 means "the default" for dhat and kappa, which the reader refuses as a value.
         if (scene.contact.dhat == 0.0) contact.erase("dhat");
         if (scene.contact.kappa == 0.0) contact.erase("kappa");
+        if (scene.contact.particle_dhat > 0.0) contact["particle_dhat"] = scene.contact.particle_dhat;
+        if (scene.contact.particle_kappa > 0.0) contact["particle_kappa"] = scene.contact.particle_kappa;
         j["contact"] = contact;
         if (scene.contact.ground_height) j["ground"] = {{"height", *scene.contact.ground_height}};
     }

@@ -53,7 +53,11 @@
 //                 "kappa": 2.2e12,                // J/m^4, optional, default kappa_scale x IPC's lower bound
 //                 "kappa_scale": 100,             //   for a 1e-2 s step (contact/adaptive_stiffness.hpp)
 //                 "friction": 0.3,                // Coulomb coefficient, default 0 (frictionless)
-//                 "friction_eps_v": 1e-4}         // m/s, slip velocity below which friction is smoothed
+//                 "friction_eps_v": 1e-4,         // m/s, slip velocity below which friction is smoothed
+//                 "particle_dhat": 0.00195,       // MPM-FEM coupling (particle objects beside meshes, 2D):
+//                 "particle_kappa": 3e9}          //   the particle / mesh barrier (m, default dx / 2, at most
+//                                                 //   that; J/m^4, default IPC's lower bound for
+//                                                 //   the average particle mass at dt 1e-3 s)
 //
 // The integrator "analytic" (the closed-form StVK-Hencky + von Mises energy) is
 // for meshes only.
@@ -167,6 +171,9 @@ struct Scene {
         double kappa_scale = 100.0;
         double friction = 0.0;                // Coulomb coefficient
         double friction_eps_v = 1e-4;         // m/s
+        // MPM-FEM coupling (particles beside meshes, 2D): the particle / mesh barrier.
+        double particle_dhat = 0.0;           // m; 0: half the grid spacing (at most that)
+        double particle_kappa = 0.0;          // J/m^4; 0: IPC's lower bound for the particles at dt 1e-3 s
     } contact;
 
     bool has_meshes() const { return !meshes.empty(); }

@@ -1,0 +1,274 @@
+#include "pnet/sim/coupled_simulation.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "pnet/contact/adaptive_stiffness.hpp"
+#include "pnet/energy/neural_elastoplastic.hpp"
+#include "pnet/io/atomic_file.hpp"
+#include "pnet/io/sha256.hpp"
+#include "pnet/nn/model_file.hpp"
+#include "pnet/scene/sampler.hpp"
+
+namespace pnet {
+
+namespace {
+
+constexpr double kKappaReferenceDt = 1e-3;  // s: the implicit MPM step of DESIGN.md §5
+
+}  // namespace
+
+CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSettings& settings)
+    : scene_(scene),
+      scene_digest_(sha256_hex(scene_to_json(scene).dump())),
+      mpm_(make_mpm_system<2>(scene)),
+      particles_(sample_particles<2>(scene)),
+      fem_(make_fem_system<2>(scene)),
+      settings_(settings) {
+    if (!std::isfinite(settings.dt) || settings.dt < 0.0) throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
+    if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
+    const FemSystem<2>& s = fem_.system;
+    for (char fixed : s.fixed_node)
+        if (fixed) throw SceneError(scene.file + ": meshes: kinematic meshes are not supported beside particles");
+
+    // The meshes' own contact (ground, between meshes), as a FEM run has it.
+    auto contact = std::make_unique<Contact2d>(s.mesh.boundary, fem_.dhat, fem_.kappa);
+    if (scene.contact.ground_height) {
+        HalfSpace2d ground;
+        ground.origin[1] = *scene.contact.ground_height;
+        contact->add_half_space(ground);
+    }
+    fem_contact_ = std::move(contact);
+
+    // The particle / mesh barrier: dhat at most half a cell; kappa IPC's lower bound for the
+    // average particle mass at the implicit MPM step, unless the scene gives them.
+    const double dhat = scene.contact.particle_dhat > 0.0 ? scene.contact.particle_dhat : 0.5 * scene.dx;
+    double kappa = scene.contact.particle_kappa;
+    if (!(kappa > 0.0)) {
+        double mass = 0.0;
+        for (double m : particles_.mass) mass += m;
+        const double diagonal = (scene.domain_max - scene.domain_min).norm();
+        kappa = initial_barrier_stiffness(diagonal, dhat, mass / particles_.size(), kKappaReferenceDt,
+                                          Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(2))
+                    .kappa;
+    }
+    coupling_ = std::make_unique<ParticleContact2d>(s.mesh.boundary, dhat, kappa);
+    const std::string inside = coupling_->first_penetration(particles_.x, s.mesh.x);
+    if (!inside.empty())
+        throw SceneError(scene.file + ": objects and meshes overlap at the start: " + inside +
+                         " (particles are numbered in object order)");
+
+    state_ = FemState<2>::at_rest(s);
+    for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+        for (int i = fem_.first_node[k]; i < fem_.first_node[k + 1]; ++i)
+            state_.v[i] = Vec<2>(scene.meshes[k].velocity[0], scene.meshes[k].velocity[1]);
+
+    if (settings.name == "explicit") {
+        explicit_ = std::make_unique<CoupledExplicitIntegrator2d>(mpm_, s, fem_contact_.get(), *coupling_);
+        explicit_->mpm().reset(particles_);
+        dt_ = settings.dt;
+    } else {
+        if (!(settings.dt > 0.0))
+            throw std::invalid_argument("dt must be > 0 for the implicit integrator " + settings.name +
+                                        " (the CFL step is explicit's)");
+        dt_ = settings.dt;
+        std::unique_ptr<ParticleEnergy<2>> energy;
+        std::vector<const LearnedReturnMap<2>*> return_maps;
+        ImplicitMethod method = ImplicitMethod::Lagged;
+        if (settings.name == "lagged") {
+            energy = std::make_unique<ElasticParticleEnergy<2>>(mpm_.materials);
+        } else if (settings.name == "plasticitynet") {
+            method = ImplicitMethod::PlasticityNet;
+            std::vector<std::shared_ptr<const ModelFile>> models = settings.models;
+            models.resize(scene.objects.size());  // objects first, then meshes: the meshes are elastic
+            std::vector<std::string> context;
+            for (const SceneObject& object : scene.objects)
+                context.push_back(scene.file + ": " + object.json_path + ".model");
+            auto neural = std::make_unique<NeuralParticleEnergy<2>>(models, mpm_.materials, context,
+                                                                    settings.implicit.regularizer_weight);
+            for (std::size_t k = 0; k < scene.objects.size(); ++k)
+                return_maps.push_back(settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map()
+                                                                           : nullptr);
+            energy = std::move(neural);
+        } else {
+            throw std::invalid_argument("unknown integrator \"" + settings.name +
+                                        "\" (expected explicit, plasticitynet or lagged for particles with meshes)");
+        }
+        implicit_ = std::make_unique<CoupledImplicitIntegrator2d>(mpm_, s, method, settings.implicit, std::move(energy),
+                                                                 std::move(return_maps), fem_contact_.get(), *coupling_);
+    }
+}
+
+StepStats CoupledSimulation2d::step() {
+    const double frame_end = (frame_ + 1) * scene_.frame_dt;
+    double dt = dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl);
+    if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
+    StepStats s = implicit_ ? implicit_->step(particles_, state_, dt, steps_)
+                            : explicit_->step(particles_, state_, dt, steps_);
+    s.contact_pairs = coupling_->active(particles_.x, state_.x).size();
+    s.min_distance = coupling_->min_distance(particles_.x, state_.x);
+    time_ += dt;
+    ++steps_;
+    if (time_ >= frame_end * (1.0 - 1e-12)) {
+        time_ = frame_end;
+        ++frame_;
+    }
+    return s;
+}
+
+FrameStats CoupledSimulation2d::advance_frame(const std::function<void()>& after_step) {
+    const auto start = std::chrono::steady_clock::now();
+    FrameStats stats;
+    const int target = frame_ + 1;
+    stats.dt_min = 1e300;
+    stats.min_distance = 1e300;
+    frame_steps_.clear();
+    while (frame_ < target) {
+        const StepStats s = step();
+        ++stats.steps;
+        stats.clamped += s.clamped;
+        stats.dt_min = std::min(stats.dt_min, s.dt);
+        stats.dt_max = std::max(stats.dt_max, s.dt);
+        stats.newton_iterations += s.newton_iterations;
+        stats.cg_iterations += s.cg_iterations;
+        stats.line_search_steps += s.line_search_steps;
+        stats.fixed_point_iterations += s.fixed_point_iterations;
+        stats.max_residual = std::max(stats.max_residual, s.residual);
+        stats.converged = stats.converged && s.converged;
+        stats.unconverged_steps += !s.converged;
+        stats.fixed_point_capped_steps += !s.fixed_point_converged;
+        stats.hardening_clamped = std::max(stats.hardening_clamped, s.hardening_clamped);
+        stats.contact_pairs = std::max(stats.contact_pairs, s.contact_pairs);
+        stats.min_distance = std::min(stats.min_distance, s.min_distance);
+        stats.ccd_queries += s.ccd_queries;
+        stats.ccd_limited += s.ccd_limited;
+        frame_steps_.push_back(s);
+        if (after_step) after_step();
+    }
+    const std::string inside = coupling_->first_penetration(particles_.x, state_.x);
+    if (!inside.empty()) throw SimulationError("frame " + std::to_string(frame_) + ": " + inside);
+    const std::string pair = fem_contact_->first_intersection(state_.x);
+    if (!pair.empty()) throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
+    stats.frame = frame_;
+    stats.time = time_;
+    for (std::size_t p = 0; p < particles_.size(); ++p) {
+        const double m = particles_.mass[p];
+        stats.kinetic += 0.5 * m * particles_.v[p].squaredNorm();
+        stats.potential -= m * mpm_.gravity.dot(particles_.x[p]);
+        for (int a = 0; a < 2; ++a) stats.momentum[a] += m * particles_.v[p][a];
+    }
+    const FemSystem<2>& s = fem_.system;
+    for (std::size_t i = 0; i < s.mesh.nodes(); ++i) {
+        const double m = s.rest.node_mass[i];
+        stats.kinetic += 0.5 * m * state_.v[i].squaredNorm();
+        stats.potential -= m * s.gravity.dot(state_.x[i]);
+        for (int a = 0; a < 2; ++a) stats.momentum[a] += m * state_.v[i][a];
+    }
+    stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return stats;
+}
+
+namespace {
+
+constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'P', 'L', '1'};
+constexpr std::size_t kNameBytes = 16;
+
+template <typename T>
+void write_array(std::ostream& out, const std::vector<T>& a) {
+    out.write(reinterpret_cast<const char*>(a.data()), static_cast<std::streamsize>(a.size() * sizeof(T)));
+}
+
+template <typename T>
+void read_array(std::istream& in, std::vector<T>& a, std::size_t n, const std::string& path) {
+    a.resize(n);
+    in.read(reinterpret_cast<char*>(a.data()), static_cast<std::streamsize>(n * sizeof(T)));
+    if (!in) throw std::invalid_argument(path + ": truncated checkpoint");
+}
+
+}  // namespace
+
+void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
+    write_file_atomically(path, [&](std::ostream& out) {
+        out.write(kMagic, sizeof kMagic);
+        const std::vector<Mat<2>> stress = explicit_ ? explicit_->mpm().checkpoint_state() : std::vector<Mat<2>>{};
+        const std::int64_t header[6] = {static_cast<std::int64_t>(particles_.size()),
+                                        static_cast<std::int64_t>(state_.x.size()),
+                                        static_cast<std::int64_t>(state_.hardening.size()),
+                                        static_cast<std::int64_t>(stress.size()), frame_, steps_};
+        out.write(reinterpret_cast<const char*>(header), sizeof header);
+        out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
+        out.write(scene_digest_.data(), 64);
+        std::string name = settings_.name;
+        name.resize(kNameBytes, '\0');
+        out.write(name.data(), kNameBytes);
+        write_array(out, particles_.x);
+        write_array(out, particles_.v);
+        write_array(out, particles_.C);
+        write_array(out, particles_.F_elastic);
+        write_array(out, particles_.hardening);
+        write_array(out, stress);
+        write_array(out, state_.x);
+        write_array(out, state_.v);
+        write_array(out, state_.plastic_inverse);
+        write_array(out, state_.hardening);
+    });
+}
+
+void CoupledSimulation2d::load_checkpoint(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+        std::error_code ec;
+        if (!std::filesystem::exists(path, ec)) throw FileNotFoundError(path + ": no such checkpoint file");
+        throw std::invalid_argument(path + ": cannot open the checkpoint");
+    }
+    char magic[8];
+    std::int64_t header[6];
+    double time;
+    std::string digest(64, '\0'), name(kNameBytes, '\0');
+    in.read(magic, sizeof magic);
+    in.read(reinterpret_cast<char*>(header), sizeof header);
+    in.read(reinterpret_cast<char*>(&time), sizeof time);
+    in.read(digest.data(), 64);
+    in.read(name.data(), kNameBytes);
+    if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
+        throw std::invalid_argument(path + ": not a PlasticityNet MPM-FEM coupling checkpoint");
+    if (digest != scene_digest_)
+        throw std::invalid_argument(path + ": written for a different scene (or a changed scene file)");
+    name.resize(name.find('\0') == std::string::npos ? name.size() : name.find('\0'));
+    if (name != settings_.name)
+        throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " + settings_.name);
+    const std::size_t n = particles_.size();
+    const std::int64_t stress_expected = explicit_ ? static_cast<std::int64_t>(n) : 0;
+    if (header[0] != static_cast<std::int64_t>(n) || header[1] != static_cast<std::int64_t>(state_.x.size()) ||
+        header[2] != static_cast<std::int64_t>(state_.hardening.size()) || header[3] != stress_expected ||
+        header[4] < 0 || header[5] < 0)
+        throw std::invalid_argument(path + ": holds " + std::to_string(header[0]) + " particles and " +
+                                    std::to_string(header[1]) + " nodes, the scene has " + std::to_string(n) + " and " +
+                                    std::to_string(state_.x.size()) + " (or a corrupt header)");
+    Particles<2> p = particles_;
+    read_array(in, p.x, n, path);
+    read_array(in, p.v, n, path);
+    read_array(in, p.C, n, path);
+    read_array(in, p.F_elastic, n, path);
+    read_array(in, p.hardening, n, path);
+    std::vector<Mat<2>> stress;
+    read_array(in, stress, static_cast<std::size_t>(header[3]), path);
+    FemState<2> s;
+    read_array(in, s.x, state_.x.size(), path);
+    read_array(in, s.v, state_.v.size(), path);
+    read_array(in, s.plastic_inverse, state_.plastic_inverse.size(), path);
+    read_array(in, s.hardening, state_.hardening.size(), path);
+    in.peek();
+    if (!in.eof()) throw std::invalid_argument(path + ": longer than its header says (corrupt checkpoint)");
+    particles_ = p;
+    state_ = std::move(s);
+    if (explicit_) explicit_->mpm().restore_checkpoint_state(std::move(stress));
+    frame_ = static_cast<int>(header[4]);
+    steps_ = header[5];
+    time_ = time;
+}
+
+}  // namespace pnet
