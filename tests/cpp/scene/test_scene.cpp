@@ -597,8 +597,13 @@ const std::vector<MalformedCase> kMalformedCases = {
      {"scenes/x.json: ground: applies to FEM meshes; this scene has none"}},
     {"AnalyticForParticles", 2, [](json& j) { j["integrator"]["name"] = "analytic"; },
      {"scenes/x.json: integrator.name: 'analytic' is the closed-form FEM energy"}},
-    {"ParticlesAndMeshes", 2, [](json& j) { j["meshes"] = example_fem()["meshes"]; },
-     {"scenes/x.json: meshes: particles and meshes in one scene (MPM-FEM coupling) are not supported yet"}},
+    {"ParticlesAndKinematicMesh", 2, [](json& j) { j["meshes"] = example_fem()["meshes"]; },
+     {"scenes/x.json: meshes[1].kinematic: kinematic meshes are not supported beside particles (MPM-FEM coupling)"}},
+    {"ParticleDhatAboveHalfACell", 2, [](json& j) { j["meshes"] = {example_fem()["meshes"][0]};
+                                                    j["contact"] = {{"particle_dhat", 0.6 * j["dx"].get<double>()}}; },
+     {"scenes/x.json: contact.particle_dhat: expected at most half the grid spacing"}},
+    {"ParticleKappaWithoutParticles", 2, [](json& j) { j = example_fem(); j["contact"]["particle_kappa"] = 1e9; },
+     {"scenes/x.json: contact.particle_kappa: applies to particles meeting meshes (MPM-FEM coupling)"}},
 };
 // clang-format on
 
