@@ -70,7 +70,10 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     newton.cg_tolerance = options_.cg_tolerance;
     newton.residual_mass = coupled_.residual_mass();
     newton.lazy_hessian = options_.lazy_hessian;
-    newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+    const bool cholesky = options_.coupled_solver == "cholesky";
+    coupled_.set_linear_solve(cholesky ? CoupledPotential2d::LinearSolve::Assembled
+                                       : CoupledPotential2d::LinearSolve::BlockPreconditioned);
+    newton.linear_solver = cholesky ? NewtonOptions::LinearSolver::Cholesky : NewtonOptions::LinearSolver::Pcg;
 
     // An intersection-free start: v* as far as CCD allows from the start positions (v = 0).
     v_ = coupled_.v_star();

@@ -1,5 +1,11 @@
 #include "pnet/coupling/coupled_potential.hpp"
 
+#include <algorithm>
+
+#include <Eigen/SparseCholesky>
+
+#include "pnet/solver/newton.hpp"  // NewtonError
+
 namespace pnet {
 
 void CoupledPotential2d::begin_step() {
@@ -64,39 +70,64 @@ double CoupledPotential2d::value_gradient(const VecX& v, VecX& gradient) {
     return em + ef + add_barrier_gradient(v, gradient);
 }
 
-void CoupledPotential2d::assemble(const VecX& v) {
+int CoupledPotential2d::pair_nodes(std::size_t k, Eigen::Index* index, double* weight, int* slot) const {
+    constexpr int kStencil = IncrementalPotential<2>::kStencil;
+    const int p = pairs_[k].particle;
+    const int* dof = mpm_.stencil_dofs(p);
+    const double* w = mpm_.stencil_weights(p);
+    int count = 0;
+    for (int s = 0; s < kStencil; ++s)
+        if (w[s] != 0.0) {
+            index[count] = 2 * dof[s];
+            weight[count] = w[s];
+            slot[count++] = 0;
+        }
+    const auto& edge = contact_.edges()[pairs_[k].edge];
+    for (int e = 0; e < 2; ++e) {
+        index[count] = mpm_.size() + 2 * edge[e];
+        weight[count] = 1.0;
+        slot[count++] = 1 + e;
+    }
+    return count;
+}
+
+namespace {
+constexpr int kPairNodes = IncrementalPotential<2>::kStencil + 2;
+}  // namespace
+
+struct CoupledPotential2d::FemFactor {
+    Eigen::SimplicialLLT<SparseMatrix, Eigen::Lower> llt;
+    std::vector<SparseMatrix::StorageIndex> outer, inner;  // the pattern analysed
+};
+
+CoupledPotential2d::CoupledPotential2d(IncrementalPotential<2>& mpm, FemPotential<2>& fem,
+                                       const ParticleContact2d& contact)
+    : mpm_(mpm), fem_(fem), contact_(contact), fem_factor_(std::make_unique<FemFactor>()) {}
+
+CoupledPotential2d::~CoupledPotential2d() = default;
+
+void CoupledPotential2d::prepare(const VecX& v) {
+    positions(v, X_, x_);
+    contact_.hessians(X_, x_, project_psd_, pairs_, pair_hessians_);
+    if (solve_ == LinearSolve::Assembled)
+        assemble();
+    else
+        prepare_blocks();
+}
+
+void CoupledPotential2d::assemble() {
     const Eigen::Index ng = mpm_.size(), n = size();
     triplets_.clear();
     mpm_.add_hessian_triplets(triplets_, 0);
     const SparseMatrix& Hf = *fem_.hessian_matrix();
     for (Eigen::Index c = 0; c < Hf.outerSize(); ++c)
         for (SparseMatrix::InnerIterator it(Hf, c); it; ++it) triplets_.emplace_back(ng + it.row(), ng + c, it.value());
-    positions(v, X_, x_);
-    contact_.hessians(X_, x_, project_psd_, pairs_, pair_hessians_);
     const double dt2 = mpm_.dt() * mpm_.dt();
-    constexpr int kStencil = IncrementalPotential<2>::kStencil;
-    // The pair's unknown nodes: the particle's stencil (weights w_ip, slot 0 of the 6 x 6
-    // Hessian) and the edge's two nodes (weight 1, slots 1 and 2).
-    Eigen::Index index[kStencil + 2];
-    double weight[kStencil + 2];
-    int slot[kStencil + 2];
+    Eigen::Index index[kPairNodes];
+    double weight[kPairNodes];
+    int slot[kPairNodes];
     for (std::size_t k = 0; k < pairs_.size(); ++k) {
-        const int p = pairs_[k].particle;
-        const int* dof = mpm_.stencil_dofs(p);
-        const double* w = mpm_.stencil_weights(p);
-        int count = 0;
-        for (int s = 0; s < kStencil; ++s)
-            if (w[s] != 0.0) {
-                index[count] = 2 * dof[s];
-                weight[count] = w[s];
-                slot[count++] = 0;
-            }
-        const auto& edge = contact_.edges()[pairs_[k].edge];
-        for (int e = 0; e < 2; ++e) {
-            index[count] = ng + 2 * edge[e];
-            weight[count] = 1.0;
-            slot[count++] = 1 + e;
-        }
+        const int count = pair_nodes(k, index, weight, slot);
         const Mat6& H = pair_hessians_[k];
         for (int i = 0; i < count; ++i)
             for (int j = 0; j < count; ++j) {
@@ -111,13 +142,104 @@ void CoupledPotential2d::assemble(const VecX& v) {
     }
     hessian_.resize(n, n);
     hessian_.setFromTriplets(triplets_.begin(), triplets_.end());  // duplicates summed in triplet order
+    diagonal_ = hessian_.diagonal();
+}
+
+void CoupledPotential2d::prepare_blocks() {
+    const Eigen::Index ng = mpm_.size(), nf = fem_.size();
+    // The grid's diagonal and the FEM block, each with the pairs' terms on its own unknowns.
+    VecX grid_diagonal;
+    mpm_.hessian_diagonal(grid_diagonal);
+    const SparseMatrix& Hf = *fem_.hessian_matrix();
+    triplets_.clear();
+    for (Eigen::Index c = 0; c < Hf.outerSize(); ++c)
+        for (SparseMatrix::InnerIterator it(Hf, c); it; ++it) triplets_.emplace_back(it.row(), c, it.value());
+    const double dt2 = mpm_.dt() * mpm_.dt();
+    Eigen::Index index[kPairNodes];
+    double weight[kPairNodes];
+    int slot[kPairNodes];
+    for (std::size_t k = 0; k < pairs_.size(); ++k) {
+        const int count = pair_nodes(k, index, weight, slot);
+        const Mat6& H = pair_hessians_[k];
+        for (int i = 0; i < count; ++i) {
+            if (index[i] < ng) {
+                for (int a = 0; a < 2; ++a)
+                    if (residual_mass_[index[i] + a] > 0.0)
+                        grid_diagonal[index[i] + a] += dt2 * weight[i] * weight[i] * H(2 * slot[i] + a, 2 * slot[i] + a);
+                continue;
+            }
+            for (int j = 0; j < count; ++j) {
+                if (index[j] < ng) continue;
+                for (int a = 0; a < 2; ++a)
+                    for (int b = 0; b < 2; ++b) {
+                        const Eigen::Index row = index[i] + a, col = index[j] + b;
+                        if (residual_mass_[row] > 0.0 && residual_mass_[col] > 0.0)
+                            triplets_.emplace_back(row - ng, col - ng, dt2 * H(2 * slot[i] + a, 2 * slot[j] + b));
+                    }
+            }
+        }
+    }
+    fem_block_.resize(nf, nf);
+    fem_block_.setFromTriplets(triplets_.begin(), triplets_.end());
+    FemFactor& f = *fem_factor_;
+    const bool same = static_cast<Eigen::Index>(f.outer.size()) == nf + 1 &&
+                      static_cast<Eigen::Index>(f.inner.size()) == fem_block_.nonZeros() &&
+                      std::equal(f.outer.begin(), f.outer.end(), fem_block_.outerIndexPtr()) &&
+                      std::equal(f.inner.begin(), f.inner.end(), fem_block_.innerIndexPtr());
+    if (!same) {
+        f.llt.analyzePattern(fem_block_);
+        f.outer.assign(fem_block_.outerIndexPtr(), fem_block_.outerIndexPtr() + nf + 1);
+        f.inner.assign(fem_block_.innerIndexPtr(), fem_block_.innerIndexPtr() + fem_block_.nonZeros());
+    }
+    f.llt.factorize(fem_block_);
+    if (f.llt.info() != Eigen::Success)
+        throw NewtonError("the FEM block of the coupled Hessian is not positive definite");
+    inverse_grid_diagonal_ = grid_diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
+    diagonal_.resize(ng + nf);
+    diagonal_ << grid_diagonal, fem_block_.diagonal();
+}
+
+void CoupledPotential2d::hessian_multiply(const VecX& d, VecX& out) const {
+    if (solve_ == LinearSolve::Assembled) {
+        out.noalias() = hessian_ * d;
+        return;
+    }
+    const Eigen::Index ng = mpm_.size(), nf = fem_.size();
+    out.resize(ng + nf);
+    work_in_ = d.head(ng);
+    mpm_.hessian_multiply(work_in_, work_out_);
+    out.head(ng) = work_out_;
+    out.tail(nf).noalias() = *fem_.hessian_matrix() * d.tail(nf);
+    const double dt2 = mpm_.dt() * mpm_.dt();
+    Eigen::Index index[kPairNodes];
+    double weight[kPairNodes];
+    int slot[kPairNodes];
+    for (std::size_t k = 0; k < pairs_.size(); ++k) {
+        const int count = pair_nodes(k, index, weight, slot);
+        // u = J d (the pair's positions' motion per dt), y = H u, out += J^T y dt^2.
+        Vec6 u = Vec6::Zero();
+        for (int i = 0; i < count; ++i)
+            for (int a = 0; a < 2; ++a)
+                if (residual_mass_[index[i] + a] > 0.0) u[2 * slot[i] + a] += weight[i] * d[index[i] + a];
+        const Vec6 y = dt2 * (pair_hessians_[k] * u);
+        for (int i = 0; i < count; ++i)
+            for (int a = 0; a < 2; ++a)
+                if (residual_mass_[index[i] + a] > 0.0) out[index[i] + a] += weight[i] * y[2 * slot[i] + a];
+    }
+}
+
+void CoupledPotential2d::apply_preconditioner(const VecX& r, VecX& z) const {
+    const Eigen::Index ng = mpm_.size(), nf = fem_.size();
+    z.resize(ng + nf);
+    z.head(ng) = inverse_grid_diagonal_.cwiseProduct(r.head(ng));
+    z.tail(nf) = fem_factor_->llt.solve(r.tail(nf));
 }
 
 void CoupledPotential2d::prepare_hessian(const VecX& v) {
     split(v);
     mpm_.prepare_hessian(vg_);
     fem_.prepare_hessian(vf_);
-    assemble(v);
+    prepare(v);
 }
 
 double CoupledPotential2d::value_gradient_hessian(const VecX& v, VecX& gradient) {
@@ -127,7 +249,7 @@ double CoupledPotential2d::value_gradient_hessian(const VecX& v, VecX& gradient)
     gradient.resize(size());
     gradient << gg_, gf_;
     const double b = add_barrier_gradient(v, gradient);
-    assemble(v);
+    prepare(v);
     return em + ef + b;
 }
 

@@ -13,14 +13,20 @@
 // the particle's stencil nodes as dt w_ip dB/dX_p, and its Hessian
 // dt^2 J^T H J (J: the weights of X_p on the stencil nodes and the identity on
 // the edge's nodes) couples the stencil to the edge's nodes. Every part is PSD
-// (projected per particle, element and pair), and so is H, which is assembled
-// (MPM node-pair blocks, the FEM matrix, the pairs) for CHOLMOD: the stiff FEM
-// body makes the system too ill-conditioned for Jacobi PCG. max_step() is the
+// (projected per particle, element and pair), and so is H. Two linear solves
+// (set_linear_solve()): `Assembled`, H assembled (MPM node-pair blocks, the FEM
+// matrix, the pairs) for CHOLMOD; `BlockPreconditioned`, matrix-free PCG whose
+// preconditioner is Jacobi on the grid and an exact sparse Cholesky solve of
+// the FEM block (with the pairs' FEM terms): the stiff FEM body makes the
+// system too ill-conditioned for Jacobi alone, and the grid part is too large
+// to factor at every Newton iteration. max_step() is the
 // CCD of the particles' linear motion against the mesh's (and the FEM
 // potential's own filter), so every iterate is intersection-free. The fixed
 // point on F0 (plasticitynet) runs over the MPM particles; the FEM body is
 // elastic (its energy has no reference).
 #include <vector>
+
+#include <memory>
 
 #include <Eigen/SparseCore>
 
@@ -33,8 +39,14 @@ namespace pnet {
 
 class CoupledPotential2d final : public ReferencedObjective<2> {
 public:
-    CoupledPotential2d(IncrementalPotential<2>& mpm, FemPotential<2>& fem, const ParticleContact2d& contact)
-        : mpm_(mpm), fem_(fem), contact_(contact) {}
+    CoupledPotential2d(IncrementalPotential<2>& mpm, FemPotential<2>& fem, const ParticleContact2d& contact);
+    ~CoupledPotential2d() override;
+
+    enum class LinearSolve { Assembled, BlockPreconditioned };
+    /// Assembled: hessian_matrix() for Newton's CHOLMOD solve. BlockPreconditioned (default):
+    /// hessian_matrix() is null, and PCG uses apply_preconditioner().
+    void set_linear_solve(LinearSolve solve) { solve_ = solve; }
+    LinearSolve linear_solve() const { return solve_; }
 
     /// After mpm.begin_step() and fem.begin_step() (with the FEM material state set).
     void begin_step();
@@ -58,9 +70,13 @@ public:
     double value_gradient(const VecX& v, VecX& gradient) override;
     void prepare_hessian(const VecX& v) override;
     double value_gradient_hessian(const VecX& v, VecX& gradient) override;
-    void hessian_multiply(const VecX& d, VecX& out) const override { out.noalias() = hessian_ * d; }
-    void hessian_diagonal(VecX& diagonal) const override { diagonal = hessian_.diagonal(); }
-    const SparseMatrix* hessian_matrix() const override { return &hessian_; }
+    void hessian_multiply(const VecX& d, VecX& out) const override;
+    void hessian_diagonal(VecX& diagonal) const override { diagonal = diagonal_; }
+    const SparseMatrix* hessian_matrix() const override {
+        return solve_ == LinearSolve::Assembled ? &hessian_ : nullptr;
+    }
+    bool has_preconditioner() const override { return solve_ == LinearSolve::BlockPreconditioned; }
+    void apply_preconditioner(const VecX& r, VecX& z) const override;
     double max_step(const VecX& v, const VecX& d) override;
 
     /// Project the pair Hessians to PSD (default; false: exact, for derivative checks; the
@@ -76,7 +92,14 @@ private:
     void split(const VecX& v) const;
     /// g += dB/dv over the active pairs at v (gradients_ and pairs_ set); returns B.
     double add_barrier_gradient(const VecX& v, VecX& g);
-    void assemble(const VecX& v);
+    /// The pairs' Hessians at v, then the assembled H (Assembled) or the diagonal and the FEM
+    /// block's factorization (BlockPreconditioned).
+    void prepare(const VecX& v);
+    void assemble();
+    void prepare_blocks();
+    /// The pair's unknown components: the particle's stencil (weight w_ip, slot 0 of its 6 x 6
+    /// Hessian) and the edge's nodes (weight 1, slots 1 and 2); returns how many.
+    int pair_nodes(std::size_t k, Eigen::Index* index, double* weight, int* slot) const;
 
     IncrementalPotential<2>& mpm_;
     FemPotential<2>& fem_;
@@ -89,7 +112,12 @@ private:
     std::vector<Vec6> gradients_;
     std::vector<Mat6> pair_hessians_;
     std::vector<Eigen::Triplet<double>> triplets_;
-    SparseMatrix hessian_;
+    SparseMatrix hessian_, fem_block_;
+    VecX diagonal_, inverse_grid_diagonal_;
+    mutable VecX work_in_, work_out_;
+    struct FemFactor;
+    std::unique_ptr<FemFactor> fem_factor_;
+    LinearSolve solve_ = LinearSolve::BlockPreconditioned;
     bool project_psd_ = true;
     int ccd_queries_ = 0, ccd_limited_ = 0;
 };

@@ -65,6 +65,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                                         it->dump());
         o.learned_return_map = it->get<bool>();
     }
+    if (const auto it = block.find("coupled_solver"); it != block.end()) {
+        if (!it->is_string() || (*it != "block" && *it != "cholesky"))
+            throw std::invalid_argument(context + ": integrator.coupled_solver: expected \"block\" or \"cholesky\", got " +
+                                        it->dump());
+        o.coupled_solver = it->get<std::string>();
+    }
     if (const auto it = block.find("preconditioner"); it != block.end()) {
         if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi"))
             throw std::invalid_argument(context + ": integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got " +
@@ -84,6 +90,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"fixed_point_anderson", fixed_point_anderson},
             {"regularizer_weight", regularizer_weight},
             {"preconditioner", preconditioner},
+            {"coupled_solver", coupled_solver},
             {"lazy_hessian", lazy_hessian},
             {"fail_on_unconverged", fail_on_unconverged},
             {"max_kinematic_stages", max_kinematic_stages},

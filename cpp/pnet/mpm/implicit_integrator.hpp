@@ -73,6 +73,10 @@ struct ImplicitOptions {
     // iteration). 0.5 halved the energy time on sand_column_2d and cut it by
     // 40% on snowball_2d at dt 1e-3, with as many or fewer Newton iterations.
     double lazy_hessian = 0.5;
+    // MPM-FEM coupling: the linear solve of the coupled Newton iterations, "block" (PCG with Jacobi
+    // on the grid and an exact Cholesky solve of the FEM block) or "cholesky" (CHOLMOD on the whole
+    // assembled Hessian); coupling/coupled_potential.hpp.
+    std::string coupled_solver = "block";
     // A step whose solve ends unconverged (iteration cap or failed line search)
     // is an error (SimulationError) instead of being counted and used.
     bool fail_on_unconverged = false;

@@ -140,7 +140,9 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         if (H && direct.factorize(*H, stats)) {
             direct.solve(-g, d);
         } else {
-            if (block > 1) {
+            if (objective.has_preconditioner()) {
+                preconditioner.set_objective(objective);
+            } else if (block > 1) {
                 objective.hessian_block_diagonal(blocks);
                 preconditioner.set_block_jacobi(blocks, block);
             } else {

@@ -3,7 +3,7 @@
 // search on E: the one optimization loop of every implicit integrator
 // (DESIGN.md §4; Gast et al. 2015, Li et al. 2020). Per iteration:
 //   g = grad E(x); stop if the residual (below) <= tolerance;
-//   H d = -g by PCG (Jacobi or block Jacobi) to the relative tolerance min(cg_tolerance, sqrt(|g| / |g0|))
+//   H d = -g by PCG (Jacobi, block Jacobi, or the objective's own preconditioner) to the relative tolerance min(cg_tolerance, sqrt(|g| / |g0|))
 //   (inexact Newton: loose far from the solution, tighter as it converges);
 //   alpha = 1, halved (at most max_line_search times) until E(x + alpha d) <= E(x) + c alpha g.d
 //   (Armijo). The full step is evaluated with value_gradient_hessian(), so an accepted full step

@@ -54,6 +54,13 @@ public:
     /// for the block-Jacobi preconditioner (only called when b > 1).
     virtual void hessian_block_diagonal(VecX& blocks) const { hessian_diagonal(blocks); }
 
+    /// The objective's own PCG preconditioner z = M^-1 r (M symmetric positive definite, built from
+    /// the Hessian prepared last), for systems whose parts Jacobi cannot balance (MPM-FEM coupling:
+    /// a stiff FEM body solved exactly beside the grid's Jacobi). False: it has none, and PCG uses
+    /// Jacobi or block Jacobi.
+    virtual bool has_preconditioner() const { return false; }
+    virtual void apply_preconditioner(const VecX& r, VecX& z) const { z = r; }
+
     /// H assembled (symmetric, both triangles stored) at the last
     /// prepare_hessian(), for a direct solve (NewtonOptions::linear_solver);
     /// null for matrix-free objectives (MPM).

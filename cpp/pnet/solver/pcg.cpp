@@ -51,13 +51,21 @@ Preconditioner Preconditioner::block_jacobi(const VecX& blocks, int block) {
     return m;
 }
 
+Preconditioner Preconditioner::of(const Objective& objective) {
+    Preconditioner m;
+    m.set_objective(objective);
+    return m;
+}
+
 void Preconditioner::set_jacobi(const VecX& diagonal) {
+    objective_ = nullptr;
     block_ = 1;
     inverse_.resize(diagonal.size());
     inverse_ = diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
 }
 
 void Preconditioner::set_block_jacobi(const VecX& blocks, int block) {
+    objective_ = nullptr;
     if (block < 1 || blocks.size() % (block * block) != 0)
         throw std::invalid_argument("Preconditioner::block_jacobi: blocks do not hold whole " + std::to_string(block) +
                                     " x " + std::to_string(block) + " blocks");
@@ -76,7 +84,9 @@ void Preconditioner::set_block_jacobi(const VecX& blocks, int block) {
 }
 
 void Preconditioner::apply(const VecX& r, VecX& z) const {
-    if (block_ == 1)
+    if (objective_)
+        objective_->apply_preconditioner(r, z);
+    else if (block_ == 1)
         z = inverse_.cwiseProduct(r);
     else if (block_ == 2)
         apply_blocks<2>(inverse_, r, z);

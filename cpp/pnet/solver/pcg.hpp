@@ -17,9 +17,13 @@ public:
     /// positive definite falls back to the inverse of its diagonal.
     static Preconditioner block_jacobi(const VecX& blocks, int block);
 
+    /// The objective's own (Objective::apply_preconditioner; not owned).
+    static Preconditioner of(const Objective& objective);
+
     /// The same, in place: the storage is kept from one Newton iteration to the next.
     void set_jacobi(const VecX& diagonal);
     void set_block_jacobi(const VecX& blocks, int block);
+    void set_objective(const Objective& objective) { objective_ = &objective; }
 
     int block() const { return block_; }
     /// z = M^-1 r.
@@ -27,6 +31,7 @@ public:
 
 private:
     int block_ = 1;
+    const Objective* objective_ = nullptr;  // set: the objective's own preconditioner
     VecX inverse_;  // block 1: the inverse diagonal; else the inverse blocks, row-major
 };
 
