@@ -156,9 +156,28 @@ TEST(CoupledPotential, GradientAndHessianWithRespectToGridAndFemVelocitiesMatchF
     VecX v = f.coupled.v_star();
     for (Eigen::Index i = 0; i < v.size(); ++i) v[i] += 0.05 * rng.uniform(-1.0, 1.0) * (f.coupled.residual_mass()[i] > 0.0);
     VecX g;
+    f.coupled.set_linear_solve(CoupledPotential2d::LinearSolve::Assembled);
     f.coupled.value_gradient_hessian(v, g);
     ASSERT_GT(f.coupled.pairs(), 0u) << "the disk should be within dhat of the bed";
     const Eigen::MatrixXd H = Eigen::MatrixXd(*f.coupled.hessian_matrix());
+    // The matrix-free product of the block-preconditioned solve applies the same H.
+    {
+        f.coupled.set_linear_solve(CoupledPotential2d::LinearSolve::BlockPreconditioned);
+        VecX g2;
+        f.coupled.value_gradient_hessian(v, g2);
+        EXPECT_EQ(f.coupled.hessian_matrix(), nullptr);
+        for (int trial = 0; trial < 3; ++trial) {
+            VecX d(v.size()), Hd;
+            for (Eigen::Index i = 0; i < d.size(); ++i) d[i] = rng.uniform(-1.0, 1.0);
+            f.coupled.hessian_multiply(d, Hd);
+            EXPECT_LT((Hd - H * d).norm(), 1e-12 * (H * d).norm()) << "trial " << trial;
+        }
+        VecX diagonal;
+        f.coupled.hessian_diagonal(diagonal);
+        EXPECT_LT((diagonal - H.diagonal()).norm(), 1e-12 * H.diagonal().norm());
+        f.coupled.set_linear_solve(CoupledPotential2d::LinearSolve::Assembled);
+        f.coupled.value_gradient_hessian(v, g2);
+    }
     test::FdStats stats;
     // The components the barrier couples (a particle's stencil, an edge's nodes) and a sample of the others.
     std::vector<Eigen::Index> columns;
@@ -198,7 +217,10 @@ TEST(CoupledPotential, GradientAndHessianWithRespectToGridAndFemVelocitiesMatchF
 }
 
 TEST(CoupledPotential, NewtonLowersTheEnergyAndKeepsEveryParticleOutsideTheDisk) {
+  for (const auto solve : {CoupledPotential2d::LinearSolve::BlockPreconditioned, CoupledPotential2d::LinearSolve::Assembled}) {
+    SCOPED_TRACE(solve == CoupledPotential2d::LinearSolve::Assembled ? "assembled" : "block preconditioned");
     CoupledFixture f;
+    f.coupled.set_linear_solve(solve);
     VecX v = f.coupled.v_star();
     const double alpha = f.coupled.max_step(VecX::Zero(v.size()), v);
     v *= std::min(1.0, alpha);
@@ -223,6 +245,7 @@ TEST(CoupledPotential, NewtonLowersTheEnergyAndKeepsEveryParticleOutsideTheDisk)
     f.coupled.positions(v, X, x);
     EXPECT_EQ(f.contact.penetrations(X, x), 0u);
     EXPECT_GT(f.contact.min_distance(X, x), 0.0);
+  }
 }
 
 TEST(CoupledSimulation, TinySceneRunsWithExplicitAndLaggedWithoutPenetration) {
