@@ -13,6 +13,7 @@
 #include "pnet/metrics/iou.hpp"
 #include "pnet/nn/torchscript.hpp"
 #include "pnet/sim/scene_models.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 
@@ -88,9 +89,13 @@ py::dict to_dict(const FrameStats& f) {
     return d;
 }
 
+/// FEM alone (no particles).
 template <typename Sim>
 constexpr bool is_fem = std::is_same_v<std::decay_t<Sim>, FemSimulation<2>> ||
                         std::is_same_v<std::decay_t<Sim>, FemSimulation<3>>;
+/// Particles and meshes (MPM-FEM coupling).
+template <typename Sim>
+constexpr bool is_coupled = std::is_same_v<std::decay_t<Sim>, CoupledSimulation2d>;
 
 [[noreturn]] void no_particles() {
     throw py::value_error("a FEM scene (meshes) has no particles: see nodes, node_velocities, elements");
@@ -140,7 +145,9 @@ public:
         }
         load_scene_models(scene_, trust_models, settings);
         py::gil_scoped_release release;
-        if (scene_.has_meshes() && scene_.dim == 2)
+        if (scene_.has_meshes() && scene_.has_particles())
+            sim_ = std::make_unique<CoupledSimulation2d>(scene_, settings);
+        else if (scene_.has_meshes() && scene_.dim == 2)
             sim_ = std::make_unique<FemSimulation<2>>(scene_, settings);
         else if (scene_.has_meshes())
             sim_ = std::make_unique<FemSimulation<3>>(scene_, settings);
@@ -157,6 +164,7 @@ public:
         if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(std::as_const(**s));
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation2d>>(&sim_)) return fn(std::as_const(**s));
         return fn(std::as_const(*std::get<std::unique_ptr<Simulation<3>>>(sim_)));
     }
     template <typename Fn>
@@ -164,13 +172,15 @@ public:
         if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(**s);
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(**s);
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation2d>>(&sim_)) return fn(**s);
         return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
     }
-    /// fn(the FEM simulation, 2D or 3D); ValueError for an MPM scene.
+    /// fn(the simulation with meshes: FEM 2D or 3D, or MPM-FEM coupling); ValueError for an MPM scene.
     template <typename Fn>
     decltype(auto) visit_fem(Fn&& fn) const {
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation2d>>(&sim_)) return fn(std::as_const(**s));
         throw py::value_error("an MPM scene (particles) has no mesh: see positions, velocities");
     }
 
@@ -283,7 +293,7 @@ private:
 
     Scene scene_;
     std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation<2>>,
-                 std::unique_ptr<FemSimulation<3>>>
+                 std::unique_ptr<FemSimulation<3>>, std::unique_ptr<CoupledSimulation2d>>
         sim_;
     std::vector<StepStats> history_;  // every step since construction or the last load_checkpoint()
 };
@@ -383,7 +393,8 @@ Every model the scene names is loaded and checked.)doc")
             });
         }, "Particles (0 in a FEM scene).")
         .def_property_readonly("is_fem", [](const PySimulation& s) { return s.scene().has_meshes(); },
-                               "Whether the scene is of FEM meshes (node and element arrays) rather than particles.")
+                               "Whether the scene has FEM meshes (node and element arrays); with particles beside "
+                               "them it is an MPM-FEM coupling (is_coupled).")
         .def_property_readonly("nodes", [](const PySimulation& s) {
             return s.visit_fem([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.state().x); });
         }, "FEM: (n, d) float64 node positions, m (a new array).")
@@ -411,15 +422,27 @@ Every model the scene names is loaded and checked.)doc")
         .def_property_readonly("contact", [](const PySimulation& s) {
             return s.visit_fem([](const auto& f) {
                 py::dict d;
-                d["dhat"] = f.scene_system().dhat;
-                d["kappa"] = f.scene_system().kappa;
-                d["bbox_diagonal"] = f.scene_system().diagonal;
-                d["min_distance"] = f.contact().min_distance(f.state().x);
-                d["active_pairs"] = f.contact().active_pairs(f.state().x);
+                if constexpr (is_coupled<decltype(f)>) {
+                    d["dhat"] = f.coupling().dhat();
+                    d["kappa"] = f.coupling().kappa();
+                    d["min_distance"] = f.coupling().min_distance(f.particles().x, f.state().x);
+                    d["active_pairs"] = f.coupling().active(f.particles().x, f.state().x).size();
+                    d["penetrations"] = f.penetrations();
+                } else {
+                    d["dhat"] = f.scene_system().dhat;
+                    d["kappa"] = f.scene_system().kappa;
+                    d["bbox_diagonal"] = f.scene_system().diagonal;
+                    d["min_distance"] = f.contact().min_distance(f.state().x);
+                    d["active_pairs"] = f.contact().active_pairs(f.state().x);
+                }
                 return d;
             });
         }, "FEM: barrier dhat (m), kappa (J/m^4), the bounding-box diagonal (m), and now the smallest pair "
-           "distance (m) and the pairs within dhat.")
+           "distance (m) and the pairs within dhat. MPM-FEM coupling: the particle / mesh barrier's dhat and "
+           "kappa, the smallest particle-edge distance, the pairs within dhat and the particles inside a mesh "
+           "(penetrations, always 0).")
+        .def_property_readonly("is_coupled", [](const PySimulation& s) { return s.scene().has_meshes() && s.scene().has_particles(); },
+                               "Whether the scene couples particles (MPM) and meshes (FEM): both array sets are there.")
         .def("step", &PySimulation::step,
              "One time step (shortened to land on the end of the frame); returns its statistics as a dict.")
         .def("advance",

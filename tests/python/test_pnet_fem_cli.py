@@ -155,3 +155,47 @@ def test_bad_fem_scenes_exit_2_naming_file_and_path(tmp_path, case):
     assert r.returncode == 2, (r.returncode, r.stderr)
     assert f"{path}: " in r.stderr and expected in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and "terminate" not in r.stderr
+
+
+@pytest.mark.parametrize("integrator", ["plasticitynet", "lagged", "explicit"])
+def test_the_tiny_coupling_writes_particles_mesh_and_png_without_penetration(tmp_path, integrator):
+    """MPM-FEM coupling (issue 18): the stiff disk falls onto the sand bed; every frame has the
+    particles (frame_N.ply), the mesh (frame_N_mesh.ply) and one picture, and no particle ends a
+    frame inside the disk (the run fails otherwise)."""
+    out = tmp_path / "run"
+    extra = ["--dt", "1e-5", "--frames", "2"] if integrator == "explicit" else []
+    r = pnet("simulate", TINY / "sand_fem_coupling_2d.json", "--integrator", integrator, "--out", out, *extra)
+    assert r.returncode == 0, r.stderr
+    assert "contact: no intersection at any frame" in r.stdout
+    run = json.loads((out / "run.json").read_text())
+    assert run["particles"] > 300 and run["nodes"] > 50 and run["particle_dhat"] == pytest.approx(run["dx"] / 2)
+    frames = 2 if integrator == "explicit" else 4
+    for f in range(frames + 1):
+        mesh = read_mesh_ply(out / f"frame_{f:05d}_mesh.ply")
+        assert mesh.position.shape == (run["nodes"], 2)
+        assert (out / f"frame_{f:05d}.ply").exists()
+        assert (out / f"frame_{f:05d}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rows = csv_rows(out / "stats.csv")
+    assert len(rows) == frames
+    if integrator != "explicit":
+        # The disk reaches the bed in the third frame: pairs within dhat, then it is slowed down.
+        assert max(int(row["contact_pairs"]) for row in rows) > 0
+        start = read_mesh_ply(out / "frame_00000_mesh.ply").position
+        end = read_mesh_ply(out / f"frame_{frames:05d}_mesh.ply").position
+        assert end[:, 1].min() > 0.03 and end[:, 1].mean() < start[:, 1].mean()
+
+
+def test_the_python_module_runs_the_tiny_coupling():
+    import plasticitynet_sim as pns
+
+    sim = pns.Simulation(str(TINY / "sand_fem_coupling_2d.json"), integrator="lagged")
+    assert sim.is_fem and sim.is_coupled and sim.num_particles > 300
+    nodes0 = sim.nodes.copy()
+    frames = sim.advance(4)
+    assert [f["frame"] for f in frames] == [1, 2, 3, 4]
+    contact = sim.contact
+    assert contact["penetrations"] == 0 and contact["dhat"] == pytest.approx(sim.scene.dx / 2)
+    assert max(f["contact_pairs"] for f in frames) > 0
+    assert sim.positions.shape == (sim.num_particles, 2) and sim.nodes.shape == nodes0.shape
+    assert sim.nodes[:, 1].mean() < nodes0[:, 1].mean()
+    assert sim.grid_mass().sum() == pytest.approx(sim.mass.sum(), rel=1e-9)
