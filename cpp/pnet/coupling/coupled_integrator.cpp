@@ -56,8 +56,7 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
 
     const std::size_t nodes = fem_system_.mesh.nodes();
     VecX v_star_fem(2 * nodes);
-    for (std::size_t i = 0; i < nodes; ++i)
-        v_star_fem.segment<2>(2 * i) = state.v[i] + dt * fem_system_.gravity;
+    for (std::size_t i = 0; i < nodes; ++i) v_star_fem.segment<2>(2 * i) = state.v[i] + dt * fem_system_.gravity;
     fem_.begin_step(state.x, v_star_fem, dt, state.plastic_inverse, {});
     fem_.set_material_state(fem_system_.element_object, state.hardening);
     fem_.set_reference({});  // elastic: no reference
@@ -145,8 +144,7 @@ double CoupledExplicitIntegrator2d::cfl_time_step(const Particles<2>& particles,
     return std::min(pnet::cfl_time_step(mpm_system_, particles, cfl), fem_.cfl_time_step(cfl));
 }
 
-StepStats CoupledExplicitIntegrator2d::step(Particles<2>& particles, FemState<2>& state, double dt,
-                                            long step_index) {
+StepStats CoupledExplicitIntegrator2d::step(Particles<2>& particles, FemState<2>& state, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
     const std::string context = "step " + std::to_string(step_index);
     // The barrier's forces at the start of the step.
@@ -191,8 +189,8 @@ StepStats CoupledExplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
         double grid_speed = 0.0;
         for (int block : grid.active_blocks())
             for (int k = 0; k < Grid<2>::kBlockNodes; ++k)
-                grid_speed = std::max(grid_speed, grid.node(static_cast<std::int64_t>(block) * Grid<2>::kBlockNodes + k)
-                                                      .momentum.norm());
+                grid_speed = std::max(
+                    grid_speed, grid.node(static_cast<std::int64_t>(block) * Grid<2>::kBlockNodes + k).momentum.norm());
         const double margin = h * grid_speed + contact_.dhat();
         for (std::size_t p = 0; p < particles.size(); ++p) {
             const Vec<2>& X = particles.x[p];

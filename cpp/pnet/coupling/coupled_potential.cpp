@@ -165,7 +165,8 @@ void CoupledPotential2d::prepare_blocks() {
             if (index[i] < ng) {
                 for (int a = 0; a < 2; ++a)
                     if (residual_mass_[index[i] + a] > 0.0)
-                        grid_diagonal[index[i] + a] += dt2 * weight[i] * weight[i] * H(2 * slot[i] + a, 2 * slot[i] + a);
+                        grid_diagonal[index[i] + a] +=
+                            dt2 * weight[i] * weight[i] * H(2 * slot[i] + a, 2 * slot[i] + a);
                 continue;
             }
             for (int j = 0; j < count; ++j) {

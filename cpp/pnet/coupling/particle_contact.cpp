@@ -66,12 +66,13 @@ std::vector<ParticleContact2d::Pair> ParticleContact2d::active(const std::vector
 double ParticleContact2d::value(const std::vector<Vec<2>>& X, const std::vector<Vec<2>>& x) const {
     double sum = 0.0;
     for (const Pair& pair : active(X, x))
-        sum += barrier_.value(point_edge_distance_sq(X[pair.particle], x[edges_[pair.edge][0]], x[edges_[pair.edge][1]]));
+        sum +=
+            barrier_.value(point_edge_distance_sq(X[pair.particle], x[edges_[pair.edge][0]], x[edges_[pair.edge][1]]));
     return kappa_ * sum;
 }
 
-double ParticleContact2d::gradient(const std::vector<Vec<2>>& X, const std::vector<Vec<2>>& x,
-                                   std::vector<Pair>& pairs, std::vector<Vec6>& gradients) const {
+double ParticleContact2d::gradient(const std::vector<Vec<2>>& X, const std::vector<Vec<2>>& x, std::vector<Pair>& pairs,
+                                   std::vector<Vec6>& gradients) const {
     pairs = active(X, x);
     gradients.resize(pairs.size());
     double sum = 0.0;

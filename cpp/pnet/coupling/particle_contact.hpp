@@ -80,8 +80,8 @@ private:
     /// dx, grown by margin) and, of those, the edges whose boxes (likewise) overlap the particle's
     /// (swept by dX when given).
     template <typename F>
-    void for_each_candidate(const std::vector<Vec<2>>& X, const std::vector<Vec<2>>* dX,
-                            const std::vector<Vec<2>>& x, const std::vector<Vec<2>>* dx, double margin, F&& f) const;
+    void for_each_candidate(const std::vector<Vec<2>>& X, const std::vector<Vec<2>>* dX, const std::vector<Vec<2>>& x,
+                            const std::vector<Vec<2>>* dx, double margin, F&& f) const;
     bool inside(const Vec<2>& p, const std::vector<Vec<2>>& x, int* edge_on) const;
 
     std::vector<std::array<int, 2>> edges_;

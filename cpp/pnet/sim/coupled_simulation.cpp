@@ -28,7 +28,8 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
       particles_(sample_particles<2>(scene)),
       fem_(make_fem_system<2>(scene)),
       settings_(settings) {
-    if (!std::isfinite(settings.dt) || settings.dt < 0.0) throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
+    if (!std::isfinite(settings.dt) || settings.dt < 0.0)
+        throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
     if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
     const FemSystem<2>& s = fem_.system;
     for (char fixed : s.fixed_node)
@@ -90,15 +91,16 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
             auto neural = std::make_unique<NeuralParticleEnergy<2>>(models, mpm_.materials, context,
                                                                     settings.implicit.regularizer_weight);
             for (std::size_t k = 0; k < scene.objects.size(); ++k)
-                return_maps.push_back(settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map()
-                                                                           : nullptr);
+                return_maps.push_back(
+                    settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);
             energy = std::move(neural);
         } else {
             throw std::invalid_argument("unknown integrator \"" + settings.name +
                                         "\" (expected explicit, plasticitynet or lagged for particles with meshes)");
         }
-        implicit_ = std::make_unique<CoupledImplicitIntegrator2d>(mpm_, s, method, settings.implicit, std::move(energy),
-                                                                 std::move(return_maps), fem_contact_.get(), *coupling_);
+        implicit_ =
+            std::make_unique<CoupledImplicitIntegrator2d>(mpm_, s, method, settings.implicit, std::move(energy),
+                                                          std::move(return_maps), fem_contact_.get(), *coupling_);
     }
 }
 
@@ -106,8 +108,8 @@ StepStats CoupledSimulation2d::step() {
     const double frame_end = (frame_ + 1) * scene_.frame_dt;
     double dt = dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl);
     if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
-    StepStats s = implicit_ ? implicit_->step(particles_, state_, dt, steps_)
-                            : explicit_->step(particles_, state_, dt, steps_);
+    StepStats s =
+        implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
     s.contact_pairs = coupling_->active(particles_.x, state_.x).size();
     s.min_distance = coupling_->min_distance(particles_.x, state_.x);
     time_ += dt;
@@ -197,7 +199,9 @@ void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
         const std::int64_t header[6] = {static_cast<std::int64_t>(particles_.size()),
                                         static_cast<std::int64_t>(state_.x.size()),
                                         static_cast<std::int64_t>(state_.hardening.size()),
-                                        static_cast<std::int64_t>(stress.size()), frame_, steps_};
+                                        static_cast<std::int64_t>(stress.size()),
+                                        frame_,
+                                        steps_};
         out.write(reinterpret_cast<const char*>(header), sizeof header);
         out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
         out.write(scene_digest_.data(), 64);

@@ -154,7 +154,8 @@ TEST(CoupledPotential, GradientAndHessianWithRespectToGridAndFemVelocitiesMatchF
     f.coupled.set_project_psd(false);
     test::Random rng(7);
     VecX v = f.coupled.v_star();
-    for (Eigen::Index i = 0; i < v.size(); ++i) v[i] += 0.05 * rng.uniform(-1.0, 1.0) * (f.coupled.residual_mass()[i] > 0.0);
+    for (Eigen::Index i = 0; i < v.size(); ++i)
+        v[i] += 0.05 * rng.uniform(-1.0, 1.0) * (f.coupled.residual_mass()[i] > 0.0);
     VecX g;
     f.coupled.set_linear_solve(CoupledPotential2d::LinearSolve::Assembled);
     f.coupled.value_gradient_hessian(v, g);
@@ -217,40 +218,42 @@ TEST(CoupledPotential, GradientAndHessianWithRespectToGridAndFemVelocitiesMatchF
 }
 
 TEST(CoupledPotential, NewtonLowersTheEnergyAndKeepsEveryParticleOutsideTheDisk) {
-  for (const auto solve : {CoupledPotential2d::LinearSolve::BlockPreconditioned, CoupledPotential2d::LinearSolve::Assembled}) {
-    SCOPED_TRACE(solve == CoupledPotential2d::LinearSolve::Assembled ? "assembled" : "block preconditioned");
-    CoupledFixture f;
-    f.coupled.set_linear_solve(solve);
-    VecX v = f.coupled.v_star();
-    const double alpha = f.coupled.max_step(VecX::Zero(v.size()), v);
-    v *= std::min(1.0, alpha);
-    NewtonOptions options;
-    options.tolerance = 1e-6;
-    options.residual_mass = f.coupled.residual_mass();
-    options.linear_solver = NewtonOptions::LinearSolver::Cholesky;
-    options.throw_on_line_search_failure = true;
-    // Each Newton iteration separately, so that every step's energy is seen.
-    double energy = f.coupled.value(v);
-    int iterations = 0;
-    for (; iterations < 30; ++iterations) {
-        NewtonOptions one = options;
-        one.max_iterations = 1;
-        const NewtonStats s = minimize(f.coupled, v, one);
-        EXPECT_LE(s.energy, energy) << "iteration " << iterations;
-        energy = s.energy;
-        if (s.converged) break;
+    for (const auto solve :
+         {CoupledPotential2d::LinearSolve::BlockPreconditioned, CoupledPotential2d::LinearSolve::Assembled}) {
+        SCOPED_TRACE(solve == CoupledPotential2d::LinearSolve::Assembled ? "assembled" : "block preconditioned");
+        CoupledFixture f;
+        f.coupled.set_linear_solve(solve);
+        VecX v = f.coupled.v_star();
+        const double alpha = f.coupled.max_step(VecX::Zero(v.size()), v);
+        v *= std::min(1.0, alpha);
+        NewtonOptions options;
+        options.tolerance = 1e-6;
+        options.residual_mass = f.coupled.residual_mass();
+        options.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+        options.throw_on_line_search_failure = true;
+        // Each Newton iteration separately, so that every step's energy is seen.
+        double energy = f.coupled.value(v);
+        int iterations = 0;
+        for (; iterations < 30; ++iterations) {
+            NewtonOptions one = options;
+            one.max_iterations = 1;
+            const NewtonStats s = minimize(f.coupled, v, one);
+            EXPECT_LE(s.energy, energy) << "iteration " << iterations;
+            energy = s.energy;
+            if (s.converged) break;
+        }
+        EXPECT_LT(iterations, 30);
+        std::vector<Vec<2>> X, x;
+        f.coupled.positions(v, X, x);
+        EXPECT_EQ(f.contact.penetrations(X, x), 0u);
+        EXPECT_GT(f.contact.min_distance(X, x), 0.0);
     }
-    EXPECT_LT(iterations, 30);
-    std::vector<Vec<2>> X, x;
-    f.coupled.positions(v, X, x);
-    EXPECT_EQ(f.contact.penetrations(X, x), 0u);
-    EXPECT_GT(f.contact.min_distance(X, x), 0.0);
-  }
 }
 
 TEST(CoupledSimulation, TinySceneRunsWithExplicitAndLaggedWithoutPenetration) {
     const Scene scene = load_scene(kTiny);
-    for (const auto& [integrator, dt] : std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"explicit", 1e-5}}) {
+    for (const auto& [integrator, dt] :
+         std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"explicit", 1e-5}}) {
         SCOPED_TRACE(integrator);
         CoupledSimulation2d sim(scene, settings_for(scene, integrator, dt));
         std::size_t most_pairs = 0;
@@ -273,12 +276,9 @@ TEST(CoupledSimulation, ABlockRestingOnTheBedStaysAtRest) {
     const double dhat = 0.5 * j["dx"].get<double>();
     // Where the barrier carries the block's weight with the default stiffness (0.97 dhat, measured):
     // started deeper, inside the barrier's reach, the barrier launches it.
-    j["meshes"][0] = {{"shape", "box"},
-                      {"min", {0.45, kBedTop + 0.96 * dhat}},
-                      {"max", {0.55, kBedTop + 0.96 * dhat + 0.02}},
-                      {"element_size", 0.01},
-                      {"material", j["meshes"][0]["material"]},
-                      {"velocity", {0.0, 0.0}}};
+    j["meshes"][0] = {
+        {"shape", "box"},       {"min", {0.45, kBedTop + 0.96 * dhat}},   {"max", {0.55, kBedTop + 0.96 * dhat + 0.02}},
+        {"element_size", 0.01}, {"material", j["meshes"][0]["material"]}, {"velocity", {0.0, 0.0}}};
     const Scene scene = scene_from_json(j, "block.json", "");
     CoupledSimulation2d sim(scene, settings_for(scene, "lagged", 1e-3));
     const std::vector<Vec<2>> start = sim.state().x;
@@ -291,7 +291,8 @@ TEST(CoupledSimulation, ABlockRestingOnTheBedStaysAtRest) {
     EXPECT_LT(sink, 0.1 * scene.dx) << "the block sank";
     EXPECT_LT(speed, 0.02) << "the block is not at rest";
     EXPECT_EQ(sim.penetrations(), 0u);
-    EXPECT_GT(sim.coupling().active(sim.particles().x, sim.state().x).size(), 0u) << "the block does not rest on the bed";
+    EXPECT_GT(sim.coupling().active(sim.particles().x, sim.state().x).size(), 0u)
+        << "the block does not rest on the bed";
 }
 
 TEST(CoupledSimulation, OneAndTwoThreadsGiveIdenticalFrames) {
@@ -308,7 +309,8 @@ TEST(CoupledSimulation, OneAndTwoThreadsGiveIdenticalFrames) {
 }
 
 TEST(CoupledSimulation, CheckpointThenResumeEqualsAnUninterruptedRun) {
-    for (const auto& [integrator, dt] : std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"explicit", 1e-5}}) {
+    for (const auto& [integrator, dt] :
+         std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"explicit", 1e-5}}) {
         SCOPED_TRACE(integrator);
         const Scene scene = load_scene(kTiny);
         const IntegratorSettings settings = settings_for(scene, integrator, dt);
