@@ -151,9 +151,7 @@ void CoupledPotential2d::prepare_blocks() {
     VecX grid_diagonal;
     mpm_.hessian_diagonal(grid_diagonal);
     const SparseMatrix& Hf = *fem_.hessian_matrix();
-    triplets_.clear();
-    for (Eigen::Index c = 0; c < Hf.outerSize(); ++c)
-        for (SparseMatrix::InnerIterator it(Hf, c); it; ++it) triplets_.emplace_back(it.row(), c, it.value());
+    triplets_.clear();  // the pairs' FEM terms, added to Hf below
     const double dt2 = mpm_.dt() * mpm_.dt();
     Eigen::Index index[kPairNodes];
     double weight[kPairNodes];
@@ -180,8 +178,13 @@ void CoupledPotential2d::prepare_blocks() {
             }
         }
     }
-    fem_block_.resize(nf, nf);
-    fem_block_.setFromTriplets(triplets_.begin(), triplets_.end());
+    if (triplets_.empty()) {
+        fem_block_ = Hf;
+    } else {
+        pair_block_.resize(nf, nf);
+        pair_block_.setFromTriplets(triplets_.begin(), triplets_.end());
+        fem_block_ = Hf + pair_block_;
+    }
     FemFactor& f = *fem_factor_;
     const bool same = static_cast<Eigen::Index>(f.outer.size()) == nf + 1 &&
                       static_cast<Eigen::Index>(f.inner.size()) == fem_block_.nonZeros() &&

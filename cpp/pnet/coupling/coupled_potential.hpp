@@ -112,7 +112,7 @@ private:
     std::vector<Vec6> gradients_;
     std::vector<Mat6> pair_hessians_;
     std::vector<Eigen::Triplet<double>> triplets_;
-    SparseMatrix hessian_, fem_block_;
+    SparseMatrix hessian_, fem_block_, pair_block_;
     VecX diagonal_, inverse_grid_diagonal_;
     mutable VecX work_in_, work_out_;
     struct FemFactor;
