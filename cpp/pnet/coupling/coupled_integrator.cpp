@@ -74,7 +74,8 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
                                        : CoupledPotential2d::LinearSolve::BlockPreconditioned);
     newton.linear_solver = cholesky ? NewtonOptions::LinearSolver::Cholesky : NewtonOptions::LinearSolver::Pcg;
 
-    // An intersection-free start: v* as far as CCD allows from the start positions (v = 0).
+    // An intersection-free start: v* as far as CCD allows from the start positions (v = 0). The
+    // fixed components (the sticky floor, massless nodes) have v* = 0, so the scaling keeps them.
     v_ = coupled_.v_star();
     const double alpha = coupled_.max_step(VecX::Zero(v_.size()), v_);
     if (alpha < 1.0) v_ *= alpha;

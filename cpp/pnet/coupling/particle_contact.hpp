@@ -63,7 +63,7 @@ public:
     double min_distance(const std::vector<Vec<2>>& X, const std::vector<Vec<2>>& x) const;
 
     /// A particle inside the body bounded by the edges, or on an edge, as text ("particle 12 inside the
-    /// mesh (closest edge 30-31)"), or "": exact orientation tests and a crossing count (the body's
+    /// mesh"), or "": a crossing count of the ray along +x and a collinearity test (the body's
     /// boundary is closed).
     std::string first_penetration(const std::vector<Vec<2>>& X, const std::vector<Vec<2>>& x) const;
     /// How many particles are inside the body or on its boundary.
