@@ -347,7 +347,8 @@ py::array_t<std::int64_t> index_rows(const std::vector<std::array<int, k>>& v) {
 
 void define_simulation(py::module_& m) {
     py::class_<PySimulation>(m, "Simulation", R"doc(A simulation of a scene with one of the integrators: MPM
-(particles) or, for a scene of meshes, FEM with IPC contact (is_fem).
+(particles) or, for a scene of meshes, FEM with IPC contact (is_fem); particles and meshes
+together are an MPM-FEM coupling (is_coupled: both the particle views and the mesh arrays).
 
     sim = pns.Simulation("scenes/snowball_2d.json", integrator="plasticitynet", dt=1e-3)
     sim.advance(10, callback=lambda sim, frame: print(frame["frame"], frame["wall_s"]))
