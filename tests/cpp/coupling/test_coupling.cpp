@@ -215,6 +215,9 @@ TEST(CoupledPotential, GradientAndHessianWithRespectToGridAndFemVelocitiesMatchF
     }
     EXPECT_GT(coupled_entries, 0) << "no grid-FEM entry of the Hessian was checked";
     EXPECT_GT(stats.checks, 1000);
+    RecordProperty("fd_checks", stats.checks);
+    std::printf("coupled potential: %d finite-difference comparisons over %zu columns (largest relative error %.2e)\n",
+                stats.checks, columns.size(), stats.max_error);
 }
 
 TEST(CoupledPotential, NewtonLowersTheEnergyAndKeepsEveryParticleOutsideTheDisk) {
