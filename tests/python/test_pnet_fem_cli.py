@@ -169,7 +169,7 @@ def test_the_tiny_coupling_writes_particles_mesh_and_png_without_penetration(tmp
     assert "contact: no intersection at any frame" in r.stdout
     run = json.loads((out / "run.json").read_text())
     assert run["particles"] > 300 and run["nodes"] > 50 and run["particle_dhat"] == pytest.approx(run["dx"] / 2)
-    frames = 2 if integrator == "explicit" else 4
+    frames = 2
     for f in range(frames + 1):
         mesh = read_mesh_ply(out / f"frame_{f:05d}_mesh.ply")
         assert mesh.position.shape == (run["nodes"], 2)
@@ -178,7 +178,7 @@ def test_the_tiny_coupling_writes_particles_mesh_and_png_without_penetration(tmp
     rows = csv_rows(out / "stats.csv")
     assert len(rows) == frames
     if integrator != "explicit":
-        # The disk reaches the bed in the third frame: pairs within dhat, then it is slowed down.
+        # The disk lands on the bed in the first frame: pairs within dhat, and it is slowed down.
         assert max(int(row["contact_pairs"]) for row in rows) > 0
         start = read_mesh_ply(out / "frame_00000_mesh.ply").position
         end = read_mesh_ply(out / f"frame_{frames:05d}_mesh.ply").position
@@ -191,8 +191,8 @@ def test_the_python_module_runs_the_tiny_coupling():
     sim = pns.Simulation(str(TINY / "sand_fem_coupling_2d.json"), integrator="lagged")
     assert sim.is_fem and sim.is_coupled and sim.num_particles > 300
     nodes0 = sim.nodes.copy()
-    frames = sim.advance(4)
-    assert [f["frame"] for f in frames] == [1, 2, 3, 4]
+    frames = sim.advance(2)
+    assert [f["frame"] for f in frames] == [1, 2]
     contact = sim.contact
     assert contact["penetrations"] == 0 and contact["dhat"] == pytest.approx(sim.scene.dx / 2)
     assert max(f["contact_pairs"] for f in frames) > 0
