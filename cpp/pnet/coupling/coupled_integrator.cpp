@@ -99,6 +99,7 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     stats.ccd_queries = coupled_.ccd_queries();
     stats.ccd_limited = coupled_.ccd_limited() + (alpha < 1.0);
     stats.energy_seconds = mpm_.energy_seconds();
+    stats.cg_seconds = mpm_.multiply_seconds();  // the grid's Hessian-vector products (PCG)
     const auto after_solve = std::chrono::steady_clock::now();
 
     // MPM: the grid velocities, slip walls, G2P.

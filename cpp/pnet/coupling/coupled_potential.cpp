@@ -16,6 +16,7 @@ void CoupledPotential2d::begin_step() {
     residual_mass_ << mpm_.residual_mass(), fem_.residual_mass();
     ccd_queries_ = ccd_limited_ = 0;
     pairs_.clear();
+    factorized_this_step_ = false;
 }
 
 void CoupledPotential2d::split(const VecX& v) const {
@@ -186,6 +187,19 @@ void CoupledPotential2d::prepare_blocks() {
         fem_block_ = Hf + pair_block_;
     }
     FemFactor& f = *fem_factor_;
+    // The FEM block only preconditions PCG: its factorization is kept through the step's Newton
+    // iterations while the pairs are the same ones (the stiff body's Hessian hardly changes; the
+    // pairs' terms do, and a new pair set gets a new factorization).
+    const bool same_pairs =
+        factorized_this_step_ && pairs_.size() == factor_pairs_.size() &&
+        std::equal(pairs_.begin(), pairs_.end(), factor_pairs_.begin(),
+                   [](const auto& a, const auto& b) { return a.particle == b.particle && a.edge == b.edge; });
+    inverse_grid_diagonal_ = grid_diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
+    diagonal_.resize(ng + nf);
+    diagonal_ << grid_diagonal, fem_block_.diagonal();
+    if (same_pairs) return;
+    factorized_this_step_ = true;
+    factor_pairs_ = pairs_;
     const bool same = static_cast<Eigen::Index>(f.outer.size()) == nf + 1 &&
                       static_cast<Eigen::Index>(f.inner.size()) == fem_block_.nonZeros() &&
                       std::equal(f.outer.begin(), f.outer.end(), fem_block_.outerIndexPtr()) &&
@@ -198,9 +212,6 @@ void CoupledPotential2d::prepare_blocks() {
     f.llt.factorize(fem_block_);
     if (f.llt.info() != Eigen::Success)
         throw NewtonError("the FEM block of the coupled Hessian is not positive definite");
-    inverse_grid_diagonal_ = grid_diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
-    diagonal_.resize(ng + nf);
-    diagonal_ << grid_diagonal, fem_block_.diagonal();
 }
 
 void CoupledPotential2d::hessian_multiply(const VecX& d, VecX& out) const {

@@ -117,6 +117,8 @@ private:
     mutable VecX work_in_, work_out_;
     struct FemFactor;
     std::unique_ptr<FemFactor> fem_factor_;
+    std::vector<ParticleContact2d::Pair> factor_pairs_;  // the pairs of the FEM block's factorization
+    bool factorized_this_step_ = false;
     LinearSolve solve_ = LinearSolve::BlockPreconditioned;
     bool project_psd_ = true;
     int ccd_queries_ = 0, ccd_limited_ = 0;
