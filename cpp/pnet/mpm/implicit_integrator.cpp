@@ -65,6 +65,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                                         it->dump());
         o.learned_return_map = it->get<bool>();
     }
+    if (const auto it = block.find("linear_solver"); it != block.end()) {
+        if (!it->is_string() || (*it != "pcg" && *it != "cholesky"))
+            throw std::invalid_argument(context + ": integrator.linear_solver: expected \"pcg\" or \"cholesky\", got " +
+                                        it->dump());
+        o.linear_solver = it->get<std::string>();
+    }
     if (const auto it = block.find("coupled_solver"); it != block.end()) {
         if (!it->is_string() || (*it != "block" && *it != "cholesky"))
             throw std::invalid_argument(context + ": integrator.coupled_solver: expected \"block\" or \"cholesky\", got " +
@@ -90,6 +96,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"fixed_point_anderson", fixed_point_anderson},
             {"regularizer_weight", regularizer_weight},
             {"preconditioner", preconditioner},
+            {"linear_solver", linear_solver},
             {"coupled_solver", coupled_solver},
             {"lazy_hessian", lazy_hessian},
             {"fail_on_unconverged", fail_on_unconverged},
@@ -133,6 +140,8 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.cg_tolerance = options_.cg_tolerance;
     newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
+    if (options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+    potential_.set_assemble(options_.linear_solver == "cholesky");
     newton.lazy_hessian = options_.lazy_hessian;
 
     v_ = potential_.v_star();

@@ -68,6 +68,10 @@ struct ImplicitOptions {
     // node). Jacobi is the default: block Jacobi saved 2-3% of the CG
     // iterations on sand_column_2d and snowball_2d (measured), not its cost.
     std::string preconditioner = "jacobi";
+    // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the preconditioner above)
+    // or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept while the
+    // active grid is the same).
+    std::string linear_solver = "pcg";
     // Newton keeps the last Hessian while each iteration cuts the residual by
     // this factor (NewtonOptions::lazy_hessian; 0: a fresh one every
     // iteration). 0.5 halved the energy time on sand_column_2d and cut it by

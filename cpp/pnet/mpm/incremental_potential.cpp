@@ -192,6 +192,12 @@ void IncrementalPotential<dim>::prepare_hessian(const VecX& v) {
     energy_.evaluate(F_, ParticleEnergy<dim>::Order::Hessian, psi_.data(), P_.data(), K_.data(), project_psd_);
     transform_hessians();
     energy_seconds_ += seconds_since(start);
+    if (assemble_) {
+        triplets_.clear();
+        add_hessian_triplets(triplets_, 0);
+        hessian_.resize(size(), size());
+        hessian_.setFromTriplets(triplets_.begin(), triplets_.end());  // duplicates summed in triplet order
+    }
 }
 
 template <int dim>

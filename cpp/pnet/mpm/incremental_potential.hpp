@@ -94,6 +94,11 @@ public:
     /// neighbours per node, one triplet per entry.
     void add_hessian_triplets(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset) const;
 
+    /// Assemble H at every Hessian pass (add_hessian_triplets()) so that hessian_matrix() gives it for
+    /// a direct solve (NewtonOptions::LinearSolver::Cholesky); default off (matrix-free PCG).
+    void set_assemble(bool assemble) { assemble_ = assemble; }
+    const SparseMatrix* hessian_matrix() const override { return assemble_ ? &hessian_ : nullptr; }
+
     /// Project the particles' Hessians to PSD (default; false gives the exact
     /// Hessian of E, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
@@ -133,6 +138,9 @@ private:
     std::vector<Tensor4<dim>> K_;           // the Hessian of psi, then K_p (prepare_hessian)
     mutable VecX masked_;
     bool project_psd_ = true;
+    bool assemble_ = false;
+    SparseMatrix hessian_;
+    std::vector<Eigen::Triplet<double>> triplets_;
     double energy_seconds_ = 0.0;
     mutable double multiply_seconds_ = 0.0;
 };

@@ -241,6 +241,50 @@ TYPED_TEST(ImplicitTest, BoundaryComponentsAreFixed) {
     EXPECT_GT(fixed, 0) << "the column stands on the sticky floor";
 }
 
+// The assembled grid Hessian (add_hessian_triplets, for CHOLMOD) is the matrix-free one: the same
+// products and diagonal, symmetric, fixed components holding only their mass; a Newton solve with
+// CHOLMOD reaches the minimum PCG reaches.
+TYPED_TEST(ImplicitTest, AssembledHessianEqualsTheMatrixFreeProductAndCholeskySolvesAlike) {
+    constexpr int dim = TypeParam::value;
+    for (const bool neural : {false, true}) {
+        SCOPED_TRACE(neural ? "plasticitynet energy" : "elastic energy");
+        PotentialFixture<dim> f(scene_name<dim>("sand_column"), neural);
+        IncrementalPotential<dim>& E = *f.potential;
+        EXPECT_EQ(E.hessian_matrix(), nullptr);
+        E.set_assemble(true);
+        VecX g(E.size());
+        E.value_gradient_hessian(f.v, g);
+        ASSERT_NE(E.hessian_matrix(), nullptr);
+        const SparseMatrix& H = *E.hessian_matrix();
+        EXPECT_LT((SparseMatrix(H.transpose()) - H).norm(), 1e-13 * H.norm());  // blocks (s, t), (t, s) summed apart
+        test::Random random(5);
+        for (int trial = 0; trial < 3; ++trial) {
+            VecX d(E.size()), Hd;
+            for (Eigen::Index i = 0; i < d.size(); ++i) d[i] = random.uniform(-1.0, 1.0);
+            E.hessian_multiply(d, Hd);
+            EXPECT_LT((H * d - Hd).norm(), 1e-12 * Hd.norm()) << "trial " << trial;
+        }
+        VecX diagonal;
+        E.hessian_diagonal(diagonal);
+        EXPECT_LT((VecX(H.diagonal()) - diagonal).norm(), 1e-12 * diagonal.norm());
+
+        NewtonOptions options;
+        options.tolerance = 1e-9;
+        options.residual_mass = E.residual_mass();
+        options.cg_tolerance = 1e-6;
+        VecX v_pcg = E.v_star(), v_cholesky = E.v_star();
+        E.set_assemble(false);
+        const NewtonStats pcg = minimize(E, v_pcg, options);
+        E.set_assemble(true);
+        options.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+        const NewtonStats cholesky = minimize(E, v_cholesky, options);
+        EXPECT_TRUE(pcg.converged && cholesky.converged);
+        EXPECT_GT(cholesky.factorizations, 0);
+        EXPECT_EQ(cholesky.cg_iterations, 0);
+        EXPECT_LT((v_pcg - v_cholesky).lpNorm<Eigen::Infinity>(), 1e-6);
+    }
+}
+
 /// Records E at every value_gradient() call: with the line search, the energies
 /// of accepted iterates.
 template <int dim>
