@@ -62,13 +62,8 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     fem_.set_reference({});  // elastic: no reference
     coupled_.begin_step();
 
-    NewtonOptions newton;
-    newton.tolerance = options_.newton_tolerance;
-    newton.max_iterations = options_.max_newton_iterations;
-    newton.max_cg_iterations = options_.max_cg_iterations;
-    newton.cg_tolerance = options_.cg_tolerance;
+    NewtonOptions newton = options_.newton_options();
     newton.residual_mass = coupled_.residual_mass();
-    newton.lazy_hessian = options_.lazy_hessian;
     const bool cholesky = options_.coupled_solver == "cholesky";
     coupled_.set_linear_solve(cholesky ? CoupledPotential2d::LinearSolve::Assembled
                                        : CoupledPotential2d::LinearSolve::BlockPreconditioned);

@@ -111,13 +111,8 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     potential_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
     potential_.set_material_state(system_.element_object, state.hardening);
 
-    NewtonOptions newton;
-    newton.tolerance = options_.newton_tolerance;
-    newton.max_iterations = options_.max_newton_iterations;
-    newton.max_cg_iterations = options_.max_cg_iterations;
-    newton.cg_tolerance = options_.cg_tolerance;
+    NewtonOptions newton = options_.newton_options();
     newton.residual_mass = potential_.residual_mass();
-    newton.lazy_hessian = options_.lazy_hessian;
     newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
 
     // An intersection-free start: v* as far as CCD allows from x^n (v = 0). The

@@ -86,6 +86,16 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     return o;
 }
 
+NewtonOptions ImplicitOptions::newton_options() const {
+    NewtonOptions newton;
+    newton.tolerance = newton_tolerance;
+    newton.max_iterations = max_newton_iterations;
+    newton.max_cg_iterations = max_cg_iterations;
+    newton.cg_tolerance = cg_tolerance;
+    newton.lazy_hessian = lazy_hessian;
+    return newton;
+}
+
 nlohmann::json ImplicitOptions::to_json() const {
     return {{"newton_tolerance", newton_tolerance},
             {"max_newton_iterations", max_newton_iterations},
@@ -133,16 +143,11 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     grid_.update_velocity(dt, system_.gravity, solve_boundary);
     potential_.begin_step(grid_, particles, dt, solve_boundary);
 
-    NewtonOptions newton;
-    newton.tolerance = options_.newton_tolerance;
-    newton.max_iterations = options_.max_newton_iterations;
-    newton.max_cg_iterations = options_.max_cg_iterations;
-    newton.cg_tolerance = options_.cg_tolerance;
+    NewtonOptions newton = options_.newton_options();
     newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
     if (options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
     potential_.set_assemble(options_.linear_solver == "cholesky");
-    newton.lazy_hessian = options_.lazy_hessian;
 
     v_ = potential_.v_star();
     ReferenceSolveOptions solve;

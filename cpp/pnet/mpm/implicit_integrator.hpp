@@ -38,6 +38,7 @@
 #include "pnet/mpm/integrator.hpp"
 #include "pnet/mpm/mpm_system.hpp"
 #include "pnet/nn/learned_return_map.hpp"
+#include "pnet/solver/newton.hpp"
 
 namespace pnet {
 
@@ -96,6 +97,9 @@ struct ImplicitOptions {
     /// block also holds name, dt and cfl). Throws std::invalid_argument
     /// "<context>: integrator.<key>: <problem>" for a wrong type or range.
     static ImplicitOptions from_json(const nlohmann::json& block, const std::string& context);
+    /// The Newton loop's settings from these (tolerance, iteration caps, CG tolerance, lazy
+    /// Hessian); the caller adds its residual masses and linear solver.
+    NewtonOptions newton_options() const;
     nlohmann::json to_json() const;
 };
 

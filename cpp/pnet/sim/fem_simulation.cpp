@@ -12,6 +12,7 @@
 #include "pnet/energy/neural_elastoplastic.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/io/atomic_file.hpp"
+#include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/io/sha256.hpp"
 
 namespace pnet {
@@ -303,22 +304,7 @@ FrameStats FemSimulation<dim>::advance_frame(const std::function<void()>& after_
     frame_steps_.clear();
     while (frame_ < target) {
         const StepStats s = step();
-        ++stats.steps;
-        stats.dt_min = std::min(stats.dt_min, s.dt);
-        stats.dt_max = std::max(stats.dt_max, s.dt);
-        stats.newton_iterations += s.newton_iterations;
-        stats.cg_iterations += s.cg_iterations;
-        stats.line_search_steps += s.line_search_steps;
-        stats.fixed_point_iterations += s.fixed_point_iterations;
-        stats.max_residual = std::max(stats.max_residual, s.residual);
-        stats.converged = stats.converged && s.converged;
-        stats.unconverged_steps += !s.converged;
-        stats.fixed_point_capped_steps += !s.fixed_point_converged;
-        stats.hardening_clamped = std::max(stats.hardening_clamped, s.hardening_clamped);
-        stats.contact_pairs = std::max(stats.contact_pairs, s.contact_pairs);
-        stats.min_distance = std::min(stats.min_distance, s.min_distance);
-        stats.ccd_queries += s.ccd_queries;
-        stats.ccd_limited += s.ccd_limited;
+        stats.add_step(s);
         frame_steps_.push_back(s);
         if (after_step) after_step();
     }
@@ -343,18 +329,6 @@ namespace {
 
 constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'F', 'E', 'M', '1'};
 constexpr std::size_t kNameBytes = 16;
-
-template <typename T>
-void write_array(std::ostream& out, const std::vector<T>& a) {
-    out.write(reinterpret_cast<const char*>(a.data()), static_cast<std::streamsize>(a.size() * sizeof(T)));
-}
-
-template <typename T>
-void read_array(std::istream& in, std::vector<T>& a, std::size_t n, const std::string& path) {
-    a.resize(n);
-    in.read(reinterpret_cast<char*>(a.data()), static_cast<std::streamsize>(n * sizeof(T)));
-    if (!in) throw std::invalid_argument(path + ": truncated checkpoint");
-}
 
 }  // namespace
 

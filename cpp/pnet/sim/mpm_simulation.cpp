@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "pnet/io/atomic_file.hpp"
+#include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/io/sha256.hpp"
 #include "pnet/scene/sampler.hpp"
 
@@ -111,19 +112,7 @@ FrameStats Simulation<dim>::advance_frame(const std::function<void()>& after_ste
     frame_steps_.clear();
     while (frame_ < target) {
         const StepStats s = step();
-        ++stats.steps;
-        stats.clamped += s.clamped;
-        stats.dt_min = std::min(stats.dt_min, s.dt);
-        stats.dt_max = std::max(stats.dt_max, s.dt);
-        stats.newton_iterations += s.newton_iterations;
-        stats.cg_iterations += s.cg_iterations;
-        stats.line_search_steps += s.line_search_steps;
-        stats.fixed_point_iterations += s.fixed_point_iterations;
-        stats.max_residual = std::max(stats.max_residual, s.residual);
-        stats.converged = stats.converged && s.converged;
-        stats.unconverged_steps += !s.converged;
-        stats.fixed_point_capped_steps += !s.fixed_point_converged;
-        stats.hardening_clamped = std::max(stats.hardening_clamped, s.hardening_clamped);
+        stats.add_step(s);
         frame_steps_.push_back(s);
         if (after_step) after_step();
     }
@@ -143,18 +132,6 @@ namespace {
 
 constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'K', 'P', '2'};
 constexpr std::size_t kNameBytes = 16;  // integrator name, zero-padded
-
-template <typename T>
-void write_array(std::ostream& out, const std::vector<T>& a) {
-    out.write(reinterpret_cast<const char*>(a.data()), static_cast<std::streamsize>(a.size() * sizeof(T)));
-}
-
-template <typename T>
-void read_array(std::istream& in, std::vector<T>& a, std::size_t n, const std::string& path) {
-    a.resize(n);
-    in.read(reinterpret_cast<char*>(a.data()), static_cast<std::streamsize>(n * sizeof(T)));
-    if (!in) throw std::invalid_argument(path + ": truncated checkpoint");
-}
 
 }  // namespace
 

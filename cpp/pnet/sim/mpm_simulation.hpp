@@ -3,6 +3,7 @@
 // integrator, frame-by-frame advance, and checkpoints that resume
 // bit-identically (they hold every array a step reads, including the
 // integrator's cached stresses).
+#include <algorithm>
 #include <functional>
 #include <memory>
 #include <string>
@@ -62,6 +63,29 @@ struct FrameStats {
     std::size_t contact_pairs = 0;
     double min_distance = 0.0;
     long ccd_queries = 0, ccd_limited = 0;
+
+    /// Adds one step of the frame: counts sum, extremes (dt, residual, clamped hardening, contact
+    /// pairs, smallest distance) are kept, failures stick. dt_min and min_distance start where the
+    /// caller set them (1e300 to take the frame's smallest).
+    void add_step(const StepStats& s) {
+        ++steps;
+        clamped += s.clamped;
+        dt_min = std::min(dt_min, s.dt);
+        dt_max = std::max(dt_max, s.dt);
+        newton_iterations += s.newton_iterations;
+        cg_iterations += s.cg_iterations;
+        line_search_steps += s.line_search_steps;
+        fixed_point_iterations += s.fixed_point_iterations;
+        max_residual = std::max(max_residual, s.residual);
+        converged = converged && s.converged;
+        unconverged_steps += !s.converged;
+        fixed_point_capped_steps += !s.fixed_point_converged;
+        hardening_clamped = std::max(hardening_clamped, s.hardening_clamped);
+        contact_pairs = std::max(contact_pairs, s.contact_pairs);
+        min_distance = std::min(min_distance, s.min_distance);
+        ccd_queries += s.ccd_queries;
+        ccd_limited += s.ccd_limited;
+    }
 };
 
 template <int dim>
