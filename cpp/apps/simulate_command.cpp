@@ -153,12 +153,13 @@ std::string frame_name(int frame, const char* extension) {
     return name;
 }
 
+/// The particles as a PLY record, written to frame_N.ply, with each particle's colour value (speed or hardening).
 template <int dim>
-void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& o, const fs::path& out) {
-    const Particles<dim>& P = sim.particles();
+PlyParticles write_particles(const Particles<dim>& P, int frame, const Options& o, const fs::path& out,
+                             std::vector<double>& colour) {
     PlyParticles ply;
     ply.dim = dim;
-    std::vector<double> colour(P.size());
+    colour.resize(P.size());
     for (std::size_t p = 0; p < P.size(); ++p) {
         for (int a = 0; a < dim; ++a) {
             ply.position.push_back(P.x[p][a]);
@@ -168,7 +169,14 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
         ply.hardening.push_back(P.hardening[p]);
         colour[p] = o.color == "speed" ? P.v[p].norm() : P.hardening[p];
     }
-    write_particles_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
+    write_particles_ply((out / frame_name(frame, "ply")).string(), ply);
+    return ply;
+}
+
+template <int dim>
+void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& o, const fs::path& out) {
+    std::vector<double> colour;
+    const PlyParticles ply = write_particles(sim.particles(), sim.frame(), o, out, colour);
     ParticleRenderOptions r;
     r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
     r.value_max = o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
@@ -289,20 +297,8 @@ void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Options&
 /// Particles and a mesh (MPM-FEM coupling): the particles as frame_N.ply, the mesh as
 /// frame_N_mesh.ply, and one PNG with the mesh drawn over the particles.
 void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Options& o, const fs::path& out) {
-    const Particles<2>& P = sim.particles();
-    PlyParticles particles;
-    particles.dim = 2;
-    std::vector<double> colour(P.size());
-    for (std::size_t p = 0; p < P.size(); ++p) {
-        for (int a = 0; a < 2; ++a) {
-            particles.position.push_back(P.x[p][a]);
-            particles.velocity.push_back(P.v[p][a]);
-        }
-        particles.mass.push_back(P.mass[p]);
-        particles.hardening.push_back(P.hardening[p]);
-        colour[p] = o.color == "speed" ? P.v[p].norm() : P.hardening[p];
-    }
-    write_particles_ply((out / frame_name(sim.frame(), "ply")).string(), particles);
+    std::vector<double> colour;
+    const PlyParticles particles = write_particles(sim.particles(), sim.frame(), o, out, colour);
     const FemState<2>& state = sim.state();
     const Mesh<2>& mesh = sim.mesh();
     PlyMesh ply;
