@@ -62,6 +62,20 @@ RUNS = {
                                        ["--fixed-point-iterations", "8", "--fixed-point-tol", "1e-3"], "ablation", None),
     "plasticitynet_1e-3_fp8_tol1e-4": ("plasticitynet", 1e-3,
                                        ["--fixed-point-iterations", "8", "--fixed-point-tol", "1e-4"], "ablation", None),
+    # Issue 19: the converged fixed point's cost (solves after the first start from the kept Hessian;
+    # Anderson acceleration of the outer loop over 3 iterates) against today's default.
+    "plasticitynet_1e-3_plain": ("plasticitynet", 1e-3,
+                                 ["--fixed-point-anderson", "0", "--fixed-point-keep-hessian", "no"], "fixed_point",
+                                 None),
+    "plasticitynet_1e-3_keep": ("plasticitynet", 1e-3,
+                                ["--fixed-point-anderson", "0", "--fixed-point-keep-hessian", "yes"], "fixed_point",
+                                None),
+    "plasticitynet_1e-3_anderson3": ("plasticitynet", 1e-3,
+                                     ["--fixed-point-anderson", "3", "--fixed-point-keep-hessian", "no"],
+                                     "fixed_point", None),
+    "plasticitynet_1e-3_keep_anderson3": ("plasticitynet", 1e-3,
+                                          ["--fixed-point-anderson", "3", "--fixed-point-keep-hessian", "yes"],
+                                          "fixed_point", None),
     "plasticitynet_1e-3_fpconv": ("plasticitynet", 1e-3,
                                   ["--fixed-point-iterations", "100", "--fixed-point-tol", "1e-5"], "ablation",
                                   {"sand_column_2d"}),
@@ -188,7 +202,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=["sand_column_2d", "snowball_2d"],
                         help="scene names under scenes/ (stiff/sand_column_2d: a stiff variant)")
-    parser.add_argument("--groups", nargs="+", default=["main", "floor"], choices=["main", "floor", "ablation"])
+    parser.add_argument("--groups", nargs="+", default=["main", "floor"], choices=["main", "floor", "ablation", "fixed_point"])
     parser.add_argument("--runs", nargs="+", help="only these runs (names as in the summary; gt is always run)")
     parser.add_argument("--frames", type=int, default=50)
     parser.add_argument("--threads", type=int, default=2)

@@ -19,13 +19,13 @@
 #include "pnet/io/png.hpp"
 #include "pnet/io/render.hpp"
 #include "pnet/io/vtu.hpp"
-#include "pnet/sim/scene_models.hpp"
-#include "pnet/sim/coupled_simulation.hpp"
-#include "pnet/sim/fem_simulation.hpp"
-#include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/nn/torchscript.hpp"
 #include "pnet/scene/scene.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
+#include "pnet/sim/fem_simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
+#include "pnet/sim/scene_models.hpp"
 
 namespace pnet::apps {
 
@@ -39,8 +39,9 @@ constexpr const char* kUsage =
     "                     [--color speed|hardening] [--trust-model]\n"
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
-    "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi]\n"
-    "                     [--lazy-hessian R] [--fail-on-unconverged]\n"
+    "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
+    "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
+    "                     [--fail-on-unconverged]\n"
     "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
     "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
     "                     material's exact one)\n";
@@ -53,7 +54,8 @@ struct Options {
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian;
     std::optional<std::string> preconditioner, return_map;
-    std::optional<int> fixed_point_iterations;
+    std::optional<int> fixed_point_iterations, fixed_point_anderson;
+    std::optional<bool> fixed_point_keep_hessian;
 };
 
 class UsageError : public std::invalid_argument {
@@ -108,7 +110,14 @@ Options parse(int argc, char** argv) {
             o.preconditioner = value();
         else if (arg == "--fixed-point-iterations")
             o.fixed_point_iterations = static_cast<int>(number(value()));
-        else if (arg == "--return-map")
+        else if (arg == "--fixed-point-anderson")
+            o.fixed_point_anderson = static_cast<int>(number(value()));
+        else if (arg == "--fixed-point-keep-hessian") {
+            const std::string text = value();
+            if (text != "yes" && text != "no")
+                throw UsageError("--fixed-point-keep-hessian: expected yes or no, got \"" + text + "\"");
+            o.fixed_point_keep_hessian = text == "yes";
+        } else if (arg == "--return-map")
             o.return_map = value();
         else if (arg == "--color")
             o.color = value();
@@ -138,12 +147,15 @@ Options parse(int argc, char** argv) {
     if (o.regularizer && !(*o.regularizer >= 0.0)) throw UsageError("--regularizer must be >= 0");
     if (o.lazy_hessian && !(*o.lazy_hessian >= 0.0 && *o.lazy_hessian < 1.0))
         throw UsageError("--lazy-hessian must be in [0, 1)");
-    if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi")
-        throw UsageError("--preconditioner: expected jacobi or block_jacobi, got \"" + *o.preconditioner + "\"");
+    if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi" &&
+        *o.preconditioner != "ichol")
+        throw UsageError("--preconditioner: expected jacobi, block_jacobi or ichol, got \"" + *o.preconditioner + "\"");
     if (o.return_map && *o.return_map != "learned" && *o.return_map != "exact")
         throw UsageError("--return-map: expected learned or exact, got \"" + *o.return_map + "\"");
     if (o.fixed_point_iterations && *o.fixed_point_iterations < 1)
         throw UsageError("--fixed-point-iterations must be >= 1");
+    if (o.fixed_point_anderson && *o.fixed_point_anderson < 0)
+        throw UsageError("--fixed-point-anderson must be >= 0 (0: the plain iteration)");
     return o;
 }
 
@@ -179,7 +191,8 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
     const PlyParticles ply = write_particles(sim.particles(), sim.frame(), o, out, colour);
     ParticleRenderOptions r;
     r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
-    r.value_max = o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
+    r.value_max =
+        o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
     for (int a = 0; a < dim; ++a) {
         r.domain_min[a] = scene.domain_min[a];
         r.domain_max[a] = scene.domain_max[a];
@@ -188,7 +201,8 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
     std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
     r.caption = caption;
     r.width_px = dim == 2 ? 640 : 720;
-    const Image image = dim == 2 ? render_particles_2d(ply.position, colour, r) : render_particles_3d(ply.position, colour, r);
+    const Image image =
+        dim == 2 ? render_particles_2d(ply.position, colour, r) : render_particles_3d(ply.position, colour, r);
     write_png((out / frame_name(sim.frame(), "png")).string(), image);
 }
 
@@ -322,7 +336,8 @@ void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Optio
     write_mesh_ply((out / mesh_name).string(), ply);
     ParticleRenderOptions r;
     r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
-    r.value_max = o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
+    r.value_max =
+        o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
     for (int a = 0; a < 2; ++a) {
         r.domain_min[a] = scene.domain_min[a];
         r.domain_max[a] = scene.domain_max[a];
@@ -349,19 +364,29 @@ template <class Sim>
 constexpr bool is_coupled = std::is_same_v<Sim, CoupledSimulation2d>;
 /// Runs with contact statistics (FEM meshes, alone or beside particles).
 template <class Sim>
-constexpr bool is_fem = std::is_same_v<Sim, FemSimulation<2>> || std::is_same_v<Sim, FemSimulation<3>> || is_coupled<Sim>;
+constexpr bool is_fem =
+    std::is_same_v<Sim, FemSimulation<2>> || std::is_same_v<Sim, FemSimulation<3>> || is_coupled<Sim>;
 
 template <class Sim>
 nlohmann::json describe_run(const Sim& sim) {
     if constexpr (is_coupled<Sim>) {
-        return {{"dx", sim.system().dx}, {"particles", sim.particles().size()}, {"nodes", sim.mesh().nodes()},
-                {"elements", sim.mesh().elements.size()}, {"particle_dhat", sim.coupling().dhat()},
-                {"particle_kappa", sim.coupling().kappa()}, {"step", sim.step_size()}};
+        return {{"dx", sim.system().dx},
+                {"particles", sim.particles().size()},
+                {"nodes", sim.mesh().nodes()},
+                {"elements", sim.mesh().elements.size()},
+                {"particle_dhat", sim.coupling().dhat()},
+                {"particle_kappa", sim.coupling().kappa()},
+                {"step", sim.step_size()}};
     } else if constexpr (is_fem<Sim>) {
         const auto& s = sim.scene_system();
-        return {{"nodes", sim.mesh().nodes()}, {"elements", sim.mesh().elements.size()},
-                {"mesh_first_node", s.first_node}, {"mesh_first_element", s.first_element},
-                {"bbox_diagonal", s.diagonal}, {"dhat", s.dhat}, {"kappa", s.kappa}, {"step", sim.step_size()}};
+        return {{"nodes", sim.mesh().nodes()},
+                {"elements", sim.mesh().elements.size()},
+                {"mesh_first_node", s.first_node},
+                {"mesh_first_element", s.first_element},
+                {"bbox_diagonal", s.diagonal},
+                {"dhat", s.dhat},
+                {"kappa", s.kappa},
+                {"step", sim.step_size()}};
     } else {
         return {{"dx", sim.system().dx}, {"particles", sim.particles().size()}};
     }
@@ -379,34 +404,44 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     const fs::path checkpoint = out / "checkpoint.bin";
     const fs::path stats_path = out / "stats.csv";
     if (o.resume) {
-        if (!fs::exists(checkpoint)) throw std::invalid_argument(checkpoint.string() + ": no checkpoint to resume from");
+        if (!fs::exists(checkpoint))
+            throw std::invalid_argument(checkpoint.string() + ": no checkpoint to resume from");
         sim.load_checkpoint(checkpoint.string());
-        std::fprintf(stderr, "resumed at frame %d (t = %.4f s, %ld steps)\n", sim.frame(), sim.time(), sim.total_steps());
+        std::fprintf(stderr, "resumed at frame %d (t = %.4f s, %ld steps)\n", sim.frame(), sim.time(),
+                     sim.total_steps());
     }
-    nlohmann::json run_json = {{"scene", fs::absolute(scene.file).string()}, {"name", scene.name}, {"dim", dim},
-                               {"integrator", settings.name}, {"dt", settings.dt}, {"cfl", settings.cfl},
-                               {"frame_dt", scene.frame_dt},
-                               {"frames", frames},
-                               {"threads", omp_get_max_threads()},
-                               {"domain_min", std::vector<double>(scene.domain_min.data(), scene.domain_min.data() + dim)},
-                               {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)}};
+    nlohmann::json run_json = {
+        {"scene", fs::absolute(scene.file).string()},
+        {"name", scene.name},
+        {"dim", dim},
+        {"integrator", settings.name},
+        {"dt", settings.dt},
+        {"cfl", settings.cfl},
+        {"frame_dt", scene.frame_dt},
+        {"frames", frames},
+        {"threads", omp_get_max_threads()},
+        {"domain_min", std::vector<double>(scene.domain_min.data(), scene.domain_min.data() + dim)},
+        {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)}};
     run_json.update(describe_run(sim));
     if (implicit) run_json["solver"] = settings.implicit.to_json();
     write_text_atomically((out / "run.json").string(), run_json.dump(2) + "\n");
 
     // stats.csv: one row per frame; steps.csv: one row per step (implicit
     // solver figures included). On resume, rows after the checkpoint's frame are dropped.
-    std::string stats = "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y" +
-                        std::string(dim == 3 ? ",momentum_z" : "") +
-                        ",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,max_residual_m_per_s,"
-                        "converged,unconverged_steps,hardening_clamped" +
-                        std::string(fem ? ",contact_pairs,min_distance_m,ccd_queries,ccd_limited" : "") + "\n";
+    std::string stats =
+        "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y" +
+        std::string(dim == 3 ? ",momentum_z" : "") +
+        ",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,max_residual_m_per_s,"
+        "converged,unconverged_steps,hardening_clamped" +
+        std::string(fem ? ",contact_pairs,min_distance_m,ccd_queries,ccd_limited" : "") + "\n";
     std::string steps_csv =
         "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
         "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
         "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged" +
-        std::string(fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,substeps,"
-                          "broad_phase_s,ccd_s" : "") +
+        std::string(
+            fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,substeps,"
+                  "broad_phase_s,ccd_s"
+                : "") +
         "\n";
     const fs::path steps_path = out / "steps.csv";
     auto keep_rows = [&](const fs::path& path, std::string& text) {
@@ -461,13 +496,14 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         long step = sim.total_steps() - static_cast<long>(sim.last_frame_steps().size());
         for (const StepStats& s : sim.last_frame_steps()) {
             t += s.dt;
-            int n = std::snprintf(row, sizeof row,
-                          "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu,%d",
-                          f.frame, step++, t, s.dt, s.wall_seconds, s.p2g_seconds, s.grid_seconds, s.g2p_seconds,
-                          s.energy_seconds, s.cg_seconds, s.newton_iterations, s.cg_iterations, s.line_search_steps,
-                          s.fixed_point_iterations, s.fixed_point_change, s.initial_residual, s.residual, s.energy,
-                          s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped,
-                          s.fixed_point_converged ? 1 : 0);
+            int n = std::snprintf(
+                row, sizeof row,
+                "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu,%d",
+                f.frame, step++, t, s.dt, s.wall_seconds, s.p2g_seconds, s.grid_seconds, s.g2p_seconds,
+                s.energy_seconds, s.cg_seconds, s.newton_iterations, s.cg_iterations, s.line_search_steps,
+                s.fixed_point_iterations, s.fixed_point_change, s.initial_residual, s.residual, s.energy,
+                s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped,
+                s.fixed_point_converged ? 1 : 0);
             if (fem)
                 n += std::snprintf(row + n, sizeof row - n, ",%d,%d,%d,%d,%zu,%.6g,%d,%.6g,%.6g", s.kinematic_stages,
                                    s.kinematic_reached ? 1 : 0, s.ccd_queries, s.ccd_limited, s.contact_pairs,
@@ -491,23 +527,26 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     std::fprintf(stderr, "\n");
     if (implicit) {
         if (run_unconverged > 0)
-            std::printf("warning: %ld of %ld steps ended with the Newton solve unconverged (largest residual %.3g m/s, "
-                        "tolerance %.3g m/s); they are marked converged = 0 in steps.csv "
-                        "(--fail-on-unconverged stops at the first)\n",
-                        run_unconverged, run_steps, run_worst_residual, settings.implicit.newton_tolerance);
+            std::printf(
+                "warning: %ld of %ld steps ended with the Newton solve unconverged (largest residual %.3g m/s, "
+                "tolerance %.3g m/s); they are marked converged = 0 in steps.csv "
+                "(--fail-on-unconverged stops at the first)\n",
+                run_unconverged, run_steps, run_worst_residual, settings.implicit.newton_tolerance);
         else
             std::printf("all %ld steps converged (Newton residual <= %.3g m/s)\n", run_steps,
                         settings.implicit.newton_tolerance);
         if (run_fixed_point_capped > 0)
-            std::printf("note: in %ld of %ld steps the fixed point on F0 stopped above its tolerance %.3g "
-                        "(max_fixed_point_iterations %d, or it stopped contracting; fixed_point_converged = 0 in "
-                        "steps.csv)\n",
-                        run_fixed_point_capped, run_steps, settings.implicit.fixed_point_tolerance,
-                        settings.implicit.max_fixed_point_iterations);
+            std::printf(
+                "note: in %ld of %ld steps the fixed point on F0 stopped above its tolerance %.3g "
+                "(max_fixed_point_iterations %d, or it stopped contracting; fixed_point_converged = 0 in "
+                "steps.csv)\n",
+                run_fixed_point_capped, run_steps, settings.implicit.fixed_point_tolerance,
+                settings.implicit.max_fixed_point_iterations);
         if (run_hardening_clamped > 0)
-            std::printf("note: up to %zu particles in a step had a hardening state outside the range the model was "
-                        "trained on (clamped; hardening_clamped in stats.csv)\n",
-                        run_hardening_clamped);
+            std::printf(
+                "note: up to %zu particles in a step had a hardening state outside the range the model was "
+                "trained on (clamped; hardening_clamped in stats.csv)\n",
+                run_hardening_clamped);
     }
     if constexpr (fem) {
         double closest = 1e300;
@@ -526,12 +565,17 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
             closest = std::min(closest, std::stod(cells[m - 3]));
             ccd_limited += std::stol(cells[m - 1]);
         }
-        std::printf("contact: no intersection at any frame (exact test); smallest distance %.3g m (dhat %.3g m), "
-                    "up to %zu pairs within dhat, %ld CCD-shortened steps\n",
-                    closest, [&] {
-                        if constexpr (is_coupled<Sim>) return sim.coupling().dhat();
-                        else return sim.scene_system().dhat;
-                    }(), most_pairs, ccd_limited);
+        std::printf(
+            "contact: no intersection at any frame (exact test); smallest distance %.3g m (dhat %.3g m), "
+            "up to %zu pairs within dhat, %ld CCD-shortened steps\n",
+            closest,
+            [&] {
+                if constexpr (is_coupled<Sim>)
+                    return sim.coupling().dhat();
+                else
+                    return sim.scene_system().dhat;
+            }(),
+            most_pairs, ccd_limited);
     }
     std::printf("wrote %d frames (PLY + PNG), stats.csv, steps.csv and run.json to %s\n", frames, out.string().c_str());
     return 0;
@@ -569,11 +613,14 @@ int simulate_command(int argc, char** argv) {
         if (o.preconditioner) settings.implicit.preconditioner = *o.preconditioner;
         if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
+        if (o.fixed_point_anderson) settings.implicit.fixed_point_anderson = *o.fixed_point_anderson;
+        if (o.fixed_point_keep_hessian) settings.implicit.fixed_point_keep_hessian = *o.fixed_point_keep_hessian;
         if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";
         load_scene_models(scene, o.trust_model, settings);
         if (scene.has_meshes() && scene.has_particles()) return run<CoupledSimulation2d>(scene, o, settings);
         if (scene.has_meshes())
-            return scene.dim == 2 ? run<FemSimulation<2>>(scene, o, settings) : run<FemSimulation<3>>(scene, o, settings);
+            return scene.dim == 2 ? run<FemSimulation<2>>(scene, o, settings)
+                                  : run<FemSimulation<3>>(scene, o, settings);
         return scene.dim == 2 ? run<Simulation<2>>(scene, o, settings) : run<Simulation<3>>(scene, o, settings);
     } catch (const UsageError& e) {
         std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);

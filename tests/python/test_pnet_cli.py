@@ -216,7 +216,7 @@ def test_implicit_options_override_the_scene(tmp_path):
     (["--cg-tol", 1.5], "--cg-tol must be in (0, 1)"),
     (["--regularizer", -1], "--regularizer must be >= 0"),
     (["--integrator", "implicit"], "--integrator: expected explicit, plasticitynet or lagged"),
-    (["--preconditioner", "ilu"], '--preconditioner: expected jacobi or block_jacobi, got "ilu"'),
+    (["--preconditioner", "ilu"], '--preconditioner: expected jacobi, block_jacobi or ichol, got "ilu"'),
     (["--lazy-hessian", 1], "--lazy-hessian must be in [0, 1)"),
     (["--dt", -1], "--dt must be a number >= 0"),
     (["--dt", "nan"], "--dt must be a number >= 0"),

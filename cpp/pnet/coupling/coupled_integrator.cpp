@@ -80,6 +80,7 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     solve.max_solves = options_.max_fixed_point_iterations;
     solve.tolerance = options_.fixed_point_tolerance;
     solve.anderson_depth = options_.fixed_point_anderson;
+    solve.keep_hessian = options_.fixed_point_keep_hessian;
     solve.fail_on_unconverged = options_.fail_on_unconverged;
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     ReferenceSolveStats s;

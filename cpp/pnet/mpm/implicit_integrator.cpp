@@ -32,7 +32,8 @@ T read_option(const nlohmann::json& block, const char* key, T value, const std::
 ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const std::string& context) {
     ImplicitOptions o;
     if (!block.is_object()) return o;
-    o.newton_tolerance = read_option(block, "newton_tolerance", o.newton_tolerance, context, 1e-300, "a positive number (m/s)");
+    o.newton_tolerance =
+        read_option(block, "newton_tolerance", o.newton_tolerance, context, 1e-300, "a positive number (m/s)");
     o.max_newton_iterations =
         read_option(block, "max_newton_iterations", o.max_newton_iterations, context, 1, "an integer >= 1");
     o.max_cg_iterations = read_option(block, "max_cg_iterations", o.max_cg_iterations, context, 1, "an integer >= 1");
@@ -46,7 +47,8 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
         read_option(block, "max_fixed_point_iterations", o.max_fixed_point_iterations, context, 1, "an integer >= 1");
     o.fixed_point_anderson =
         read_option(block, "fixed_point_anderson", o.fixed_point_anderson, context, 0, "an integer >= 0");
-    o.regularizer_weight = read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
+    o.regularizer_weight =
+        read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
     o.lazy_hessian = read_option(block, "lazy_hessian", o.lazy_hessian, context, 0.0, "a number in [0, 1)");
     if (o.lazy_hessian >= 1.0)
         throw std::invalid_argument(context + ": integrator.lazy_hessian: expected a number in [0, 1), got " +
@@ -58,6 +60,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
             throw std::invalid_argument(context + ": integrator.fail_on_unconverged: expected true or false, got " +
                                         it->dump());
         o.fail_on_unconverged = it->get<bool>();
+    }
+    if (const auto it = block.find("fixed_point_keep_hessian"); it != block.end()) {
+        if (!it->is_boolean())
+            throw std::invalid_argument(
+                context + ": integrator.fixed_point_keep_hessian: expected true or false, got " + it->dump());
+        o.fixed_point_keep_hessian = it->get<bool>();
     }
     if (const auto it = block.find("learned_return_map"); it != block.end()) {
         if (!it->is_boolean())
@@ -73,14 +81,15 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     }
     if (const auto it = block.find("coupled_solver"); it != block.end()) {
         if (!it->is_string() || (*it != "block" && *it != "cholesky"))
-            throw std::invalid_argument(context + ": integrator.coupled_solver: expected \"block\" or \"cholesky\", got " +
-                                        it->dump());
+            throw std::invalid_argument(
+                context + ": integrator.coupled_solver: expected \"block\" or \"cholesky\", got " + it->dump());
         o.coupled_solver = it->get<std::string>();
     }
     if (const auto it = block.find("preconditioner"); it != block.end()) {
-        if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi"))
-            throw std::invalid_argument(context + ": integrator.preconditioner: expected \"jacobi\" or \"block_jacobi\", got " +
-                                        it->dump());
+        if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi" && *it != "ichol"))
+            throw std::invalid_argument(
+                context + ": integrator.preconditioner: expected \"jacobi\", \"block_jacobi\" or \"ichol\", got " +
+                it->dump());
         o.preconditioner = it->get<std::string>();
     }
     return o;
@@ -104,6 +113,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"fixed_point_tolerance", fixed_point_tolerance},
             {"max_fixed_point_iterations", max_fixed_point_iterations},
             {"fixed_point_anderson", fixed_point_anderson},
+            {"fixed_point_keep_hessian", fixed_point_keep_hessian},
             {"regularizer_weight", regularizer_weight},
             {"preconditioner", preconditioner},
             {"linear_solver", linear_solver},
@@ -146,8 +156,9 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     NewtonOptions newton = options_.newton_options();
     newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
+    newton.incomplete_cholesky = options_.preconditioner == "ichol";
     if (options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
-    potential_.set_assemble(options_.linear_solver == "cholesky");
+    potential_.set_assemble(options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();
     ReferenceSolveOptions solve;
@@ -155,6 +166,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     solve.max_solves = options_.max_fixed_point_iterations;
     solve.tolerance = options_.fixed_point_tolerance;
     solve.anderson_depth = options_.fixed_point_anderson;
+    solve.keep_hessian = options_.fixed_point_keep_hessian;
     solve.fail_on_unconverged = options_.fail_on_unconverged;
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);

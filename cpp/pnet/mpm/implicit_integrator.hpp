@@ -52,8 +52,8 @@ struct ImplicitOptions {
     double newton_tolerance = 1e-3;
     int max_newton_iterations = 50;
     int max_cg_iterations = 500;
-    double cg_tolerance = 0.1;           // largest relative PCG residual (inexact Newton)
-    double fixed_point_tolerance = 1e-3; // max_p ||F_p(v) - F0_p||_F (plasticitynet)
+    double cg_tolerance = 0.1;            // largest relative PCG residual (inexact Newton)
+    double fixed_point_tolerance = 1e-3;  // max_p ||F_p(v) - F0_p||_F (plasticitynet)
     // Solves per step (plasticitynet): the fixed point on F0 is converged to
     // fixed_point_tolerance, with this cap. On sand_column_2d at dt 1e-3 one
     // solve (F0 = F(v*) only) left the deposit's spread 5.7% short of the
@@ -64,10 +64,14 @@ struct ImplicitOptions {
     // Anderson acceleration of the fixed point over this many iterates (0: the
     // plain iteration; solver/fixed_point.hpp).
     int fixed_point_anderson = 0;
-    double regularizer_weight = 1.0;     // w of eq. 11 (plasticitynet; 0: the ablation)
-    // PCG preconditioner: "jacobi" or "block_jacobi" (the d x d block of each
-    // node). Jacobi is the default: block Jacobi saved 2-3% of the CG
-    // iterations on sand_column_2d and snowball_2d (measured), not its cost.
+    // The fixed point's solves after the first start from the Hessian the previous one prepared
+    // (a modified Newton start, ReferenceSolveOptions::keep_hessian): a gradient pass instead of a
+    // Hessian pass per solve. MPM and MPM-FEM coupling; FEM's direct solver ignores it.
+    bool fixed_point_keep_hessian = false;
+    double regularizer_weight = 1.0;  // w of eq. 11 (plasticitynet; 0: the ablation)
+    // PCG preconditioner: "jacobi", "block_jacobi" (the d x d block of each
+    // node) or "ichol" (incomplete Cholesky of the assembled grid Hessian; MPM only). Jacobi is the default: block
+    // Jacobi saved 2-3% of the CG iterations on sand_column_2d and snowball_2d (measured), not its cost.
     std::string preconditioner = "jacobi";
     // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the preconditioner above)
     // or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept while the

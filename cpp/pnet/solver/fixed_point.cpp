@@ -55,7 +55,9 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
         if (fixed_point) objective.set_reference(work.F0);
         if (after_reference) after_reference();
         const std::string where = context + (fixed_point ? ", fixed-point iteration " + std::to_string(j + 1) : "");
-        const NewtonStats s = minimize(objective, v, newton, where, &work.newton);
+        NewtonOptions solve_newton = newton;
+        solve_newton.keep_prepared_hessian = newton.keep_prepared_hessian || (options.keep_hessian && j > 0);
+        const NewtonStats s = minimize(objective, v, solve_newton, where, &work.newton);
         if (j == 0) stats.initial_residual = s.initial_residual;
         stats.newton_iterations += s.iterations;
         stats.cg_iterations += s.cg_iterations;

@@ -31,25 +31,28 @@ public:
 };
 
 struct ReferenceSolveOptions {
-    bool fixed_point = false;       // iterate on F0 (plasticitynet)
-    int max_solves = 8;             // fixed point: the cap
-    double tolerance = 1e-3;        // fixed point: on max_p ||F(v) - F0||_F
+    bool fixed_point = false;          // iterate on F0 (plasticitynet)
+    int max_solves = 8;                // fixed point: the cap
+    double tolerance = 1e-3;           // fixed point: on max_p ||F(v) - F0||_F
     bool fail_on_unconverged = false;  // an unconverged Newton solve throws NewtonError
     // Fixed point: Anderson acceleration of the map F0 -> F(v(F0)) over the last
     // `anderson_depth` iterates (0: the plain iteration of eq. 10). The next
     // reference is the combination of the last images F(v) whose residuals
     // F(v) - F0, combined alike, are smallest (least squares; Walker and Ni 2011).
     int anderson_depth = 0;
+    // Fixed point: the solves after the first start from the Hessian the previous one prepared
+    // (NewtonOptions::keep_prepared_hessian; at the same v, with F0 moved by the last change).
+    bool keep_hessian = false;
 };
 
 /// Totals over the step's solves.
 struct ReferenceSolveStats {
     int solves = 0, newton_iterations = 0, cg_iterations = 0, line_search_steps = 0;
     double initial_residual = 0.0, residual = 0.0, energy = 0.0;
-    double change = 0.0;                 // fixed point: the smallest max_p ||F(v) - F0|| reached
-    bool converged = true;               // every Newton solve reached its tolerance
+    double change = 0.0;    // fixed point: the smallest max_p ||F(v) - F0|| reached
+    bool converged = true;  // every Newton solve reached its tolerance
     bool line_search_failed = false;
-    bool fixed_point_converged = true;   // the change reached the tolerance (not the cap)
+    bool fixed_point_converged = true;  // the change reached the tolerance (not the cap)
 
     /// Adds a later solve of the same step: counts sum, the last solve's
     /// residual, energy and fixed-point outcome stand, failures stick.

@@ -82,8 +82,9 @@ private:
 
 std::string where(const std::string& context, int iteration, double residual) {
     char text[160];
-    std::snprintf(text, sizeof text, "%sNewton iteration %d (residual %.3e): ",
-                  context.empty() ? "" : (context + ": ").c_str(), iteration, residual);
+    std::snprintf(text, sizeof text,
+                  "%sNewton iteration %d (residual %.3e): ", context.empty() ? "" : (context + ": ").c_str(), iteration,
+                  residual);
     return text;
 }
 
@@ -115,11 +116,20 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     DirectSolver& direct = workspace->impl().direct;
     const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
     const bool lazy = options.lazy_hessian > 0.0;
+    int ichol_hessians = -1;  // the Hessian count at the incomplete Cholesky factorization
     // Every iterate's Hessian is prepared before its direction is computed:
-    // at the start by value_gradient_hessian, later by the full step's
-    // evaluation or by prepare_hessian when a lazy one may not be kept.
-    double energy = objective.value_gradient_hessian(x, g);
-    ++stats.hessians;
+    // at the start by value_gradient_hessian (or kept, keep_prepared_hessian),
+    // later by the full step's evaluation or by prepare_hessian when a lazy one
+    // may not be kept.
+    double energy;
+    bool contracted = false;  // the last iterate was reached by a full step that cut the residual enough
+    if (options.keep_prepared_hessian) {
+        energy = objective.value_gradient(x, g);
+        contracted = true;  // the kept Hessian is treated as a lazy one
+    } else {
+        energy = objective.value_gradient_hessian(x, g);
+        ++stats.hessians;
+    }
     objective.hessian_diagonal(diagonal);
     double residual = residual_of(g, options, diagonal);
     stats.initial_energy = stats.energy = energy;
@@ -127,21 +137,25 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     if (!std::isfinite(energy) || !g.allFinite())
         throw NewtonError(where(context, 0, residual) + "the energy or its gradient is not finite at the start");
     const double g0 = std::max(g.norm(), 1e-300);
-    bool contracted = false;  // the last iterate was reached by a full step that cut the residual enough
 
     for (int it = 0; it < options.max_iterations; ++it) {
         if (residual <= options.tolerance) {
             stats.converged = true;
             break;
         }
-        const SparseMatrix* H = options.linear_solver == NewtonOptions::LinearSolver::Cholesky
-                                    ? objective.hessian_matrix()
-                                    : nullptr;
+        const SparseMatrix* H =
+            options.linear_solver == NewtonOptions::LinearSolver::Cholesky ? objective.hessian_matrix() : nullptr;
         if (H && direct.factorize(*H, stats)) {
             direct.solve(-g, d);
         } else {
+            const SparseMatrix* assembled = options.incomplete_cholesky ? objective.hessian_matrix() : nullptr;
             if (objective.has_preconditioner()) {
                 preconditioner.set_objective(objective);
+            } else if (assembled) {
+                if (stats.hessians != ichol_hessians) {  // a new Hessian since the last factorization
+                    preconditioner.set_incomplete_cholesky(*assembled);
+                    ichol_hessians = stats.hessians;
+                }
             } else if (block > 1) {
                 objective.hessian_block_diagonal(blocks);
                 preconditioner.set_block_jacobi(blocks, block);
@@ -161,8 +175,10 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         // starts from the largest allowed fraction.
         const double alpha_max = std::min(1.0, objective.max_step(x, d));
         if (!(alpha_max > 0.0))
-            throw NewtonError(where(context, it, residual) + "the step filter allows no motion along the Newton "
-                              "direction (max_step = " + std::to_string(alpha_max) + ")");
+            throw NewtonError(where(context, it, residual) +
+                              "the step filter allows no motion along the Newton "
+                              "direction (max_step = " +
+                              std::to_string(alpha_max) + ")");
         if (alpha_max < 1.0) d *= alpha_max;
         const double slope_full = g.dot(d);  // the slope of the (possibly shortened) step
         // The full step first, with its gradient; with its Hessian too unless the
@@ -220,8 +236,10 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 g.swap(g_trial);
                 energy = e_full;
             } else if (!any_finite) {
-                throw NewtonError(where(context, it, residual) + "the energy is not finite anywhere along the Newton "
-                                  "direction (down to a step of 2^-" + std::to_string(options.max_line_search) + ")");
+                throw NewtonError(where(context, it, residual) +
+                                  "the energy is not finite anywhere along the Newton "
+                                  "direction (down to a step of 2^-" +
+                                  std::to_string(options.max_line_search) + ")");
             } else {
                 stats.line_search_failed = true;
                 if (options.throw_on_line_search_failure)
@@ -229,7 +247,6 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                                       std::to_string(options.max_line_search) + " halvings (E = " +
                                       std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
                 break;  // x and g are those of the last accepted iterate
-
             }
         }
         objective.hessian_diagonal(diagonal);  // of the Hessian prepared last

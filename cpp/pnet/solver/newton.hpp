@@ -3,14 +3,13 @@
 // search on E: the one optimization loop of every implicit integrator
 // (DESIGN.md §4; Gast et al. 2015, Li et al. 2020). Per iteration:
 //   g = grad E(x); stop if the residual (below) <= tolerance;
-//   H d = -g by PCG (Jacobi, block Jacobi, or the objective's own preconditioner) to the relative tolerance min(cg_tolerance, sqrt(|g| / |g0|))
-//   (inexact Newton: loose far from the solution, tighter as it converges);
-//   alpha = 1, halved (at most max_line_search times) until E(x + alpha d) <= E(x) + c alpha g.d
-//   (Armijo). The full step is evaluated with value_gradient_hessian(), so an accepted full step
-//   costs one energy pass and arrives with its Hessian prepared. Once |g.d| is below the round-off
-//   of E, the full step is taken if it lowers |g|. If no halving lowers E, the full step is still
-//   taken when it lowers |g| and changes E by less than its round-off; otherwise the solve stops,
-//   unconverged, at the last accepted iterate (stats.line_search_failed; an error only with
+//   H d = -g by PCG (Jacobi, block Jacobi, or the objective's own preconditioner) to the relative tolerance
+//   min(cg_tolerance, sqrt(|g| / |g0|)) (inexact Newton: loose far from the solution, tighter as it converges); alpha =
+//   1, halved (at most max_line_search times) until E(x + alpha d) <= E(x) + c alpha g.d (Armijo). The full step is
+//   evaluated with value_gradient_hessian(), so an accepted full step costs one energy pass and arrives with its
+//   Hessian prepared. Once |g.d| is below the round-off of E, the full step is taken if it lowers |g|. If no halving
+//   lowers E, the full step is still taken when it lowers |g| and changes E by less than its round-off; otherwise the
+//   solve stops, unconverged, at the last accepted iterate (stats.line_search_failed; an error only with
 //   throw_on_line_search_failure, or when E was not finite at any trial point).
 // Residual: max_i |g_i| residual_scale_i (by default), or, with residual_mass (per-component masses
 // m_i, 0 on fixed components), the mass-weighted velocity residual
@@ -33,12 +32,12 @@
 namespace pnet {
 
 struct NewtonOptions {
-    double tolerance = 1e-6;        // on |g|_scaled (see residual_scale)
+    double tolerance = 1e-6;  // on |g|_scaled (see residual_scale)
     int max_iterations = 100;
     int max_cg_iterations = 500;
-    double cg_tolerance = 1e-2;     // largest relative CG residual
-    double armijo = 1e-4;           // sufficient-decrease constant c
-    int max_line_search = 12;       // halvings (alpha >= 2^-12) before the line search has failed
+    double cg_tolerance = 1e-2;  // largest relative CG residual
+    double armijo = 1e-4;        // sufficient-decrease constant c
+    int max_line_search = 12;    // halvings (alpha >= 2^-12) before the line search has failed
     /// Residual max_i |g_i| residual_scale_i (empty: max |g_i|). Ignored when
     /// residual_mass is given.
     VecX residual_scale;
@@ -51,6 +50,9 @@ struct NewtonOptions {
     /// Block Jacobi (the objective's hessian_block_diagonal(), when its block
     /// size is > 1) instead of Jacobi.
     bool block_preconditioner = false;
+    /// Incomplete Cholesky of the objective's assembled hessian_matrix() as PCG's preconditioner
+    /// (refactored with every new Hessian; objectives without a matrix use Jacobi).
+    bool incomplete_cholesky = false;
     /// The linear solve of H d = -g: PCG (matrix-free), or a sparse Cholesky
     /// factorization by CHOLMOD of the objective's hessian_matrix() (FEM:
     /// small, stiff systems), whose symbolic analysis is kept while the
@@ -62,12 +64,19 @@ struct NewtonOptions {
     /// residual by at least this factor keep the previous Hessian; every other
     /// iterate gets a fresh one. 0: a fresh Hessian at every iterate (Newton).
     double lazy_hessian = 0.0;
+    /// Start from the Hessian the objective prepared last instead of a fresh one (a modified Newton
+    /// start: the solves of a fixed point on the reference F0 start where the previous one ended, with
+    /// F0 moved a little). The start costs a gradient pass instead of a Hessian pass; the first
+    /// direction uses the kept Hessian, which stays while full steps cut the residual by
+    /// lazy_hessian (with lazy_hessian = 0 the first trial point gets a fresh one). The residual at
+    /// the start is weighted by the kept Hessian's diagonal.
+    bool keep_prepared_hessian = false;
 };
 
 struct NewtonStats {
-    int iterations = 0;          // Newton iterations with a step taken
-    int cg_iterations = 0;       // total over the iterations
-    int line_search_steps = 0;   // energy evaluations in line searches, total
+    int iterations = 0;                             // Newton iterations with a step taken
+    int cg_iterations = 0;                          // total over the iterations
+    int line_search_steps = 0;                      // energy evaluations in line searches, total
     double initial_residual = 0.0, residual = 0.0;  // |g|_scaled before and after
     double initial_energy = 0.0, energy = 0.0;
     bool converged = false;
@@ -77,7 +86,7 @@ struct NewtonStats {
     /// Stopped because no step along the Newton direction lowered E (x is the
     /// last accepted iterate; converged is false).
     bool line_search_failed = false;
-    int hessians = 0;  // Hessian passes (value_gradient_hessian or prepare_hessian)
+    int hessians = 0;                      // Hessian passes (value_gradient_hessian or prepare_hessian)
     int factorizations = 0, analyses = 0;  // Cholesky: numeric factorizations, symbolic analyses
 };
 

@@ -57,8 +57,19 @@ Preconditioner Preconditioner::of(const Objective& objective) {
     return m;
 }
 
+void Preconditioner::set_incomplete_cholesky(const SparseMatrix& H) {
+    objective_ = nullptr;
+    block_ = 1;
+    if (!ichol_) ichol_ = std::make_shared<IncompleteCholesky>();
+    ichol_->compute(H);
+    if (ichol_->info() != Eigen::Success)
+        throw std::runtime_error("Preconditioner: the incomplete Cholesky factorization failed");
+    use_ichol_ = true;
+}
+
 void Preconditioner::set_jacobi(const VecX& diagonal) {
     objective_ = nullptr;
+    use_ichol_ = false;
     block_ = 1;
     inverse_.resize(diagonal.size());
     inverse_ = diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
@@ -66,6 +77,7 @@ void Preconditioner::set_jacobi(const VecX& diagonal) {
 
 void Preconditioner::set_block_jacobi(const VecX& blocks, int block) {
     objective_ = nullptr;
+    use_ichol_ = false;
     if (block < 1 || blocks.size() % (block * block) != 0)
         throw std::invalid_argument("Preconditioner::block_jacobi: blocks do not hold whole " + std::to_string(block) +
                                     " x " + std::to_string(block) + " blocks");
@@ -86,6 +98,8 @@ void Preconditioner::set_block_jacobi(const VecX& blocks, int block) {
 void Preconditioner::apply(const VecX& r, VecX& z) const {
     if (objective_)
         objective_->apply_preconditioner(r, z);
+    else if (use_ichol_)
+        z = ichol_->solve(r);
     else if (block_ == 1)
         z = inverse_.cwiseProduct(r);
     else if (block_ == 2)

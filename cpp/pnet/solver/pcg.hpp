@@ -2,7 +2,12 @@
 // Matrix-free preconditioned conjugate gradients for H d = b with H symmetric
 // positive semi-definite (Objective::hessian_multiply), preconditioned by the
 // inverse of diag(H) (Jacobi) or of its b x b diagonal blocks (block Jacobi:
-// for MPM the d x d coupling of a node's velocity components).
+// for MPM the d x d coupling of a node's velocity components), or an
+// incomplete Cholesky factorization of the assembled Hessian.
+#include <memory>
+
+#include <Eigen/IterativeLinearSolvers>
+
 #include "pnet/solver/objective.hpp"
 
 namespace pnet {
@@ -24,6 +29,10 @@ public:
     void set_jacobi(const VecX& diagonal);
     void set_block_jacobi(const VecX& blocks, int block);
     void set_objective(const Objective& objective) { objective_ = &objective; }
+    /// Incomplete Cholesky with threshold dropping (Eigen's IncompleteCholesky, AMD ordering, the
+    /// diagonal shifted until the factorization succeeds) of the assembled H (both triangles or the
+    /// lower one); the ordering is kept while H's pattern size is unchanged.
+    void set_incomplete_cholesky(const SparseMatrix& H);
 
     int block() const { return block_; }
     /// z = M^-1 r.
@@ -32,7 +41,10 @@ public:
 private:
     int block_ = 1;
     const Objective* objective_ = nullptr;  // set: the objective's own preconditioner
-    VecX inverse_;  // block 1: the inverse diagonal; else the inverse blocks, row-major
+    VecX inverse_;                          // block 1: the inverse diagonal; else the inverse blocks, row-major
+    using IncompleteCholesky = Eigen::IncompleteCholesky<double, Eigen::Lower, Eigen::AMDOrdering<int>>;
+    std::shared_ptr<IncompleteCholesky> ichol_;  // set: incomplete Cholesky
+    bool use_ichol_ = false;
 };
 
 struct PcgResult {

@@ -50,7 +50,8 @@ public:
     double value(const VecX& x) override {
         ++value_calls;
         double e = 0.0;
-        for (Eigen::Index i = 0; i < x.size(); ++i) e += 0.5 * m_[i] * std::pow(x[i] - c_[i], 2) + 0.25 * std::pow(x[i], 4);
+        for (Eigen::Index i = 0; i < x.size(); ++i)
+            e += 0.5 * m_[i] * std::pow(x[i] - c_[i], 2) + 0.25 * std::pow(x[i], 4);
         for (Eigen::Index i = 0; i + 1 < x.size(); ++i) e += k_ * std::log(std::cosh(x[i] - x[i + 1]));
         return e;
     }
@@ -87,6 +88,8 @@ public:
             if (i + 1 < x_.size()) diagonal[i] += k_ / std::pow(std::cosh(x_[i] - x_[i + 1]), 2);
         }
     }
+    /// Moves every target c_i by `by` (the next problem of a sequence, as F0 moves in a fixed point).
+    void shift_targets(double by) { c_.array() += by; }
     int value_calls = 0, hessians = 0;
     std::vector<double> energies;  // at every accepted iterate
 
@@ -217,7 +220,8 @@ TEST(Newton, ConvexChainConvergesAndEveryStepLowersTheEnergy) {
         EXPECT_GE(strict, s.iterations / 2);
         VecX g_final;
         chain.value_gradient(x, g_final);
-        EXPECT_LT(g_final.lpNorm<Eigen::Infinity>(), 1e-10) << "seed " << seed << " stats residual " << s.residual << " iterations " << s.iterations;
+        EXPECT_LT(g_final.lpNorm<Eigen::Infinity>(), 1e-10)
+            << "seed " << seed << " stats residual " << s.residual << " iterations " << s.iterations;
         // The solver's count of Hessian passes is the objective's (plus the probe above).
         EXPECT_EQ(chain.hessians, s.hessians + 1);
     }
@@ -242,6 +246,44 @@ TEST(Newton, LazyHessianConvergesToTheSameMinimizerWithFewerHessians) {
             EXPECT_LE(lazy.energies[i], lazy.energies[i - 1] + 1e-13 * std::abs(lazy.energies[i - 1]));
         EXPECT_TRUE(s_exact.converged);
     }
+}
+
+// A solve that starts from the Hessian the previous solve prepared (the fixed point's later solves,
+// NewtonOptions::keep_prepared_hessian) reaches the same minimizer as a fresh start, with at least
+// one Hessian pass fewer (none at the start); a start already converged costs no Hessian pass.
+TEST(Newton, KeptHessianStartReachesTheSameMinimizer) {
+    for (unsigned seed : {1u, 2u, 3u})
+        for (double shift : {0.01, 0.3}) {
+            Chain fresh(60, seed), kept(60, seed);
+            VecX x_fresh = VecX::Zero(60), x_kept = VecX::Zero(60);
+            NewtonOptions options;
+            options.tolerance = 1e-10;
+            options.lazy_hessian = 0.5;
+            minimize(fresh, x_fresh, options, "chain");
+            minimize(kept, x_kept, options, "chain");
+            ASSERT_EQ(x_fresh, x_kept);
+            fresh.shift_targets(shift);
+            kept.shift_targets(shift);
+            const int fresh_before = fresh.hessians, kept_before = kept.hessians;
+            kept.energies.clear();  // those of the last problem
+            const NewtonStats s_fresh = minimize(fresh, x_fresh, options, "chain");
+            options.keep_prepared_hessian = true;
+            const NewtonStats s_kept = minimize(kept, x_kept, options, "chain");
+            SCOPED_TRACE("seed " + std::to_string(seed) + " shift " + std::to_string(shift));
+            EXPECT_TRUE(s_fresh.converged);
+            EXPECT_TRUE(s_kept.converged);
+            EXPECT_LT((x_kept - x_fresh).lpNorm<Eigen::Infinity>(), 1e-8);
+            EXPECT_EQ(kept.hessians - kept_before, s_kept.hessians);
+            EXPECT_LT(s_kept.hessians, s_fresh.hessians);
+            EXPECT_EQ(fresh.hessians - fresh_before, s_fresh.hessians);
+            for (std::size_t i = 1; i < kept.energies.size(); ++i)
+                EXPECT_LE(kept.energies[i], kept.energies[i - 1] + 1e-13 * std::abs(kept.energies[i - 1]));
+            // Already at the minimizer: one gradient, no Hessian pass.
+            const NewtonStats s_again = minimize(kept, x_kept, options, "chain");
+            EXPECT_TRUE(s_again.converged);
+            EXPECT_EQ(s_again.hessians, 0);
+            EXPECT_EQ(s_again.iterations, 0);
+        }
 }
 
 /// Audits which Hessian each Newton direction is computed with: a direction
