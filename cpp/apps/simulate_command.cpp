@@ -41,6 +41,7 @@ constexpr const char* kUsage =
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
+    "                     [--fixed-point-inexact FORCING]\n"
     "                     [--fail-on-unconverged]\n"
     "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
     "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
@@ -52,7 +53,7 @@ struct Options {
     int frames = -1, threads = 0, checkpoint_every = 10;
     bool resume = false, trust_model = false, fail_on_unconverged = false;
     // Implicit solver overrides (unset: the scene's value).
-    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian;
+    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
     std::optional<std::string> preconditioner, return_map;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
     std::optional<bool> fixed_point_keep_hessian;
@@ -110,6 +111,8 @@ Options parse(int argc, char** argv) {
             o.preconditioner = value();
         else if (arg == "--fixed-point-iterations")
             o.fixed_point_iterations = static_cast<int>(number(value()));
+        else if (arg == "--fixed-point-inexact")
+            o.fixed_point_inexact = number(value());
         else if (arg == "--fixed-point-anderson")
             o.fixed_point_anderson = static_cast<int>(number(value()));
         else if (arg == "--fixed-point-keep-hessian") {
@@ -154,6 +157,8 @@ Options parse(int argc, char** argv) {
         throw UsageError("--return-map: expected learned or exact, got \"" + *o.return_map + "\"");
     if (o.fixed_point_iterations && *o.fixed_point_iterations < 1)
         throw UsageError("--fixed-point-iterations must be >= 1");
+    if (o.fixed_point_inexact && !(*o.fixed_point_inexact >= 0.0 && *o.fixed_point_inexact < 1.0))
+        throw UsageError("--fixed-point-inexact must be in [0, 1) (0: exact inner solves)");
     if (o.fixed_point_anderson && *o.fixed_point_anderson < 0)
         throw UsageError("--fixed-point-anderson must be >= 0 (0: the plain iteration)");
     return o;
@@ -614,6 +619,7 @@ int simulate_command(int argc, char** argv) {
         if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         if (o.fixed_point_anderson) settings.implicit.fixed_point_anderson = *o.fixed_point_anderson;
+        if (o.fixed_point_inexact) settings.implicit.fixed_point_inexact = *o.fixed_point_inexact;
         if (o.fixed_point_keep_hessian) settings.implicit.fixed_point_keep_hessian = *o.fixed_point_keep_hessian;
         if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";
         load_scene_models(scene, o.trust_model, settings);

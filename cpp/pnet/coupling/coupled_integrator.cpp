@@ -75,13 +75,7 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     const double alpha = coupled_.max_step(VecX::Zero(v_.size()), v_);
     if (alpha < 1.0) v_ *= alpha;
 
-    ReferenceSolveOptions solve;
-    solve.fixed_point = method_ == ImplicitMethod::PlasticityNet;
-    solve.max_solves = options_.max_fixed_point_iterations;
-    solve.tolerance = options_.fixed_point_tolerance;
-    solve.anderson_depth = options_.fixed_point_anderson;
-    solve.keep_hessian = options_.fixed_point_keep_hessian;
-    solve.fail_on_unconverged = options_.fail_on_unconverged;
+    const ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     ReferenceSolveStats s;
     try {

@@ -1,6 +1,7 @@
 #include "pnet/energy/neural_elastoplastic.hpp"
 
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 #include "pnet/math/psd.hpp"
@@ -77,6 +78,12 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
         for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - P(k / dim, k % dim);
         if (relative_) offset_[p] = net_value_[p];  // N(F0, F0, h)
     }
+    buffers_at_reference_ = true;
+}
+
+template <int dim>
+bool NeuralElastoplasticEnergy<dim>::at_reference(const Mat<dim>* F) const {
+    return buffers_at_reference_ && !F0_.empty() && std::memcmp(F, F0_.data(), F0_.size() * sizeof(Mat<dim>)) == 0;
 }
 
 template <int dim>
@@ -108,12 +115,16 @@ void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const {
+    if (at_reference(F)) return finish(F, psi, nullptr);
+    buffers_at_reference_ = false;
     net_.evaluate(F, FusedMlp::Order::Value, net_value_.data());
     finish(F, psi, nullptr);
 }
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
+    if (at_reference(F)) return finish(F, psi, gradient);
+    buffers_at_reference_ = false;
     net_.evaluate(F, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
     finish(F, psi, gradient);
 }
@@ -122,6 +133,7 @@ template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, double* psi, Mat<dim>* gradient,
                                                             Tensor4<dim>* hessian, bool project_psd) const {
     static_assert(sizeof(Tensor4<dim>) == kM * kM * sizeof(double), "Tensor4 must be a plain d^2 x d^2 array");
+    buffers_at_reference_ = false;
     // Hess_F N is symmetric, so the row-major output is also the column-major
     // Eigen matrix.
     net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),

@@ -10,8 +10,8 @@
 // scene's. The network's hardening input is the h of DESIGN.md §3 for the
 // particle's state (Cam-Clay: min(a, 0)), clamped to the range the model was
 // trained on (ModelMetadata::network_hardening); Ptilde(F0, h) in c uses the
-// state itself, so grad Psi(F0) stays exact where the input was clamped. c is computed once per optimization (set_reference()); within it,
-// the line search asks for values, Newton for gradients and Hessians
+// state itself, so grad Psi(F0) stays exact where the input was clamped. c is computed once per optimization
+// (set_reference()); within it, the line search asks for values, Newton for gradients and Hessians
 //   d2 Psi / dF2 = E [ Hess_F N + w mu I ]   (d^2 x d^2, row-major vec(F) basis),
 // optionally projected to positive semi-definite (eigenvalue clamp).
 #include <cstddef>
@@ -32,8 +32,8 @@ public:
     static constexpr int kM = dim * dim;
 
     struct Options {
-        double youngs_modulus = 1.0;     // E of the scene's material, Pa
-        double regularizer_weight = 1.0; // w of eq. 11 (0: the paper's eq. 8 alone)
+        double youngs_modulus = 1.0;      // E of the scene's material, Pa
+        double regularizer_weight = 1.0;  // w of eq. 11 (0: the paper's eq. 8 alone)
         /// Report Psi(F) - Psi(F0) (same gradient and Hessian): the constant
         /// N(F0, F0, h) - c : F0 is of the size of the elastic energy density
         /// at E, so an incremental potential summed over many particles would
@@ -83,9 +83,9 @@ private:
     ModelMetadata metadata_;
     bool has_hardening_;
     bool relative_;
-    double E_;          // scene E / training E
+    double E_;  // scene E / training E
     double w_;
-    double mu_train_;   // shear modulus at the training E
+    double mu_train_;  // shear modulus at the training E
 
     std::vector<Mat<dim>> F0_;
     std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)
@@ -94,6 +94,11 @@ private:
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> net_value_, net_gradient_;
+    // net_value_ and net_gradient_ hold N and grad N at F0 (set_reference's own pass) until another
+    // evaluation: the fixed point's next solve starts at F(v) = F0 and reuses them.
+    mutable bool buffers_at_reference_ = false;
+    /// Whether F[0..size()) is bitwise the reference F0 and the buffers still hold its pass.
+    bool at_reference(const Mat<dim>* F) const;
 };
 
 }  // namespace pnet

@@ -130,20 +130,18 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         predictor_.set_material_state(system_.element_object, state.hardening);
         predictor_.set_reference({});
         try {
-            const NewtonStats p = minimize(predictor_, v, newton, "step " + std::to_string(step_index) + ", predictor",
-                                           &work_.newton);
+            const NewtonStats p =
+                minimize(predictor_, v, newton, "step " + std::to_string(step_index) + ", predictor", &work_.newton);
             stats.newton_iterations += p.iterations;
             stats.line_search_steps += p.line_search_steps;
         } catch (const NewtonError& e) {
             throw SimulationError(e.what());
         }
     }
-    ReferenceSolveOptions solve;
-    solve.fixed_point = method_ == FemMethod::PlasticityNet;
-    solve.max_solves = options_.max_fixed_point_iterations;
-    solve.tolerance = options_.fixed_point_tolerance;
-    solve.anderson_depth = options_.fixed_point_anderson;
-    solve.fail_on_unconverged = options_.fail_on_unconverged;
+    // FEM keeps exact solves from a fresh Hessian (its direct solver refactors either way).
+    ReferenceSolveOptions solve = options_.reference_solve_options(method_ == FemMethod::PlasticityNet);
+    solve.keep_hessian = false;
+    solve.inexact_forcing = 0.0;
     if (!solve.fixed_point) potential_.set_reference({});  // the elastic and analytic energies need no F0
     // When CCD held the kinematic nodes back, this first solve only starts the
     // stages below: its fixed point stops at their tolerance (kStageTolerance).
@@ -151,9 +149,9 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     if (has_kinematic_ && alpha < 1.0) first_solve.tolerance = std::max(solve.tolerance, kStageTolerance);
     ReferenceSolveStats s;
     try {
-        s = solve_with_reference<dim>(potential_, v, newton, first_solve, "step " + std::to_string(step_index), work_,
-                                      [&] { stats.hardening_clamped = std::max(stats.hardening_clamped,
-                                                                               energy_->hardening_clamped()); });
+        s = solve_with_reference<dim>(
+            potential_, v, newton, first_solve, "step " + std::to_string(step_index), work_,
+            [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped()); });
     } catch (const NewtonError& e) {
         throw SimulationError(e.what());
     }
@@ -188,10 +186,9 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
                 potential_.soften_fixed(weight);
                 NewtonOptions soft = newton;
                 soft.residual_mass = potential_.residual_mass();
-                s.append(solve_with_reference<dim>(potential_, v, soft, stage_solve,
-                                                     "step " + std::to_string(step_index) + ", kinematic stage " +
-                                                         std::to_string(stage + 1),
-                                                     work_));
+                s.append(solve_with_reference<dim>(
+                    potential_, v, soft, stage_solve,
+                    "step " + std::to_string(step_index) + ", kinematic stage " + std::to_string(stage + 1), work_));
                 ++stats.kinematic_stages;
             }
             potential_.harden_fixed();
@@ -202,7 +199,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
             v += t * d;
             stats.kinematic_reached = t >= 1.0;
             s.append(solve_with_reference<dim>(potential_, v, newton, solve,
-                                                 "step " + std::to_string(step_index) + ", kinematic targets", work_));
+                                               "step " + std::to_string(step_index) + ", kinematic targets", work_));
         } catch (const NewtonError& e) {
             throw SimulationError(e.what());
         }
@@ -268,7 +265,8 @@ StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         // shrinks with it): stop instead of crawling.
         if (++stats.substeps > kMaxSubsteps)
             throw SimulationError("step " + std::to_string(step_index) + ": contact needed more than " +
-                                  std::to_string(kMaxSubsteps) + " explicit substeps (a gap is closing to 0: "
+                                  std::to_string(kMaxSubsteps) +
+                                  " explicit substeps (a gap is closing to 0: "
                                   "the barrier stiffness kappa is too low for this impact)");
     }
     stats.wall_seconds = seconds_since(start);
@@ -337,8 +335,10 @@ double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long 
         if (t >= 1.0) break;
         ++stats.ccd_limited;
         if (attempt == 60 || !(h > 0.0))
-            throw SimulationError("step " + std::to_string(step_index) + ": the explicit step cannot avoid "
-                                  "intersecting the mesh (CCD allows " + std::to_string(t) + " of it)");
+            throw SimulationError("step " + std::to_string(step_index) +
+                                  ": the explicit step cannot avoid "
+                                  "intersecting the mesh (CCD allows " +
+                                  std::to_string(t) + " of it)");
         h *= std::min(0.5, t);
     }
     for (std::size_t i = 0; i < n; ++i) {

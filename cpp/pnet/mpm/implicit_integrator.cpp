@@ -47,6 +47,11 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
         read_option(block, "max_fixed_point_iterations", o.max_fixed_point_iterations, context, 1, "an integer >= 1");
     o.fixed_point_anderson =
         read_option(block, "fixed_point_anderson", o.fixed_point_anderson, context, 0, "an integer >= 0");
+    o.fixed_point_inexact =
+        read_option(block, "fixed_point_inexact", o.fixed_point_inexact, context, 0.0, "a number in [0, 1)");
+    if (o.fixed_point_inexact >= 1.0)
+        throw std::invalid_argument(context + ": integrator.fixed_point_inexact: expected a number in [0, 1), got " +
+                                    nlohmann::json(o.fixed_point_inexact).dump());
     o.regularizer_weight =
         read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
     o.lazy_hessian = read_option(block, "lazy_hessian", o.lazy_hessian, context, 0.0, "a number in [0, 1)");
@@ -105,6 +110,18 @@ NewtonOptions ImplicitOptions::newton_options() const {
     return newton;
 }
 
+ReferenceSolveOptions ImplicitOptions::reference_solve_options(bool fixed_point) const {
+    ReferenceSolveOptions solve;
+    solve.fixed_point = fixed_point;
+    solve.max_solves = max_fixed_point_iterations;
+    solve.tolerance = fixed_point_tolerance;
+    solve.anderson_depth = fixed_point_anderson;
+    solve.keep_hessian = fixed_point_keep_hessian;
+    solve.inexact_forcing = fixed_point_inexact;
+    solve.fail_on_unconverged = fail_on_unconverged;
+    return solve;
+}
+
 nlohmann::json ImplicitOptions::to_json() const {
     return {{"newton_tolerance", newton_tolerance},
             {"max_newton_iterations", max_newton_iterations},
@@ -114,6 +131,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"max_fixed_point_iterations", max_fixed_point_iterations},
             {"fixed_point_anderson", fixed_point_anderson},
             {"fixed_point_keep_hessian", fixed_point_keep_hessian},
+            {"fixed_point_inexact", fixed_point_inexact},
             {"regularizer_weight", regularizer_weight},
             {"preconditioner", preconditioner},
             {"linear_solver", linear_solver},
@@ -161,13 +179,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     potential_.set_assemble(options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();
-    ReferenceSolveOptions solve;
-    solve.fixed_point = method_ == ImplicitMethod::PlasticityNet;
-    solve.max_solves = options_.max_fixed_point_iterations;
-    solve.tolerance = options_.fixed_point_tolerance;
-    solve.anderson_depth = options_.fixed_point_anderson;
-    solve.keep_hessian = options_.fixed_point_keep_hessian;
-    solve.fail_on_unconverged = options_.fail_on_unconverged;
+    const ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
     ReferenceSolveStats s;

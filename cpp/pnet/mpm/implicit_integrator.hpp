@@ -38,6 +38,7 @@
 #include "pnet/mpm/integrator.hpp"
 #include "pnet/mpm/mpm_system.hpp"
 #include "pnet/nn/learned_return_map.hpp"
+#include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/newton.hpp"
 
 namespace pnet {
@@ -66,8 +67,16 @@ struct ImplicitOptions {
     int fixed_point_anderson = 0;
     // The fixed point's solves after the first start from the Hessian the previous one prepared
     // (a modified Newton start, ReferenceSolveOptions::keep_hessian): a gradient pass instead of a
-    // Hessian pass per solve. MPM and MPM-FEM coupling; FEM's direct solver ignores it.
-    bool fixed_point_keep_hessian = false;
+    // Hessian pass per solve. MPM and MPM-FEM coupling; FEM's direct solver ignores it. On
+    // sand_column_2d (10 frames, 1 thread) 89 -> 61 ms per step at the same Newton and CG counts; with
+    // the energy's reuse of set_reference's pass at F = F0, 51 ms (issue 19; fixed_point_anderson 3
+    // cut the solves on sand_column_2d but added 29% on snowball_2d, fixed_point_inexact saved nothing:
+    // the later solves already take one Newton step; notebooks/results/implicit_eval/solver_comparison.md).
+    bool fixed_point_keep_hessian = true;
+    // Inexact inner solves while F0 still moves: a later solve of the fixed point whose F0 moved by
+    // more than fixed_point_tolerance stops once its residual has fallen by this factor (0: exact
+    // solves; ReferenceSolveOptions::inexact_forcing). MPM and MPM-FEM coupling.
+    double fixed_point_inexact = 0.0;
     double regularizer_weight = 1.0;  // w of eq. 11 (plasticitynet; 0: the ablation)
     // PCG preconditioner: "jacobi", "block_jacobi" (the d x d block of each
     // node) or "ichol" (incomplete Cholesky of the assembled grid Hessian; MPM only). Jacobi is the default: block
@@ -104,6 +113,9 @@ struct ImplicitOptions {
     /// The Newton loop's settings from these (tolerance, iteration caps, CG tolerance, lazy
     /// Hessian); the caller adds its residual masses and linear solver.
     NewtonOptions newton_options() const;
+    /// The step's solve settings from these: the fixed point on F0 when `fixed_point`, its cap,
+    /// tolerance, acceleration, Hessian reuse and inexact inner solves.
+    ReferenceSolveOptions reference_solve_options(bool fixed_point) const;
     nlohmann::json to_json() const;
 };
 

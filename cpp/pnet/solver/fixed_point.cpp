@@ -51,12 +51,15 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
     const int solves = fixed_point ? options.max_solves : 1;
     if (fixed_point) objective.deformation(v, work.F0);  // F0^0 = F(v)
     double best_change = std::numeric_limits<double>::infinity(), previous_change = best_change;
+    double last_change = best_change;  // the change of F0 that the next solve starts from
+    bool have_best = false;
     for (int j = 0; j < solves; ++j) {
         if (fixed_point) objective.set_reference(work.F0);
         if (after_reference) after_reference();
         const std::string where = context + (fixed_point ? ", fixed-point iteration " + std::to_string(j + 1) : "");
         NewtonOptions solve_newton = newton;
         solve_newton.keep_prepared_hessian = newton.keep_prepared_hessian || (options.keep_hessian && j > 0);
+        if (j > 0 && last_change > options.tolerance) solve_newton.relative_tolerance = options.inexact_forcing;
         const NewtonStats s = minimize(objective, v, solve_newton, where, &work.newton);
         if (j == 0) stats.initial_residual = s.initial_residual;
         stats.newton_iterations += s.iterations;
@@ -78,13 +81,18 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
         objective.deformation(v, work.F);
         double change = 0.0;
         for (std::size_t p = 0; p < work.F.size(); ++p) change = std::max(change, (work.F[p] - work.F0[p]).norm());
-        // Keep the most self-consistent solution.
-        if (change < best_change) {
+        // Keep the most self-consistent solution among those solved to the Newton tolerance (an inexact
+        // solve's v is only a start for the next).
+        const bool exact = s.residual <= newton.tolerance || solve_newton.relative_tolerance <= 0.0;
+        if (exact && change < best_change) {
             best_change = change;
             work.best_v = v;
+            have_best = true;
         }
-        stats.change = best_change;
-        if (change <= options.tolerance) break;
+        stats.change = have_best ? best_change : change;
+        last_change = change;
+        // Done when F0 is consistent and this solve met the Newton tolerance itself (not an inexact one).
+        if (change <= options.tolerance && (s.residual <= newton.tolerance || !converged)) break;
         if (options.anderson_depth <= 0) {
             if (change > previous_change) break;
             previous_change = change;
@@ -96,8 +104,8 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
         }
     }
     if (fixed_point) {
-        v.swap(work.best_v);
-        stats.fixed_point_converged = best_change <= options.tolerance;
+        if (have_best) v.swap(work.best_v);  // else: every solve was inexact (the cap); the last one stands
+        stats.fixed_point_converged = have_best && best_change <= options.tolerance;
     }
     return stats;
 }

@@ -43,6 +43,11 @@ struct ReferenceSolveOptions {
     // Fixed point: the solves after the first start from the Hessian the previous one prepared
     // (NewtonOptions::keep_prepared_hessian; at the same v, with F0 moved by the last change).
     bool keep_hessian = false;
+    // Fixed point: inexact inner solves while F0 still moves. A solve after the first whose F0 moved
+    // by more than the tolerance stops once its residual has fallen by this factor (or reached the
+    // Newton tolerance; NewtonOptions::relative_tolerance); the loop ends only on a solve converged to
+    // the Newton tolerance, and only such a solve's v is returned. 0: exact solves.
+    double inexact_forcing = 0.0;
 };
 
 /// Totals over the step's solves.

@@ -137,9 +137,10 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     if (!std::isfinite(energy) || !g.allFinite())
         throw NewtonError(where(context, 0, residual) + "the energy or its gradient is not finite at the start");
     const double g0 = std::max(g.norm(), 1e-300);
+    const double target = std::max(options.tolerance, options.relative_tolerance * residual);
 
     for (int it = 0; it < options.max_iterations; ++it) {
-        if (residual <= options.tolerance) {
+        if (residual <= target) {
             stats.converged = true;
             break;
         }
@@ -263,7 +264,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         stats.energy = energy;
         stats.residual = residual;
     }
-    if (residual <= options.tolerance) stats.converged = true;
+    if (residual <= target) stats.converged = true;
     return stats;
 }
 

@@ -71,6 +71,9 @@ struct NewtonOptions {
     /// lazy_hessian (with lazy_hessian = 0 the first trial point gets a fresh one). The residual at
     /// the start is weighted by the kept Hessian's diagonal.
     bool keep_prepared_hessian = false;
+    /// Inexact solve: also stop once the residual is at most this fraction of the starting one
+    /// (0: only the absolute tolerance). converged then means the looser of the two was met.
+    double relative_tolerance = 0.0;
 };
 
 struct NewtonStats {

@@ -123,13 +123,27 @@ void check_model(const std::string& file) {
     }
 }
 
-TEST(NeuralElastoplasticEnergy, Sand2d) { check_model<2>("sand_2d.pt"); }
-TEST(NeuralElastoplasticEnergy, Snow2d) { check_model<2>("snow_2d.pt"); }
-TEST(NeuralElastoplasticEnergy, Metal2d) { check_model<2>("metal_2d.pt"); }
-TEST(NeuralElastoplasticEnergy, MetalNeoHookeanLearnedReturnMap2d) { check_model<2>("metal_nh_2d.pt"); }
-TEST(NeuralElastoplasticEnergy, Sand3d) { check_model<3>("sand_3d.pt"); }
-TEST(NeuralElastoplasticEnergy, Snow3d) { check_model<3>("snow_3d.pt"); }
-TEST(NeuralElastoplasticEnergy, Metal3d) { check_model<3>("metal_3d.pt"); }
+TEST(NeuralElastoplasticEnergy, Sand2d) {
+    check_model<2>("sand_2d.pt");
+}
+TEST(NeuralElastoplasticEnergy, Snow2d) {
+    check_model<2>("snow_2d.pt");
+}
+TEST(NeuralElastoplasticEnergy, Metal2d) {
+    check_model<2>("metal_2d.pt");
+}
+TEST(NeuralElastoplasticEnergy, MetalNeoHookeanLearnedReturnMap2d) {
+    check_model<2>("metal_nh_2d.pt");
+}
+TEST(NeuralElastoplasticEnergy, Sand3d) {
+    check_model<3>("sand_3d.pt");
+}
+TEST(NeuralElastoplasticEnergy, Snow3d) {
+    check_model<3>("snow_3d.pt");
+}
+TEST(NeuralElastoplasticEnergy, Metal3d) {
+    check_model<3>("metal_3d.pt");
+}
 
 TEST(NeuralElastoplasticEnergy, ProjectionClampsNegativeEigenvalues) {
     // Strong compression makes the learned Hessian indefinite for some particles;
@@ -215,7 +229,9 @@ TEST(NeuralElastoplasticEnergy, HardeningInputIsMinOfTheStateClampedToTheTrained
     double differ = 0.0;
     for (std::size_t p = 0; p < n; ++p)
         differ = std::max(differ, ((g1[p] - energy.elastoplastic_stress(b.F0[p], -0.2)) -
-                                   (g0[p] - energy.elastoplastic_stress(b.F0[p], 0.0))).cwiseAbs().maxCoeff());
+                                   (g0[p] - energy.elastoplastic_stress(b.F0[p], 0.0)))
+                                      .cwiseAbs()
+                                      .maxCoeff());
     EXPECT_GT(differ, 1e-6 * E) << "the hardening input changes the network's output";
 }
 
@@ -240,6 +256,43 @@ TEST(NeuralElastoplasticEnergy, RelativeToTheReferenceShiftsOnlyTheValue) {
         EXPECT_NEAR(r[p], a[p] - a0[p], 1e-9 * std::abs(a0[p]));
         EXPECT_TRUE(gr[p] == ga[p]);
     }
+}
+
+// The first evaluation at F = F0 after set_reference reuses set_reference's own network pass (the fixed
+// point's next solve starts there): value and gradient are bitwise those of a fresh pass, and an
+// evaluation elsewhere in between, or a hardening change, is not mistaken for one at the reference.
+TEST(NeuralElastoplasticEnergy, EvaluationAtTheReferenceEqualsAFreshPass) {
+    const ModelFile model = load_model_file(kModels + "/snow_2d.pt");
+    NeuralElastoplasticEnergy<2> cached(model, {1.4e5, 1.0}), fresh(model, {1.4e5, 1.0});
+    const Batch<2> b = make_batch<2>(model.metadata, 8, 7);
+    const std::size_t n = b.F.size();
+    cached.set_reference(b.F0.data(), b.h.data(), n);
+    fresh.set_reference(b.F0.data(), b.h.data(), n);
+    std::vector<double> psi_cached(n), psi_fresh(n), psi_other(n);
+    std::vector<Mat<2>> g_cached(n), g_fresh(n), g_other(n);
+    fresh.value_gradient(b.F.data(), psi_other.data(), g_other.data());  // moves fresh's buffers off F0
+    fresh.value_gradient(b.F0.data(), psi_fresh.data(), g_fresh.data());
+    cached.value_gradient(b.F0.data(), psi_cached.data(), g_cached.data());
+    for (std::size_t p = 0; p < n; ++p) {
+        EXPECT_EQ(psi_cached[p], psi_fresh[p]);
+        EXPECT_TRUE(g_cached[p] == g_fresh[p]);
+    }
+    // After an evaluation at F the buffers are F's: a later call at F0 must not see F's values.
+    cached.value_gradient(b.F.data(), psi_other.data(), g_other.data());
+    cached.value_gradient(b.F0.data(), psi_cached.data(), g_cached.data());
+    for (std::size_t p = 0; p < n; ++p) {
+        EXPECT_EQ(psi_cached[p], psi_fresh[p]);
+        EXPECT_TRUE(g_cached[p] == g_fresh[p]);
+    }
+    // A new reference with other hardening at the same F0: its pass, not the old one.
+    std::vector<double> h2 = b.h;
+    for (double& h : h2) h += 0.05;
+    cached.set_reference(b.F0.data(), h2.data(), n);
+    fresh.set_reference(b.F0.data(), h2.data(), n);
+    fresh.value_gradient(b.F.data(), psi_other.data(), g_other.data());
+    fresh.value_gradient(b.F0.data(), psi_fresh.data(), g_fresh.data());
+    cached.value(b.F0.data(), psi_cached.data());
+    for (std::size_t p = 0; p < n; ++p) EXPECT_EQ(psi_cached[p], psi_fresh[p]);
 }
 
 // --- Python cross-check ----------------------------------------------------------

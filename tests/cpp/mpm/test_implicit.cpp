@@ -17,6 +17,7 @@
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
+#include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/newton.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
@@ -341,6 +342,66 @@ TYPED_TEST(ImplicitTest, EveryNewtonStepLowersTheEnergy) {
     }
 }
 
+// The fixed point on F0 (paper eq. 10) with each acceleration of issue 19 -- later solves from the kept
+// Hessian, Anderson over 3 iterates, inexact inner solves while F0 moves -- reaches the plain
+// iteration's self-consistent solution: F(v) = F0 to the tolerance, the last solve converged to the
+// Newton tolerance itself, v within the tolerances of the plain iteration's.
+TYPED_TEST(ImplicitTest, FixedPointAccelerationsReachThePlainIterationsSolution) {
+    constexpr int dim = TypeParam::value;
+    PotentialFixture<dim> f(scene_name<dim>("sand_column"), true, 2e-3);
+    IncrementalPotential<dim>& E = *f.potential;
+    NewtonOptions newton;
+    newton.tolerance = 1e-6;
+    newton.cg_tolerance = 1e-3;
+    newton.lazy_hessian = 0.5;
+    newton.residual_mass = E.residual_mass();
+    struct Variant {
+        const char* name;
+        bool keep;
+        int anderson;
+        double inexact;  // forcing of the inner solves
+    };
+    const Variant variants[] = {{"plain", false, 0, 0.0},
+                                {"kept Hessian", true, 0, 0.0},
+                                {"Anderson 3", false, 3, 0.0},
+                                {"inexact", false, 0, 0.1},
+                                {"all three", true, 3, 0.1}};
+    VecX v_plain;
+    int plain_solves = 0;
+    for (const Variant& variant : variants) {
+        SCOPED_TRACE(variant.name);
+        ReferenceSolveOptions options;
+        options.fixed_point = true;
+        options.max_solves = 30;
+        options.tolerance = 1e-7;
+        options.keep_hessian = variant.keep;
+        options.anderson_depth = variant.anderson;
+        options.inexact_forcing = variant.inexact;
+        ReferenceSolveWork<dim> work;
+        VecX v = E.v_star();
+        const ReferenceSolveStats stats = solve_with_reference<dim>(E, v, newton, options, "test", work);
+        EXPECT_TRUE(stats.fixed_point_converged) << "change " << stats.change;
+        EXPECT_TRUE(stats.converged);
+        EXPECT_LE(stats.residual, newton.tolerance) << "the last solve met the Newton tolerance";
+        EXPECT_LE(stats.change, options.tolerance);
+        // F(v) is the reference the energy holds: the fixed point is self-consistent at the returned v.
+        std::vector<Mat<dim>> F;
+        E.deformation(v, F);
+        double change = 0.0;
+        for (std::size_t p = 0; p < F.size(); ++p) change = std::max(change, (F[p] - work.F0[p]).norm());
+        if (variant.anderson == 0) {
+            EXPECT_LE(change, options.tolerance);
+        }
+        if (v_plain.size() == 0) {
+            v_plain = v;
+            plain_solves = stats.solves;
+            EXPECT_GE(plain_solves, 3) << "the fixed point needs several solves here, or the test shows nothing";
+        } else {
+            EXPECT_LT((v - v_plain).lpNorm<Eigen::Infinity>(), 1e-4 * std::max(1.0, v_plain.lpNorm<Eigen::Infinity>()));
+        }
+    }
+}
+
 template <int dim>
 IntegratorSettings implicit_settings(const std::string& name, const Scene& scene, double model_scale) {
     IntegratorSettings s;
@@ -488,6 +549,9 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_EQ(o.fixed_point_anderson, 2);
     EXPECT_FALSE(o.fixed_point_keep_hessian);
     EXPECT_EQ(ImplicitOptions{}.lazy_hessian, 0.5);
+    EXPECT_TRUE(ImplicitOptions{}.fixed_point_keep_hessian);
+    EXPECT_EQ(ImplicitOptions{}.fixed_point_anderson, 0);
+    EXPECT_EQ(ImplicitOptions{}.fixed_point_inexact, 0.0);
     EXPECT_EQ(ImplicitOptions::from_json(o.to_json(), "s.json").to_json(), o.to_json());
     EXPECT_EQ(o.newton_tolerance, 1e-4);
     EXPECT_EQ(o.max_fixed_point_iterations, 3);
@@ -503,6 +567,8 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_EQ(message({{"newton_tolerance", -1}}),
               "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
     EXPECT_EQ(message({{"lazy_hessian", 1}}), "s.json: integrator.lazy_hessian: expected a number in [0, 1), got 1.0");
+    EXPECT_EQ(message({{"fixed_point_inexact", 1}}),
+              "s.json: integrator.fixed_point_inexact: expected a number in [0, 1), got 1.0");
     EXPECT_EQ(message({{"preconditioner", "ilu"}}),
               "s.json: integrator.preconditioner: expected \"jacobi\", \"block_jacobi\" or \"ichol\", got \"ilu\"");
     EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),
