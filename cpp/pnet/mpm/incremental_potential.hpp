@@ -19,8 +19,8 @@
 // is zeroed and their Hessian rows and columns replaced by m_i, so Newton never
 // moves them. Scatters run in the grid's block-colour order, so every sum has
 // a fixed order and results do not depend on the thread count.
-#include <cstdint>
 #include <Eigen/SparseCore>
+#include <cstdint>
 #include <vector>
 
 #include "pnet/energy/particle_energy.hpp"
@@ -121,13 +121,13 @@ private:
     const Particles<dim>* particles_ = nullptr;
     double dt_ = 0.0;
 
-    std::vector<int> node_dof_;             // grid storage index -> dof (-1: not an unknown)
-    std::vector<std::int64_t> dof_node_;    // dof -> grid storage index
-    VecX mass_;                             // per component (m_i, or 1 for a massless node), kg
+    std::vector<int> node_dof_;                            // grid storage index -> dof (-1: not an unknown)
+    std::vector<std::int64_t> dof_node_;                   // dof -> grid storage index
+    VecX mass_;                                            // per component (m_i, or 1 for a massless node), kg
     VecX v_star_, free_, residual_scale_, residual_mass_;  // free_: 1 on free components, 0 on fixed ones
-    std::vector<int> stencil_dof_;          // particle p, node s: dof of node s of p's stencil
-    std::vector<Vec<dim>> stencil_grad_;    // grad w_ip, 1/m
-    std::vector<double> stencil_weight_;    // w_ip
+    std::vector<int> stencil_dof_;                         // particle p, node s: dof of node s of p's stencil
+    std::vector<Vec<dim>> stencil_grad_;                   // grad w_ip, 1/m
+    std::vector<double> stencil_weight_;                   // w_ip
     // add_hessian_triplets(): per node and neighbour offset, the neighbour's dof and the d x d block.
     mutable std::vector<int> pair_dof_;
     mutable std::vector<double> pair_block_;
@@ -135,8 +135,13 @@ private:
     // Per particle, at the last evaluation.
     std::vector<Mat<dim>> F_, P_;
     std::vector<double> psi_;
-    std::vector<Tensor4<dim>> K_;           // the Hessian of psi, then K_p (prepare_hessian)
+    std::vector<Tensor4<dim>> K_;  // the Hessian of psi, then K_p (prepare_hessian)
     mutable VecX masked_;
+    // hessian_multiply without colour passes: the stencil entries (p, s) of each unknown node, grouped
+    // by node (CSR: node_entries_[node_entry_start_[k] .. node_entry_start_[k + 1]) = p * kStencil + s,
+    // increasing), and each particle's K_p dG_p.
+    std::vector<int> node_entry_start_, node_entries_;
+    mutable std::vector<Eigen::Matrix<double, kM, 1>> particle_product_;
     bool project_psd_ = true;
     bool assemble_ = false;
     SparseMatrix hessian_;
