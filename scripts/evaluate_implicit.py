@@ -91,6 +91,15 @@ def run_step(scene: str, name: str) -> float:
     return gt_step(scene) if name == "gt" else RUNS[name][1]
 
 
+def without_threads(command: list) -> list:
+    """The command without --threads N: frames are bit-identical at 1 and 2 threads (the C++ tests
+    OneAndTwoThreads...), so the thread count is not part of what a run computes."""
+    if "--threads" not in command:
+        return command
+    t = command.index("--threads")
+    return command[:t] + command[t + 2:]
+
+
 def run_marker(scene: str, command: list, explicit: bool) -> dict:
     """What a run's result depends on besides the simulator: the command and the scene file (for an
     explicit run without its "integrator" block, which only sets the implicit solvers)."""
@@ -101,12 +110,8 @@ def run_marker(scene: str, command: list, explicit: bool) -> dict:
     scene_sha = hashlib.sha256(json.dumps(scene_json, sort_keys=True).encode()).hexdigest()
     # The binary and the output folder are not part of what a run computes (a run may be reused from
     # another work folder through a link, or made by an older binary when only the implicit code changed).
-    # Nor is the thread count: frames are bit-identical at 1 and 2 threads (tests: OneAndTwoThreads...).
     i = command.index("--out")
-    command = command[2:i] + command[i + 2:]
-    if "--threads" in command:
-        t = command.index("--threads")
-        command = command[:t] + command[t + 2:]
+    command = without_threads(command[2:i] + command[i + 2:])
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     marker = {"command": command, "scene_sha256": scene_sha, "commit": commit}  # commit: for the record only
     if not explicit:  # an implicit run also depends on its model files (retrained models are re-run)
@@ -123,9 +128,8 @@ def run_dir_complete(out: Path, marker: dict, frames: int) -> bool:
     if not path.exists() or not (out / f"frame_{frames:05d}.ply").exists():
         return False
     old = json.loads(path.read_text())
-    if isinstance(old, dict) and "--threads" in old.get("command", []):  # markers written before threads were dropped
-        t = old["command"].index("--threads")
-        old["command"] = old["command"][:t] + old["command"][t + 2:]
+    if isinstance(old, dict) and isinstance(old.get("command"), list):  # markers written before threads were dropped
+        old["command"] = without_threads(old["command"])
     return isinstance(old, dict) and all(old.get(k) == marker.get(k) for k in ("command", "scene_sha256", "models"))
 
 

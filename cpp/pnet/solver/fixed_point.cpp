@@ -92,7 +92,7 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
         stats.change = have_best ? best_change : change;
         last_change = change;
         // Done when F0 is consistent and this solve met the Newton tolerance itself (not an inexact one).
-        if (change <= options.tolerance && (s.residual <= newton.tolerance || !converged)) break;
+        if (change <= options.tolerance && (exact || !converged)) break;
         if (options.anderson_depth <= 0) {
             if (change > previous_change) break;
             previous_change = change;
