@@ -115,7 +115,7 @@ def run_marker(scene: str, command: list, explicit: bool) -> dict:
     commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     marker = {"command": command, "scene_sha256": scene_sha, "commit": commit}  # commit: for the record only
     if not explicit:  # an implicit run also depends on its model files (retrained models are re-run)
-        scene_dir = ROOT / "scenes"
+        scene_dir = (ROOT / "scenes" / f"{scene}.json").parent  # model paths are relative to the scene file
         marker["models"] = {
             o["model"]: hashlib.sha256((scene_dir / o["model"]).read_bytes()).hexdigest()
             for o in scene_json.get("objects", []) + scene_json.get("meshes", []) if "model" in o

@@ -18,6 +18,7 @@ say() { printf '[setup] %s\n' "$*"; }
 packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libsuitesparse-dev nlohmann-json3-dev pybind11-dev libgtest-dev libtorch-dev zlib1g-dev
+  libpng-dev libssl-dev
   libgmsh-dev
   python3 python3-dev python3-venv python3-pip python3-setuptools python3-wheel
   python3-torch python3-numpy python3-matplotlib python3-tqdm python3-pytest

@@ -1,6 +1,6 @@
 #include "pnet/io/png.hpp"
 
-#include <zlib.h>
+#include <png.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -17,41 +17,22 @@ namespace pnet {
 
 namespace {
 
-constexpr std::uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-
-// Far above any frame or plot, and low enough that 3 * w * h + h cannot overflow anywhere or
-// make a corrupt header allocate gigabytes.
+// Far above any frame or plot, and low enough that 3 * w * h cannot overflow anywhere or make a
+// corrupt header allocate gigabytes.
 constexpr std::int64_t kMaxPixels = std::int64_t(1) << 28;
 
-void put_be32(std::string& out, std::uint32_t v) {
-    out.push_back(static_cast<char>(v >> 24));
-    out.push_back(static_cast<char>((v >> 16) & 0xff));
-    out.push_back(static_cast<char>((v >> 8) & 0xff));
-    out.push_back(static_cast<char>(v & 0xff));
-}
-
-std::uint32_t get_be32(const std::uint8_t* p) {
-    return (std::uint32_t(p[0]) << 24) | (std::uint32_t(p[1]) << 16) | (std::uint32_t(p[2]) << 8) | p[3];
-}
-
-// A chunk is length, type, data, and the CRC-32 of type + data (PNG spec section 5.3).
-void put_chunk(std::string& out, const char type[4], const std::uint8_t* data, std::size_t size) {
-    put_be32(out, std::uint32_t(size));
-    out.append(type, 4);
-    out.append(reinterpret_cast<const char*>(data), size);
-    uLong crc = crc32(0L, Z_NULL, 0);
-    crc = crc32(crc, reinterpret_cast<const Bytef*>(type), 4);
-    if (size > 0) crc = crc32_z(crc, data, size);
-    put_be32(out, std::uint32_t(crc));
-}
-
-// Paeth predictor (PNG spec section 9.4).
-std::uint8_t paeth(int a, int b, int c) {
-    const int p = a + b - c;
-    const int pa = std::abs(p - a), pb = std::abs(p - b), pc = std::abs(p - c);
-    if (pa <= pb && pa <= pc) return std::uint8_t(a);
-    return std::uint8_t(pb <= pc ? b : c);
-}
+/// libpng's simplified API (png_image) owns its state through `opaque`; this frees it on
+/// every path out, errors included.
+struct PngImage {
+    png_image image;
+    PngImage() {
+        std::memset(&image, 0, sizeof(image));
+        image.version = PNG_IMAGE_VERSION;
+    }
+    ~PngImage() { png_image_free(&image); }
+    PngImage(const PngImage&) = delete;
+    PngImage& operator=(const PngImage&) = delete;
+};
 
 }  // namespace
 
@@ -104,29 +85,46 @@ void write_png(const std::string& path, const Image& img) {
         throw std::invalid_argument(path + ": image has " + std::to_string(img.rgb.size()) + " bytes, expected " +
                                     std::to_string(row_bytes * std::size_t(img.height)));
     }
-
-    // Filter type 0 (None) on every row: each scanline is its filter byte then the raw pixels.
-    std::vector<std::uint8_t> raw((row_bytes + 1) * std::size_t(img.height));
-    for (int y = 0; y < img.height; ++y) {
-        std::uint8_t* dst = &raw[std::size_t(y) * (row_bytes + 1)];
-        dst[0] = 0;
-        std::memcpy(dst + 1, &img.rgb[std::size_t(y) * row_bytes], row_bytes);
-    }
-    uLongf compressed_size = compressBound(uLong(raw.size()));
-    std::vector<std::uint8_t> compressed(compressed_size);
-    const int status = compress2(compressed.data(), &compressed_size, raw.data(), uLong(raw.size()), 6);
-    if (status != Z_OK) throw std::runtime_error(path + ": zlib compress2 failed (" + std::to_string(status) + ")");
-
-    std::string png(reinterpret_cast<const char*>(kSignature), sizeof(kSignature));
-    std::string ihdr;
-    put_be32(ihdr, std::uint32_t(img.width));
-    put_be32(ihdr, std::uint32_t(img.height));
-    ihdr += std::string{8, 2, 0, 0, 0};  // bit depth 8, colour type 2 (RGB), deflate, filter set 0, no interlace
-    put_chunk(png, "IHDR", reinterpret_cast<const std::uint8_t*>(ihdr.data()), ihdr.size());
-    put_chunk(png, "IDAT", compressed.data(), compressed_size);
-    put_chunk(png, "IEND", nullptr, 0);
-    write_text_atomically(path, png);
+    PngImage png;
+    png.image.width = png_uint_32(img.width);
+    png.image.height = png_uint_32(img.height);
+    png.image.format = PNG_FORMAT_RGB;
+    // Encode to memory first (size query, then the bytes), so that the file is written whole
+    // and atomically: a failed encode leaves any earlier file untouched.
+    png_alloc_size_t size = 0;
+    if (!png_image_write_to_memory(&png.image, nullptr, &size, 0, img.rgb.data(), 0, nullptr))
+        throw std::runtime_error(path + ": libpng cannot encode the image: " + png.image.message);
+    std::string bytes(size, '\0');
+    if (!png_image_write_to_memory(&png.image, bytes.data(), &size, 0, img.rgb.data(), 0, nullptr))
+        throw std::runtime_error(path + ": libpng cannot encode the image: " + png.image.message);
+    bytes.resize(size);
+    write_text_atomically(path, bytes);
 }
+
+namespace {
+
+/// The bytes of a PNG in memory, handed to libpng's reader in the pieces it asks for.
+struct MemorySource {
+    const std::string& bytes;
+    std::size_t position = 0;
+};
+
+void read_from_memory(png_structp png, png_bytep out, png_size_t size) {
+    auto* source = static_cast<MemorySource*>(png_get_io_ptr(png));
+    if (size > source->bytes.size() - source->position) png_error(png, "truncated file (read beyond its end)");
+    std::memcpy(out, source->bytes.data() + source->position, size);
+    source->position += size;
+}
+
+/// libpng reports errors by longjmp; the message is kept here for the exception thrown after.
+void record_error(png_structp png, png_const_charp message) {
+    *static_cast<std::string*>(png_get_error_ptr(png)) = message;
+    png_longjmp(png, 1);
+}
+
+void ignore_warning(png_structp, png_const_charp) {}
+
+}  // namespace
 
 Image read_png_rgb(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
@@ -134,96 +132,54 @@ Image read_png_rgb(const std::string& path) {
     const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     if (in.bad()) throw std::runtime_error(path + ": reading failed");
     auto fail = [&](const std::string& problem) { return std::runtime_error(path + ": " + problem); };
-    const auto* data = reinterpret_cast<const std::uint8_t*>(bytes.data());
-
-    if (bytes.size() < sizeof(kSignature) || std::memcmp(data, kSignature, sizeof(kSignature)) != 0) {
+    if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0)
         throw fail("not a PNG file (bad signature)");
-    }
-    std::size_t pos = sizeof(kSignature);
-    int width = 0, height = 0;
-    bool have_header = false, ended = false;
-    std::vector<std::uint8_t> idat;
-    while (!ended) {
-        if (bytes.size() - pos < 12) throw fail("truncated PNG (chunk header at byte " + std::to_string(pos) + ")");
-        const std::uint32_t length = get_be32(data + pos);
-        const std::string type(bytes, pos + 4, 4);
-        if (length > bytes.size() - pos - 12) throw fail("truncated PNG (" + type + " chunk)");
-        const std::uint8_t* body = data + pos + 8;
-        uLong crc = crc32(0L, Z_NULL, 0);
-        crc = crc32_z(crc, data + pos + 4, 4 + std::size_t(length));
-        if (std::uint32_t(crc) != get_be32(body + length)) throw fail("CRC mismatch in the " + type + " chunk");
-        pos += 12 + std::size_t(length);
 
-        if (type == "IHDR") {
-            if (have_header || length != 13) throw fail("bad IHDR chunk");
-            const std::uint32_t w = get_be32(body), h = get_be32(body + 4);
-            if (w == 0 || h == 0 || w > std::uint32_t(kMaxPixels) || h > std::uint32_t(kMaxPixels) ||
-                std::int64_t(w) * std::int64_t(h) > kMaxPixels) {
-                throw fail("unsupported image size " + std::to_string(w) + " x " + std::to_string(h));
-            }
-            if (body[8] != 8 || body[9] != 2 || body[10] != 0 || body[11] != 0 || body[12] != 0) {
-                throw fail("only 8-bit RGB non-interlaced PNG is supported (bit depth " + std::to_string(body[8]) +
-                           ", colour type " + std::to_string(body[9]) + ", interlace " + std::to_string(body[12]) +
-                           ")");
-            }
-            width = int(w);
-            height = int(h);
-            have_header = true;
-        } else if (!have_header) {
-            throw fail("the first chunk is " + type + ", not IHDR");
-        } else if (type == "IDAT") {
-            idat.insert(idat.end(), body, body + length);
-        } else if (type == "IEND") {
-            ended = true;
-        } else if (!(type[0] & 0x20) && type != "PLTE") {
-            // Bit 5 of the first letter clear marks a critical chunk, which a decoder must not skip.
-            throw fail("unsupported critical chunk " + type);
-        }
+    // libpng's full reader, not png_image: that one skips the chunk CRCs of the image data.
+    std::string error;
+    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &error, record_error, ignore_warning);
+    if (!png) throw fail("libpng cannot allocate a reader");
+    png_infop info = png_create_info_struct(png);
+    MemorySource source{bytes, 0};
+    // libpng longjmps to the last setjmp on an error. Locals with destructors are made outside
+    // the guarded stretches, which change only libpng's state and the pixels behind `rows`.
+    if (setjmp(png_jmpbuf(png))) {
+        png_destroy_read_struct(&png, &info, nullptr);
+        throw fail("corrupt or truncated PNG (libpng: " + error + ")");
     }
-    if (idat.empty()) throw fail("no IDAT chunk");
+    if (!info) png_error(png, "cannot allocate the info struct");
+    png_set_read_fn(png, &source, read_from_memory);
+    png_set_crc_action(png, PNG_CRC_ERROR_QUIT, PNG_CRC_WARN_DISCARD);  // critical chunks: a bad CRC is an error
+    png_read_info(png, info);
+    const png_uint_32 w = png_get_image_width(png, info), h = png_get_image_height(png, info);
+    if (w == 0 || h == 0 || std::int64_t(w) * std::int64_t(h) > kMaxPixels) {
+        png_destroy_read_struct(&png, &info, nullptr);
+        throw fail("unsupported image size " + std::to_string(w) + " x " + std::to_string(h));
+    }
+    // Any PNG loads as 8-bit RGB: palette and grey expanded, 16-bit stripped, alpha composited on white.
+    const int colour = png_get_color_type(png, info);
+    if (colour == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(png);
+    if (colour == PNG_COLOR_TYPE_GRAY || colour == PNG_COLOR_TYPE_GRAY_ALPHA) png_set_gray_to_rgb(png);
+    if (png_get_bit_depth(png, info) < 8) png_set_expand(png);
+    png_set_strip_16(png);
+    if (colour & PNG_COLOR_MASK_ALPHA || png_get_valid(png, info, PNG_INFO_tRNS)) {
+        png_color_16 white{};
+        white.red = white.green = white.blue = white.gray = 255;
+        png_set_background(png, &white, PNG_BACKGROUND_GAMMA_SCREEN, 0, 1.0);
+    }
+    png_set_interlace_handling(png);
+    png_read_update_info(png, info);
 
-    const std::size_t row_bytes = 3 * std::size_t(width);
-    std::vector<std::uint8_t> raw((row_bytes + 1) * std::size_t(height));
-    uLongf raw_size = uLongf(raw.size());
-    const int status = uncompress(raw.data(), &raw_size, idat.data(), uLong(idat.size()));
-    if (status != Z_OK || raw_size != raw.size()) {
-        throw fail("corrupt image data (zlib status " + std::to_string(status) + ", " + std::to_string(raw_size) +
-                   " of " + std::to_string(raw.size()) + " bytes)");
+    Image img{int(w), int(h)};
+    std::vector<png_bytep> rows(h);
+    for (png_uint_32 y = 0; y < h; ++y) rows[y] = img.rgb.data() + std::size_t(y) * 3 * w;
+    if (setjmp(png_jmpbuf(png))) {
+        png_destroy_read_struct(&png, &info, nullptr);
+        throw fail("corrupt or truncated PNG (libpng: " + error + ")");
     }
-
-    // Undo the row filters (PNG spec section 9.2); bpp = 3 bytes per pixel.
-    Image img(width, height);
-    std::vector<std::uint8_t> previous(row_bytes, 0), current(row_bytes);
-    for (int y = 0; y < height; ++y) {
-        const std::uint8_t* line = &raw[std::size_t(y) * (row_bytes + 1)];
-        const std::uint8_t filter = line[0];
-        for (std::size_t i = 0; i < row_bytes; ++i) {
-            const int a = i >= 3 ? current[i - 3] : 0, b = previous[i], c = i >= 3 ? previous[i - 3] : 0;
-            int predictor = 0;
-            switch (filter) {
-                case 0:
-                    predictor = 0;
-                    break;
-                case 1:
-                    predictor = a;
-                    break;
-                case 2:
-                    predictor = b;
-                    break;
-                case 3:
-                    predictor = (a + b) / 2;
-                    break;
-                case 4:
-                    predictor = paeth(a, b, c);
-                    break;
-                default:
-                    throw fail("bad filter type " + std::to_string(filter) + " on row " + std::to_string(y));
-            }
-            current[i] = std::uint8_t(line[1 + i] + predictor);
-        }
-        std::memcpy(&img.rgb[std::size_t(y) * row_bytes], current.data(), row_bytes);
-        std::swap(previous, current);
-    }
+    png_read_image(png, rows.data());
+    png_read_end(png, nullptr);
+    png_destroy_read_struct(&png, &info, nullptr);
     return img;
 }
 

@@ -1,17 +1,22 @@
 #pragma once
-// SHA-256 (FIPS 180-4), self-contained so that model files and checkpoints can
-// be fingerprinted (e.g. checked against a MANIFEST) without pulling in OpenSSL.
-#include <array>
+// SHA-256 (FIPS 180-4) through OpenSSL's libcrypto (EVP), so that model files
+// and checkpoints are fingerprinted (e.g. checked against a MANIFEST) by the
+// system's audited implementation.
 #include <cstddef>
-#include <cstdint>
+#include <memory>
 #include <string>
 
 namespace pnet {
 
-/// Incremental SHA-256 (FIPS 180-4): feed data in any chunking, the digest is the same.
+/// Incremental SHA-256: feed data in any chunking, the digest is the same.
 class Sha256 {
 public:
     Sha256();
+    ~Sha256();
+    Sha256(Sha256&&) noexcept;
+    Sha256& operator=(Sha256&&) noexcept;
+    Sha256(const Sha256&) = delete;
+    Sha256& operator=(const Sha256&) = delete;
 
     void update(const void* data, std::size_t size);
 
@@ -20,13 +25,8 @@ public:
     std::string hex_digest();
 
 private:
-    void reset();
-    void process_block(const std::uint8_t* block);
-
-    std::array<std::uint32_t, 8> state_;
-    std::array<std::uint8_t, 64> buffer_;  // pending bytes of an incomplete block
-    std::size_t buffered_ = 0;             // bytes used in buffer_ (always < 64)
-    std::uint64_t length_ = 0;             // total message length in bytes
+    struct Context;
+    std::unique_ptr<Context> context_;
 };
 
 /// sha256 of a byte string, lowercase hex.

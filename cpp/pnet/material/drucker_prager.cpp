@@ -34,14 +34,14 @@ template <int dim>
 ReturnResult<dim> DruckerPrager<dim>::project(const Vec<dim>& Sigma, double hardening) const {
     const Vec<dim> eps = Sigma.array().log().matrix();
     const double tr_eps = eps.sum();
-    if (tr_eps > 0.0) return {Vec<dim>::Ones(), hardening, ReturnBranch::Apex};
+    if (tr_eps > 0.0) return {Vec<dim>::Ones(), hardening, ReturnBranch::Apex, true, Vec<dim>::Zero()};
     const Vec<dim> eps_hat = eps - tr_eps / dim * Vec<dim>::Ones();
     const double eps_hat_norm = eps_hat.norm();
     const double dgamma = eps_hat_norm + alpha_ * (dim * lambda_ + 2.0 * mu_) * tr_eps / (2.0 * mu_);
-    if (dgamma <= 0.0) return {Sigma, hardening, ReturnBranch::Elastic};
+    if (dgamma <= 0.0) return {Sigma, hardening, ReturnBranch::Elastic, true, eps};
     // dgamma > 0 implies eps_hat_norm > 0 because tr_eps <= 0 here.
-    const Vec<dim> Z = (eps - dgamma / eps_hat_norm * eps_hat).array().exp().matrix();
-    return {Z, hardening, ReturnBranch::Cone};
+    const Vec<dim> eps_Z = eps - dgamma / eps_hat_norm * eps_hat;
+    return {eps_Z.array().exp().matrix(), hardening, ReturnBranch::Cone, true, eps_Z};
 }
 
 template <int dim>

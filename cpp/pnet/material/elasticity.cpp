@@ -84,7 +84,11 @@ double Elasticity<dim>::psi(const Vec<dim>& Sigma) const {
 
 template <int dim>
 Vec<dim> Elasticity<dim>::tau(const Vec<dim>& Sigma) const {
-    const Vec<dim> eps = Sigma.array().log().matrix();
+    return tau_of_strain(Sigma.array().log().matrix());
+}
+
+template <int dim>
+Vec<dim> Elasticity<dim>::tau_of_strain(const Vec<dim>& eps) const {
     const double log_J = eps.sum();
     const Vec<dim> ones = Vec<dim>::Ones();
     switch (model_) {

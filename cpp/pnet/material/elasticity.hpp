@@ -52,6 +52,8 @@ public:
     double psi(const Vec<dim>& Sigma) const;
     /// Kirchhoff stress in diagonal space, tau_i = d psi / d eps_i.
     Vec<dim> tau(const Vec<dim>& Sigma) const;
+    /// The same stress from the Hencky strain eps = log(Sigma).
+    Vec<dim> tau_of_strain(const Vec<dim>& eps) const;
     /// d tau_i / d eps_j.
     Mat<dim> dtau_deps(const Vec<dim>& Sigma) const;
     /// (tau_i - tau_j) / (Sigma_i - Sigma_j) for i != j, evaluated in closed

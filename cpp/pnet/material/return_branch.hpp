@@ -29,12 +29,19 @@ inline const char* to_string(ReturnBranch branch) {
     return "unknown";
 }
 
-/// Projected singular values and the updated hardening state.
+/// Projected singular values and the updated hardening state. A model that
+/// works in Hencky strain (Drucker-Prager) also gives log(Sigma) as it formed
+/// it, so that the stress of the projected state needs no second log.
 template <int dim>
 struct ReturnResult {
     Vec<dim> Sigma;
     double hardening = 0.0;
     ReturnBranch branch = ReturnBranch::Elastic;
+    bool strain_known = false;
+    Vec<dim> strain = Vec<dim>::Zero();  // log(Sigma) where strain_known
+
+    /// log(Sigma), the Hencky strain of the projected state.
+    Vec<dim> hencky_strain() const { return strain_known ? strain : Vec<dim>(Sigma.array().log().matrix()); }
 };
 
 }  // namespace pnet

@@ -101,7 +101,7 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     grid_to_particles(grid_, particles, dt, MaterialReturnMap<dim>{system_, particles},
                       [&](std::ptrdiff_t p, const PolarSVD<dim>& svd, const ReturnResult<dim>& Z) {
                           const Material<dim>& material = system_.materials[particles.object[p]];
-                          const Vec<dim> tau = material.elasticity().tau(Z.Sigma);
+                          const Vec<dim> tau = material.elasticity().tau_of_strain(Z.hencky_strain());
                           scaled_stress_[p] = particles.rest_volume[p] * (svd.U * tau.asDiagonal() * svd.U.transpose());
                       });
     stats.clamped = clamp_to_grid(particles, grid_, step_index, system_.dx / dt);

@@ -1,9 +1,11 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
+#include <png.h>
 #include <zlib.h>
 
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -136,22 +138,45 @@ TEST(Png, BadFilesAreRejected) {
     expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "truncated");
 
     std::string corrupt = good;
-    corrupt[45] = char(corrupt[45] ^ 0x55);  // inside the IDAT data (which starts at byte 41)
+    corrupt[good.size() - 14] = char(corrupt[good.size() - 14] ^ 0x55);  // the IDAT's CRC (IEND is the last 12 bytes)
     write_file(path, corrupt);
     expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "CRC");
 
-    std::string grey = good;
-    grey[25] = 0;  // colour type greyscale (the CRC check comes first, so fix it up)
-    const uLong crc = crc32(0L, reinterpret_cast<const Bytef*>(grey.data() + 12), 17);
-    for (int k = 0; k < 4; ++k) grey[29 + std::size_t(k)] = char((crc >> (8 * (3 - k))) & 0xff);
-    write_file(path, grey);
-    expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "8-bit RGB");
+    corrupt = good;
+    corrupt[good.size() / 2] = char(corrupt[good.size() / 2] ^ 0x55);  // inside the image data
+    write_file(path, corrupt);
+    expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "IDAT");
 
     write_file(path, "GIF89a not a png");
     expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "not a PNG file");
 
     const std::string missing = dir.file("missing.png");
     expect_error<std::runtime_error>([&] { read_png_rgb(missing); }, missing, "cannot open");
+}
+
+// Other encoders' colour types load as RGB (libpng converts them): a greyscale PNG gives
+// r = g = b = the grey level.
+TEST(Png, ReadsGreyscaleAsRgb) {
+    const int w = 5, h = 3;
+    std::vector<std::uint8_t> grey(std::size_t(w * h));
+    for (std::size_t i = 0; i < grey.size(); ++i) grey[i] = std::uint8_t(17 * i);
+    png_image image;
+    std::memset(&image, 0, sizeof(image));
+    image.version = PNG_IMAGE_VERSION;
+    image.width = w;
+    image.height = h;
+    image.format = PNG_FORMAT_GRAY;
+    TempDir dir;
+    const std::string path = dir.file("grey.png");
+    ASSERT_TRUE(png_image_write_to_file(&image, path.c_str(), 0, grey.data(), 0, nullptr)) << image.message;
+    const Image back = read_png_rgb(path);
+    ASSERT_EQ(back.width, w);
+    ASSERT_EQ(back.height, h);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::uint8_t g = grey[std::size_t(y * w + x)];
+            EXPECT_EQ(back.get(x, y), (Rgb{g, g, g})) << x << ", " << y;
+        }
 }
 
 TEST(Png, WriterRejectsBadImages) {
