@@ -157,9 +157,9 @@ def simulate(scene: str, name: str, frames: int, threads: int, work: Path, force
     return out
 
 
-def compare(gt: Path, run: Path, dx: float) -> list:
+def compare(gt: Path, run: Path, dx: float, pnet: Path = PNET) -> list:
     out = run / "compare_gt"
-    subprocess.run([str(PNET), "compare", str(gt), str(run), "--out", str(out), "--dx", repr(dx)], check=True,
+    subprocess.run([str(pnet), "compare", str(gt), str(run), "--out", str(out), "--dx", repr(dx)], check=True,
                    stdout=subprocess.DEVNULL)
     with open(out / "iou.csv") as f:
         return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
@@ -220,11 +220,12 @@ def main():
     parser.add_argument("--work", type=Path, default=ROOT / "out" / "eval")
     parser.add_argument("--results", type=Path, default=ROOT / "notebooks" / "results" / "implicit_eval")
     parser.add_argument("--force", action="store_true", help="re-run even when a complete run exists")
-    parser.add_argument("--pnet", type=Path, default=PNET, help="the pnet binary that simulates (default: the build's)")
+    parser.add_argument("--pnet", type=Path, default=PNET, help="the pnet binary that simulates and compares (default: the build's; a copy lets "
+                             "the build relink while an evaluation runs)")
     parser.add_argument("--simulate-only", action="store_true", help="run the simulations, compare nothing")
     args = parser.parse_args()
-    if not PNET.exists():
-        sys.exit(f"{PNET} not found: build first (./scripts/setup.sh)")
+    if not args.pnet.exists():
+        sys.exit(f"{args.pnet} not found: build first (./scripts/setup.sh)")
 
     args.results.mkdir(parents=True, exist_ok=True)
     summary = []
@@ -257,7 +258,7 @@ def main():
             row = {"scene": scene, "run": name, "integrator": RUNS[name][0], "dt": run_step(scene, name),
                    **figures}
             if name != "gt":
-                rows = compare(gt, run, dx)
+                rows = compare(gt, run, dx, args.pnet)
                 curves[name] = rows
                 soft = [r["soft_iou"] for r in rows]
                 binary = [r["binary_iou"] for r in rows]

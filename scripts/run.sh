@@ -4,8 +4,8 @@
 # implicit integrator at dt = 1e-3 s (the scene's integrator block; the learned
 # sand energy models/sand_2d.pt). Writes per frame a PLY and a PNG, stats.csv,
 # steps.csv (Newton/CG/fixed-point figures per step) and run.json to
-# out/sand_column_2d/ (or --out DIR), plus sand_column_2d.mp4 when ffmpeg is
-# installed, and prints where everything is.
+# out/sand_column_2d/ (or --out DIR), plus the video sand_column_2d.mp4 (`pnet
+# video`), and prints where everything is.
 #
 # Other arguments go to `pnet simulate` (e.g. --frames 10, --threads 1,
 # --integrator explicit --dt 1e-5 for the ground truth).
@@ -27,15 +27,8 @@ done
 
 "$build_dir/cpp/pnet" simulate "$scene" --out "$out" "${args[@]+"${args[@]}"}"
 
-if command -v ffmpeg >/dev/null 2>&1; then
-  video="$out/sand_column_2d.mp4"
-  # 50 frames per second of video = the scene's frame rate (frame_dt 0.02 s): real time.
-  ffmpeg -loglevel error -y -framerate 50 -i "$out/frame_%05d.png" -c:v libx264 -pix_fmt yuv420p \
-    -vf "pad=ceil(iw/2)*2:ceil(ih/2)*2" "$video.tmp.mp4"
-  mv "$video.tmp.mp4" "$video"
-  echo "video: $video"
-else
-  echo "video: skipped (ffmpeg is not installed; 'apt-get install ffmpeg' to get $out/sand_column_2d.mp4)"
-fi
+# The video: 50 frames per second = the scene's frame rate (frame_dt 0.02 s), real time
+# (setup.sh installs ffmpeg).
+"$build_dir/cpp/pnet" video "$out" --out "$out/sand_column_2d.mp4"
 echo "frames: $out/frame_*.png and $out/frame_*.ply (open the PLYs in ParaView, Blender or Houdini)"
 echo "statistics: $out/stats.csv (per frame), $out/steps.csv (per step), run: $out/run.json"

@@ -25,6 +25,8 @@ packages=(
   # Debian's torch calls the system libblas.so.3; without OpenBLAS that is the
   # reference BLAS, and training runs 4-5x slower (scripts/bench_training.py).
   libopenblas0-openmp
+  # Videos (pnet video, scripts/run.sh) and the notebooks (executed by the test suite).
+  ffmpeg jupyter-nbconvert python3-nbformat python3-nbclient python3-ipykernel
 )
 missing=()
 for p in "${packages[@]}"; do

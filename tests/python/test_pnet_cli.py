@@ -291,3 +291,52 @@ def test_a_model_trained_for_other_plasticity_parameters_is_refused(tmp_path):
     assert "the object's material has 35" in r.stderr, r.stderr
     # lagged uses no model: the same scene runs.
     assert pnet("simulate", path, "--integrator", "lagged", "--frames", 1, "--out", tmp_path / "l").returncode == 0
+
+
+def _video_frames(path: Path) -> int:
+    """Frames in an MP4 as ffprobe counts them by decoding."""
+    r = subprocess.run(["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
+                        "stream=nb_read_frames,codec_name,pix_fmt", "-of", "json", str(path)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    stream = json.loads(r.stdout)["streams"][0]
+    assert stream["codec_name"] == "h264" and stream["pix_fmt"] == "yuv420p"
+    return int(stream["nb_read_frames"])
+
+
+def test_video_encodes_every_frame_and_refuses_gaps(tmp_path):
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "explicit", "--frames", 4, "--out", out)
+    assert r.returncode == 0, r.stderr
+    r = pnet("video", out)
+    assert r.returncode == 0, r.stderr
+    assert "5 frames" in r.stdout and "50 frames per second" in r.stdout  # frame_dt 0.02 s: real time
+    assert _video_frames(out / "video.mp4") == 5
+    assert not list(out.glob("*.tmp.mp4"))
+
+    (out / "frame_00002.png").unlink()
+    r = pnet("video", out, "--out", tmp_path / "gap.mp4")
+    assert r.returncode == 2 and "frame 2.png is missing" in r.stderr
+    assert not (tmp_path / "gap.mp4").exists()
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--fps", "0"], "--fps: expected a frame rate in (0, 1000]"),
+    (["--fps", "nan"], "--fps: expected a frame rate"),
+    (["--bogus"], "unknown option --bogus"),
+    ([], "no frame_NNNNN.png images"),
+])
+def test_video_usage_errors(tmp_path, args, expected):
+    r = pnet("video", tmp_path, *args)
+    assert r.returncode == 2 and expected in r.stderr, r.stderr
+
+
+def test_video_without_ffmpeg_says_how_to_get_it(tmp_path):
+    out = tmp_path / "run"
+    assert pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "explicit", "--frames", 1,
+                "--out", out).returncode == 0
+    (out / "video.mp4").write_bytes(b"an earlier video")
+    r = subprocess.run([str(PNET), "video", str(out)], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PATH": str(tmp_path / "empty")})
+    assert r.returncode == 1 and "cannot run ffmpeg" in r.stderr and "apt-get install ffmpeg" in r.stderr
+    assert (out / "video.mp4").read_bytes() == b"an earlier video", "a failed encode must not touch the old video"

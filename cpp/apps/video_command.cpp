@@ -1,0 +1,172 @@
+#include "video_command.hpp"
+
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+extern char** environ;
+
+namespace pnet::apps {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr const char* kUsage = "usage: pnet video DIR [--out FILE.mp4] [--fps F]\n";
+
+struct InputError : std::invalid_argument {
+    using std::invalid_argument::invalid_argument;
+};
+
+struct Options {
+    fs::path dir, out;
+    double fps = 0.0;  // 0: from run.json
+};
+
+Options parse(int argc, char** argv) {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+        const std::string arg = argv[i];
+        auto value = [&]() -> std::string {
+            if (i + 1 >= argc) throw InputError(arg + " needs a value");
+            return argv[++i];
+        };
+        if (arg == "--out") {
+            o.out = value();
+            if (o.out.empty()) throw InputError("--out: empty path");
+        } else if (arg == "--fps") {
+            const std::string text = value();
+            std::size_t used = 0;
+            try {
+                o.fps = std::stod(text, &used);
+            } catch (const std::exception&) {
+                used = 0;
+            }
+            if (used != text.size() || !std::isfinite(o.fps) || o.fps <= 0.0 || o.fps > 1000.0)
+                throw InputError("--fps: expected a frame rate in (0, 1000] frames per second, got '" + text + "'");
+        } else if (!arg.empty() && arg[0] == '-') {
+            throw InputError("unknown option " + arg);
+        } else if (o.dir.empty()) {
+            o.dir = arg;
+        } else {
+            throw InputError("one run folder expected, got a second: " + arg);
+        }
+    }
+    if (o.dir.empty()) throw InputError("no run folder given");
+    return o;
+}
+
+/// frame number -> path of DIR/frame_NNNNN.png.
+std::map<long, fs::path> frames_in(const fs::path& dir) {
+    std::map<long, fs::path> frames;
+    for (const fs::directory_entry& entry : fs::directory_iterator(dir)) {
+        const std::string name = entry.path().filename().string();
+        if (name.size() != 15 || name.rfind("frame_", 0) != 0 || name.substr(11) != ".png") continue;
+        const std::string digits = name.substr(6, 5);
+        if (digits.find_first_not_of("0123456789") != std::string::npos) continue;
+        frames[std::stol(digits)] = entry.path();
+    }
+    return frames;
+}
+
+double run_frame_rate(const fs::path& dir) {
+    const fs::path run = dir / "run.json";
+    if (!fs::exists(run)) return 50.0;
+    try {
+        std::ifstream in(run);
+        const nlohmann::json j = nlohmann::json::parse(in);
+        const double frame_dt = j.at("frame_dt").get<double>();
+        if (std::isfinite(frame_dt) && frame_dt > 0.0) return 1.0 / frame_dt;
+    } catch (const std::exception&) {
+    }
+    std::fprintf(stderr, "pnet video: %s has no usable frame_dt; using 50 frames per second\n", run.c_str());
+    return 50.0;
+}
+
+/// Runs argv (argv[0] looked up on PATH); returns its exit status, or -1 if it could not start.
+int run_process(const std::vector<std::string>& args) {
+    std::vector<char*> argv;
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    pid_t pid = 0;
+    if (const int error = posix_spawnp(&pid, argv[0], nullptr, nullptr, argv.data(), environ); error != 0) {
+        errno = error;
+        return -1;
+    }
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0)
+        if (errno != EINTR) return -1;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
+
+}  // namespace
+
+int video_command(int argc, char** argv) {
+    Options o;
+    std::map<long, fs::path> frames;
+    try {
+        o = parse(argc, argv);
+        if (!fs::is_directory(o.dir)) throw InputError(o.dir.string() + ": not a folder");
+        frames = frames_in(o.dir);
+        if (frames.empty()) throw InputError(o.dir.string() + ": no frame_NNNNN.png images (did the run write PNG?)");
+        long expected = frames.begin()->first;
+        for (const auto& [number, path] : frames) {
+            if (number != expected)
+                throw InputError(o.dir.string() + ": frame " + std::to_string(expected) +
+                                 ".png is missing (frames must be numbered without gaps)");
+            ++expected;
+        }
+    } catch (const InputError& e) {
+        std::fprintf(stderr, "pnet video: %s\n%s", e.what(), kUsage);
+        return 2;
+    } catch (const fs::filesystem_error& e) {
+        std::fprintf(stderr, "pnet video: %s\n", e.what());
+        return 2;
+    }
+    if (o.out.empty()) o.out = o.dir / "video.mp4";
+    if (o.fps == 0.0) o.fps = run_frame_rate(o.dir);
+
+    const fs::path tmp = o.out.string() + ".tmp.mp4";
+    char fps[32];
+    std::snprintf(fps, sizeof fps, "%.6g", o.fps);
+    // H.264 needs even sizes: pad by one pixel where a frame is odd.
+    const std::vector<std::string> command = {
+        "ffmpeg", "-loglevel", "error", "-y", "-framerate", fps, "-start_number", std::to_string(frames.begin()->first),
+        "-i", (o.dir / "frame_%05d.png").string(), "-frames:v", std::to_string(frames.size()), "-c:v", "libx264",
+        "-pix_fmt", "yuv420p", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", tmp.string()};
+    const int status = run_process(command);
+    if (status != 0) {
+        std::error_code ignored;
+        fs::remove(tmp, ignored);
+        if (status == -1)
+            std::fprintf(stderr, "pnet video: cannot run ffmpeg (%s); install it (apt-get install ffmpeg)\n",
+                         std::strerror(errno));
+        else
+            std::fprintf(stderr, "pnet video: ffmpeg failed (exit status %d) encoding %s\n", status, tmp.c_str());
+        return 1;
+    }
+    std::error_code error;
+    fs::rename(tmp, o.out, error);
+    if (error) {
+        std::fprintf(stderr, "pnet video: cannot move the video into place: %s -> %s: %s\n", tmp.c_str(),
+                     o.out.c_str(), error.message().c_str());
+        fs::remove(tmp, error);
+        return 1;
+    }
+    std::printf("video: %s (%zu frames, %s frames per second)\n", o.out.c_str(), frames.size(), fps);
+    return 0;
+}
+
+}  // namespace pnet::apps
