@@ -195,6 +195,8 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
     std::vector<double> colour;
     const PlyParticles ply = write_particles(sim.particles(), sim.frame(), o, out, colour);
     ParticleRenderOptions r;
+    r.legend = true;
+    r.value_label = o.color == "speed" ? "speed (m/s)" : o.color;
     r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
     r.value_max =
         o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
@@ -230,6 +232,8 @@ void write_frame(const FemSimulation<2>& sim, const Scene& scene, const Options&
     }
     write_mesh_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
     ParticleRenderOptions r;
+    r.legend = true;
+    r.value_label = o.color == "speed" ? "speed (m/s)" : o.color;
     // Speed: 0 to twice the fastest prescribed or initial speed (the plate's 0.05 m/s: 0.1 m/s).
     double speed_scale = 0.0;
     for (const SceneMesh& m : scene.meshes) speed_scale = std::max(speed_scale, m.velocity.norm());
@@ -297,6 +301,8 @@ void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Options&
     vtu.cell_data.push_back({"hardening", 1, state.hardening});
     write_vtu((out / frame_name(sim.frame(), "vtu")).string(), vtu);
     ParticleRenderOptions r;
+    r.legend = true;
+    r.value_label = o.color == "speed" ? "speed (m/s)" : o.color;
     double speed_scale = 0.0;
     for (const SceneMesh& m : scene.meshes) speed_scale = std::max(speed_scale, m.velocity.norm());
     r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
@@ -340,6 +346,8 @@ void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Optio
     std::snprintf(mesh_name, sizeof mesh_name, "frame_%05d_mesh.ply", sim.frame());
     write_mesh_ply((out / mesh_name).string(), ply);
     ParticleRenderOptions r;
+    r.legend = true;
+    r.value_label = o.color == "speed" ? "speed (m/s)" : o.color;
     r.value_min = o.color == "speed" ? 0.0 : *std::min_element(colour.begin(), colour.end());
     r.value_max =
         o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));

@@ -346,6 +346,61 @@ void draw_caption(Image& img, const ParticleRenderOptions& options, int margin) 
     draw_text(img, margin + 4, margin + 4, options.caption, {40, 40, 40}, text_scale_for(options.width_px));
 }
 
+/// A length in metres as text in the unit that keeps it readable ("0.2 m", "5 cm", "2 mm").
+std::string length_text(double metres) {
+    char text[32];
+    if (metres >= 1.0)
+        std::snprintf(text, sizeof text, "%g m", metres);
+    else if (metres >= 0.01)
+        std::snprintf(text, sizeof text, "%g cm", metres * 100.0);
+    else
+        std::snprintf(text, sizeof text, "%g mm", metres * 1000.0);
+    return text;
+}
+
+/// img with the legend band of `options` appended below it: in 2D (pixels_per_metre > 0) a
+/// scale bar at the left, and a colour bar at the right.
+Image with_legend(const Image& img, const ParticleRenderOptions& options, double pixels_per_metre) {
+    if (!options.legend) return img;
+    Image out(img.width, img.height + kLegendHeight, {255, 255, 255});
+    std::copy(img.rgb.begin(), img.rgb.end(), out.rgb.begin());
+    const Rgb ink{40, 40, 40};
+    const int top = img.height + 4, bar_y = top + 9;
+    if (pixels_per_metre > 0.0) {
+        // The longest 1, 2 or 5 x 10^k m not over a quarter of the box width.
+        const double limit = 0.25 * (options.domain_max[0] - options.domain_min[0]);
+        const double decade = std::pow(10.0, std::floor(std::log10(limit)));
+        double length = decade;
+        for (double m : {2.0, 5.0})
+            if (m * decade <= limit) length = m * decade;
+        const int x0 = 8, x1 = x0 + int(std::lround(length * pixels_per_metre));
+        for (int x = x0; x <= x1; ++x)
+            for (int dy = 0; dy < 2; ++dy) out.set(x, bar_y + dy, ink);
+        for (int dy = -3; dy <= 4; ++dy) {
+            out.set(x0, bar_y + dy, ink);
+            out.set(x1, bar_y + dy, ink);
+        }
+        draw_text(out, x1 + 6, bar_y - 3, length_text(length), ink);
+    }
+    // Colour bar: "label  min [gradient] max" at the right.
+    char lo[32], hi[32];
+    std::snprintf(lo, sizeof lo, "%.3g", options.value_min);
+    std::snprintf(hi, sizeof hi, "%.3g", options.value_max);
+    const int bar_w = std::min(160, img.width / 4);
+    const int right = img.width - 8 - text_width(hi);
+    const int bar_x1 = right - 6, bar_x0 = bar_x1 - bar_w;
+    for (int x = bar_x0; x <= bar_x1; ++x) {
+        const Rgb c = viridis(double(x - bar_x0) / std::max(1, bar_w));
+        for (int dy = -4; dy <= 4; ++dy) out.set(x, bar_y + dy, c);
+    }
+    draw_text(out, right, bar_y - 3, hi, ink);
+    draw_text(out, bar_x0 - 6 - text_width(lo), bar_y - 3, lo, ink);
+    if (!options.value_label.empty())
+        draw_text(out, bar_x0 - 18 - text_width(lo) - text_width(options.value_label), bar_y - 3, options.value_label,
+                  ink);
+    return out;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Line plot helpers.
 
@@ -466,7 +521,7 @@ Image render_particles_2d(const std::vector<double>& position, const std::vector
                   particle_colour(value, i, options));
     }
     draw_caption(img, options, margin);
-    return img;
+    return with_legend(img, options, s);
 }
 
 Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>& triangles,
@@ -520,7 +575,7 @@ Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>
             draw_segment(img, a[0], a[1], b[0], b[1], 0.6, {30, 30, 30}, clip, 0.45);
         }
     draw_caption(img, options, margin);
-    return img;
+    return with_legend(img, options, s);
 }
 
 Image render_particles_3d(const std::vector<double>& position, const std::vector<double>& value,
@@ -629,7 +684,7 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
     }
     draw_edges(true);
     draw_caption(img, options, margin);
-    return img;
+    return with_legend(img, options, 0.0);  // orthographic 3D: no single scale
 }
 
 Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>& triangles,
@@ -724,7 +779,7 @@ Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>
     }
     draw_box(true);
     draw_caption(img, options, margin);
-    return img;
+    return with_legend(img, options, 0.0);
 }
 
 Image render_line_plot(const LinePlot& plot) {

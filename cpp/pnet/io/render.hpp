@@ -31,7 +31,15 @@ struct ParticleRenderOptions {
     double radius_px = 0.0;
     // Text drawn in the top-left corner (e.g. "t = 0.50 s"), none if empty.
     std::string caption;
+    // A legend band below the picture: a colour bar from value_min to value_max named
+    // value_label (e.g. "speed (m/s)"), and in 2D a scale bar (1, 2 or 5 x 10^k m, at most a
+    // quarter of the box width). The image grows by kLegendHeight pixels.
+    bool legend = false;
+    std::string value_label;
 };
+
+/// Height in pixels of the legend band (ParticleRenderOptions::legend).
+inline constexpr int kLegendHeight = 26;
 
 /// 2D particles (position n x 2, row per particle, y up) as filled anti-aliased disks on white
 /// inside a thin grey frame at the domain boundary; disk i is coloured by viridis of value[i]

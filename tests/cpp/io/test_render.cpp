@@ -72,6 +72,35 @@ TEST(Render2d, DisksWhereParticlesAreBackgroundElsewhere) {
     EXPECT_LT(frame.r, 255);
 }
 
+TEST(Render2d, LegendBandHasScaleBarAndColourBar) {
+    const std::vector<double> position = {0.5, 0.5, 0.25, 0.75};
+    const std::vector<double> value = {0.0, 1.0};
+    ParticleRenderOptions o = unit_options();
+    const Image plain = render_particles_2d(position, value, o);
+    o.legend = true;
+    o.value_label = "speed (m/s)";
+    const Image img = render_particles_2d(position, value, o);
+    ASSERT_EQ(img.width, plain.width);
+    ASSERT_EQ(img.height, plain.height + kLegendHeight);
+    // The picture itself is unchanged.
+    EXPECT_TRUE(std::equal(plain.rgb.begin(), plain.rgb.end(), img.rgb.begin()));
+    // Colour bar: both ends of viridis appear in the band, left dark, right yellow.
+    int first_dark = -1, last_yellow = -1;
+    const int bar_y = plain.height + 4 + 9;
+    for (int x = 0; x < img.width; ++x) {
+        if (first_dark < 0 && img.get(x, bar_y) == viridis(0.0)) first_dark = x;
+        if (img.get(x, bar_y) == viridis(1.0)) last_yellow = x;
+    }
+    ASSERT_GE(first_dark, 0);
+    EXPECT_GT(last_yellow, first_dark);
+    // Scale bar: the box is 1 m wide, so 0.2 m (the longest 1/2/5 x 10^k within a quarter):
+    // a dark line from x = 8 over 0.2 m of the picture's scale.
+    const double pixels_per_metre = (200 - 2.0 * 6) / 1.0;  // width minus margins of this radius
+    int dark_end = 8;
+    while (dark_end + 1 < img.width && img.get(dark_end + 1, bar_y) != kWhite) ++dark_end;
+    EXPECT_NEAR(dark_end - 8, 0.2 * pixels_per_metre, 3.0);
+}
+
 TEST(Render2d, AutomaticRadiusLeavesNoGapsInABody) {
     std::vector<double> position;
     const double h = 1.0 / 64;  // lattice spacing
