@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -11,6 +12,7 @@
 #include <vector>
 
 #include "pnet/io/atomic_file.hpp"
+#include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
 #include "pnet/io/render.hpp"
 #include "pnet/metrics/run_comparison.hpp"
@@ -21,7 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kUsage = "usage: pnet compare DIR_A DIR_B [--out DIR] [--dx DX]\n";
+constexpr const char* kUsage = "usage: pnet compare DIR_A DIR_B [--out DIR] [--dx DX] [--image]\n";
 
 class UsageError : public std::invalid_argument {
 public:
@@ -38,6 +40,7 @@ public:
 struct Options {
     std::string dir_a, dir_b, out;
     double dx = 0.0;  // 0: DIR_A's run.json dx
+    bool image = false;  // also compare.png: the last common frame side by side (and overlaid in 2D)
 };
 
 Options parse(int argc, char** argv) {
@@ -62,6 +65,8 @@ Options parse(int argc, char** argv) {
             }
             if (used == 0 || used != text.size() || !std::isfinite(o.dx) || !(o.dx > 0.0))
                 throw UsageError("--dx: expected a positive number, got \"" + text + "\"");
+        } else if (arg == "--image") {
+            o.image = true;
         } else if (arg.size() > 1 && arg[0] == '-') {
             throw UsageError("unknown option " + arg);
         } else {
@@ -92,6 +97,60 @@ Summary summarize(const std::vector<FrameIou>& rows, double FrameIou::*field) {
     }
     s.mean /= static_cast<double>(rows.size());
     return s;
+}
+
+/// img with a title band of `title` above it.
+Image titled(const Image& img, const std::string& title) {
+    constexpr int band = 20;
+    Image out(img.width, img.height + band, {255, 255, 255});
+    std::copy(img.rgb.begin(), img.rgb.end(), out.rgb.begin() + 3 * std::size_t(band) * std::size_t(img.width));
+    draw_text(out, 6, 6, title, {40, 40, 40});
+    return out;
+}
+
+/// Images side by side, tops aligned, 8 white pixels apart.
+Image side_by_side(const std::vector<Image>& images) {
+    int width = 0, height = 0;
+    for (const Image& img : images) {
+        width += img.width + 8;
+        height = std::max(height, img.height);
+    }
+    Image out(width - 8, height, {255, 255, 255});
+    int x0 = 0;
+    for (const Image& img : images) {
+        for (int y = 0; y < img.height; ++y)
+            for (int x = 0; x < img.width; ++x) out.set(x0 + x, y, img.get(x, y));
+        x0 += img.width + 8;
+    }
+    return out;
+}
+
+/// 2D: both runs' particles of one frame in one picture: A only blue, B only orange, both grey.
+Image overlay_2d(const RunInfo& a, const RunInfo& b, int frame, int width_px) {
+    ParticleRenderOptions r;
+    for (int k = 0; k < 2; ++k) {
+        r.domain_min[k] = a.domain_min[k];
+        r.domain_max[k] = a.domain_max[k];
+    }
+    r.width_px = width_px;
+    const PlyParticles pa = read_particles_ply(a.frames.at(frame), 2), pb = read_particles_ply(b.frames.at(frame), 2);
+    // The same radius in both (A's lattice), so that a particle covers the same area in each.
+    const Image ia = render_particles_2d(pa.position, {}, r);
+    r.radius_px = 0.0;
+    const Image ib = render_particles_2d(pb.position, {}, r);
+    Image out(ia.width, std::min(ia.height, ib.height), {255, 255, 255});
+    const Rgb white{255, 255, 255};
+    for (int y = 0; y < out.height; ++y)
+        for (int x = 0; x < out.width; ++x) {
+            const bool in_a = ia.get(x, y) != white, in_b = ib.get(x, y) != white;
+            if (in_a && in_b)
+                out.set(x, y, {150, 150, 150});
+            else if (in_a)
+                out.set(x, y, {31, 119, 180});
+            else if (in_b)
+                out.set(x, y, {255, 127, 14});
+        }
+    return out;
 }
 
 int compare(const Options& o) {
@@ -174,6 +233,30 @@ int compare(const Options& o) {
                 last.frame, last.spread_b, last.spread_a, 100.0 * (last.spread_b / last.spread_a - 1.0), last.height_b,
                 last.height_a, 100.0 * (last.height_b / last.height_a - 1.0));
     std::printf("wrote %s and %s\n", (out / "iou.csv").string().c_str(), (out / "iou.png").string().c_str());
+    if (o.image) {
+        // The last common frame: each run's own picture (its frame PNG) and, in 2D, both overlaid.
+        const int frame = pair.common.back();
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%05d.png", frame);
+        std::vector<Image> panels;
+        try {
+            for (const RunInfo* run : {&a, &b}) {
+                const fs::path png = fs::path(run->dir) / name;
+                if (fs::exists(png)) panels.push_back(titled(read_png_rgb(png.string()), run->name));
+            }
+            if (a.dim == 2) {
+                const int width = panels.empty() ? 640 : panels.front().width;
+                panels.push_back(titled(overlay_2d(a, b, frame, width),
+                                        "overlay: blue " + a.name + " only, orange " + b.name + " only, grey both"));
+            }
+            const fs::path path = out / "compare.png";
+            write_png(path.string(), side_by_side(panels));
+            std::printf("wrote %s (frame %d)\n", path.string().c_str(), frame);
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "pnet compare: --image: %s\n", e.what());
+            return 1;
+        }
+    }
     return 0;
 }
 

@@ -340,3 +340,25 @@ def test_video_without_ffmpeg_says_how_to_get_it(tmp_path):
                        env={**os.environ, "PATH": str(tmp_path / "empty")})
     assert r.returncode == 1 and "cannot run ffmpeg" in r.stderr and "apt-get install ffmpeg" in r.stderr
     assert (out / "video.mp4").read_bytes() == b"an earlier video", "a failed encode must not touch the old video"
+
+
+def _png_size(path: Path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+@pytest.mark.parametrize("name, panels", [("sand_column_2d", 3), ("sand_column_3d", 2)])
+def test_compare_image_puts_the_runs_side_by_side(tmp_path, name, panels):
+    """--image: each run's last common frame, and in 2D an overlay of both (three panels)."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    for out, extra in ((a, ["--integrator", "explicit"]), (b, ["--integrator", "explicit", "--dt", "2e-4"])):
+        r = pnet("simulate", TINY / f"{name}.json", *extra, "--frames", 2, "--out", out)
+        assert r.returncode == 0, r.stderr
+    r = pnet("compare", a, b, "--image", "--out", tmp_path / "cmp")
+    assert r.returncode == 0, r.stderr
+    assert "compare.png (frame 2)" in r.stdout
+    width, height = _png_size(tmp_path / "cmp" / "compare.png")
+    frame_width, frame_height = _png_size(a / "frame_00002.png")
+    assert width == panels * frame_width + 8 * (panels - 1)
+    assert height == frame_height + 20  # the title band
