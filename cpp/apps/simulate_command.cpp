@@ -36,7 +36,7 @@ namespace fs = std::filesystem;
 constexpr const char* kUsage =
     "usage: pnet simulate SCENE.json --out DIR [--integrator explicit|plasticitynet|lagged|analytic] [--dt SECONDS]\n"
     "                     [--cfl C] [--frames N] [--threads T] [--checkpoint-every N] [--resume]\n"
-    "                     [--color speed|hardening] [--trust-model]\n"
+    "                     [--color speed|hardening] [--trust-model] [--vtu]\n"
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
@@ -52,6 +52,7 @@ struct Options {
     std::optional<double> dt, cfl;
     int frames = -1, threads = 0, checkpoint_every = 10;
     bool resume = false, trust_model = false, fail_on_unconverged = false;
+    bool vtu = false;  // also frame_NNNNN.vtu (ParaView) for particles and 2D meshes
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
     std::optional<std::string> preconditioner, return_map;
@@ -126,6 +127,8 @@ Options parse(int argc, char** argv) {
             o.color = value();
         else if (arg == "--resume")
             o.resume = true;
+        else if (arg == "--vtu")
+            o.vtu = true;
         else if (arg == "--trust-model")
             o.trust_model = true;
         else if (arg == "--fail-on-unconverged")
@@ -190,10 +193,31 @@ PlyParticles write_particles(const Particles<dim>& P, int frame, const Options& 
     return ply;
 }
 
+/// The particles of a frame as a VTK unstructured grid of vertices (ParaView's particle view).
+void write_particles_vtu(const fs::path& path, const PlyParticles& ply) {
+    VtuMesh m;
+    m.dim = ply.dim;
+    m.position = ply.position;
+    m.point_data = {{"velocity", ply.dim, ply.velocity}, {"mass", 1, ply.mass}, {"hardening", 1, ply.hardening}};
+    write_vtu(path.string(), m);
+}
+
+/// A 2D FEM frame as a VTK unstructured grid of triangles.
+void write_mesh_vtu(const fs::path& path, const PlyMesh& ply) {
+    VtuMesh m;
+    m.dim = 2;
+    m.position = ply.position;
+    m.cells = ply.triangles;
+    m.point_data = {{"velocity", 2, ply.velocity}};
+    m.cell_data = {{"hardening", 1, ply.hardening}};
+    write_vtu(path.string(), m);
+}
+
 template <int dim>
 void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& o, const fs::path& out) {
     std::vector<double> colour;
     const PlyParticles ply = write_particles(sim.particles(), sim.frame(), o, out, colour);
+    if (o.vtu) write_particles_vtu(out / frame_name(sim.frame(), "vtu"), ply);
     ParticleRenderOptions r;
     r.legend = true;
     r.value_label = o.color == "speed" ? "speed (m/s)" : o.color;
@@ -231,6 +255,7 @@ void write_frame(const FemSimulation<2>& sim, const Scene& scene, const Options&
         colour[e] = o.color == "speed" ? v.norm() : state.hardening[e];
     }
     write_mesh_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
+    if (o.vtu) write_mesh_vtu(out / frame_name(sim.frame(), "vtu"), ply);
     ParticleRenderOptions r;
     r.legend = true;
     r.value_label = o.color == "speed" ? "speed (m/s)" : o.color;
@@ -324,6 +349,7 @@ void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Options&
 void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Options& o, const fs::path& out) {
     std::vector<double> colour;
     const PlyParticles particles = write_particles(sim.particles(), sim.frame(), o, out, colour);
+    if (o.vtu) write_particles_vtu(out / frame_name(sim.frame(), "vtu"), particles);
     const FemState<2>& state = sim.state();
     const Mesh<2>& mesh = sim.mesh();
     PlyMesh ply;
@@ -345,6 +371,10 @@ void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Optio
     char mesh_name[64];
     std::snprintf(mesh_name, sizeof mesh_name, "frame_%05d_mesh.ply", sim.frame());
     write_mesh_ply((out / mesh_name).string(), ply);
+    if (o.vtu) {
+        std::snprintf(mesh_name, sizeof mesh_name, "frame_%05d_mesh.vtu", sim.frame());
+        write_mesh_vtu(out / mesh_name, ply);
+    }
     ParticleRenderOptions r;
     r.legend = true;
     r.value_label = o.color == "speed" ? "speed (m/s)" : o.color;

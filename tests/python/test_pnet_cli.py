@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 import subprocess
 from pathlib import Path
 
@@ -362,3 +363,24 @@ def test_compare_image_puts_the_runs_side_by_side(tmp_path, name, panels):
     frame_width, frame_height = _png_size(a / "frame_00002.png")
     assert width == panels * frame_width + 8 * (panels - 1)
     assert height == frame_height + 20  # the title band
+
+
+@pytest.mark.parametrize("name, cell_type", [("sand_column_2d", "1"), ("sand_column_3d", "1"),
+                                             ("metal_frame_2d", "5"), ("sand_fem_coupling_2d", "1")])
+def test_vtu_frames_hold_the_ply_frames_points(tmp_path, name, cell_type):
+    """--vtu: each frame also as a VTK unstructured grid (ParaView): the same points as the PLY,
+    vertex cells for particles, triangles for a 2D mesh, with the velocity field."""
+    import xml.etree.ElementTree as ET
+
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / f"{name}.json", "--integrator", "explicit", "--frames", 1, "--vtu", "--out", out)
+    assert r.returncode == 0, r.stderr
+    for frame in (0, 1):
+        piece = ET.parse(out / f"frame_{frame:05d}.vtu").getroot().find("UnstructuredGrid/Piece")
+        header = (out / f"frame_{frame:05d}.ply").read_bytes().split(b"end_header")[0].decode()
+        vertices = int(re.search(r"element vertex (\d+)", header).group(1))
+        assert int(piece.get("NumberOfPoints")) == vertices
+        names = [a.get("Name") for a in piece.iter("DataArray")]
+        assert "velocity" in names
+        types = piece.find("Cells").findall("DataArray")[2].text.split()
+        assert set(types) == {cell_type}
