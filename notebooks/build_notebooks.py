@@ -203,7 +203,11 @@ ax.set(title="metal_frame_2d: mean nodal error vs explicit ground truth", xlabel
 ax.legend()
 plt.show()
 for run in ("plasticitynet_1e-2", "plasticitynet_1e-2_w0"):
-    display(Markdown(f"**{run}**, last frame"), Image(filename=str(require(fem / f"{run}_final.png")), width=300))'''),
+    display(Markdown(f"**{run}**, last frame"), Image(filename=str(require(fem / f"{run}_final.png")), width=300))
+# The run without the regularizer stops where its solve fails ("(failed)" in the frames column).
+lines = require(RESULTS / "fem_eval" / "summary.md").read_text().splitlines()
+table = [l for l in lines if l.startswith("|")][:2] + [l for l in lines if "| metal_frame_2d | plasticitynet_1e-2" in l]
+display(Markdown("\\n".join(table)))'''),
     new_code_cell('''sand = RESULTS / "regularizer_ablation" / "sand_column_2d"
 rows = read_csv(require(sand / "iou.csv"))
 fig, ax = plt.subplots(figsize=(7, 4))
