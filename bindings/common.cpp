@@ -1,5 +1,7 @@
 #include "common.hpp"
 
+#include <cmath>
+
 namespace pnet::bindings {
 
 std::string shape_text(py::ssize_t n, const std::vector<py::ssize_t>& tail) {
@@ -36,7 +38,41 @@ py::array_t<double, py::array::c_style> batch_array(const py::handle& obj, const
     return py::array_t<double, py::array::c_style>::ensure(array);
 }
 
+namespace {
+
+/// JSON has no NaN or infinity (Python's json.dumps would write them anyway, and the parser then
+/// fails without naming the field): refuse them here, naming the path of the value.
+void require_finite(const py::handle& obj, const std::string& path) {
+    if (py::isinstance<py::float_>(obj)) {
+        const double v = obj.cast<double>();
+        if (!std::isfinite(v))
+            throw py::value_error(path + ": expected a finite number, got " + py::repr(obj).cast<std::string>());
+    } else if (py::isinstance<py::dict>(obj)) {
+        for (const auto& [key, value] : obj.cast<py::dict>())
+            require_finite(value, path + "." + py::str(key).cast<std::string>());
+    } else if (py::isinstance<py::list>(obj) || py::isinstance<py::tuple>(obj)) {
+        std::size_t i = 0;
+        for (const py::handle item : obj) require_finite(item, path + "[" + std::to_string(i++) + "]");
+    }
+}
+
+}  // namespace
+
+double to_number(const py::handle& obj, const std::string& what) {
+    // bool is an int in Python, but True as a time step is a mistake, not 1 s.
+    if (py::isinstance<py::bool_>(obj) || !(py::isinstance<py::float_>(obj) || py::isinstance<py::int_>(obj)))
+        throw py::type_error(what + ": expected a number, got " + py::str(py::type::of(obj)).cast<std::string>());
+    return obj.cast<double>();
+}
+
+std::string to_text(const py::handle& obj, const std::string& what) {
+    if (!py::isinstance<py::str>(obj))
+        throw py::type_error(what + ": expected a string, got " + py::str(py::type::of(obj)).cast<std::string>());
+    return obj.cast<std::string>();
+}
+
 nlohmann::json to_json(const py::handle& obj, const std::string& what) {
+    require_finite(obj, what);
     std::string text;
     try {
         text = py::module_::import("json").attr("dumps")(obj).cast<std::string>();

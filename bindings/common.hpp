@@ -65,6 +65,13 @@ py::array_t<double> from_matrices(const std::vector<Mat<dim>>& F) {
 /// module; ValueError naming `what` if it is not JSON-serializable.
 nlohmann::json to_json(const py::handle& obj, const std::string& what);
 
+/// A Python int or float as a double; TypeError "<what>: expected a number, got <type>" otherwise
+/// (bool included).
+double to_number(const py::handle& obj, const std::string& what);
+
+/// A Python str; TypeError "<what>: expected a string, got <type>" otherwise.
+std::string to_text(const py::handle& obj, const std::string& what);
+
 /// JSON as Python objects (dict, list, float, int, str, bool, None).
 py::object to_python(const nlohmann::json& j);
 

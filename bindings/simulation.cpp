@@ -129,9 +129,9 @@ public:
                  const py::object& solver, bool trust_models)
         : scene_(to_scene(scene)) {
         IntegratorSettings settings =
-            integrator_settings(scene_, integrator.is_none() ? std::string() : integrator.cast<std::string>());
-        if (!dt.is_none()) settings.dt = dt.cast<double>();
-        if (!cfl.is_none()) settings.cfl = cfl.cast<double>();
+            integrator_settings(scene_, integrator.is_none() ? std::string() : to_text(integrator, "integrator"));
+        if (!dt.is_none()) settings.dt = to_number(dt, "dt");
+        if (!cfl.is_none()) settings.cfl = to_number(cfl, "cfl");
         if (!solver.is_none()) {
             nlohmann::json options = settings.implicit.to_json();
             const nlohmann::json given = to_json(solver, "solver");

@@ -81,8 +81,17 @@ Options parse(int argc, char** argv) {
             } catch (const std::exception&) {
                 used = 0;
             }
-            if (used != text.size()) throw UsageError(arg + ": expected a number, got \"" + text + "\"");
+            if (text.empty() || used != text.size())
+                throw UsageError(arg + ": expected a number, got \"" + text + "\"");
             return v;
+        };
+        // A whole number in [lo, hi], else a message naming the option and the range.
+        auto integer = [&](const std::string& text, long lo, long hi, const char* meaning) {
+            const double v = number(text);
+            if (!(v >= double(lo) && v <= double(hi)) || v != std::floor(v))
+                throw UsageError(arg + " must be a whole number in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                                 "]" + meaning + ", got \"" + text + "\"");
+            return static_cast<int>(v);
         };
         if (arg == "--out")
             o.out = value();
@@ -93,11 +102,11 @@ Options parse(int argc, char** argv) {
         else if (arg == "--cfl")
             o.cfl = number(value());
         else if (arg == "--frames")
-            o.frames = static_cast<int>(number(value()));
+            o.frames = integer(value(), 1, 10000000, " (frames to simulate)");
         else if (arg == "--threads")
-            o.threads = static_cast<int>(number(value()));
+            o.threads = integer(value(), 0, 1024, " (0: all cores)");
         else if (arg == "--checkpoint-every")
-            o.checkpoint_every = static_cast<int>(number(value()));
+            o.checkpoint_every = integer(value(), 0, 10000000, " (frames between checkpoints; 0: none)");
         else if (arg == "--newton-tol")
             o.newton_tol = number(value());
         else if (arg == "--cg-tol")
@@ -111,11 +120,11 @@ Options parse(int argc, char** argv) {
         else if (arg == "--preconditioner")
             o.preconditioner = value();
         else if (arg == "--fixed-point-iterations")
-            o.fixed_point_iterations = static_cast<int>(number(value()));
+            o.fixed_point_iterations = integer(value(), 1, 100000, "");
         else if (arg == "--fixed-point-inexact")
             o.fixed_point_inexact = number(value());
         else if (arg == "--fixed-point-anderson")
-            o.fixed_point_anderson = static_cast<int>(number(value()));
+            o.fixed_point_anderson = integer(value(), 0, 100, " (0: the plain iteration)");
         else if (arg == "--fixed-point-keep-hessian") {
             const std::string text = value();
             if (text != "yes" && text != "no")
@@ -143,14 +152,17 @@ Options parse(int argc, char** argv) {
     if (o.scene.empty()) throw UsageError("no scene file given");
     if (o.out.empty()) throw UsageError("--out DIR is required");
     if (o.color != "speed" && o.color != "hardening") throw UsageError("--color: speed or hardening");
-    if (o.frames == 0 || o.frames < -1) throw UsageError("--frames must be >= 1");
     if (o.dt && !(std::isfinite(*o.dt) && *o.dt >= 0.0))
         throw UsageError("--dt must be a number >= 0 (seconds; 0: the CFL step)");
-    if (o.cfl && !(std::isfinite(*o.cfl) && *o.cfl > 0.0)) throw UsageError("--cfl must be a number > 0");
-    if (o.newton_tol && !(*o.newton_tol > 0.0)) throw UsageError("--newton-tol must be > 0");
+    if (o.cfl && !(std::isfinite(*o.cfl) && *o.cfl > 0.0 && *o.cfl <= 1.0))
+        throw UsageError("--cfl must be a number > 0 and <= 1 (a fraction of the cell size per step)");
+    if (o.newton_tol && !(std::isfinite(*o.newton_tol) && *o.newton_tol > 0.0))
+        throw UsageError("--newton-tol must be a finite number > 0 (m/s)");
     if (o.cg_tol && !(*o.cg_tol > 0.0 && *o.cg_tol < 1.0)) throw UsageError("--cg-tol must be in (0, 1)");
-    if (o.fixed_point_tol && !(*o.fixed_point_tol >= 0.0)) throw UsageError("--fixed-point-tol must be >= 0");
-    if (o.regularizer && !(*o.regularizer >= 0.0)) throw UsageError("--regularizer must be >= 0");
+    if (o.fixed_point_tol && !(std::isfinite(*o.fixed_point_tol) && *o.fixed_point_tol >= 0.0))
+        throw UsageError("--fixed-point-tol must be a finite number >= 0");
+    if (o.regularizer && !(std::isfinite(*o.regularizer) && *o.regularizer >= 0.0))
+        throw UsageError("--regularizer must be a finite number >= 0");
     if (o.lazy_hessian && !(*o.lazy_hessian >= 0.0 && *o.lazy_hessian < 1.0))
         throw UsageError("--lazy-hessian must be in [0, 1)");
     if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi" &&
@@ -158,12 +170,8 @@ Options parse(int argc, char** argv) {
         throw UsageError("--preconditioner: expected jacobi, block_jacobi or ichol, got \"" + *o.preconditioner + "\"");
     if (o.return_map && *o.return_map != "learned" && *o.return_map != "exact")
         throw UsageError("--return-map: expected learned or exact, got \"" + *o.return_map + "\"");
-    if (o.fixed_point_iterations && *o.fixed_point_iterations < 1)
-        throw UsageError("--fixed-point-iterations must be >= 1");
     if (o.fixed_point_inexact && !(*o.fixed_point_inexact >= 0.0 && *o.fixed_point_inexact < 1.0))
         throw UsageError("--fixed-point-inexact must be in [0, 1) (0: exact inner solves)");
-    if (o.fixed_point_anderson && *o.fixed_point_anderson < 0)
-        throw UsageError("--fixed-point-anderson must be >= 0 (0: the plain iteration)");
     return o;
 }
 

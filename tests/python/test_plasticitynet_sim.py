@@ -506,3 +506,23 @@ def test_3d_fem_scene_has_tetrahedra_and_boundary_triangles():
 def test_fem_analytic_is_refused_for_neo_hookean_metal():
     with pytest.raises(ValueError, match=r"meshes\[0\]\.material: the analytic integrator needs StVK-Hencky"):
         pns.Simulation(str(TINY / "metal_nh_frame_2d.json"), integrator="analytic")
+
+
+@pytest.mark.parametrize("kwargs, names", [
+    (dict(dt=float("nan")), "dt"), (dict(dt=float("inf")), "dt"), (dict(dt=-1e-3), "dt"), (dict(dt="abc"), "dt"),
+    (dict(cfl=float("nan")), "cfl"), (dict(cfl=0.0), "cfl"), (dict(cfl=[0.5]), "cfl"),
+    (dict(integrator="implicit"), "integrator"), (dict(integrator=3), "integrator"),
+    (dict(solver={"newton_tolerance": float("nan")}), "newton_tolerance"),
+    (dict(solver={"cg_tolerance": float("inf")}), "cg_tolerance"),
+    (dict(solver={"regularizer_weight": float("-inf")}), "regularizer_weight"),
+    (dict(solver={"fixed_point_tolerance": float("nan")}), "fixed_point_tolerance"),
+    (dict(solver={"max_newton_iterations": 2.5}), "max_newton_iterations"),
+    (dict(solver={"preconditioner": "ilu"}), "preconditioner"),
+    (dict(solver=[1, 2]), "solver"),
+])
+def test_bad_keyword_is_a_value_or_type_error_naming_it(kwargs, names):
+    """Every keyword of Simulation(): a ValueError (TypeError for a wrong type) whose message names it,
+    never a RuntimeError from the JSON or cast layers underneath."""
+    with pytest.raises((ValueError, TypeError)) as info:
+        pns.Simulation(str(ROOT / "scenes" / "tiny" / "sand_column_2d.json"), **kwargs)
+    assert names in str(info.value), str(info.value)
