@@ -3,7 +3,13 @@
 #include <gmsh.h>
 #include <omp.h>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -41,15 +47,30 @@ private:
 };
 
 /// The elements of gmsh type `type` in the current model, with compact node numbers.
+/// What gmsh holds of a mesh: the elements of one type (tags and node tags) and every node.
+struct GmshMeshData {
+    std::vector<std::size_t> element_tags, node_tags, all_tags;
+    std::vector<double> coord;  // 3 per node
+};
+
+GmshMeshData query_gmsh_mesh(int type) {
+    GmshMeshData d;
+    gmsh::model::mesh::getElementsByType(type, d.element_tags, d.node_tags);
+    std::vector<double> parametric;
+    gmsh::model::mesh::getNodes(d.all_tags, d.coord, parametric, -1, -1, false, false);
+    return d;
+}
+
 template <int dim>
-Mesh<dim> collect(int type, const std::string& context) {
-    std::vector<std::size_t> element_tags, node_tags;
-    gmsh::model::mesh::getElementsByType(type, element_tags, node_tags);
+Mesh<dim> build_mesh(const GmshMeshData& d, const std::string& context) {
+    const std::vector<std::size_t>& element_tags = d.element_tags;
+    const std::vector<std::size_t>& node_tags = d.node_tags;
+    const std::vector<std::size_t>& all_tags = d.all_tags;
+    const std::vector<double>& coord = d.coord;
     if (element_tags.empty())
         throw MeshError(context + ": no " + (dim == 2 ? "triangles" : "tetrahedra") + " in the mesh");
-    std::vector<std::size_t> all_tags;
-    std::vector<double> coord, parametric;
-    gmsh::model::mesh::getNodes(all_tags, coord, parametric, -1, -1, false, false);
+    if (node_tags.size() != element_tags.size() * (dim + 1) || coord.size() != 3 * all_tags.size())
+        throw MeshError(context + ": inconsistent element or node arrays from gmsh");
     std::unordered_map<std::size_t, std::size_t> position;  // gmsh node tag -> index into coord / 3
     for (std::size_t i = 0; i < all_tags.size(); ++i) position[all_tags[i]] = i;
     Mesh<dim> mesh;
@@ -77,6 +98,101 @@ Mesh<dim> collect(int type, const std::string& context) {
         }
     mesh.finalize(context);
     return mesh;
+}
+
+template <int dim>
+Mesh<dim> collect(int type, const std::string& context) {
+    return build_mesh<dim>(query_gmsh_mesh(type), context);
+}
+
+// The pipe protocol of read_mesh_file's child: a status byte ('k' ok, 'e' error), then for an error
+// its message, for a mesh each array as its length and its raw elements.
+template <typename T>
+void put_array(std::string& out, const std::vector<T>& a) {
+    const std::uint64_t n = a.size();
+    out.append(reinterpret_cast<const char*>(&n), sizeof n);
+    out.append(reinterpret_cast<const char*>(a.data()), a.size() * sizeof(T));
+}
+
+template <typename T>
+bool take_array(const std::string& in, std::size_t& at, std::vector<T>& a) {
+    std::uint64_t n = 0;
+    if (in.size() - at < sizeof n) return false;
+    std::memcpy(&n, in.data() + at, sizeof n);
+    at += sizeof n;
+    if (n > (in.size() - at) / sizeof(T)) return false;
+    a.resize(n);
+    std::memcpy(a.data(), in.data() + at, n * sizeof(T));
+    at += n * sizeof(T);
+    return true;
+}
+
+void write_all(int fd, const std::string& bytes) {
+    for (std::size_t done = 0; done < bytes.size();) {
+        const ssize_t w = ::write(fd, bytes.data() + done, bytes.size() - done);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return;
+        done += std::size_t(w);
+    }
+}
+
+/// Reads `path` with gmsh in a child process, so that a file that crashes gmsh's reader (its MSH
+/// parser has crashed on malformed files) is a MeshError, not the end of the caller.
+GmshMeshData read_in_child(const std::string& path, int type) {
+    int fds[2];
+    if (::pipe(fds) != 0) throw MeshError(path + ": cannot create a pipe to read the mesh: " + std::strerror(errno));
+    std::fflush(nullptr);
+    const pid_t pid = ::fork();
+    if (pid < 0) {
+        ::close(fds[0]);
+        ::close(fds[1]);
+        throw MeshError(path + ": cannot start the mesh reader: " + std::strerror(errno));
+    }
+    if (pid == 0) {  // the child: gmsh only, then _exit (no destructors, no atexit handlers of the parent)
+        ::close(fds[0]);
+        std::string out;
+        try {
+            GmshSession session;
+            gmsh::open(path);
+            const GmshMeshData d = query_gmsh_mesh(type);
+            out = "k";
+            put_array(out, d.element_tags);
+            put_array(out, d.node_tags);
+            put_array(out, d.all_tags);
+            put_array(out, d.coord);
+        } catch (const std::exception& e) {
+            out = std::string("e") + e.what();
+        } catch (...) {
+            out = "eunknown error";
+        }
+        write_all(fds[1], out);
+        ::close(fds[1]);
+        ::_exit(0);
+    }
+    ::close(fds[1]);
+    std::string in;
+    char buffer[1 << 16];
+    for (;;) {
+        const ssize_t r = ::read(fds[0], buffer, sizeof buffer);
+        if (r < 0 && errno == EINTR) continue;
+        if (r <= 0) break;
+        in.append(buffer, std::size_t(r));
+    }
+    ::close(fds[0]);
+    int status = 0;
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    if (WIFSIGNALED(status))
+        throw MeshError(path + ": gmsh crashed reading it (signal " + std::to_string(WTERMSIG(status)) +
+                        "): a malformed mesh file");
+    if (in.empty() || (in[0] != 'k' && in[0] != 'e')) throw MeshError(path + ": the mesh reader ended without a result");
+    if (in[0] == 'e') throw MeshError(path + ": gmsh cannot read it: " + in.substr(1));
+    GmshMeshData d;
+    std::size_t at = 1;
+    if (!take_array(in, at, d.element_tags) || !take_array(in, at, d.node_tags) || !take_array(in, at, d.all_tags) ||
+        !take_array(in, at, d.coord))
+        throw MeshError(path + ": the mesh reader's result is incomplete");
+    return d;
 }
 
 }  // namespace
@@ -299,15 +415,8 @@ Mesh<dim> read_mesh_file(const std::string& path) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) throw MeshError(path + ": no such mesh file");
     std::lock_guard<std::mutex> lock(gmsh_mutex);
-    GmshSession session;
-    try {
-        gmsh::open(path);
-    } catch (const std::exception& e) {
-        throw MeshError(path + ": gmsh cannot read it: " + e.what());
-    } catch (...) {
-        throw MeshError(path + ": gmsh cannot read it");
-    }
-    return collect<dim>(dim == 2 ? 2 : 4, path);  // gmsh types: 2 = 3-node triangle, 4 = 4-node tetrahedron
+    // gmsh types: 2 = 3-node triangle, 4 = 4-node tetrahedron.
+    return build_mesh<dim>(read_in_child(path, dim == 2 ? 2 : 4), path);
 }
 
 template Mesh<2> read_mesh_file<2>(const std::string&);

@@ -1,8 +1,12 @@
 #pragma once
 // Raw arrays of the simulation checkpoints (MPM, FEM, MPM-FEM coupling): written as their bytes, read
-// back with a known count; a short file is an error naming it.
+// back with a known count; a short file is an error naming it. Every checkpoint is sealed: its bytes
+// are followed by "PNETSHA2" and the SHA-256 (hex) of those bytes, so that a flipped bit or a
+// truncated copy is refused before any of it is used.
+#include <functional>
 #include <istream>
 #include <ostream>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -21,5 +25,13 @@ void read_array(std::istream& in, std::vector<T>& a, std::size_t n, const std::s
     in.read(reinterpret_cast<char*>(a.data()), static_cast<std::streamsize>(n * sizeof(T)));
     if (!in) throw std::invalid_argument(path + ": truncated checkpoint");
 }
+
+/// Writes the bytes `write` produces, then the seal, atomically (write_file_atomically).
+void write_sealed_checkpoint(const std::string& path, const std::function<void(std::ostream&)>& write);
+
+/// The checked payload of a sealed checkpoint. FileNotFoundError if path does not exist;
+/// std::invalid_argument "<path>: ..." if it cannot be read, has no seal (truncated, or not a
+/// checkpoint) or its bytes do not match the seal (corrupt).
+std::istringstream read_sealed_checkpoint(const std::string& path);
 
 }  // namespace pnet

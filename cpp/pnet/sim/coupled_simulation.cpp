@@ -166,7 +166,7 @@ constexpr std::size_t kNameBytes = 16;
 }  // namespace
 
 void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
-    write_file_atomically(path, [&](std::ostream& out) {
+    write_sealed_checkpoint(path, [&](std::ostream& out) {
         out.write(kMagic, sizeof kMagic);
         const std::vector<Mat<2>> stress = explicit_ ? explicit_->mpm().checkpoint_state() : std::vector<Mat<2>>{};
         const std::int64_t header[6] = {static_cast<std::int64_t>(particles_.size()),
@@ -195,12 +195,7 @@ void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
 }
 
 void CoupledSimulation2d::load_checkpoint(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec)) throw FileNotFoundError(path + ": no such checkpoint file");
-        throw std::invalid_argument(path + ": cannot open the checkpoint");
-    }
+    std::istringstream in = read_sealed_checkpoint(path);
     char magic[8];
     std::int64_t header[6];
     double time;

@@ -334,7 +334,7 @@ constexpr std::size_t kNameBytes = 16;
 
 template <int dim>
 void FemSimulation<dim>::save_checkpoint(const std::string& path) const {
-    write_file_atomically(path, [&](std::ostream& out) {
+    write_sealed_checkpoint(path, [&](std::ostream& out) {
         out.write(kMagic, sizeof kMagic);
         const std::int64_t header[5] = {kDim, static_cast<std::int64_t>(state_.x.size()),
                                         static_cast<std::int64_t>(state_.hardening.size()), frame_, steps_};
@@ -353,12 +353,7 @@ void FemSimulation<dim>::save_checkpoint(const std::string& path) const {
 
 template <int dim>
 void FemSimulation<dim>::load_checkpoint(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec)) throw FileNotFoundError(path + ": no such checkpoint file");
-        throw std::invalid_argument(path + ": cannot open the checkpoint");
-    }
+    std::istringstream in = read_sealed_checkpoint(path);
     char magic[8];
     std::int64_t header[5];
     double time;

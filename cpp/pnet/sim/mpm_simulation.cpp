@@ -137,7 +137,7 @@ constexpr std::size_t kNameBytes = 16;  // integrator name, zero-padded
 
 template <int dim>
 void Simulation<dim>::save_checkpoint(const std::string& path) const {
-    write_file_atomically(path, [&](std::ostream& out) {
+    write_sealed_checkpoint(path, [&](std::ostream& out) {
         out.write(kMagic, sizeof kMagic);
         const std::int64_t header[4] = {dim, static_cast<std::int64_t>(particles_.size()), frame_, steps_};
         out.write(reinterpret_cast<const char*>(header), sizeof header);
@@ -163,12 +163,7 @@ void Simulation<dim>::save_checkpoint(const std::string& path) const {
 
 template <int dim>
 void Simulation<dim>::load_checkpoint(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec)) throw FileNotFoundError(path + ": no such checkpoint file");
-        throw std::invalid_argument(path + ": cannot open the checkpoint");
-    }
+    std::istringstream in = read_sealed_checkpoint(path);
     char magic[8];
     std::int64_t header[4];
     double time;
