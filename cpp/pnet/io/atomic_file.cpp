@@ -33,6 +33,7 @@ void write_file_atomically(const std::string& path, const std::function<void(std
     if (!out) {
         throw std::runtime_error(path + ": cannot create temporary file " + tmp + ": " + std::strerror(errno));
     }
+    errno = 0;  // the streams do not say why a write failed; the failed write(2) leaves errno
     try {
         write(out);
     } catch (const std::exception& e) {
@@ -44,16 +45,19 @@ void write_file_atomically(const std::string& path, const std::function<void(std
         remove_quietly(tmp);
         throw std::runtime_error(path + ": writing failed: unknown exception");
     }
+    auto reason = [] { return errno != 0 ? std::string(std::strerror(errno)) : std::string("an I/O error"); };
     out.flush();
     if (!out) {
+        const std::string why = reason();
         out.close();
         remove_quietly(tmp);
-        throw std::runtime_error(path + ": writing " + tmp + " failed (disk full?)");
+        throw std::runtime_error(path + ": writing " + tmp + " failed: " + why);
     }
     out.close();  // close() can fail too, e.g. when the last buffered block cannot be written
     if (out.fail()) {
+        const std::string why = reason();
         remove_quietly(tmp);
-        throw std::runtime_error(path + ": closing " + tmp + " failed");
+        throw std::runtime_error(path + ": closing " + tmp + " failed: " + why);
     }
 
     std::error_code ec;

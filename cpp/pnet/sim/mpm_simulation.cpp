@@ -5,6 +5,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
@@ -200,6 +201,28 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, p.object, n, path);
     std::vector<Mat<dim>> state;
     read_array(in, state, static_cast<std::size_t>(state_size), path);
+    // A state that could not have come from a run (a bug upstream, or an edited file whose seal was
+    // remade) is refused here, naming the particle, rather than blowing up steps later.
+    const int objects = static_cast<int>(system_.materials.size());
+    for (std::size_t i = 0; i < n; ++i) {
+        auto bad = [&](const char* what) {
+            throw std::invalid_argument(path + ": particle " + std::to_string(i) + "'s " + what +
+                                        " (corrupt checkpoint state)");
+        };
+        if (!p.x[i].allFinite()) bad("position is not finite");
+        if (!p.v[i].allFinite()) bad("velocity is not finite");
+        if (!p.C[i].allFinite()) bad("affine velocity C is not finite");
+        if (!p.F_elastic[i].allFinite() || !(p.F_elastic[i].determinant() > 0.0))
+            bad("deformation gradient is not finite or not invertible");
+        if (!std::isfinite(p.hardening[i])) bad("hardening is not finite");
+        if (!(p.mass[i] > 0.0) || !std::isfinite(p.mass[i])) bad("mass is not a positive number");
+        if (!(p.rest_volume[i] > 0.0) || !std::isfinite(p.rest_volume[i])) bad("rest volume is not a positive number");
+        if (p.object[i] < 0 || p.object[i] >= objects) bad("object index is out of range");
+    }
+    for (const Mat<dim>& m : state)
+        if (!m.allFinite()) throw std::invalid_argument(path + ": the integrator's state is not finite (corrupt checkpoint)");
+    if (header[2] < 0 || header[2] > std::numeric_limits<int>::max() || header[3] < 0 || !std::isfinite(time) || time < 0.0)
+        throw std::invalid_argument(path + ": corrupt checkpoint header (frame, step count or time)");
     particles_ = p;  // copy assignment keeps each array's storage (Python views of it stay valid)
     integrator_->restore_checkpoint_state(std::move(state));
     frame_ = static_cast<int>(header[2]);
