@@ -13,6 +13,7 @@
 #include "pnet/nn/model_file.hpp"
 #include "pnet/nn/torchscript.hpp"
 
+#include "support/mutator.hpp"
 #include "support/temp_dir.hpp"
 
 namespace pnet {
@@ -221,6 +222,44 @@ TEST(ModelFile, TruncatedAndRandomBytes) {
     write_file(path, noise);
     expect_error<std::invalid_argument>([&] { load_model_file(path, trusted); }, path,
                                         "not a readable TorchScript archive");
+}
+
+// Mutated model files (issue 21's fuzz harness): untrusted, every changed file is refused by its
+// hash before LibTorch sees it; trusted, LibTorch's archive reader and the metadata checks must end
+// each case in a valid load or std::invalid_argument, never a crash.
+TEST(ModelFile, FuzzedFilesAreRefusedOrLoad) {
+    TempDir dir;
+    const std::string good = read_file(kModels + "/snow_2d.pt");
+    test::Mutator mutate(2105);
+    LoadOptions trusted;
+    trusted.trusted = true;
+    int untrusted_refused = 0, unchanged = 0, trusted_valid = 0, trusted_refused = 0;
+    const int cases = test::fuzz_cases(300);
+    for (int c = 0; c < cases; ++c) {
+        const std::string bytes = mutate.bytes(good);
+        unchanged += bytes == good;
+        const std::string path = dir.file("case.pt");
+        write_file(path, bytes);
+        try {
+            load_model_file(path);
+        } catch (const UntrustedModelError&) {
+            ++untrusted_refused;
+        } catch (const std::exception& e) {
+            ADD_FAILURE() << "case " << c << " (untrusted): " << e.what();
+        }
+        try {
+            load_model_file(path, trusted);
+            ++trusted_valid;
+        } catch (const std::invalid_argument&) {
+            ++trusted_refused;
+        } catch (const std::exception& e) {
+            ADD_FAILURE() << "case " << c << " (trusted): undocumented " << typeid(e).name() << ": " << e.what();
+        }
+    }
+    std::printf("[fuzz] model files (load_model_file)   %d cases: untrusted %d refused by hash; trusted %d valid loads, "
+                "%d clean errors\n", cases, untrusted_refused, trusted_valid, trusted_refused);
+    // A copy of a pinned file under another name is still pinned by its hash: only changed bytes are refused.
+    EXPECT_EQ(untrusted_refused, cases - unchanged);
 }
 
 TEST(ModelFile, WrongDimensionOrKind) {
