@@ -383,6 +383,17 @@ void FemSimulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, s.hardening, state_.hardening.size(), path);
     in.peek();
     if (!in.eof()) throw std::invalid_argument(path + ": longer than its header says (corrupt checkpoint)");
+    // A state no run could have written is refused naming the node or element (see the MPM loader).
+    for (std::size_t i = 0; i < s.x.size(); ++i)
+        if (!s.x[i].allFinite() || !s.v[i].allFinite())
+            throw std::invalid_argument(path + ": node " + std::to_string(i) +
+                                        "'s position or velocity is not finite (corrupt checkpoint state)");
+    for (std::size_t e = 0; e < s.hardening.size(); ++e)
+        if (!std::isfinite(s.hardening[e]) || !s.plastic_inverse[e].allFinite())
+            throw std::invalid_argument(path + ": element " + std::to_string(e) +
+                                        "'s plastic state is not finite (corrupt checkpoint state)");
+    if (!std::isfinite(time) || time < 0.0)
+        throw std::invalid_argument(path + ": corrupt checkpoint header (time)");
     state_ = std::move(s);
     frame_ = static_cast<int>(header[3]);
     steps_ = header[4];

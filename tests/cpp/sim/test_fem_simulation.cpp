@@ -6,9 +6,11 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <cmath>
 #include <cstring>
 #include <nlohmann/json.hpp>
 
+#include "pnet/io/sha256.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "support/temp_dir.hpp"
 
@@ -115,6 +117,27 @@ TEST(FemSimulation, CheckpointThenResumeEqualsAnUninterruptedRun) {
         expect_identical(resumed.state(), uninterrupted.state());
         EXPECT_EQ(dir.entries(), std::vector<std::string>{"state.bin"});
     }
+}
+
+// A checkpoint whose sealed state holds a NaN (a bug upstream writing it) is refused naming the node.
+TEST(FemSimulation, NonFiniteCheckpointStateIsRefusedNamingTheNode) {
+    const Scene scene = load_scene(kTinyFrame);
+    test::TempDir dir;
+    FemSimulation<2> sim(scene, settings_for(scene, "lagged", 1e-2));
+    sim.advance_frame();
+    sim.save_checkpoint(dir.file("state.bin"));
+    std::string bytes = test::read_file(dir.file("state.bin"));
+    // Layout: magic 8, header 5 x int64, time 8, scene digest 64, name 16, then x (n x 2 doubles), v.
+    const std::size_t n = sim.state().x.size(), node = 3;
+    const std::size_t at = 8 + 5 * 8 + 8 + 64 + 16 + n * 2 * 8 + node * 2 * 8;
+    const double nan = std::nan("");
+    std::memcpy(&bytes[at], &nan, sizeof nan);
+    std::string payload = bytes.substr(0, bytes.size() - 72);
+    test::write_file(dir.file("nan.bin"), payload + "PNETSHA2" + sha256_hex(payload));
+    FemSimulation<2> target(scene, settings_for(scene, "lagged", 1e-2));
+    test::expect_error<std::invalid_argument>([&] { target.load_checkpoint(dir.file("nan.bin")); }, dir.file("nan.bin"),
+                                              "node 3's position or velocity is not finite");
+    EXPECT_EQ(target.frame(), 0);  // the refused load changed nothing
 }
 
 TEST(FemSimulation, CheckpointOfAnotherIntegratorOrATruncatedFileIsRefused) {
