@@ -145,6 +145,14 @@ void read_domain(const Reader& r, const json& j, Scene& scene) {
 /// The grid has nodes at domain_min + i dx up to domain_max, so the extent must
 /// be a whole number of cells; enough of them to leave room inside the margins.
 void check_cells(const Reader& r, const Scene& scene) {
+    // Grid nodes a run may allocate (about 2 GiB of grid in 3D): far above every scene here, and a
+    // refusal instead of an allocation that takes the machine down.
+    constexpr double kMaxGridNodes = 67108864.0;  // 2^26
+    double nodes = 1.0;
+    for (int a = 0; a < scene.dim; ++a) nodes *= std::floor((scene.domain_max[a] - scene.domain_min[a]) / scene.dx) + 1.0;
+    if (!(nodes <= kMaxGridNodes))
+        r.fail("dx", "the grid would have " + show(nodes) + " nodes, more than the 67108864 a run may allocate (dx = " +
+                         show(scene.dx) + " m is too small for the domain)");
     for (int a = 0; a < scene.dim; ++a) {
         const double extent = scene.domain_max[a] - scene.domain_min[a];
         const double cells = extent / scene.dx;
@@ -531,6 +539,8 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
     if (const json* v = Reader::find(j, "frames")) scene.frames = r.integer(*v, "frames", 1);
     if (const json* v = Reader::find(j, "particles_per_cell"))
         scene.particles_per_cell = r.integer(*v, "particles_per_cell", 1);
+    if (scene.particles_per_cell > 16)
+        r.fail("particles_per_cell", "expected at most 16 per axis, got " + std::to_string(scene.particles_per_cell));
     if (particles) read_boundary(r, j, scene);
     else if (Reader::find(j, "boundary")) r.fail("boundary", "grid boundary conditions need particle objects");
     read_integrator(r, j, scene);

@@ -561,6 +561,11 @@ const std::vector<MalformedCase> kMalformedCases = {
     {"UnknownIntegrator", 2, [](json& j) { j["integrator"]["name"] = "implicit_euler"; },
      {"scenes/x.json: integrator.name: unknown integrator 'implicit_euler'",
       "(expected explicit, plasticitynet, lagged or analytic)"}},
+    // Found by the fuzz harness: a dx far below the domain's size made a grid of 1e12 nodes (a hang).
+    {"GridTooLarge", 2, [](json& j) { j["dx"] = 1.0 / 65536; },
+     {"scenes/x.json: dx: the grid would have", "nodes, more than the 67108864 a run may allocate"}},
+    {"TooManyParticlesPerCell", 2, [](json& j) { j["particles_per_cell"] = 100; },
+     {"scenes/x.json: particles_per_cell: expected at most 16 per axis, got 100"}},
     {"NegativeDt", 2, [](json& j) { j["integrator"]["dt"] = -1e-3; },
      {"scenes/x.json: integrator.dt: expected a number >= 0, got -0.001"}},
     {"CflAboveOne", 2, [](json& j) { j["integrator"]["cfl"] = 2; },
