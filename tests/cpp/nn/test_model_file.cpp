@@ -234,7 +234,7 @@ TEST(ModelFile, FuzzedFilesAreRefusedOrLoad) {
     LoadOptions trusted;
     trusted.trusted = true;
     int untrusted_refused = 0, unchanged = 0, trusted_valid = 0, trusted_refused = 0;
-    const int cases = test::fuzz_cases(300);
+    const int cases = test::fuzz_cases(200);
     for (int c = 0; c < cases; ++c) {
         const std::string bytes = mutate.bytes(good);
         unchanged += bytes == good;
@@ -258,8 +258,9 @@ TEST(ModelFile, FuzzedFilesAreRefusedOrLoad) {
     }
     std::printf("[fuzz] model files (load_model_file)   %d cases: untrusted %d refused by hash; trusted %d valid loads, "
                 "%d clean errors\n", cases, untrusted_refused, trusted_valid, trusted_refused);
-    // A copy of a pinned file under another name is still pinned by its hash: only changed bytes are refused.
-    EXPECT_EQ(untrusted_refused, cases - unchanged);
+    // Pins live in the MANIFEST beside the file: a copy outside models/ (even byte-identical, as
+    // `unchanged` of these are) is refused untrusted, before LibTorch reads a byte of it.
+    EXPECT_EQ(untrusted_refused, cases) << unchanged << " of the cases were byte-identical";
 }
 
 TEST(ModelFile, WrongDimensionOrKind) {
