@@ -256,7 +256,7 @@ TEST(ModelFile, FuzzedFilesAreRefusedOrLoad) {
             ADD_FAILURE() << "case " << c << " (trusted): undocumented " << typeid(e).name() << ": " << e.what();
         }
     }
-    std::printf("[fuzz] model files (load_model_file)   %d cases: untrusted %d refused by hash; trusted %d valid loads, "
+    std::printf("[fuzz] model files (load_model_file)   %d cases: untrusted %d refused (not pinned); trusted %d valid loads, "
                 "%d clean errors\n", cases, untrusted_refused, trusted_valid, trusted_refused);
     // Pins live in the MANIFEST beside the file: a copy outside models/ (even byte-identical, as
     // `unchanged` of these are) is refused untrusted, before LibTorch reads a byte of it.
