@@ -111,7 +111,7 @@ template <typename T>
 void put_array(std::string& out, const std::vector<T>& a) {
     const std::uint64_t n = a.size();
     out.append(reinterpret_cast<const char*>(&n), sizeof n);
-    out.append(reinterpret_cast<const char*>(a.data()), a.size() * sizeof(T));
+    if (!a.empty()) out.append(reinterpret_cast<const char*>(a.data()), a.size() * sizeof(T));
 }
 
 template <typename T>
@@ -122,7 +122,7 @@ bool take_array(const std::string& in, std::size_t& at, std::vector<T>& a) {
     at += sizeof n;
     if (n > (in.size() - at) / sizeof(T)) return false;
     a.resize(n);
-    std::memcpy(a.data(), in.data() + at, n * sizeof(T));
+    if (n > 0) std::memcpy(a.data(), in.data() + at, n * sizeof(T));
     at += n * sizeof(T);
     return true;
 }
