@@ -134,9 +134,8 @@ Image overlay_2d(const RunInfo& a, const RunInfo& b, int frame, int width_px) {
     }
     r.width_px = width_px;
     const PlyParticles pa = read_particles_ply(a.frames.at(frame), 2), pb = read_particles_ply(b.frames.at(frame), 2);
-    // The same radius in both (A's lattice), so that a particle covers the same area in each.
+    // Each run's disks sized from its own particle spacing (radius_px 0), as in its frames.
     const Image ia = render_particles_2d(pa.position, {}, r);
-    r.radius_px = 0.0;
     const Image ib = render_particles_2d(pb.position, {}, r);
     Image out(ia.width, std::min(ia.height, ib.height), {255, 255, 255});
     const Rgb white{255, 255, 255};
