@@ -16,6 +16,7 @@
 #include "pnet/io/png.hpp"
 #include "pnet/io/render.hpp"
 #include "pnet/metrics/run_comparison.hpp"
+#include "parse_number.hpp"
 
 namespace pnet::apps {
 
@@ -57,13 +58,8 @@ Options parse(int argc, char** argv) {
             if (o.out.empty()) throw UsageError("--out: empty path");
         } else if (arg == "--dx") {
             const std::string text = value();
-            std::size_t used = 0;
-            try {
-                o.dx = std::stod(text, &used);
-            } catch (const std::exception&) {
-                used = 0;
-            }
-            if (used == 0 || used != text.size() || !std::isfinite(o.dx) || !(o.dx > 0.0))
+            o.dx = parse_number(text).value_or(0.0);
+            if (!std::isfinite(o.dx) || !(o.dx > 0.0))
                 throw UsageError("--dx: expected a positive number, got \"" + text + "\"");
         } else if (arg == "--image") {
             o.image = true;

@@ -23,6 +23,7 @@
 #include "pnet/nn/torchscript.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
+#include "parse_number.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/sim/scene_models.hpp"
@@ -74,16 +75,9 @@ Options parse(int argc, char** argv) {
             return argv[++i];
         };
         auto number = [&](const std::string& text) {
-            std::size_t used = 0;
-            double v = 0;
-            try {
-                v = std::stod(text, &used);
-            } catch (const std::exception&) {
-                used = 0;
-            }
-            if (text.empty() || used != text.size())
-                throw UsageError(arg + ": expected a number, got \"" + text + "\"");
-            return v;
+            const std::optional<double> v = parse_number(text);
+            if (!v) throw UsageError(arg + ": expected a number, got \"" + text + "\"");
+            return *v;
         };
         // A whole number in [lo, hi], else a message naming the option and the range.
         auto integer = [&](const std::string& text, long lo, long hi, const char* meaning) {

@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include "parse_number.hpp"
+
 extern char** environ;
 
 namespace pnet::apps {
@@ -48,13 +50,8 @@ Options parse(int argc, char** argv) {
             if (o.out.empty()) throw InputError("--out: empty path");
         } else if (arg == "--fps") {
             const std::string text = value();
-            std::size_t used = 0;
-            try {
-                o.fps = std::stod(text, &used);
-            } catch (const std::exception&) {
-                used = 0;
-            }
-            if (used != text.size() || !std::isfinite(o.fps) || o.fps <= 0.0 || o.fps > 1000.0)
+            o.fps = parse_number(text).value_or(0.0);
+            if (!std::isfinite(o.fps) || o.fps <= 0.0 || o.fps > 1000.0)
                 throw InputError("--fps: expected a frame rate in (0, 1000] frames per second, got '" + text + "'");
         } else if (!arg.empty() && arg[0] == '-') {
             throw InputError("unknown option " + arg);
