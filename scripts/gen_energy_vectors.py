@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes the Python side of the energy cross-check (tests/data/energy_vectors_python.json).
 
-For every energy model in models/MANIFEST: Psi, grad_F Psi and the raw Hessian of the PlasticityNet
+For every energy model in models/MANIFEST and models/ablation/MANIFEST: Psi, grad_F Psi and the raw Hessian of the PlasticityNet
 energy (paper eqs. 8 + 11) through `plasticitynet.load_model` (torch autograd, float64), at a
 scene Young's modulus E and regularizer weight w, on a few (F, F0, h); for every return-map model:
 Z and the new hardening of the learned return mapping. The C++ tests
@@ -54,10 +54,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(ROOT / "tests/data/energy_vectors_python.json"))
     args = parser.parse_args()
-    manifest = json.loads((ROOT / "models/MANIFEST").read_text())
+    entries = json.loads((ROOT / "models/MANIFEST").read_text())["models"]
+    # The energy-representation ablation's models (scripts/train_ablation_models.sh), named relative to models/.
+    for entry in json.loads((ROOT / "models/ablation/MANIFEST").read_text())["models"]:
+        entries.append({**entry, "file": "ablation/" + entry["file"]})
     rng = np.random.Generator(np.random.PCG64(SEED))
     cases = []
-    for entry in manifest["models"]:
+    for entry in entries:
         path = ROOT / "models" / entry["file"]
         d = entry["dim"]
         model = load_model(path, E=E_SCENE) if entry["kind"] == "energy" else load_model(path)

@@ -3,7 +3,7 @@
 was trained (command line, schedule, wall time, machine) and the errors measured on held-out samples
 at export (plasticitynet.evaluate). The C++ loader and the tests check model files against it.
 
-    .venv/bin/python scripts/make_manifest.py [--models DIR]
+    .venv/bin/python scripts/make_manifest.py [--models DIR] [--all]
 
 MANIFEST is JSON: {"format": "plasticitynet-manifest", "version": 1, "models": [{...}, ...]}.
 """
@@ -40,6 +40,7 @@ def entry(path: Path) -> dict:
             {
                 "representation": meta.get("representation", "raw"),
                 "hessian_weight": recipe.get("hessian_weight", 0.0),
+                "energy_form": meta.get("energy_form", "eq8"),
             }
             if meta["kind"] == "energy"
             else {}
@@ -65,9 +66,13 @@ def entry(path: Path) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", type=Path, default=Path(__file__).resolve().parent.parent / "models")
+    parser.add_argument(
+        "--all", action="store_true", help="every .pt file in the folder (models/ablation) instead of the shipped list"
+    )
     args = parser.parse_args(argv)
+    names = sorted(p.stem for p in args.models.glob("*.pt")) if args.all else SHIPPED
     entries, missing = [], []
-    for name in SHIPPED:
+    for name in names:
         path = args.models / f"{name}.pt"
         if path.exists():
             entries.append(entry(path))

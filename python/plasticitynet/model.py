@@ -60,6 +60,9 @@ def _check_metadata(meta, where: str) -> dict:
         if representation not in REPRESENTATIONS:
             raise bad(f"representation = {representation!r}, expected one of {', '.join(REPRESENTATIONS)}")
         allowed = (mlp_input_width(d, False, representation), mlp_input_width(d, True, representation))
+        form = meta.get("energy_form", "eq8")  # files written before it existed are eq. 8
+        if form not in energy.ENERGY_FORMS:
+            raise bad(f"energy_form = {form!r}, expected one of {', '.join(energy.ENERGY_FORMS)}")
     else:
         allowed = (d + 1,)
     if meta["input_width"] not in allowed:
@@ -157,6 +160,8 @@ class LearnedEnergy:
         #: "raw" (the paper's [F, F0, h]) or "principal" (frame-indifferent; nets.EnergyNet).
         self.representation = metadata.get("representation", "raw")
         self.has_hardening = metadata["input_width"] == mlp_input_width(self.dim, True, self.representation)
+        #: "eq8" (the paper's) or a form it rejected in sec. 5.2 (training.energy.ENERGY_FORMS).
+        self.energy_form = metadata.get("energy_form", "eq8")
         self.training_material = Material.from_dict(metadata["material"], self.dim)
         self.E = float(metadata.get("training_E", TRAINING_E) if E is None else E)
         #: The material at the requested E (Pa).
@@ -211,7 +216,7 @@ class LearnedEnergy:
         return P[0] if single else P
 
     def correction(self, F0, h=None) -> torch.Tensor:
-        """E c = E (grad_F N(F0, F0, h) - Ptilde(F0, h)), (B, d, d)."""
+        """E c = E (grad_F N(F0, F0, h) - Ptilde(F0, h)), (B, d, d) (eq. 8; the other forms' c otherwise)."""
         F0, _, h, single = self._inputs(F0, F0, h)
         c = self._c(F0, h)
         return self.E * (c[0] if single else c)
@@ -219,14 +224,18 @@ class LearnedEnergy:
     def _c(self, F0, h):
         with torch.no_grad():
             P0 = self.stress_nd(F0, h)
-        return energy.correction(self.network, F0, self._net_h(h), P0).detach()
+        return energy.correction(self.network, F0, self._net_h(h), P0, form=self.energy_form).detach()
+
+    def _slot(self, F0):
+        """The network's F0 input: F0, or the identity for a global energy form."""
+        return energy.network_reference(self.energy_form, F0)
 
     # --- energy ----------------------------------------------------------------------------------
     def psi(self, F, F0, h=None, w: float = 0.0) -> torch.Tensor:
         """Psi(F, F0, h) scaled by E, (B,); differentiable in F."""
         F, F0, h, single = self._inputs(F, F0, h)
         c = self._c(F0, h)
-        value = self.network(energy_input(F, F0, self._net_h(h)))[:, 0] - (c * F).sum((-2, -1))
+        value = self.network(energy_input(F, self._slot(F0), self._net_h(h)))[:, 0] - (c * F).sum((-2, -1))
         if w != 0.0:
             D = F - F0
             value = value + 0.5 * w * self.mu * (D * D).sum((-2, -1))
@@ -234,7 +243,7 @@ class LearnedEnergy:
         return value[0] if single else value
 
     def _gradient(self, F, F0, h, w, c, create_graph):
-        _, dN = energy.network_gradient(self.network, F, F0, self._net_h(h), create_graph=create_graph)
+        _, dN = energy.network_gradient(self.network, F, self._slot(F0), self._net_h(h), create_graph=create_graph)
         g = dN - c
         if w != 0.0:
             g = g + w * self.mu * (F - F0)

@@ -113,3 +113,59 @@ def test_return_map_residuals_share_their_zero_set_and_reject_unknown_names():
     assert radius > 0 and paper > 0 and radius != paper
     with pytest.raises(ValueError, match="residual"):
         return_map_net.return_map_loss(net, material, Sigma, h, residual="relative")
+
+
+# --- the energy forms the paper rejected (sec. 5.2, Fig. 11) ----------------------------------------------
+@pytest.mark.parametrize("form", ["local_identity", "global_identity", "global"])
+@pytest.mark.parametrize("name,dim", [("sand", 2), ("snow", 3)])
+def test_rejected_forms_are_what_the_paper_wrote(form, name, dim):
+    """Each rejected form's gradient against its definition written out with autograd on the bare network:
+    local_identity grad N(F, F0) - grad N(I, F0), global_identity grad N(F, I) - grad N(I, I), global
+    grad N(F, I); the *_identity forms give zero stress at F = I, the global ones do not depend on F0."""
+    m, net, b, h, P, P0 = _setup(name, dim, n=16)
+    eye = torch.eye(dim, dtype=torch.float64).expand_as(b.F)
+
+    def grad_n(F, slot):
+        F = F.clone().requires_grad_(True)
+        (g,) = torch.autograd.grad(net(energy_input(F, slot, h)).sum(), F)
+        return g
+
+    slot = b.F0 if form == "local_identity" else eye
+    expected = grad_n(b.F, slot) - (grad_n(eye, slot) if form != "global" else 0.0)
+    g = psi_gradient(net, b.F, b.F0, h, P0, form=form)
+    assert torch.allclose(g, expected, rtol=1e-12, atol=1e-14)
+    # w != 0 adds the regularizer of eq. 11 around F0 as in eq. 8.
+    g_w = psi_gradient(net, b.F, b.F0, h, P0, w=0.5, mu=m.mu, form=form)
+    assert torch.allclose(g_w - g, 0.5 * m.mu * (b.F - b.F0), rtol=1e-12, atol=1e-14)
+    # psi's autograd derivative is psi_gradient.
+    F = b.F.clone().requires_grad_(True)
+    (g_auto,) = torch.autograd.grad(psi(net, F, b.F0, h, P0, w=0.5, mu=m.mu, form=form).sum(), F)
+    assert torch.allclose(g_auto, g_w, rtol=1e-12, atol=1e-13)
+    at_identity = psi_gradient(net, eye.clone(), b.F0, h, P0, form=form)
+    if form != "global":
+        assert float(at_identity.abs().max()) < 1e-12
+    else:
+        assert float(at_identity.abs().max()) > 1e-6  # nothing makes N's gradient vanish at I
+    if form != "local_identity":
+        other_F0 = b.F0.flip(0)
+        assert torch.allclose(psi_gradient(net, b.F, other_F0, h, P0.flip(0), form=form), g, rtol=1e-13, atol=1e-15)
+    # Unlike eq. 8, none of them reproduces Ptilde(F0) at F = F0 by construction.
+    assert float((psi_gradient(net, b.F0, b.F0, h, P0, form=form) - P0).abs().max()) > 1e-3
+
+
+@pytest.mark.parametrize("form", ["eq8", "local_identity", "global_identity", "global"])
+def test_loss_of_each_form_is_eq9_with_its_gradient(form):
+    """The fused loss of every form equals mean ||grad Psi - Ptilde||^2 with that form's grad Psi (for
+    "global", the paper's L = E_F ||grad N(F) - Ptilde(F)||^2 of sec. 5.2), and trains the network."""
+    m, net, b, h, P, P0 = _setup("sand", 2)
+    loss = energy_loss(net, b.F, b.F0, h, P, P0, form=form)
+    ref = ((psi_gradient(net, b.F, b.F0, h, P0, form=form) - P) ** 2).sum((-2, -1)).mean()
+    assert torch.allclose(loss, ref, rtol=1e-12)
+    loss.backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in list(net.parameters())[:-1])
+
+
+def test_unknown_form_is_refused():
+    m, net, b, h, P, P0 = _setup("sand", 2, n=4)
+    with pytest.raises(ValueError, match="energy_form = 'polar': expected one of eq8, local_identity"):
+        psi_gradient(net, b.F, b.F0, h, P0, form="polar")

@@ -143,6 +143,8 @@ def test_train_py_end_to_end(tmp_path):
         (["--material", "sand", "--dim", "2", "--hessian-weight", "-1"], "must be finite and >= 0, got -1"),
         (["--material", "sand", "--dim", "2", "--hessian-weight", "inf"], "must be finite and >= 0, got inf"),
         (["--material", "sand", "--dim", "2", "--sampling", "far"], "invalid choice: 'far'"),
+        (["--material", "sand", "--dim", "2", "--energy-form", "eq9"], "invalid choice: 'eq9'"),
+        (["--material", "metal_nh_rm", "--dim", "2", "--energy-form", "global"], "--energy-form applies to energies"),
     ],
 )
 def test_bad_arguments_exit_2(args, message, capsys):
@@ -160,3 +162,28 @@ def test_bad_arguments_through_train_py():
     ):
         run = subprocess.run([sys.executable, str(TRAIN_PY), *args], capture_output=True, text=True, timeout=120)
         assert run.returncode == 2 and message in run.stderr and "usage: train.py" in run.stderr
+
+
+@pytest.mark.parametrize("form", ["global", "local_identity"])
+def test_train_py_rejected_energy_form(tmp_path, form):
+    """train.py --energy-form (the ablation of the paper's Fig. 11): the form is in the printed line, the
+    metadata and the recipe, load_model evaluates it, and eq. 8's exactness at F0 is (rightly) not there."""
+    out = tmp_path / f"sand_2d_{form}.pt"
+    run = subprocess.run(
+        [sys.executable, str(TRAIN_PY), "--material", "sand", "--dim", "2", "--epochs", "10", "--batch", "128",
+         "--representation", "raw", "--energy-form", form, "--out", str(out), "--no-progress", "--threads", "1",
+         "--eval-samples", "500"], capture_output=True, text=True, timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    assert f"energy form {form}" in run.stdout
+    model = plasticitynet.load_model(out)
+    assert model.energy_form == form and model.metadata["energy_form"] == form
+    assert model.metadata["recipe"]["energy_form"] == form
+    assert "rejected" in model.metadata["energy"]
+    assert model.metadata["errors"]["at_F0_max_rel"] > 1e-6
+    eye = torch.eye(2, dtype=torch.float64)
+    F0 = torch.tensor([[1.1, 0.05], [0.0, 0.9]], dtype=torch.float64)
+    if form == "local_identity":
+        assert float(model.gradient(eye, F0).abs().max()) < 1e-9
+    else:
+        assert torch.allclose(model.gradient(F0, F0), model.gradient(F0, eye), rtol=1e-13, atol=1e-15)

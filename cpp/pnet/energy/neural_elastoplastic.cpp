@@ -66,17 +66,38 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
             clamped += outside;
         }
     }
-    net_.set_reference(F0, has_hardening_ ? network_h.data() : nullptr, n);
+    const EnergyForm form = metadata_.energy_form;
+    const bool global = form == EnergyForm::GlobalIdentity || form == EnergyForm::Global;
+    if (form != EnergyForm::Eq8) identity_.assign(n, Mat<dim>::Identity());
+    // The network's F0 slot: F0, or the identity for a global form.
+    net_.set_reference(global ? identity_.data() : F0, has_hardening_ ? network_h.data() : nullptr, n);
     hardening_clamped_ = clamped;
-    // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
+    // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next solve's first evaluation.
     net_.evaluate(F0, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
+    if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {
+        // c = grad_F N(I, slot, h), the rejected forms' correction at the identity.
+        identity_value_.resize(n);
+        identity_gradient_.resize(n * kM);
+        net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
+    }
 #pragma omp parallel for schedule(static) if (count >= 64)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
-        const double h = hardening ? hardening[p] : h0;
-        const Mat<dim> P = return_map_ ? return_map_->elastoplastic_stress(F0[p], h)
-                                       : training_material_.elastoplastic_stress(F0[p], h);
-        for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - P(k / dim, k % dim);
-        if (relative_) offset_[p] = net_value_[p];  // N(F0, F0, h)
+        if (relative_) offset_[p] = net_value_[p];  // N(F0, slot, h)
+        switch (form) {
+            case EnergyForm::Eq8: {
+                // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
+                const double h = hardening ? hardening[p] : h0;
+                const Mat<dim> P = return_map_ ? return_map_->elastoplastic_stress(F0[p], h)
+                                               : training_material_.elastoplastic_stress(F0[p], h);
+                for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - P(k / dim, k % dim);
+                break;
+            }
+            case EnergyForm::LocalIdentity:
+            case EnergyForm::GlobalIdentity:
+                for (int k = 0; k < kM; ++k) c_[p][k] = identity_gradient_[p * kM + k];
+                break;
+            case EnergyForm::Global: c_[p].setZero(); break;
+        }
     }
     buffers_at_reference_ = true;
 }

@@ -14,6 +14,12 @@
 // (set_reference()); within it, the line search asks for values, Newton for gradients and Hessians
 //   d2 Psi / dF2 = E [ Hess_F N + w mu I ]   (d^2 x d^2, row-major vec(F) basis),
 // optionally projected to positive semi-definite (eigenvalue clamp).
+//
+// A model in one of the forms the paper rejected (ModelMetadata::energy_form,
+// for the ablation of its Fig. 11) changes only c and the network's F0 input:
+// c = grad_F N(I, F0, h) (local_identity), grad_F N(I, I, h) with the identity
+// in the F0 slot (global_identity), or 0 with the identity in the slot
+// (global); grad_F Psi(F0) is then not Ptilde(F0, h).
 #include <cstddef>
 #include <memory>
 #include <vector>
@@ -90,6 +96,9 @@ private:
     std::vector<Mat<dim>> F0_;
     std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)
     std::vector<double> offset_;                   // Psi(F0) / E when relative_, else 0
+    // The rejected energy forms only: identities (the F0 slot or the correction point) and N, grad N there.
+    std::vector<Mat<dim>> identity_;
+    std::vector<double> identity_value_, identity_gradient_;
     std::size_t hardening_clamped_ = 0;
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).

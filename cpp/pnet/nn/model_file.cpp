@@ -53,6 +53,16 @@ std::string to_string(EnergyRepresentation representation) {
     return representation == EnergyRepresentation::Raw ? "raw" : "principal";
 }
 
+std::string to_string(EnergyForm form) {
+    switch (form) {
+        case EnergyForm::Eq8: return "eq8";
+        case EnergyForm::LocalIdentity: return "local_identity";
+        case EnergyForm::GlobalIdentity: return "global_identity";
+        case EnergyForm::Global: return "global";
+    }
+    return "?";
+}
+
 ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
     if (!j.is_object()) throw std::invalid_argument(context + ": metadata.json is not a JSON object");
     ModelMetadata meta;
@@ -102,6 +112,16 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
                 meta.representation = EnergyRepresentation::Principal;
             else
                 fail(context, "representation", "\"" + representation + "\" is not \"raw\" or \"principal\"");
+        }
+        if (j.contains("energy_form")) {  // files written before it existed are eq. 8
+            const std::string form = text(j, "energy_form", context);
+            bool known = false;
+            for (EnergyForm f : {EnergyForm::Eq8, EnergyForm::LocalIdentity, EnergyForm::GlobalIdentity,
+                                 EnergyForm::Global})
+                if (form == to_string(f)) meta.energy_form = f, known = true;
+            if (!known)
+                fail(context, "energy_form",
+                     "\"" + form + "\" is not \"eq8\", \"local_identity\", \"global_identity\" or \"global\"");
         }
         const bool raw = meta.representation == EnergyRepresentation::Raw;
         const int expected = (raw ? 2 * d * d : d * d + d) + (meta.has_hardening ? 1 : 0);

@@ -48,12 +48,27 @@ enum class EnergyRepresentation { Raw, Principal };
 /// "raw" or "principal".
 std::string to_string(EnergyRepresentation representation);
 
+/// The energy's form (metadata "energy_form"; files without it are Eq8): the
+/// paper's eq. 8, or one of the forms it tried and rejected (sec. 5.2, Fig. 11),
+/// kept for that ablation (python/plasticitynet/training/energy.py):
+///   Eq8             Psi = N(F, F0, h) - (grad_F N(F0, F0, h) - Ptilde(F0, h)) : F
+///   LocalIdentity   Psi = N(F, F0, h) - grad_F N(I, F0, h) : F
+///   GlobalIdentity  Psi = N(F, I, h) - grad_F N(I, I, h) : F
+///   Global          Psi = N(F, I, h)
+/// (plus the regularizer of eq. 11 in each). The global forms feed the identity
+/// in the network's F0 slot.
+enum class EnergyForm { Eq8, LocalIdentity, GlobalIdentity, Global };
+
+/// "eq8", "local_identity", "global_identity" or "global".
+std::string to_string(EnergyForm form);
+
 struct ModelMetadata {
     ModelKind kind = ModelKind::Energy;
     int dim = 2;
     std::vector<int> widths;
     bool has_hardening = false;         // energy: the input ends with h
     EnergyRepresentation representation = EnergyRepresentation::Raw;  // energy
+    EnergyForm energy_form = EnergyForm::Eq8;                          // energy
     /// The range of the network's hardening input h it was trained on
     /// (recipe.distribution.h_range; energies with hardening and return maps).
     /// Models that do not record it get the training distribution of DESIGN.md
@@ -85,7 +100,7 @@ struct ModelMetadata {
 
 /// Parses and validates the metadata entry; std::invalid_argument naming
 /// `context` (the file) and the field on any problem: unknown format or
-/// version, kind, dim, representation, widths (input width 2d^2 (+1) for a raw
+/// version, kind, dim, representation, energy_form, widths (input width 2d^2 (+1) for a raw
 /// energy, d^2 + d (+1) for a principal one, d+1 for a return map; output 1), activation other than "silu", layer parameter
 /// names, material (validated as a material description of this dimension),
 /// training_E, return_map reference.

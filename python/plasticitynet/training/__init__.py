@@ -3,7 +3,8 @@
 - sampling:        seeded (F, F0, h) batches ("paper" and "near" sampling), return-map states
 - nets:            the MLPs of Table 2 (SiLU) and the energy input layout [vec F, vec F0, h]
 - targets:         Ptilde(F, h) from the material library at E = 1 (analytic or learned return mapping)
-- energy:          the corrected energy of eq. 8 (+ regularizer of eq. 11) and the loss of eq. 9
+- energy:          the corrected energy of eq. 8 (+ regularizer of eq. 11), the loss of eq. 9, and the
+                   forms the paper rejected (sec. 5.2, Fig. 11) for that ablation
 - return_map_net:  the learned von Mises return mapping of eqs. 12-13
 - trainer:         Adam + StepLR loop, CSV log, loss plot, resumable checkpoints
 - export:          float64 TorchScript + metadata JSON (read back by plasticitynet.load_model)
@@ -11,7 +12,7 @@
 - cli:             the argument parser behind the repository's train.py
 """
 
-from .energy import correction, energy_loss, network_gradient, psi, psi_gradient
+from .energy import ENERGY_FORMS, correction, energy_loss, network_gradient, psi, psi_gradient
 from .export import FORMAT, FORMAT_VERSION, energy_metadata, export_model, return_map_metadata, script_network
 from .nets import MLP, energy_input, energy_widths, make_mlp, return_map_widths
 from .sampling import (
@@ -28,7 +29,7 @@ from .targets import TRAINING_E, ElastoplasticStress, nondimensional_material, w
 from .trainer import MATERIALS, TrainConfig, Trainer, TrainResult, train
 
 __all__ = [
-    "correction", "energy_loss", "network_gradient", "psi", "psi_gradient",
+    "ENERGY_FORMS", "correction", "energy_loss", "network_gradient", "psi", "psi_gradient",
     "FORMAT", "FORMAT_VERSION", "energy_metadata", "export_model", "return_map_metadata", "script_network",
     "MLP", "energy_input", "energy_widths", "make_mlp", "return_map_widths",
     "DeformationBatch", "SamplingSpec", "generator_for", "random_rotations", "sample_batch",

@@ -18,6 +18,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from .energy import ENERGY_FORMS
 from .evaluate import format_errors
 from .nets import REPRESENTATIONS
 from .return_map_net import RESIDUALS
@@ -105,6 +106,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         help="energies: weight of the loss on Hess Psi against sym(d Ptilde/dF) beside eq. 9 (0: off)",
     )
+    p.add_argument(
+        "--energy-form",
+        choices=ENERGY_FORMS,
+        default="eq8",
+        help="energies: eq8 (the paper's eq. 8) or a form the paper rejected in sec. 5.2 / Fig. 11, for that "
+        "ablation: local_identity = N(F, F0) - grad N(I, F0) : F, global_identity = N(F) - grad N(I) : F, "
+        "global = N(F) (eq8)",
+    )
     p.add_argument("--out", default=None, help="model file (default models/{material}_{dim}d.pt)")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint OUT.ckpt")
     p.add_argument(
@@ -141,6 +150,8 @@ def main(argv=None, root: str | Path | None = None) -> int:
         return_map = str(rm)
     elif args.return_map:
         parser.error(f"--return-map applies to --material metal_nh only, not {args.material}")
+    if args.energy_form != "eq8" and args.material == RETURN_MAP_MATERIAL:
+        parser.error(f"--energy-form applies to energies, not --material {RETURN_MAP_MATERIAL}")
     if args.resume and not out.with_suffix(".ckpt").is_file():
         parser.error(f"--resume: no checkpoint {out.with_suffix('.ckpt')}")
     argv_list = sys.argv[1:] if argv is None else list(argv)
@@ -157,6 +168,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
         rm_loss=args.rm_loss,
         representation=args.representation,
         hessian_weight=args.hessian_weight,
+        energy_form=args.energy_form,
         out=str(out),
         checkpoint_every=args.checkpoint_every,
         resume=args.resume,
@@ -176,7 +188,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
         f"training the {args.dim}D {args.material} {kind}: {config.epochs} steps of batch {config.batch}, "
         f"lr {config.lr} x{config.lr_decay} every {config.decay_steps}, sampling {config.sampling}, seed {config.seed}"
         + (
-            f", {config.representation} input, Hessian weight {config.hessian_weight}"
+            f", {config.representation} input, Hessian weight {config.hessian_weight}, energy form {config.energy_form}"
             if args.material != RETURN_MAP_MATERIAL
             else ""
         )

@@ -32,6 +32,34 @@ from torch import nn
 
 from .nets import energy_input
 
+#: The energy's form: eq. 8 (the paper's, and the only one the simulator should use) and the three forms
+#: the paper tried and rejected (sec. 5.2, Fig. 11), kept for that ablation:
+#:   "eq8"             Psi = N(F, F0, h) - (grad_F N(F0, F0, h) - Ptilde(F0, h)) : F
+#:   "local_identity"  Psi = N(F, F0, h) - grad_F N(I, F0, h) : F    (zero stress at F = I)
+#:   "global_identity" Psi = N(F, I, h) - grad_F N(I, I, h) : F      (one global energy, zero stress at I)
+#:   "global"          Psi = N(F, I, h)                              (one global energy)
+#: The global forms feed the identity in the network's F0 slot, so N is a function of F (and h) alone
+#: while the network, its file and the simulator's kernel stay those of eq. 8.
+ENERGY_FORMS = ("eq8", "local_identity", "global_identity", "global")
+
+
+def check_form(form: str) -> str:
+    if form not in ENERGY_FORMS:
+        raise ValueError(f"energy_form = {form!r}: expected one of {', '.join(ENERGY_FORMS)}")
+    return form
+
+
+def network_reference(form: str, F0: torch.Tensor) -> torch.Tensor:
+    """What the network's F0 slot receives: F0 for the local forms, the identity for the global ones."""
+    if check_form(form) in ("eq8", "local_identity"):
+        return F0
+    return torch.eye(F0.shape[-1], dtype=F0.dtype, device=F0.device).expand_as(F0)
+
+
+def _correction_point(form: str, F0: torch.Tensor) -> torch.Tensor:
+    """Where the linear correction takes grad_F N: F0 for eq. 8, the identity for the *_identity forms."""
+    return F0 if form == "eq8" else torch.eye(F0.shape[-1], dtype=F0.dtype, device=F0.device).expand_as(F0)
+
 
 def _frob_inner(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
     """A : B = sum_ij A_ij B_ij per batch entry, (B,)."""
@@ -52,11 +80,20 @@ def network_gradient(
 
 
 def correction(
-    net: nn.Module, F0: torch.Tensor, h: torch.Tensor | None, Ptilde0: torch.Tensor, create_graph: bool = False
+    net: nn.Module,
+    F0: torch.Tensor,
+    h: torch.Tensor | None,
+    Ptilde0: torch.Tensor,
+    create_graph: bool = False,
+    form: str = "eq8",
 ) -> torch.Tensor:
-    """c = grad_F N(F0, F0, h) - Ptilde(F0, h), (B, d, d) (a constant of F)."""
+    """c, (B, d, d), a constant of F: grad_F N(F0, F0, h) - Ptilde(F0, h) for eq. 8, grad_F N(I, F0, h) or
+    grad_F N(I, I, h) for the *_identity forms, 0 for "global" (ENERGY_FORMS)."""
     F0 = F0.detach()
-    return network_gradient(net, F0, F0, h, create_graph)[1] - Ptilde0
+    if check_form(form) == "global":
+        return torch.zeros_like(F0)
+    c = network_gradient(net, _correction_point(form, F0), network_reference(form, F0), h, create_graph)[1]
+    return c - Ptilde0 if form == "eq8" else c
 
 
 def psi(
@@ -67,10 +104,11 @@ def psi(
     Ptilde0: torch.Tensor,
     w: float = 0.0,
     mu: float = 0.0,
+    form: str = "eq8",
 ) -> torch.Tensor:
-    """Psi(F, F0, h) (eq. 8; eq. 11 with w != 0), (B,). Differentiable in F."""
-    c = correction(net, F0, h, Ptilde0).detach()
-    value = net(energy_input(F, F0, h))[:, 0] - _frob_inner(c, F)
+    """Psi(F, F0, h) (eq. 8 or another ENERGY_FORMS; eq. 11 with w != 0), (B,). Differentiable in F."""
+    c = correction(net, F0, h, Ptilde0, form=form).detach()
+    value = net(energy_input(F, network_reference(form, F0), h))[:, 0] - _frob_inner(c, F)
     if w != 0.0:
         D = F - F0
         value = value + 0.5 * w * mu * _frob_inner(D, D)
@@ -86,10 +124,11 @@ def psi_gradient(
     w: float = 0.0,
     mu: float = 0.0,
     create_graph: bool = False,
+    form: str = "eq8",
 ) -> torch.Tensor:
-    """grad_F Psi(F, F0, h) = grad_F N(F, F0, h) - c + w mu (F - F0), (B, d, d)."""
-    _, dN = network_gradient(net, F, F0, h, create_graph)
-    g = dN - correction(net, F0, h, Ptilde0, create_graph)
+    """grad_F Psi(F, F0, h) = grad_F N(F, F0, h) - c + w mu (F - F0), (B, d, d) (the F0 slot and c of `form`)."""
+    _, dN = network_gradient(net, F, network_reference(form, F0), h, create_graph)
+    g = dN - correction(net, F0, h, Ptilde0, create_graph, form)
     if w != 0.0:
         g = g + w * mu * (F - F0)
     return g
@@ -106,22 +145,35 @@ def energy_loss(
     direction: torch.Tensor | None = None,
     S_direction: torch.Tensor | None = None,
     parts: dict | None = None,
+    form: str = "eq8",
 ) -> torch.Tensor:
-    """Eq. 9: mean ||grad_F Psi(F, F0, h) - Ptilde(F, h)||_F^2 with
+    """Eq. 9: mean ||grad_F Psi(F, F0, h) - Ptilde(F, h)||_F^2 with, for eq. 8,
     grad_F Psi = grad_F N(F, F0, h) - grad_F N(F0, F0, h) + Ptilde(F0, h).
     Both input gradients come from one forward/backward pass over the 2B inputs
-    [F, F0, h] and [F0, F0, h], kept in the graph for the parameter gradient.
+    [F, F0, h] and [F0, F0, h], kept in the graph for the parameter gradient. The other ENERGY_FORMS
+    change the F0 slot and the correction point (the identity) and drop Ptilde(F0, h); "global" has no
+    correction, so its loss is the paper's L = E_F ||grad_F N(F) - Ptilde(F)||^2 of sec. 5.2.
 
     With hessian_weight > 0, plus hessian_weight * mean ||Hess_F N(F, F0, h) v - J v||^2 / ||v||^2 for the
     directions v = `direction` (B, d, d) and the targets J v = `S_direction` (B, d, d), J = d Ptilde/dF
     (see the module docstring). `parts`, if given, receives the two terms' values (floats)."""
     B = F.shape[0]
-    first = torch.cat([F, F0]).detach().requires_grad_(True)
-    second = torch.cat([F0, F0])
-    hh = None if h is None else torch.cat([h, h])
+    slot = network_reference(form, F0)
+    if form == "global":
+        first = F.detach().requires_grad_(True)
+        second = slot
+        hh = h
+    else:
+        first = torch.cat([F, _correction_point(form, F0)]).detach().requires_grad_(True)
+        second = torch.cat([slot, slot])
+        hh = None if h is None else torch.cat([h, h])
     N = net(energy_input(first, second, hh))
     (dN,) = torch.autograd.grad(N.sum(), first, create_graph=True)
-    grad_psi = dN[:B] - dN[B:] + Ptilde0
+    grad_psi = dN[:B]
+    if form != "global":
+        grad_psi = grad_psi - dN[B:]
+    if form == "eq8":
+        grad_psi = grad_psi + Ptilde0
     residual = grad_psi - Ptilde
     loss = _frob_inner(residual, residual).mean()
     if parts is not None:

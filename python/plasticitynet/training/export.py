@@ -25,6 +25,7 @@ import torch
 from torch import nn
 
 from ..materials import Material
+from .energy import check_form
 from .nets import MLP
 from .targets import TRAINING_E
 
@@ -32,6 +33,19 @@ FORMAT = "plasticitynet-model"
 FORMAT_VERSION = 1
 METADATA_KEY = "metadata.json"
 KINDS = ("energy", "return_map")
+
+#: The "energy" entry of the metadata per energy_form (energy.ENERGY_FORMS).
+_TAIL = "; N, Ptilde and mu at E = 1; grad_F: derivative in the first d*d inputs"
+ENERGY_DESCRIPTIONS = {
+    "eq8": "Psi(F, F0, h) = E [N(F, F0, h) - (grad_F N(F0, F0, h) - Ptilde(F0, h)) : F + w mu/2 ||F - F0||^2] "
+    "(paper eqs. 8, 11" + _TAIL + ")",
+    "local_identity": "Psi(F, F0, h) = E [N(F, F0, h) - grad_F N(I, F0, h) : F + w mu/2 ||F - F0||^2] "
+    "(a form the paper rejected, sec. 5.2" + _TAIL + ")",
+    "global_identity": "Psi(F, F0, h) = E [N(F, I, h) - grad_F N(I, I, h) : F + w mu/2 ||F - F0||^2] "
+    "(a form the paper rejected, sec. 5.2; the F0 slot is the identity" + _TAIL + ")",
+    "global": "Psi(F, F0, h) = E [N(F, I, h) + w mu/2 ||F - F0||^2] "
+    "(a form the paper rejected, sec. 5.2; the F0 slot is the identity" + _TAIL + ")",
+}
 
 ENERGY_RESCALE = (
     "multiply Psi, grad Psi and Hess Psi by the scene's Young's modulus E in Pa; "
@@ -91,9 +105,11 @@ def energy_metadata(
     recipe: dict,
     errors: dict | None = None,
     return_map: dict | None = None,
+    energy_form: str = "eq8",
 ) -> dict:
     """Metadata of an energy model. `return_map`: {"type": "analytic"} (default) or
-    {"type": "learned", "file": path relative to the model's folder, "sha256": ...}."""
+    {"type": "learned", "file": path relative to the model's folder, "sha256": ...}. `energy_form`: eq. 8 or
+    one of the rejected forms of the paper's Fig. 11 (energy.ENERGY_FORMS), recorded as "energy_form"."""
     d = material.dim
     representation = getattr(net, "representation", "raw")
     forward_layout = [f"F (row-major, {d * d})", f"F0 (row-major, {d * d})"] + (["h"] if has_hardening else [])
@@ -114,10 +130,8 @@ def energy_metadata(
             else "none: the MLP takes forward's input"
         ),
         has_hardening=has_hardening,
-        energy=(
-            "Psi(F, F0, h) = E [N(F, F0, h) - (grad_F N(F0, F0, h) - Ptilde(F0, h)) : F + w mu/2 ||F - F0||^2] "
-            "(paper eqs. 8, 11; N, Ptilde and mu at E = 1; grad_F: derivative in the first d*d inputs)"
-        ),
+        energy_form=check_form(energy_form),
+        energy=ENERGY_DESCRIPTIONS[energy_form],
         return_map=dict(return_map or {"type": "analytic"}),
     )
     return meta

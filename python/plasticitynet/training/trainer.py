@@ -26,7 +26,7 @@ from pathlib import Path
 import torch
 
 from . import return_map_net
-from .energy import energy_loss, psi_gradient, stress_directional_derivative
+from .energy import ENERGY_FORMS, energy_loss, psi_gradient, stress_directional_derivative
 from .export import energy_metadata, export_model, return_map_metadata, script_network, sha256_of
 from .nets import MLP, REPRESENTATIONS, make_energy_net, make_mlp, return_map_widths
 from .sampling import SAMPLINGS, TRAINING_SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec
@@ -39,11 +39,11 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 #: Fields that must agree between a checkpoint and the run resuming it (epochs may grow).
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
-    "representation", "hessian_weight",
+    "representation", "hessian_weight", "energy_form",
 )
 
 #: What checkpoints written before a field existed were trained with.
-_LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0}
+_LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8"}
 
 #: Held-out samples of the in-training error curve (eval_every), "eval" stream at this step index
 #: (disjoint from the final evaluation, which uses steps 0, 1, ...).
@@ -65,6 +65,7 @@ class TrainConfig:
     rm_loss: str = "radius"  # metal_nh_rm: residual of eq. 13 (return_map_net.RESIDUALS)
     representation: str = "principal"  # energies: nets.REPRESENTATIONS
     hessian_weight: float = 0.0  # energies: weight of the Hessian loss (energy.hessian_loss); 0: eq. 9 only
+    energy_form: str = "eq8"  # energies: eq. 8 or a rejected form of the paper's Fig. 11 (energy.ENERGY_FORMS)
     out: str = ""  # model path; "" -> models/{material}_{dim}d.pt
     checkpoint_every: int = 500
     resume: bool = False
@@ -97,6 +98,10 @@ class TrainConfig:
             raise ValueError(
                 f"representation = {self.representation!r}: expected one of {', '.join(REPRESENTATIONS)}"
             )
+        if self.energy_form not in ENERGY_FORMS:
+            raise ValueError(f"energy_form = {self.energy_form!r}: expected one of {', '.join(ENERGY_FORMS)}")
+        if self.material == RETURN_MAP_MATERIAL and self.energy_form != "eq8":
+            raise ValueError(f"energy_form = {self.energy_form!r} applies to energies, not {RETURN_MAP_MATERIAL}")
         if not (math.isfinite(self.hessian_weight) and self.hessian_weight >= 0):
             raise ValueError(f"hessian_weight = {self.hessian_weight!r}: must be finite and >= 0")
         if self.eval_every < 0 or self.eval_samples < 0:
@@ -162,7 +167,8 @@ class EnergyTask:
                 Sv = stress_directional_derivative(self.stress, b.F, b.h, v).float()
             v = v.float()
         return energy_loss(
-            self.net, b32.F, b32.F0, self._h(b32.h), P.float(), P0.float(), weight, v, Sv, self.loss_parts
+            self.net, b32.F, b32.F0, self._h(b32.h), P.float(), P0.float(), weight, v, Sv, self.loss_parts,
+            self.config.energy_form,
         )
 
     def curve_error(self) -> dict:
@@ -174,12 +180,15 @@ class EnergyTask:
                 P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).float()
                 P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).float()
             b32 = b.to(torch.float32)
-            g = psi_gradient(self.net, b32.F, b32.F0, self._h(b32.h), P0).detach()
+            g = psi_gradient(self.net, b32.F, b32.F0, self._h(b32.h), P0, form=self.config.energy_form).detach()
             out[s] = float(((g - P) ** 2).sum() / (P**2).sum()) ** 0.5
         return out
 
     def metadata(self, recipe: dict, errors=None) -> dict:
-        return energy_metadata(self.material, self.net, self.spec.has_hardening, recipe, errors, self.return_map_info)
+        return energy_metadata(
+            self.material, self.net, self.spec.has_hardening, recipe, errors, self.return_map_info,
+            self.config.energy_form,
+        )
 
     def in_memory_model(self, metadata: dict):
         from ..model import LearnedEnergy
@@ -429,6 +438,7 @@ class Trainer:
             recipe["distribution"] = self.task.spec.to_dict()
             recipe["representation"] = cfg.representation
             recipe["hessian_weight"] = cfg.hessian_weight
+            recipe["energy_form"] = cfg.energy_form
         else:  # the return-map net
             recipe["distribution"] = {"eps_range": [-1.0, 1.0], "h_range": [0.0, 1.0]}
             recipe["rm_loss"] = cfg.rm_loss

@@ -61,11 +61,12 @@ void check_model(const std::string& file) {
     Batch<dim> b = make_batch<dim>(model.metadata, n, 17);
     energy.set_reference(b.F0.data(), b.h.data(), n);
 
-    // grad Psi(F0) = E Ptilde(F0, h), exactly up to round-off.
+    // grad Psi(F0) = E Ptilde(F0, h), exactly up to round-off (eq. 8; the rejected forms of the
+    // ablation models do not have it: RejectedEnergyForms).
     std::vector<double> psi(n);
     std::vector<Mat<dim>> grad(n);
     energy.value_gradient(b.F0.data(), psi.data(), grad.data());
-    for (std::size_t p = 0; p < n; ++p) {
+    for (std::size_t p = 0; p < n && model.metadata.energy_form == EnergyForm::Eq8; ++p) {
         const Mat<dim> P = energy.elastoplastic_stress(b.F0[p], b.h[p]);
         EXPECT_LE((grad[p] - P).cwiseAbs().maxCoeff(), 1e-10 * P.cwiseAbs().maxCoeff()) << "particle " << p;
     }
@@ -143,6 +144,76 @@ TEST(NeuralElastoplasticEnergy, Snow3d) {
 }
 TEST(NeuralElastoplasticEnergy, Metal3d) {
     check_model<3>("metal_3d.pt");
+}
+
+// The models of the energy-representation ablation (models/ablation/, paper sec. 5.2, Fig. 11):
+// derivatives against finite differences, and each form's defining property.
+TEST(NeuralElastoplasticEnergy, AblationModelsDerivatives) {
+    for (const char* form : {"eq8", "local_identity", "global_identity", "global"})
+        check_model<2>(std::string("ablation/sand_2d_") + form + ".pt");
+}
+
+TEST(NeuralElastoplasticEnergy, RejectedEnergyForms) {
+    const double E = 3.0e5;
+    const std::size_t n = 7;
+    for (const EnergyForm form :
+         {EnergyForm::Eq8, EnergyForm::LocalIdentity, EnergyForm::GlobalIdentity, EnergyForm::Global}) {
+        const std::string file = kModels + "/ablation/sand_2d_" + to_string(form) + ".pt";
+        SCOPED_TRACE(file);
+        const ModelFile model = load_model_file(file);
+        ASSERT_EQ(model.metadata.energy_form, form);
+        NeuralElastoplasticEnergy<2> energy(model, {E, 0.0});  // w = 0: the form alone
+        Batch<2> b = make_batch<2>(model.metadata, n, 5);
+        energy.set_reference(b.F0.data(), b.h.data(), n);
+        std::vector<double> psi(n);
+        std::vector<Mat<2>> at_F0(n), at_I(n), at_F(n), at_F_other(n);
+        const std::vector<Mat<2>> identity(n, Mat<2>::Identity());
+        energy.value_gradient(b.F0.data(), psi.data(), at_F0.data());
+        energy.value_gradient(identity.data(), psi.data(), at_I.data());
+        energy.value_gradient(b.F.data(), psi.data(), at_F.data());
+        // The same F with other references (the batch's F0 in reverse order).
+        std::vector<Mat<2>> F0_other(b.F0.rbegin(), b.F0.rend());
+        energy.set_reference(F0_other.data(), b.h.data(), n);
+        energy.value_gradient(b.F.data(), psi.data(), at_F_other.data());
+        double F0_error = 0.0, I_stress = 0.0, F0_dependence = 0.0, scale = 0.0;
+        for (std::size_t p = 0; p < n; ++p) {
+            const Mat<2> P = energy.elastoplastic_stress(b.F0[p], b.h[p]);
+            scale = std::max(scale, P.cwiseAbs().maxCoeff());
+            F0_error = std::max(F0_error, (at_F0[p] - P).cwiseAbs().maxCoeff());
+            I_stress = std::max(I_stress, at_I[p].cwiseAbs().maxCoeff());
+            F0_dependence = std::max(F0_dependence, (at_F[p] - at_F_other[p]).cwiseAbs().maxCoeff());
+        }
+        // Eq. 8 alone reproduces Ptilde(F0) at F = F0 by construction.
+        if (form == EnergyForm::Eq8)
+            EXPECT_LE(F0_error, 1e-10 * scale);
+        else
+            EXPECT_GT(F0_error, 1e-4 * scale);
+        // The *_identity forms have zero stress at F = I whatever F0.
+        if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) EXPECT_LE(I_stress, 1e-10 * E);
+        // The global forms do not depend on F0 (at w = 0); the local ones do.
+        if (form == EnergyForm::GlobalIdentity || form == EnergyForm::Global)
+            EXPECT_LE(F0_dependence, 1e-10 * scale);
+        else
+            EXPECT_GT(F0_dependence, 1e-4 * scale);
+        if (form == EnergyForm::Global) EXPECT_EQ(energy.correction(0), Mat<2>::Zero());
+    }
+}
+
+TEST(ModelMetadata, UnknownEnergyFormIsRefusedNamingTheField) {
+    const ModelFile model = load_model_file(kModels + "/sand_2d.pt");
+    nlohmann::json j = model.metadata.json;
+    EXPECT_EQ(parse_model_metadata(j, "m.pt").energy_form, EnergyForm::Eq8);  // no field: eq. 8
+    j["energy_form"] = "global";
+    EXPECT_EQ(parse_model_metadata(j, "m.pt").energy_form, EnergyForm::Global);
+    j["energy_form"] = "eq9";
+    try {
+        parse_model_metadata(j, "m.pt");
+        FAIL() << "accepted energy_form eq9";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("m.pt"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("energy_form"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("\"eq9\""), std::string::npos) << e.what();
+    }
 }
 
 TEST(NeuralElastoplasticEnergy, ProjectionClampsNegativeEigenvalues) {
@@ -380,7 +451,7 @@ TEST(NeuralElastoplasticEnergy, MatchesPythonVectors) {
             for (const auto& y : c["expect"]["yielding"]) yielding += y.get<bool>();
         }
     }
-    EXPECT_EQ(models, 8);
+    EXPECT_EQ(models, 12);  // the 8 shipped models and the 4 of the ablation (models/ablation/)
     EXPECT_GT(yielding, 0) << "no yielding return-map case: the learned projection was not exercised";
     EXPECT_GT(checks, 100);
 }
