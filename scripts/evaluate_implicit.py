@@ -8,14 +8,16 @@ For each scene it runs `pnet simulate` with
   plasticitynet_1e-3, plasticitynet_1e-4, lagged_1e-3
 and, for sand_column_2d (group "ablation"), plasticitynet at 1e-3 with the
 regularizer off (w = 0) and with 1, 2, 4 and converged fixed-point iterations on
-F0. Every run is compared with the ground truth frame by frame (`pnet compare`:
+F0, and (group "representation") the energy forms of the paper's Fig. 11 (scripts/train_ablation_models.sh).
+Every run is compared with the ground truth frame by frame (`pnet compare`:
 soft IoU = sum min / sum max of the B-spline mass fields, and binary IoU).
 
 Outputs (under --results, default notebooks/results/implicit_eval):
   summary.csv, summary.md        per scene and run: dt, seconds per frame, mean Newton /
                                  CG / fixed-point iterations per step, min and mean IoU
   <scene>/iou.csv, iou.png       per-frame soft IoU of every run (one curve each)
-  <scene>/<run>_stats.csv, <run>_steps.csv (implicit runs), <run>_final.png
+  <scene>/<run>_stats.csv, <run>_steps.csv (implicit runs), <run>_final.png (and with --keep-frames,
+                                 <run>_frame_NNNNN.png)
 The full runs (PLY of every frame) stay in --work (default out/eval); a run whose
 directory holds all its frames from the same command and scene file is reused, not
 re-run (pass --force after changing the simulator; command.json records the commit).
@@ -81,6 +83,14 @@ RUNS = {
                                   {"sand_column_2d"}),
 }
 
+# The energy-representation ablation (paper sec. 5.2, Fig. 11; group "representation"): the 2D sand energy
+# in eq. 8's form and in the three forms the paper rejected, all four trained with one recipe
+# (scripts/train_ablation_models.sh), each replacing the scene's model (pnet simulate --model).
+ENERGY_FORMS = ("eq8", "local_identity", "global_identity", "global")
+for _form in ENERGY_FORMS:
+    RUNS[f"form_{_form}_1e-3"] = ("plasticitynet", 1e-3, ["--model", str(ROOT / "models" / "ablation" / f"sand_2d_{_form}.pt")],
+                                  "representation", {"sand_column_2d"})
+
 
 def gt_step(scene: str) -> float:
     """The ground truth's step: the paper's 1e-5 s, 1e-6 s for the stiff variants."""
@@ -116,10 +126,13 @@ def run_marker(scene: str, command: list, explicit: bool) -> dict:
     marker = {"command": command, "scene_sha256": scene_sha, "commit": commit}  # commit: for the record only
     if not explicit:  # an implicit run also depends on its model files (retrained models are re-run)
         scene_dir = (ROOT / "scenes" / f"{scene}.json").parent  # model paths are relative to the scene file
-        marker["models"] = {
-            o["model"]: hashlib.sha256((scene_dir / o["model"]).read_bytes()).hexdigest()
-            for o in scene_json.get("objects", []) + scene_json.get("meshes", []) if "model" in o
-        }
+        if "--model" in command:  # one model replaces the scene's
+            model = Path(command[command.index("--model") + 1])
+            files = {model.name: model}
+        else:
+            files = {o["model"]: scene_dir / o["model"]
+                     for o in scene_json.get("objects", []) + scene_json.get("meshes", []) if "model" in o}
+        marker["models"] = {key: hashlib.sha256(path.read_bytes()).hexdigest() for key, path in files.items()}
     return marker
 
 
@@ -213,7 +226,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=["sand_column_2d", "snowball_2d"],
                         help="scene names under scenes/ (stiff/sand_column_2d: a stiff variant)")
-    parser.add_argument("--groups", nargs="+", default=["main", "floor"], choices=["main", "floor", "ablation", "fixed_point"])
+    parser.add_argument("--groups", nargs="+", default=["main", "floor"], choices=["main", "floor", "ablation", "fixed_point", "representation"])
     parser.add_argument("--runs", nargs="+", help="only these runs (names as in the summary; gt is always run)")
     parser.add_argument("--frames", type=int, default=50)
     parser.add_argument("--threads", type=int, default=2)
@@ -223,6 +236,8 @@ def main():
     parser.add_argument("--pnet", type=Path, default=PNET, help="the pnet binary that simulates and compares (default: the build's; a copy lets "
                              "the build relink while an evaluation runs)")
     parser.add_argument("--simulate-only", action="store_true", help="run the simulations, compare nothing")
+    parser.add_argument("--keep-frames", nargs="+", type=int, default=[],
+                        help="also copy these frames' pictures of every run into --results (<run>_frame_NNNNN.png)")
     args = parser.parse_args()
     if not args.pnet.exists():
         sys.exit(f"{args.pnet} not found: build first (./scripts/setup.sh)")
@@ -255,6 +270,10 @@ def main():
                 shutil.copyfile(run / f, results / f"{name}_{f}")
             last = sorted(run.glob("frame_*.png"))[-1]
             shutil.copyfile(last, results / f"{name}_final.png")
+            for frame in args.keep_frames:  # a run that stopped early has fewer
+                picture = run / f"frame_{frame:05d}.png"
+                if picture.exists():
+                    shutil.copyfile(picture, results / f"{name}_{picture.name}")
             row = {"scene": scene, "run": name, "integrator": RUNS[name][0], "dt": run_step(scene, name),
                    **figures}
             if name != "gt":

@@ -125,10 +125,11 @@ Image side_by_side(const std::vector<Image>& images) {
 Image overlay_2d(const RunInfo& a, const RunInfo& b, int frame, int width_px) {
     ParticleRenderOptions r;
     for (int k = 0; k < 2; ++k) {
-        r.domain_min[k] = a.domain_min[k];
-        r.domain_max[k] = a.domain_max[k];
+        r.domain_min[k] = a.view_min[k];
+        r.domain_max[k] = a.view_max[k];
     }
     r.width_px = width_px;
+    r.grid_spacing_m = a.dx;
     const PlyParticles pa = read_particles_ply(a.frames.at(frame), 2), pb = read_particles_ply(b.frames.at(frame), 2);
     // Each run's disks sized from its own particle spacing (radius_px 0), as in its frames.
     const Image ia = render_particles_2d(pa.position, {}, r);

@@ -37,7 +37,7 @@ namespace fs = std::filesystem;
 constexpr const char* kUsage =
     "usage: pnet simulate SCENE.json --out DIR [--integrator explicit|plasticitynet|lagged|analytic] [--dt SECONDS]\n"
     "                     [--cfl C] [--frames N] [--threads T] [--checkpoint-every N] [--resume]\n"
-    "                     [--color speed|hardening] [--trust-model] [--vtu]\n"
+    "                     [--color speed|hardening] [--model FILE.pt] [--trust-model] [--vtu]\n"
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
@@ -50,6 +50,7 @@ constexpr const char* kUsage =
 
 struct Options {
     std::string scene, out, integrator, color = "speed";
+    std::string model;  // --model: the energy model of every object and mesh that names one
     std::optional<double> dt, cfl;
     int frames = -1, threads = 0, checkpoint_every = 10;
     bool resume = false, trust_model = false, fail_on_unconverged = false;
@@ -132,6 +133,8 @@ Options parse(int argc, char** argv) {
             o.resume = true;
         else if (arg == "--vtu")
             o.vtu = true;
+        else if (arg == "--model")
+            o.model = value();
         else if (arg == "--trust-model")
             o.trust_model = true;
         else if (arg == "--fail-on-unconverged")
@@ -227,13 +230,15 @@ void write_frame(const Simulation<dim>& sim, const Scene& scene, const Options& 
     r.value_max =
         o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
     for (int a = 0; a < dim; ++a) {
-        r.domain_min[a] = scene.domain_min[a];
-        r.domain_max[a] = scene.domain_max[a];
+        r.domain_min[a] = scene.view_min[a];
+        r.domain_max[a] = scene.view_max[a];
     }
     char caption[128];
     std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
     r.caption = caption;
     r.width_px = dim == 2 ? 640 : 720;
+    r.grid_spacing_m = scene.dx;
+    r.particle_spacing_m = scene.dx / scene.particles_per_cell;
     const Image image =
         dim == 2 ? render_particles_2d(ply.position, colour, r) : render_particles_3d(ply.position, colour, r);
     write_png((out / frame_name(sim.frame(), "png")).string(), image);
@@ -268,8 +273,8 @@ void write_frame(const FemSimulation<2>& sim, const Scene& scene, const Options&
     r.value_max = o.color == "speed" ? std::max(0.1, 2.0 * speed_scale)
                                      : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
     for (int a = 0; a < 2; ++a) {
-        r.domain_min[a] = scene.domain_min[a];
-        r.domain_max[a] = scene.domain_max[a];
+        r.domain_min[a] = scene.view_min[a];
+        r.domain_max[a] = scene.view_max[a];
     }
     char caption[128];
     std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
@@ -336,8 +341,8 @@ void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Options&
     r.value_max = o.color == "speed" ? std::max(0.1, 2.0 * speed_scale)
                                      : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
     for (int a = 0; a < 3; ++a) {
-        r.domain_min[a] = scene.domain_min[a];
-        r.domain_max[a] = scene.domain_max[a];
+        r.domain_min[a] = scene.view_min[a];
+        r.domain_max[a] = scene.view_max[a];
     }
     char caption[128];
     std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
@@ -384,13 +389,15 @@ void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Optio
     r.value_max =
         o.color == "speed" ? 3.0 : std::max(r.value_min + 1e-6, *std::max_element(colour.begin(), colour.end()));
     for (int a = 0; a < 2; ++a) {
-        r.domain_min[a] = scene.domain_min[a];
-        r.domain_max[a] = scene.domain_max[a];
+        r.domain_min[a] = scene.view_min[a];
+        r.domain_max[a] = scene.view_max[a];
     }
     char caption[128];
     std::snprintf(caption, sizeof caption, "%s  t = %.3f s  (%s)", scene.name.c_str(), sim.time(), o.color.c_str());
     r.caption = caption;
     r.width_px = 640;
+    r.grid_spacing_m = scene.dx;
+    r.particle_spacing_m = scene.dx / scene.particles_per_cell;
     Image image = render_particles_2d(particles.position, colour, r);
     if (o.color == "hardening") mesh_colour.clear();  // the mesh has no hardening: one colour
     const Image drawn = render_mesh_2d(ply.position, ply.triangles, mesh_colour, r);
@@ -411,6 +418,30 @@ constexpr bool is_coupled = std::is_same_v<Sim, CoupledSimulation2d>;
 template <class Sim>
 constexpr bool is_fem =
     std::is_same_v<Sim, FemSimulation<2>> || std::is_same_v<Sim, FemSimulation<3>> || is_coupled<Sim>;
+
+/// --model FILE: FILE (relative to the working folder) replaces the model of every object and mesh
+/// that names one, e.g. a model trained with other options; load_scene_models checks it as it would
+/// the scene's (trusted, an energy of the scene's dimension, for the object's material).
+void use_model(Scene& scene, const std::string& file) {
+    if (file.empty()) throw UsageError("--model: expected a model file");
+    const std::string path = fs::absolute(file).lexically_normal().string();
+    int replaced = 0;
+    for (SceneObject& object : scene.objects)
+        if (!object.model.empty()) object.model = path, ++replaced;
+    for (SceneMesh& mesh : scene.meshes)
+        if (!mesh.model.empty()) mesh.model = path, ++replaced;
+    if (replaced == 0) throw UsageError("--model " + file + ": " + scene.file + " names no model to replace");
+}
+
+/// The energy model files the run's objects and meshes use, in order (none: empty).
+nlohmann::json scene_models(const Scene& scene) {
+    nlohmann::json models = nlohmann::json::array();
+    for (const SceneObject& object : scene.objects)
+        if (!object.model.empty()) models.push_back(object.model);
+    for (const SceneMesh& mesh : scene.meshes)
+        if (!mesh.model.empty()) models.push_back(mesh.model);
+    return models;
+}
 
 template <class Sim>
 nlohmann::json describe_run(const Sim& sim) {
@@ -466,8 +497,11 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         {"frames", frames},
         {"threads", omp_get_max_threads()},
         {"domain_min", std::vector<double>(scene.domain_min.data(), scene.domain_min.data() + dim)},
-        {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)}};
+        {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)},
+        {"view_min", std::vector<double>(scene.view_min.data(), scene.view_min.data() + dim)},
+        {"view_max", std::vector<double>(scene.view_max.data(), scene.view_max.data() + dim)}};
     run_json.update(describe_run(sim));
+    run_json["models"] = scene_models(scene);
     if (implicit) run_json["solver"] = settings.implicit.to_json();
     write_text_atomically((out / "run.json").string(), run_json.dump(2) + "\n");
 
@@ -640,7 +674,8 @@ int simulate_command(int argc, char** argv) {
     // count to its own intra-op count (1 on this 2-core machine), which overrode --threads.
     if (o.threads > 0) TorchAutograd::set_threads(o.threads);
     try {
-        const Scene scene = load_scene(o.scene);
+        Scene scene = load_scene(o.scene);
+        if (!o.model.empty()) use_model(scene, o.model);
         IntegratorSettings settings;
         try {
             settings = integrator_settings(scene, o.integrator);

@@ -413,3 +413,65 @@ def test_bad_numeric_option_exits_2_naming_it(tmp_path, option, value):
     assert r.returncode == 2, f"{option} {value!r} accepted: {r.stdout[-300:]} {r.stderr[-300:]}"
     assert option in r.stderr, r.stderr
     assert not out.exists(), "a refused command must write nothing"
+
+
+def test_model_option_replaces_the_scenes_models(tmp_path):
+    """--model FILE: every object that names a model uses FILE instead (checked as the scene's would be);
+    run.json lists the models a run used."""
+    scene = TINY / "sand_column_2d.json"
+    r = pnet("simulate", scene, "--integrator", "plasticitynet", "--frames", 1, "--out", tmp_path / "own")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "own" / "run.json").read_text())["models"] == [str((ROOT / "models" / "sand_2d.pt"))]
+    other = ROOT / "models" / "ablation" / "sand_2d_global.pt"
+    r = pnet("simulate", scene, "--integrator", "plasticitynet", "--frames", 1, "--model", other, "--out", tmp_path / "o")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "o" / "run.json").read_text())["models"] == [str(other)]
+    # The frames differ: another energy moved the particles.
+    assert (tmp_path / "o" / "frame_00001.ply").read_bytes() != (tmp_path / "own" / "frame_00001.ply").read_bytes()
+
+
+@pytest.mark.parametrize(
+    "model,expected",
+    [
+        ("/no/such/model.pt", "/no/such/model.pt"),
+        (str(ROOT / "models" / "snow_2d.pt"), "objects[0].model: "),
+        (str(ROOT / "models" / "sand_3d.pt"), "objects[0].model: "),
+    ],
+)
+def test_model_option_errors(tmp_path, model, expected):
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "plasticitynet", "--frames", 1,
+             "--model", model, "--out", tmp_path / "o")
+    assert r.returncode == 2 and expected in r.stderr, r.stderr
+    assert not (tmp_path / "o" / "frame_00001.ply").exists()
+
+
+def test_model_option_needs_a_scene_that_names_a_model(tmp_path):
+    scene = tiny_scene("sand_column_2d")
+    del scene["objects"][0]["model"]
+    path = write_scene(tmp_path, scene)
+    r = pnet("simulate", path, "--integrator", "lagged", "--model", ROOT / "models" / "sand_2d.pt", "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert f"{path} names no model to replace" in r.stderr, r.stderr
+
+
+def test_scene_view_frames_the_pictures(tmp_path):
+    """A scene's "view" is the region its pictures show (the domain by default): same width, the height
+    of the view's aspect ratio; run.json records it; a view with max <= min is refused naming it."""
+    scene = tiny_scene("sand_column_2d")
+    scene.pop("view", None)
+    r = pnet("simulate", write_scene(tmp_path, scene), "--integrator", "explicit", "--frames", 1, "--out", tmp_path / "a")
+    assert r.returncode == 0, r.stderr
+    lo, hi = scene["domain"]["min"], scene["domain"]["max"]
+    scene["view"] = {"min": lo, "max": [hi[0], lo[1] + 0.4 * (hi[1] - lo[1])]}
+    r = pnet("simulate", write_scene(tmp_path, scene, "view.json"), "--integrator", "explicit", "--frames", 1,
+             "--out", tmp_path / "b")
+    assert r.returncode == 0, r.stderr
+    (wa, ha), (wb, hb) = _png_size(tmp_path / "a" / "frame_00001.png"), _png_size(tmp_path / "b" / "frame_00001.png")
+    assert wa == wb and hb < 0.6 * ha
+    run = json.loads((tmp_path / "b" / "run.json").read_text())
+    assert run["view_min"] == scene["view"]["min"] and run["view_max"] == scene["view"]["max"]
+    assert run["domain_max"] == hi
+    scene["view"]["max"][1] = lo[1]
+    path = write_scene(tmp_path, scene, "bad.json")
+    r = pnet("simulate", path, "--integrator", "explicit", "--frames", 1, "--out", tmp_path / "c")
+    assert r.returncode == 2 and f"{path}: view.max[1]: must exceed view.min[1]" in r.stderr, r.stderr

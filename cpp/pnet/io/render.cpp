@@ -244,10 +244,11 @@ Rgb particle_colour(const std::vector<double>& value, std::size_t i, const Parti
 }
 
 // Typical particle spacing: the median distance to the nearest other particle over a sample of
-// up to 4096 particles, found with a hash grid whose cell h0 = (bounding volume / n)^(1/d) is the
-// spacing of a lattice filling the particles' bounding box. Particles of a body are at least
-// that dense, so their nearest neighbour lies within the 3^d surrounding cells; isolated
-// particles whose neighbour is farther than h0 are left out of the median. 0 if n < 2.
+// up to 4096 particles, found with a hash grid of cell 2 h0, h0 = (bounding volume / n)^(1/d) the
+// spacing of a lattice filling the particles' bounding box. Particles of a body are nearly that
+// dense (a full N x M lattice of spacing h has h0 = h sqrt((N-1)(M-1) / (N M)), a little less
+// than h), so their nearest neighbour lies within 2 h0, in the 3^d surrounding cells; isolated
+// particles whose neighbour is farther are left out of the median. 0 if n < 2.
 double particle_spacing(const std::vector<double>& position, int dim) {
     const std::size_t n = position.size() / std::size_t(dim);
     if (n < 2) return 0.0;
@@ -272,12 +273,13 @@ double particle_spacing(const std::vector<double>& position, int dim) {
         }
     }
     const double h0 = std::pow(volume / double(n), 1.0 / spread_axes);
+    const double cell = 2.0 * h0;  // the hash cell and the search radius
 
     // Cell coordinates packed 21 bits per axis; wrapping can only add candidates from far cells,
     // whose true distances are then computed, so the nearest neighbour found is still right.
     constexpr std::uint64_t kMask = (1u << 21) - 1;
     auto cell_of = [&](std::size_t i, int k) {
-        return std::int64_t(std::floor((position[i * std::size_t(dim) + std::size_t(k)] - lo[k]) / h0));
+        return std::int64_t(std::floor((position[i * std::size_t(dim) + std::size_t(k)] - lo[k]) / cell));
     };
     auto key_of = [&](const std::int64_t c[3]) {
         std::uint64_t key = 0;
@@ -303,7 +305,7 @@ double particle_spacing(const std::vector<double>& position, int dim) {
         const std::size_t i = cells[s].second;
         std::int64_t c[3] = {0, 0, 0};
         for (int k = 0; k < dim; ++k) c[k] = cell_of(i, k);
-        double best2 = h0 * h0;
+        double best2 = cell * cell;
         bool found = false;
         const int neighbours = dim == 3 ? 27 : 9;
         for (int m = 0; m < neighbours; ++m) {
@@ -339,6 +341,68 @@ double disk_radius(const std::vector<double>& position, int dim, const ParticleR
     double spacing = particle_spacing(position, dim);
     if (!(spacing > 0)) spacing = (options.domain_max[0] - options.domain_min[0]) / 100.0;
     return std::clamp(0.75 * spacing * s, 0.8, options.width_px / 16.0);
+}
+
+// The automatic 2D splats at world-to-pixel scale s: {half-width H, particle spacing h}, both in
+// pixels; h is options.particle_spacing_m or else the median nearest-neighbour distance, H the
+// larger of h and the grid spacing (options.grid_spacing_m), within [1, 1/16 of the image width].
+std::array<double, 2> splat_size(const std::vector<double>& position, const ParticleRenderOptions& options, double s) {
+    double spacing = options.particle_spacing_m > 0 ? options.particle_spacing_m : particle_spacing(position, 2);
+    if (!(spacing > 0)) spacing = (options.domain_max[0] - options.domain_min[0]) / 100.0;
+    const double H = std::clamp(std::max(spacing, options.grid_spacing_m) * s, 1.0, options.width_px / 16.0);
+    return {H, spacing * s};
+}
+
+// Partition-of-unity splats (2D, automatic size). Particle i adds the tent
+//     w(u, v) = max(0, 1 - |u - u_i| / H) max(0, 1 - |v - v_i| / H)
+// at each pixel centre (u, v), H the splat half-width in pixels. The tents are the bilinear
+// interpolation basis of a lattice of spacing H, so on a lattice of spacing h = H / k they sum
+// to k^2 = (H / h)^2 at every pixel inside a body, whatever the pixel pitch: with the coverage
+// (h / H)^2 sum w, the body fills evenly, with none of the moire that disks at a non-integer
+// pitch make. With h the particles' rest spacing (h^2 the area each stands for), the coverage is
+// the local density over the rest density, 1 / J: a stretched body shows lighter and a gap wider
+// than 2H stays open. With H the grid
+// spacing, particles are spread over the cells their mass goes to, as MPM's grid sees the
+// material, and rows of particles that shear apart by less than a cell do not show as stripes.
+// A pixel shows the weighted mean value's colour at opacity min(1, coverage) over the white.
+void splat_particles_2d(Image& img, const std::vector<double>& position, const std::vector<double>& value,
+                        const ParticleRenderOptions& options, int margin, double s, double H, double h) {
+    const std::size_t n = position.size() / 2;
+    const std::size_t pixels = std::size_t(img.width) * std::size_t(img.height);
+    std::vector<double> weight(pixels, 0.0), weighted_value(pixels, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+        const double x = position[2 * i], y = position[2 * i + 1];
+        if (!std::isfinite(x) || !std::isfinite(y)) continue;
+        const double u = margin + (x - options.domain_min[0]) * s, v = margin + (options.domain_max[1] - y) * s;
+        const int u0 = std::max(0, int(std::floor(u - H))), u1 = std::min(img.width - 1, int(std::ceil(u + H)));
+        const int v0 = std::max(0, int(std::floor(v - H))), v1 = std::min(img.height - 1, int(std::ceil(v + H)));
+        const double value_i = value.empty() ? 0.0 : value[i];
+        for (int py = v0; py <= v1; ++py) {
+            const double wy = 1.0 - std::abs(py + 0.5 - v) / H;
+            if (wy <= 0) continue;
+            for (int px = u0; px <= u1; ++px) {
+                const double w = wy * (1.0 - std::abs(px + 0.5 - u) / H);
+                if (w <= 0) continue;
+                const std::size_t k = std::size_t(py) * std::size_t(img.width) + std::size_t(px);
+                weight[k] += w;
+                weighted_value[k] += w * value_i;
+            }
+        }
+    }
+    const double range = options.value_max - options.value_min;
+    for (int py = 0; py < img.height; ++py)
+        for (int px = 0; px < img.width; ++px) {
+            const std::size_t k = std::size_t(py) * std::size_t(img.width) + std::size_t(px);
+            if (weight[k] <= 0) continue;
+            const double mean = weighted_value[k] / weight[k];
+            const Rgb c = value.empty() ? viridis(0.45) : viridis(range > 0 ? (mean - options.value_min) / range : 0.5);
+            const double alpha = std::min(1.0, weight[k] * (h / H) * (h / H));
+            const Rgb under = img.get(px, py);
+            auto mix = [&](std::uint8_t top, std::uint8_t bottom) {
+                return std::uint8_t(std::lround(alpha * top + (1.0 - alpha) * bottom));
+            };
+            img.set(px, py, {mix(c.r, under.r), mix(c.g, under.g), mix(c.b, under.b)});
+        }
 }
 
 void draw_caption(Image& img, const ParticleRenderOptions& options, int margin) {
@@ -503,10 +567,16 @@ Image render_particles_2d(const std::vector<double>& position, const std::vector
     const double ex = options.domain_max[0] - options.domain_min[0];
     const double ey = options.domain_max[1] - options.domain_min[1];
 
-    // The radius sets the margin that keeps disks at the boundary whole, and the margin the
-    // scale; the automatic radius uses the scale of a 4-pixel margin (a sub-pixel difference).
-    const double radius = disk_radius(position, 2, options, (options.width_px - 8) / ex);
-    const int margin = std::max(4, int(std::ceil(radius)) + 2);
+    // The radius (disk, or splat half-width) sets the margin that keeps particles at the boundary
+    // whole, and the margin the scale; the automatic size uses the scale of a 4-pixel margin (a
+    // sub-pixel difference).
+    const bool splat = !(options.radius_px > 0);
+    const double s4 = (options.width_px - 8) / ex;
+    const std::array<double, 2> size = splat ? splat_size(position, options, s4) : std::array<double, 2>{};
+    const double radius = splat ? size[0] : options.radius_px;
+    // Splats fade out at their edge and need no room beyond 4 px: the frame of a mesh drawn in the
+    // same picture (render_mesh_2d) then matches.
+    const int margin = splat ? 4 : std::max(4, int(std::ceil(radius)) + 2);
     const double s = (options.width_px - 2 * margin) / ex;
     if (!(s > 0)) throw std::invalid_argument(std::string(who) + ": disks too large for the image width");
     Image img(options.width_px, image_height(ey * s, margin, who), {255, 255, 255});
@@ -514,6 +584,12 @@ Image render_particles_2d(const std::vector<double>& position, const std::vector
     // Frame just outside the domain, so that it does not cover particles lying on the boundary.
     draw_rect(img, {margin - 1, margin - 1, margin + int(std::lround(ex * s)), margin + int(std::lround(ey * s))},
               {170, 170, 170});
+    if (splat) {
+        // The spacing measured at the scale s4, rescaled to the final scale s.
+        splat_particles_2d(img, position, value, options, margin, s, radius * s / s4, size[1] * s / s4);
+        draw_caption(img, options, margin);
+        return with_legend(img, options, s);
+    }
     for (std::size_t i = 0; i < n; ++i) {
         const double x = position[2 * i], y = position[2 * i + 1];
         if (!std::isfinite(x) || !std::isfinite(y)) continue;

@@ -26,9 +26,19 @@ struct ParticleRenderOptions {
     double domain_max[3] = {1.0, 1.0, 1.0};
     // Image width; the height follows from the box's (projected) aspect ratio.
     int width_px = 800;
-    // Disk radius in pixels; <= 0 chooses 0.75 x the particle spacing (median nearest-neighbour
-    // distance), so that a body of particles looks solid, with no gaps between lattice points.
+    // Disk radius in pixels; <= 0 chooses the size from the particle spacing h (median
+    // nearest-neighbour distance): in 2D partition-of-unity splats of half-width h (a body on a
+    // lattice fills evenly at any pixel pitch, with no moire; render_particles_2d), in 3D spheres
+    // of radius 0.75 h, so that a body of particles looks solid, with no gaps between lattice points.
     double radius_px = 0.0;
+    // 2D automatic size: the simulation's grid spacing dx, m (0: unknown). The splats are then at
+    // least dx wide, spreading each particle over the cells its mass goes to, as MPM's grid sees
+    // the material (render_particles_2d).
+    double grid_spacing_m = 0.0;
+    // 2D automatic size: the particles' spacing at rest (dx / particles per cell), m, the side of the
+    // area each stands for (0: the median nearest-neighbour distance of the frame). The splats'
+    // coverage is then the density over the rest density.
+    double particle_spacing_m = 0.0;
     // Text drawn in the top-left corner (e.g. "t = 0.50 s"), none if empty.
     std::string caption;
     // A legend band below the picture: a colour bar from value_min to value_max named
@@ -41,11 +51,13 @@ struct ParticleRenderOptions {
 /// Height in pixels of the legend band (ParticleRenderOptions::legend).
 inline constexpr int kLegendHeight = 26;
 
-/// 2D particles (position n x 2, row per particle, y up) as filled anti-aliased disks on white
-/// inside a thin grey frame at the domain boundary; disk i is coloured by viridis of value[i]
-/// (value may be empty: one colour for all). Domain point (x, y) is at pixel
+/// 2D particles (position n x 2, row per particle, y up) on white inside a thin grey frame at the
+/// domain (view) boundary, coloured by viridis of value[i] (value may be empty: one colour for
+/// all): filled anti-aliased disks of radius_px, or with radius_px <= 0 partition-of-unity splats
+/// (tents of half-width r = the larger of the particle spacing and grid_spacing_m in pixels, whose
+/// coverage is 1 inside a body on a lattice; a pixel shows the weighted mean value). Domain point (x, y) is at pixel
 ///     col = m + (x - min_x) s,  row = m + (max_y - y) s,  s = (width_px - 2 m) / (max_x - min_x),
-/// m = max(4, ceil(r) + 2) for disk radius r, and the image is
+/// m = max(4, ceil(r) + 2) for disk radius r (4 for splats), and the image is
 /// round((max_y - min_y) s) + 2 m pixels high. Throws std::invalid_argument for mismatched
 /// sizes, an empty domain or a width outside [16, 16384].
 Image render_particles_2d(const std::vector<double>& position, const std::vector<double>& value,

@@ -134,6 +134,13 @@ RunInfo read_run_info(const std::string& dir) {
         if (!(run.domain_max[d] > run.domain_min[d]))
             throw RunInputError(run.json_file + ": domain_max: must exceed domain_min on every axis, got " +
                                 j.at("domain_max").dump() + " and " + j.at("domain_min").dump());
+    // The region the run's pictures show (runs written before it existed: the domain).
+    run.view_min = j.contains("view_min") ? point(j, run.json_file, "view_min", run.dim) : run.domain_min;
+    run.view_max = j.contains("view_max") ? point(j, run.json_file, "view_max", run.dim) : run.domain_max;
+    for (int d = 0; d < run.dim; ++d)
+        if (!(run.view_max[d] > run.view_min[d]))
+            throw RunInputError(run.json_file + ": view_max: must exceed view_min on every axis, got " +
+                                j.at("view_max").dump() + " and " + j.at("view_min").dump());
     run.dx = positive_number(j, run.json_file, "dx");
     run.frame_dt = positive_number(j, run.json_file, "frame_dt");
 

@@ -3,7 +3,8 @@
 // in the library so that the Python bindings can call it too.
 //
 // A run directory holds run.json and the frames frame_NNNNN.ply (io/ply.hpp), NNNNN the frame number in
-// 5 to 9 digits. From run.json only dim (2 or 3), domain_min and domain_max (dim numbers each, m), dx (m)
+// 5 to 9 digits. From run.json only dim (2 or 3), domain_min and domain_max (dim numbers each, m; view_min and
+// view_max, the pictures' region, if present), dx (m)
 // and frame_dt (s) are read; frame k is the state at time k frame_dt. Frames are paired by number, both
 // runs' particle mass is rasterized on one grid over the common domain and the two mass fields are
 // compared with iou() (metrics/iou.hpp).
@@ -31,6 +32,7 @@ struct RunInfo {
     std::string json_file;  // dir/run.json
     int dim = 0;            // 2 or 3
     std::array<double, 3> domain_min{}, domain_max{};  // m, first dim entries used; max > min on every axis
+    std::array<double, 3> view_min{}, view_max{};      // m, the region its pictures show (default: the domain)
     double dx = 0.0;                                   // the simulation's grid spacing, m
     double frame_dt = 0.0;                             // time between frames, s
     std::map<int, std::string> frames;                 // frame number -> PLY path (dir/frame_NNNNN.ply)

@@ -142,6 +142,22 @@ void read_domain(const Reader& r, const json& j, Scene& scene) {
                                                     show(scene.domain_min[a]) + ", got " + show(scene.domain_max[a]));
 }
 
+/// "view": the region pictures show (optional; default the domain); each bound finite, max > min.
+void read_view(const Reader& r, const json& j, Scene& scene) {
+    scene.view_min = scene.domain_min;
+    scene.view_max = scene.domain_max;
+    const json* view = Reader::find(j, "view");
+    if (!view) return;
+    r.require_object(*view, "view");
+    r.reject_unknown_keys(*view, "view", {"min", "max"});
+    if (const json* v = Reader::find(*view, "min")) scene.view_min = r.vector(*v, "view.min", scene.dim);
+    if (const json* v = Reader::find(*view, "max")) scene.view_max = r.vector(*v, "view.max", scene.dim);
+    for (int a = 0; a < scene.dim; ++a)
+        if (!(scene.view_max[a] > scene.view_min[a]))
+            r.fail(index_path("view.max", a), "must exceed view.min[" + std::to_string(a) + "] = " +
+                                                  show(scene.view_min[a]) + ", got " + show(scene.view_max[a]));
+}
+
 /// The grid has nodes at domain_min + i dx up to domain_max, so the extent must
 /// be a whole number of cells; enough of them to leave room inside the margins.
 void check_cells(const Reader& r, const Scene& scene) {
@@ -508,7 +524,7 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
     const Reader r(file);
     r.require_object(j, "(top level)");
     r.reject_unknown_keys(j, "",
-                          {"name", "description", "dim", "domain", "dx", "gravity", "frame_dt", "frames",
+                          {"name", "description", "dim", "domain", "view", "dx", "gravity", "frame_dt", "frames",
                            "particles_per_cell", "boundary", "integrator", "objects", "meshes", "ground", "contact"});
     Scene scene;
     scene.file = file;
@@ -525,6 +541,7 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
     if (const json* v = Reader::find(j, "description")) scene.description = r.text(*v, "description");
 
     read_domain(r, j, scene);
+    read_view(r, j, scene);
     // A grid (dx) is needed for particles; a scene of meshes only may leave it out.
     const bool particles = Reader::find(j, "objects") != nullptr || Reader::find(j, "meshes") == nullptr;
     if (particles || Reader::find(j, "dx")) {
@@ -638,6 +655,7 @@ json scene_to_json(const Scene& scene) {
     json j = {{"name", scene.name},
               {"dim", scene.dim},
               {"domain", {{"min", vector_json(scene.domain_min)}, {"max", vector_json(scene.domain_max)}}},
+              {"view", {{"min", vector_json(scene.view_min)}, {"max", vector_json(scene.view_max)}}},
               {"gravity", vector_json(scene.gravity)},
               {"frame_dt", scene.frame_dt},
               {"frames", scene.frames},

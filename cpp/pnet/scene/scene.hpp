@@ -8,6 +8,8 @@
 //     "description": "any text",                  // optional (source of the parameters, deviations)
 //     "dim": 2,                                   // required, 2 or 3
 //     "domain": {"min": [0, 0], "max": [1, 1]},   // m, optional, default [0, 1]^dim
+//     "view": {"min": [0.2, 0], "max": [0.8, 0.4]},  // m, optional, default the domain: the region the
+//                                                 // frames' pictures show (content, not empty space)
 //     "dx": 0.00390625,                           // m, required; a whole number (>= 8) of cells per axis
 //     "gravity": [0, -9.8],                       // m/s^2, optional, default (0, -9.8[, 0])
 //     "frame_dt": 0.02, "frames": 50,             // s, optional
@@ -142,6 +144,7 @@ struct Scene {
     std::string description;
     int dim = 2;                             // 2 or 3
     Eigen::VectorXd domain_min, domain_max;  // m
+    Eigen::VectorXd view_min, view_max;      // m, the region pictures show (default: the domain)
     double dx = 0.0;                         // grid spacing, m
     Eigen::VectorXd gravity;                 // m/s^2
     double frame_dt = 0.02;                  // s

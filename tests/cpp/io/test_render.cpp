@@ -114,15 +114,16 @@ TEST(Render2d, AutomaticRadiusLeavesNoGapsInABody) {
     o.width_px = 400;
     const Image img = render_particles_2d(position, {}, o);
     EXPECT_EQ(img.width, 400);
-    // The gaps most likely to show are the centres of lattice cells; all must be covered. The
-    // margin is at least 4 px; with r = 0.75 h s ~ 4.6 px it is 7, so s = 386 px/m.
-    const double s = (400 - 2 * 7) / 1.0;
+    // The gaps most likely to show are the centres of lattice cells; all must be covered, at full
+    // opacity (the splats' coverage sums to 1 inside the body). The margin of splats is 4 px, so
+    // s = 392 px/m.
+    const double s = (400 - 2 * 4) / 1.0;
     for (int i = 0; i < 19; ++i)
         for (int j = 0; j < 9; ++j) {
-            const int x = int(7 + (0.3 + (i + 0.5) * h) * s), y = int(7 + (1 - (0.1 + (j + 0.5) * h)) * s);
-            ASSERT_TRUE(coloured(img.get(x, y))) << "gap at lattice cell " << i << ", " << j;
+            const int x = int(4 + (0.3 + (i + 0.5) * h) * s), y = int(4 + (1 - (0.1 + (j + 0.5) * h)) * s);
+            ASSERT_EQ(img.get(x, y), viridis(0.45)) << "gap at lattice cell " << i << ", " << j;
         }
-    EXPECT_EQ(img.get(int(7 + 0.8 * s), int(7 + 0.5 * s)), kWhite);
+    EXPECT_EQ(img.get(int(4 + 0.8 * s), int(4 + 0.5 * s)), kWhite);
 }
 
 TEST(Render2d, CaptionAndInputChecks) {
