@@ -760,7 +760,8 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
     }
     draw_edges(true);
     draw_caption(img, options, margin);
-    return with_legend(img, options, 0.0);  // orthographic 3D: no single scale
+    // Orthographic: s pixels per metre for every length parallel to the picture plane.
+    return with_legend(img, options, s);
 }
 
 Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>& triangles,
@@ -855,7 +856,7 @@ Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>
     }
     draw_box(true);
     draw_caption(img, options, margin);
-    return with_legend(img, options, 0.0);
+    return with_legend(img, options, s);  // orthographic: s pixels per metre in the picture plane
 }
 
 Image render_line_plot(const LinePlot& plot) {

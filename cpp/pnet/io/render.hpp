@@ -42,8 +42,9 @@ struct ParticleRenderOptions {
     // Text drawn in the top-left corner (e.g. "t = 0.50 s"), none if empty.
     std::string caption;
     // A legend band below the picture: a colour bar from value_min to value_max named
-    // value_label (e.g. "speed (m/s)"), and in 2D a scale bar (1, 2 or 5 x 10^k m, at most a
-    // quarter of the box width). The image grows by kLegendHeight pixels.
+    // value_label (e.g. "speed (m/s)"), and a scale bar (1, 2 or 5 x 10^k m, at most a quarter
+    // of the box width; in 3D's orthographic view, for lengths parallel to the picture plane).
+    // The image grows by kLegendHeight pixels.
     bool legend = false;
     std::string value_label;
 };

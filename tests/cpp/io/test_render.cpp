@@ -165,6 +165,26 @@ TEST(Render3d, SizeAndColouredPixels) {
     EXPECT_EQ(img.get(0, img.height - 1), kWhite);
 }
 
+// 3D legend: the scale bar holds for lengths parallel to the picture plane (orthographic), so it
+// scales with the picture: twice the width, twice the bar.
+TEST(Render3d, LegendScaleBarScalesWithThePicture) {
+    const std::vector<double> position = {0.5, 0.5, 0.5, 0.4, 0.6, 0.5};
+    ParticleRenderOptions o = unit_options();
+    o.legend = true;
+    o.radius_px = 3.0;
+    auto bar_length = [&](int width) {
+        o.width_px = width;
+        const Image img = render_particles_3d(position, {}, o);
+        const int bar_y = img.height - kLegendHeight + 4 + 9;
+        int end = 8;
+        while (end + 1 < img.width && img.get(end + 1, bar_y) != kWhite) ++end;
+        return end - 8;
+    };
+    const int short_bar = bar_length(300), long_bar = bar_length(600);
+    EXPECT_GT(short_bar, 20);
+    EXPECT_NEAR(long_bar, 2 * short_bar, 3);
+}
+
 // Two particles on one line of sight: the one nearer the camera (direction (1, 0.8, 1.5) from the
 // centre) must be the one seen, whichever comes first in the input.
 TEST(Render3d, NearerParticleHidesFartherOne) {
