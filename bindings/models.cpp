@@ -163,6 +163,9 @@ plasticitynet.load_model(...).psi in torch. A return-map model (kind
         .def_property_readonly("widths", [](const PyModel& m) { return m.file().metadata.widths; })
         .def_property_readonly("has_hardening", [](const PyModel& m) { return m.file().metadata.has_hardening; },
                                "Whether the energy takes the hardening state h as an input.")
+        .def_property_readonly("energy_form", [](const PyModel& m) { return to_string(m.file().metadata.energy_form); },
+                               "\"eq8\" (the paper's energy), or a form it rejected (sec. 5.2, Fig. 11; models/ablation/): "
+                               "\"local_identity\", \"global_identity\", \"global\".")
         .def_property_readonly("learned_return_map", [](const PyModel& m) { return m.file().metadata.learned_return_map(); },
                                "Whether the energy was trained with (and uses) a learned return mapping.")
         .def_property_readonly("metadata", [](const PyModel& m) { return to_python(m.file().metadata.json); },

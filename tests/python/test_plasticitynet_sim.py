@@ -526,3 +526,20 @@ def test_bad_keyword_is_a_value_or_type_error_naming_it(kwargs, names):
     with pytest.raises((ValueError, TypeError)) as info:
         pns.Simulation(str(ROOT / "scenes" / "tiny" / "sand_column_2d.json"), **kwargs)
     assert names in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("form", ["local_identity", "global_identity", "global"])
+def test_ablation_model_forms_match_torch(form):
+    """The energy forms the paper rejected (models/ablation/): the C++ energy through the module equals
+    plasticitynet.load_model's, and only eq. 8 would reproduce the stress at F = F0."""
+    path = MODELS / "ablation" / f"sand_2d_{form}.pt"
+    model = pns.load_model(path, E=3.537e5)
+    reference = plasticitynet.load_model(path, E=3.537e5)
+    assert model.energy_form == form == reference.energy_form and model.pinned
+    F0 = random_F(12, 2, seed=4)
+    F = F0 + 0.05 * np.random.default_rng(5).standard_normal((12, 2, 2))
+    tF, tF0 = torch.from_numpy(F), torch.from_numpy(F0)
+    scale = model.E
+    assert np.allclose(model.gradient(F, F0, w=1.0), reference.gradient(tF, tF0, w=1.0).numpy(), rtol=0, atol=1e-10 * scale)
+    assert np.allclose(model.hessian(F, F0, w=1.0), reference.hessian(tF, tF0, w=1.0).numpy(), rtol=0, atol=1e-10 * scale)
+    assert not np.allclose(model.gradient(F0, F0), model.stress(F0), rtol=0, atol=1e-4 * scale)
