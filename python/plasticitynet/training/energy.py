@@ -49,16 +49,18 @@ def check_form(form: str) -> str:
     return form
 
 
+def _identities_like(F0: torch.Tensor) -> torch.Tensor:
+    return torch.eye(F0.shape[-1], dtype=F0.dtype, device=F0.device).expand_as(F0)
+
+
 def network_reference(form: str, F0: torch.Tensor) -> torch.Tensor:
     """What the network's F0 slot receives: F0 for the local forms, the identity for the global ones."""
-    if check_form(form) in ("eq8", "local_identity"):
-        return F0
-    return torch.eye(F0.shape[-1], dtype=F0.dtype, device=F0.device).expand_as(F0)
+    return F0 if check_form(form) in ("eq8", "local_identity") else _identities_like(F0)
 
 
 def _correction_point(form: str, F0: torch.Tensor) -> torch.Tensor:
     """Where the linear correction takes grad_F N: F0 for eq. 8, the identity for the *_identity forms."""
-    return F0 if form == "eq8" else torch.eye(F0.shape[-1], dtype=F0.dtype, device=F0.device).expand_as(F0)
+    return F0 if form == "eq8" else _identities_like(F0)
 
 
 def _frob_inner(A: torch.Tensor, B: torch.Tensor) -> torch.Tensor:
