@@ -9,7 +9,8 @@
 # All four with one recipe, the paper's (raw [F, F0] input, the loss of eq. 9
 # alone, the paper's (F, F0) sampling) at the CPU schedule of the shipped 2D
 # sand model (batch 8192, 15000 steps, x0.95 every 300): only the form
-# differs. About 6 min each on one thread; then writes models/ablation/MANIFEST.
+# differs. 6-10 min each on one thread (two at a time on 2 cores); then writes
+# models/ablation/MANIFEST.
 # Usage: scripts/train_ablation_models.sh [--threads N] [FORM ...]
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
