@@ -333,14 +333,16 @@ double particle_spacing(const std::vector<double>& position, int dim) {
     return nearest[nearest.size() / 2];
 }
 
-// Disk radius in pixels for world-to-pixel scale s: the option, or 0.75 x the particle spacing
-// (more than half the diagonal of a square lattice cell, so that a body shows no gaps), within
-// [0.8, 1/16 of the image width].
+// Sphere (disk) radius in pixels for world-to-pixel scale s: the option, or 0.75 x the particle
+// spacing (more than half the diagonal of a square lattice cell, so that a body shows no gaps)
+// and at least 0.6 x the grid spacing when it is known (rows of particles that shear apart by
+// less than a cell stay joined, as the grid sees them), within [0.8, 1/16 of the image width].
 double disk_radius(const std::vector<double>& position, int dim, const ParticleRenderOptions& options, double s) {
     if (options.radius_px > 0) return options.radius_px;
     double spacing = particle_spacing(position, dim);
     if (!(spacing > 0)) spacing = (options.domain_max[0] - options.domain_min[0]) / 100.0;
-    return std::clamp(0.75 * spacing * s, 0.8, options.width_px / 16.0);
+    const double radius = std::max(0.75 * spacing, 0.6 * options.grid_spacing_m);
+    return std::clamp(radius * s, 0.8, options.width_px / 16.0);
 }
 
 // The automatic 2D splats at world-to-pixel scale s: {half-width H, particle spacing h}, both in

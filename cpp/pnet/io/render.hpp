@@ -29,11 +29,12 @@ struct ParticleRenderOptions {
     // Disk radius in pixels; <= 0 chooses the size from the particle spacing h (median
     // nearest-neighbour distance): in 2D partition-of-unity splats of half-width h (a body on a
     // lattice fills evenly at any pixel pitch, with no moire; render_particles_2d), in 3D spheres
-    // of radius 0.75 h, so that a body of particles looks solid, with no gaps between lattice points.
+    // of radius max(0.75 h, 0.6 grid_spacing_m), so that a body of particles looks solid, with no
+    // gaps between lattice points.
     double radius_px = 0.0;
-    // 2D automatic size: the simulation's grid spacing dx, m (0: unknown). The splats are then at
+    // Automatic size: the simulation's grid spacing dx, m (0: unknown). 2D splats are then at
     // least dx wide, spreading each particle over the cells its mass goes to, as MPM's grid sees
-    // the material (render_particles_2d).
+    // the material (render_particles_2d); 3D spheres at least 0.6 dx in radius.
     double grid_spacing_m = 0.0;
     // 2D automatic size: the particles' spacing at rest (dx / particles per cell), m, the side of the
     // area each stands for (0: the median nearest-neighbour distance of the frame). The splats'

@@ -185,6 +185,23 @@ TEST(Render3d, LegendScaleBarScalesWithThePicture) {
     EXPECT_NEAR(long_bar, 2 * short_bar, 3);
 }
 
+// With the grid spacing known, 3D spheres are at least 0.6 dx in radius: a lattice of spacing
+// h = dx / 2 is drawn with r = 0.6 dx = 1.2 h instead of 0.75 h, covering more of the picture.
+TEST(Render3d, GridSpacingSetsTheSmallestSphere) {
+    std::vector<double> position;
+    const double h = 0.02;
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) position.insert(position.end(), {0.45 + h * i, 0.45 + h * j, 0.45 + h * k});
+    ParticleRenderOptions o = unit_options();
+    o.width_px = 300;
+    o.radius_px = 0.0;  // automatic
+    const int plain = count_coloured(render_particles_3d(position, {}, o));
+    o.grid_spacing_m = 2 * h;
+    const int joined = count_coloured(render_particles_3d(position, {}, o));
+    EXPECT_GT(joined, 1.3 * plain);
+}
+
 // Two particles on one line of sight: the one nearer the camera (direction (1, 0.8, 1.5) from the
 // centre) must be the one seen, whichever comes first in the input.
 TEST(Render3d, NearerParticleHidesFartherOne) {
