@@ -50,7 +50,7 @@ constexpr const char* kUsage =
 
 struct Options {
     std::string scene, out, integrator, color = "speed";
-    std::string model;  // --model: the energy model of every object and mesh that names one
+    std::optional<std::string> model;  // --model: the energy model of every object and mesh that names one
     std::optional<double> dt, cfl;
     int frames = -1, threads = 0, checkpoint_every = 10;
     bool resume = false, trust_model = false, fail_on_unconverged = false;
@@ -675,7 +675,7 @@ int simulate_command(int argc, char** argv) {
     if (o.threads > 0) TorchAutograd::set_threads(o.threads);
     try {
         Scene scene = load_scene(o.scene);
-        if (!o.model.empty()) use_model(scene, o.model);
+        if (o.model) use_model(scene, *o.model);
         IntegratorSettings settings;
         try {
             settings = integrator_settings(scene, o.integrator);

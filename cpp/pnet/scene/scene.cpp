@@ -127,35 +127,33 @@ private:
     std::string file_;
 };
 
+/// An optional box {"min": [...], "max": [...]} at key `name` (either bound may be left out: it keeps
+/// the value given); each bound finite, max > min on every axis.
+void read_box(const Reader& r, const json& j, const std::string& name, int dim, Eigen::VectorXd& min,
+              Eigen::VectorXd& max) {
+    const json* box = Reader::find(j, name);
+    if (!box) return;
+    r.require_object(*box, name);
+    r.reject_unknown_keys(*box, name, {"min", "max"});
+    if (const json* v = Reader::find(*box, "min")) min = r.vector(*v, name + ".min", dim);
+    if (const json* v = Reader::find(*box, "max")) max = r.vector(*v, name + ".max", dim);
+    for (int a = 0; a < dim; ++a)
+        if (!(max[a] > min[a]))
+            r.fail(index_path(name + ".max", a), "must exceed " + name + ".min[" + std::to_string(a) + "] = " +
+                                                     show(min[a]) + ", got " + show(max[a]));
+}
+
 void read_domain(const Reader& r, const json& j, Scene& scene) {
     scene.domain_min = Eigen::VectorXd::Zero(scene.dim);
     scene.domain_max = Eigen::VectorXd::Ones(scene.dim);
-    const json* domain = Reader::find(j, "domain");
-    if (!domain) return;
-    r.require_object(*domain, "domain");
-    r.reject_unknown_keys(*domain, "domain", {"min", "max"});
-    if (const json* v = Reader::find(*domain, "min")) scene.domain_min = r.vector(*v, "domain.min", scene.dim);
-    if (const json* v = Reader::find(*domain, "max")) scene.domain_max = r.vector(*v, "domain.max", scene.dim);
-    for (int a = 0; a < scene.dim; ++a)
-        if (!(scene.domain_max[a] > scene.domain_min[a]))
-            r.fail(index_path("domain.max", a), "must exceed domain.min[" + std::to_string(a) + "] = " +
-                                                    show(scene.domain_min[a]) + ", got " + show(scene.domain_max[a]));
+    read_box(r, j, "domain", scene.dim, scene.domain_min, scene.domain_max);
 }
 
-/// "view": the region pictures show (optional; default the domain); each bound finite, max > min.
+/// "view": the region pictures show (optional; default the domain).
 void read_view(const Reader& r, const json& j, Scene& scene) {
     scene.view_min = scene.domain_min;
     scene.view_max = scene.domain_max;
-    const json* view = Reader::find(j, "view");
-    if (!view) return;
-    r.require_object(*view, "view");
-    r.reject_unknown_keys(*view, "view", {"min", "max"});
-    if (const json* v = Reader::find(*view, "min")) scene.view_min = r.vector(*v, "view.min", scene.dim);
-    if (const json* v = Reader::find(*view, "max")) scene.view_max = r.vector(*v, "view.max", scene.dim);
-    for (int a = 0; a < scene.dim; ++a)
-        if (!(scene.view_max[a] > scene.view_min[a]))
-            r.fail(index_path("view.max", a), "must exceed view.min[" + std::to_string(a) + "] = " +
-                                                  show(scene.view_min[a]) + ", got " + show(scene.view_max[a]));
+    read_box(r, j, "view", scene.dim, scene.view_min, scene.view_max);
 }
 
 /// The grid has nodes at domain_min + i dx up to domain_max, so the extent must
