@@ -434,6 +434,7 @@ def test_model_option_replaces_the_scenes_models(tmp_path):
     "model,expected",
     [
         ("/no/such/model.pt", "/no/such/model.pt"),
+        ("", "--model: expected a model file"),
         (str(ROOT / "models" / "snow_2d.pt"), "objects[0].model: "),
         (str(ROOT / "models" / "sand_3d.pt"), "objects[0].model: "),
     ],
