@@ -12,6 +12,7 @@
 #include "common.hpp"
 #include "pnet/metrics/iou.hpp"
 #include "pnet/nn/torchscript.hpp"
+#include "pnet/sim/threads.hpp"
 #include "pnet/sim/scene_models.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
 #include "pnet/sim/fem_simulation.hpp"
@@ -40,6 +41,8 @@ void for_each_step_field(F&& f) {
     f("line_search_steps", &StepStats::line_search_steps);
     f("fixed_point_iterations", &StepStats::fixed_point_iterations);
     f("fixed_point_change", &StepStats::fixed_point_change);
+    f("reference_updates", &StepStats::reference_updates);
+    f("true_residual", &StepStats::true_residual);
     f("initial_residual", &StepStats::initial_residual);
     f("residual", &StepStats::residual);
     f("energy", &StepStats::energy);
@@ -496,11 +499,17 @@ max_grid_speed (m/s).)doc")
             });
         });
 
+    // Every core the process may use by default, set before any model loads (LibTorch would
+    // otherwise impose its own, smaller, intra-op count on OpenMP; sim/threads.hpp).
+    use_threads();
     m.def("set_threads", [](int n) {
         if (n < 1) throw py::value_error("threads: expected a number >= 1, got " + std::to_string(n));
-        TorchAutograd::set_threads(n);  // OpenMP's count, which LibTorch would reset on loading a model
+        use_threads(n);
     }, py::arg("n"), "Number of OpenMP threads the simulator uses (all cores by default). Results do not depend on it.");
-    m.def("threads", [] { return omp_get_max_threads(); }, "Number of OpenMP threads the simulator uses.");
+    m.def("threads", [] { return thread_count(); }, "Number of OpenMP threads the simulator uses.");
+    m.def("available_cores", [] { return available_cores(); },
+          "The cores this process may use (OMP_NUM_THREADS where set, else its CPU affinity): the default thread "
+          "count.");
 }
 
 }  // namespace pnet::bindings

@@ -21,6 +21,7 @@
 #include "pnet/io/vtu.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/nn/torchscript.hpp"
+#include "pnet/sim/threads.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
 #include "parse_number.hpp"
@@ -39,12 +40,15 @@ constexpr const char* kUsage =
     "                     [--cfl C] [--frames N] [--threads T] [--checkpoint-every N] [--resume]\n"
     "                     [--color speed|hardening] [--model FILE.pt] [--trust-model] [--vtu]\n"
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
-    "                     [--newton-tol M_PER_S] [--cg-tol R] [--fixed-point-iterations N]\n"
+    "                     [--newton-tol M_PER_S] [--cg-tol R] [--outer-iteration newton|fixed_point]\n"
+    "                     [--hessian auto|network|tangent] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
     "                     [--fixed-point-inexact FORCING]\n"
     "                     [--fail-on-unconverged]\n"
     "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
+    "                     [--analytic-regularizer W] (analytic + W mu/2 |F - F0|^2 under plasticitynet's outer\n"
+    "                     iteration: the learned solve without learning error, a diagnostic)\n"
     "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
     "                     material's exact one)\n";
 
@@ -57,7 +61,8 @@ struct Options {
     bool vtu = false;  // also frame_NNNNN.vtu (ParaView) for particles and 2D meshes
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
-    std::optional<std::string> preconditioner, return_map;
+    std::optional<double> analytic_regularizer;
+    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
     std::optional<bool> fixed_point_keep_hessian;
 };
@@ -110,11 +115,23 @@ Options parse(int argc, char** argv) {
             o.fixed_point_tol = number(value());
         else if (arg == "--regularizer")
             o.regularizer = number(value());
+        else if (arg == "--analytic-regularizer")
+            o.analytic_regularizer = number(value());
         else if (arg == "--lazy-hessian")
             o.lazy_hessian = number(value());
         else if (arg == "--preconditioner")
             o.preconditioner = value();
-        else if (arg == "--fixed-point-iterations")
+        else if (arg == "--outer-iteration") {
+            const std::string text = value();
+            if (text != "newton" && text != "fixed_point")
+                throw UsageError("--outer-iteration: expected newton or fixed_point, got \"" + text + "\"");
+            o.outer_iteration = text;
+        } else if (arg == "--hessian") {
+            const std::string text = value();
+            if (text != "auto" && text != "network" && text != "tangent")
+                throw UsageError("--hessian: expected auto, network or tangent, got \"" + text + "\"");
+            o.hessian = text;
+        } else if (arg == "--fixed-point-iterations")
             o.fixed_point_iterations = integer(value(), 1, 100000, "");
         else if (arg == "--fixed-point-inexact")
             o.fixed_point_inexact = number(value());
@@ -160,6 +177,8 @@ Options parse(int argc, char** argv) {
         throw UsageError("--fixed-point-tol must be a finite number >= 0");
     if (o.regularizer && !(std::isfinite(*o.regularizer) && *o.regularizer >= 0.0))
         throw UsageError("--regularizer must be a finite number >= 0");
+    if (o.analytic_regularizer && !(std::isfinite(*o.analytic_regularizer) && *o.analytic_regularizer >= 0.0))
+        throw UsageError("--analytic-regularizer must be a finite number >= 0");
     if (o.lazy_hessian && !(*o.lazy_hessian >= 0.0 && *o.lazy_hessian < 1.0))
         throw UsageError("--lazy-hessian must be in [0, 1)");
     if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi" &&
@@ -495,7 +514,7 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
         {"cfl", settings.cfl},
         {"frame_dt", scene.frame_dt},
         {"frames", frames},
-        {"threads", omp_get_max_threads()},
+        {"threads", thread_count()},
         {"domain_min", std::vector<double>(scene.domain_min.data(), scene.domain_min.data() + dim)},
         {"domain_max", std::vector<double>(scene.domain_max.data(), scene.domain_max.data() + dim)},
         {"view_min", std::vector<double>(scene.view_min.data(), scene.view_min.data() + dim)},
@@ -516,7 +535,8 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
     std::string steps_csv =
         "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
         "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
-        "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged" +
+        "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged,reference_updates,"
+        "true_residual_m_per_s" +
         std::string(
             fem ? ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,substeps,"
                   "broad_phase_s,ccd_s"
@@ -577,12 +597,12 @@ int run(const Scene& scene, const Options& o, const IntegratorSettings& settings
             t += s.dt;
             int n = std::snprintf(
                 row, sizeof row,
-                "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu,%d",
+                "%d,%ld,%.9g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%.6g,%d,%d,%d,%d,%.6g,%.6g,%.6g,%.12g,%d,%zu,%d,%zu,%d,%d,%.6g",
                 f.frame, step++, t, s.dt, s.wall_seconds, s.p2g_seconds, s.grid_seconds, s.g2p_seconds,
                 s.energy_seconds, s.cg_seconds, s.newton_iterations, s.cg_iterations, s.line_search_steps,
                 s.fixed_point_iterations, s.fixed_point_change, s.initial_residual, s.residual, s.energy,
                 s.converged ? 1 : 0, s.clamped, s.line_search_failed ? 1 : 0, s.hardening_clamped,
-                s.fixed_point_converged ? 1 : 0);
+                s.fixed_point_converged ? 1 : 0, s.reference_updates, s.true_residual);
             if (fem)
                 n += std::snprintf(row + n, sizeof row - n, ",%d,%d,%d,%d,%zu,%.6g,%d,%.6g,%.6g", s.kinematic_stages,
                                    s.kinematic_reached ? 1 : 0, s.ccd_queries, s.ccd_limited, s.contact_pairs,
@@ -670,9 +690,9 @@ int simulate_command(int argc, char** argv) {
         std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
         return 2;
     }
-    // Through LibTorch: its first operation on this thread (loading a model) sets OpenMP's
-    // count to its own intra-op count (1 on this 2-core machine), which overrode --threads.
-    if (o.threads > 0) TorchAutograd::set_threads(o.threads);
+    // --threads, or every core the process may use; set in LibTorch too, whose first operation
+    // (loading a model) would otherwise impose its own count on OpenMP (sim/threads.hpp).
+    use_threads(o.threads);
     try {
         Scene scene = load_scene(o.scene);
         if (o.model) use_model(scene, *o.model);
@@ -690,10 +710,13 @@ int simulate_command(int argc, char** argv) {
         if (o.cg_tol) settings.implicit.cg_tolerance = *o.cg_tol;
         if (o.fixed_point_tol) settings.implicit.fixed_point_tolerance = *o.fixed_point_tol;
         if (o.regularizer) settings.implicit.regularizer_weight = *o.regularizer;
+        if (o.analytic_regularizer) settings.implicit.analytic_regularizer = *o.analytic_regularizer;
         if (o.preconditioner) settings.implicit.preconditioner = *o.preconditioner;
         if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         if (o.fixed_point_anderson) settings.implicit.fixed_point_anderson = *o.fixed_point_anderson;
+        if (o.outer_iteration) settings.implicit.outer_iteration = *o.outer_iteration;
+        if (o.hessian) settings.implicit.hessian = *o.hessian;
         if (o.fixed_point_inexact) settings.implicit.fixed_point_inexact = *o.fixed_point_inexact;
         if (o.fixed_point_keep_hessian) settings.implicit.fixed_point_keep_hessian = *o.fixed_point_keep_hessian;
         if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";

@@ -46,6 +46,7 @@
 
 #include "pnet/nn/model_file.hpp"
 #include "pnet/nn/torchscript.hpp"
+#include "pnet/sim/threads.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
 #include "pnet/sim/fem_simulation.hpp"
@@ -251,7 +252,7 @@ int main(int argc, char** argv) {
         return 2;
     }
     if (stiff_frames == 0) stiff_frames = frames;
-    if (threads > 0) pnet::TorchAutograd::set_threads(threads);  // OpenMP's count, which LibTorch would reset
+    pnet::use_threads(threads);  // --threads or every core; LibTorch's count too (sim/threads.hpp)
     // The paper's Table 1 (2D, s/frame; their machine): ours (MPM 1e-3, FEM 1e-2) vs explicit at 1e-5.
     const std::map<std::string, std::pair<double, double>> paper = {{"sand_column_2d", {12.58, 6.20}},
                                                                     {"snowball_2d", {35.56, 6.78}},

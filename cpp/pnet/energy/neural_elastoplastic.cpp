@@ -4,6 +4,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "pnet/material/elastoplastic_tangent.hpp"
 #include "pnet/math/psd.hpp"
 
 namespace pnet {
@@ -26,7 +27,13 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
       relative_(options.relative_to_reference),
       E_(options.youngs_modulus / model.metadata.training_E),
       w_(options.regularizer_weight),
-      mu_train_(model.metadata.material.elastic.mu()) {
+      mu_train_(model.metadata.material.elastic.mu()),
+      hessian_kind_(options.hessian) {
+    if (hessian_kind_ == Options::Hessian::Auto) {
+        const bool associative = model.metadata.material.plasticity == PlasticityModel::VonMises;
+        hessian_kind_ = associative ? Options::Hessian::Tangent : Options::Hessian::Network;
+        if (associative) w_ = 0.0;
+    }
     if (!(std::isfinite(options.youngs_modulus) && options.youngs_modulus > 0.0))
         throw std::invalid_argument(model.path + ": Young's modulus must be a positive number of Pa, got " +
                                     std::to_string(options.youngs_modulus));
@@ -50,6 +57,11 @@ Mat<dim> NeuralElastoplasticEnergy<dim>::elastoplastic_stress(const Mat<dim>& F,
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const double* hardening, std::size_t n) {
     F0_.assign(F0, F0 + n);
+    const double initial = training_material_.description().initial_hardening;
+    if (hardening)
+        hardening_.assign(hardening, hardening + n);
+    else
+        hardening_.assign(n, initial);
     c_.resize(n);
     offset_.assign(n, 0.0);
     net_value_.resize(n);
@@ -154,6 +166,24 @@ template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, double* psi, Mat<dim>* gradient,
                                                             Tensor4<dim>* hessian, bool project_psd) const {
     static_assert(sizeof(Tensor4<dim>) == kM * kM * sizeof(double), "Tensor4 must be a plain d^2 x d^2 array");
+    if (hessian_kind_ == Options::Hessian::Tangent) {
+        value_gradient(F, psi, gradient);  // the network's value and gradient (set_reference's pass at F = F0)
+        const double wmu = w_ * mu_train_;
+        const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
+#pragma omp parallel for schedule(static) if (count >= 64)
+        for (std::ptrdiff_t p = 0; p < count; ++p) {
+            const double h = hardening_[p];
+            const PrincipalReturnMap<dim> Z = [&](const Vec<dim>& Sigma) {
+                return return_map_ ? return_map_->return_map(Sigma, h).Sigma
+                                   : training_material_.return_map(Sigma, h).Sigma;
+            };
+            Tensor4<dim> H = elastoplastic_tangent<dim>(clamped_svd<dim>(F[p]), training_material_.elasticity(), Z,
+                                                        project_psd);
+            H.diagonal().array() += wmu;  // PSD plus w mu I stays PSD
+            hessian[p] = E_ * H;
+        }
+        return;
+    }
     buffers_at_reference_ = false;
     // Hess_F N is symmetric, so the row-major output is also the column-major
     // Eigen matrix.

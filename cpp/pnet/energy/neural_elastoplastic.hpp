@@ -45,6 +45,14 @@ public:
         /// at E, so an incremental potential summed over many particles would
         /// carry a large constant whose round-off hides the step's changes.
         bool relative_to_reference = false;
+        /// The Hessian Newton gets: the network's, E [Hess_F N + w mu I] (paper eq. 11), or the
+        /// consistent tangent of the elastoplastic stress, E [dPtilde/dF(F, h) + w mu I]
+        /// (material/elastoplastic_tangent.hpp), the Jacobian of the true residual when F = F0.
+        /// Auto: the tangent with w = 0 for associative plasticity (von Mises: the tangent is the
+        /// symmetric Jacobian, and w mu would only slow Newton on plastic flow, where the true
+        /// stiffness is near zero), the network's with w otherwise (non-associative Drucker-Prager
+        /// and Cam-Clay, whose symmetrized tangent is not the Jacobian). Measured: docs/solver.md.
+        enum class Hessian { Auto, Network, Tangent } hessian = Hessian::Network;
     };
 
     /// Throws std::invalid_argument (naming the model file) unless `model` is a
@@ -76,6 +84,9 @@ public:
     double youngs_modulus() const { return E_; }
     /// Shear modulus of the scene's material, Pa.
     double mu() const { return E_ * mu_train_; }
+    /// The Hessian Newton gets (Options::hessian, Auto resolved) and the regularizer weight w.
+    typename Options::Hessian hessian_kind() const { return hessian_kind_; }
+    double regularizer_weight() const { return w_; }
     const EnergyNetwork<dim>& network() const { return net_; }
     bool has_hardening() const { return has_hardening_; }
     const LearnedReturnMap<dim>* learned_return_map() const { return return_map_.get(); }
@@ -92,6 +103,9 @@ private:
     double E_;  // scene E / training E
     double w_;
     double mu_train_;  // shear modulus at the training E
+    typename Options::Hessian hessian_kind_;  // Network or Tangent (Auto resolved)
+
+    std::vector<double> hardening_;  // per particle, the state (not the network's clamped input)
 
     std::vector<Mat<dim>> F0_;
     std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)

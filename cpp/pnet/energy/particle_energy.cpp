@@ -31,7 +31,8 @@ void ElasticParticleEnergy<dim>::evaluate(const std::vector<Mat<dim>>& F, typena
 template <int dim>
 NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
                                                 const std::vector<Material<dim>>& materials,
-                                                const std::vector<std::string>& context, double regularizer_weight) {
+                                                const std::vector<std::string>& context, double regularizer_weight,
+                                                typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian) {
     if (models.size() != materials.size() || context.size() != materials.size())
         throw std::invalid_argument("NeuralParticleEnergy: one model and one context per object are needed");
     for (std::size_t k = 0; k < materials.size(); ++k) {
@@ -54,7 +55,7 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
         try {
             group.energy = std::make_unique<NeuralElastoplasticEnergy<dim>>(
                 model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight,
-                                                                        /*relative_to_reference=*/true});
+                                                                        /*relative_to_reference=*/true, hessian});
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(context[k] + ": " + e.what());
         }

@@ -79,7 +79,9 @@ public:
     /// NeuralElastoplasticEnergy::Options::relative_to_reference).
     NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
                          const std::vector<Material<dim>>& materials, const std::vector<std::string>& context,
-                         double regularizer_weight);
+                         double regularizer_weight,
+                         typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian =
+                             NeuralElastoplasticEnergy<dim>::Options::Hessian::Network);
 
     void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
                        const std::vector<int>& object) override;

@@ -73,6 +73,8 @@ FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, 
     : system_(system),
       method_(method),
       options_(options),
+      iterates_reference_(method == FemMethod::PlasticityNet ||
+                          (method == FemMethod::Analytic && options.analytic_regularizer > 0.0)),
       energy_(std::move(energy)),
       potential_(system_.mesh, system_.rest, *energy_),
       elastic_energy_(system_.materials),
@@ -125,7 +127,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     const double alpha = potential_.max_step(VecX::Zero(v.size()), v_star);
     if (alpha < 1.0) v *= alpha;
 
-    if (method_ == FemMethod::PlasticityNet) {
+    if (iterates_reference_) {
         predictor_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
         predictor_.set_material_state(system_.element_object, state.hardening);
         predictor_.set_reference({});
@@ -139,7 +141,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         }
     }
     // FEM keeps exact solves from a fresh Hessian (its direct solver refactors either way).
-    ReferenceSolveOptions solve = options_.reference_solve_options(method_ == FemMethod::PlasticityNet);
+    ReferenceSolveOptions solve = options_.reference_solve_options(iterates_reference_);
     solve.keep_hessian = false;
     solve.inexact_forcing = 0.0;
     if (!solve.fixed_point) potential_.set_reference({});  // the elastic and analytic energies need no F0

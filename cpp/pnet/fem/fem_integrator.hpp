@@ -88,6 +88,8 @@ private:
     const FemSystem<dim>& system_;
     FemMethod method_;
     ImplicitOptions options_;
+    // F0 is an unknown of the step: plasticitynet, or analytic regularized about F0 (a diagnostic).
+    bool iterates_reference_;
     std::unique_ptr<ParticleEnergy<dim>> energy_;
     FemPotential<dim> potential_;
     ElasticParticleEnergy<dim> elastic_energy_;

@@ -54,6 +54,8 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                                     nlohmann::json(o.fixed_point_inexact).dump());
     o.regularizer_weight =
         read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
+    o.analytic_regularizer =
+        read_option(block, "analytic_regularizer", o.analytic_regularizer, context, 0.0, "a number >= 0");
     o.lazy_hessian = read_option(block, "lazy_hessian", o.lazy_hessian, context, 0.0, "a number in [0, 1)");
     if (o.lazy_hessian >= 1.0)
         throw std::invalid_argument(context + ": integrator.lazy_hessian: expected a number in [0, 1), got " +
@@ -90,6 +92,18 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                 context + ": integrator.coupled_solver: expected \"block\" or \"cholesky\", got " + it->dump());
         o.coupled_solver = it->get<std::string>();
     }
+    if (const auto it = block.find("hessian"); it != block.end()) {
+        if (!it->is_string() || (*it != "auto" && *it != "network" && *it != "tangent"))
+            throw std::invalid_argument(
+                context + ": integrator.hessian: expected \"auto\", \"network\" or \"tangent\", got " + it->dump());
+        o.hessian = it->get<std::string>();
+    }
+    if (const auto it = block.find("outer_iteration"); it != block.end()) {
+        if (!it->is_string() || (*it != "newton" && *it != "fixed_point"))
+            throw std::invalid_argument(
+                context + ": integrator.outer_iteration: expected \"newton\" or \"fixed_point\", got " + it->dump());
+        o.outer_iteration = it->get<std::string>();
+    }
     if (const auto it = block.find("preconditioner"); it != block.end()) {
         if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi" && *it != "ichol"))
             throw std::invalid_argument(
@@ -113,6 +127,7 @@ NewtonOptions ImplicitOptions::newton_options() const {
 ReferenceSolveOptions ImplicitOptions::reference_solve_options(bool fixed_point) const {
     ReferenceSolveOptions solve;
     solve.fixed_point = fixed_point;
+    solve.outer = outer_iteration == "fixed_point" ? OuterIteration::FixedPoint : OuterIteration::Newton;
     solve.max_solves = max_fixed_point_iterations;
     solve.tolerance = fixed_point_tolerance;
     solve.anderson_depth = fixed_point_anderson;
@@ -127,12 +142,15 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"max_newton_iterations", max_newton_iterations},
             {"max_cg_iterations", max_cg_iterations},
             {"cg_tolerance", cg_tolerance},
+            {"outer_iteration", outer_iteration},
             {"fixed_point_tolerance", fixed_point_tolerance},
             {"max_fixed_point_iterations", max_fixed_point_iterations},
             {"fixed_point_anderson", fixed_point_anderson},
             {"fixed_point_keep_hessian", fixed_point_keep_hessian},
             {"fixed_point_inexact", fixed_point_inexact},
             {"regularizer_weight", regularizer_weight},
+            {"analytic_regularizer", analytic_regularizer},
+            {"hessian", hessian},
             {"preconditioner", preconditioner},
             {"linear_solver", linear_solver},
             {"coupled_solver", coupled_solver},

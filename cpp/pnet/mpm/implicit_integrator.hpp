@@ -54,6 +54,10 @@ struct ImplicitOptions {
     int max_newton_iterations = 50;
     int max_cg_iterations = 500;
     double cg_tolerance = 0.1;            // largest relative PCG residual (inexact Newton)
+    // plasticitynet: how the reference F0 follows F(v) (solver/fixed_point.hpp, docs/solver.md):
+    // "newton", F0 = F(v) at every Newton iterate, one solve converged on the true residual; or
+    // "fixed_point", the paper's eq. 10, a full solve per F0 (the keys fixed_point_* below).
+    std::string outer_iteration = "newton";
     double fixed_point_tolerance = 1e-3;  // max_p ||F_p(v) - F0_p||_F (plasticitynet)
     // Solves per step (plasticitynet): the fixed point on F0 is converged to
     // fixed_point_tolerance, with this cap. On sand_column_2d at dt 1e-3 one
@@ -78,6 +82,15 @@ struct ImplicitOptions {
     // solves; ReferenceSolveOptions::inexact_forcing). MPM and MPM-FEM coupling.
     double fixed_point_inexact = 0.0;
     double regularizer_weight = 1.0;  // w of eq. 11 (plasticitynet; 0: the ablation)
+    // plasticitynet: the Hessian of Newton's steps, "network" (Hess N + w mu, the paper's), "tangent"
+    // (the return mapping's consistent tangent + w mu) or "auto" (the tangent with w = 0 for von
+    // Mises, the network's otherwise, and the network's under the fixed point;
+    // NeuralElastoplasticEnergy::Options::Hessian).
+    std::string hessian = "auto";
+    // FEM `analytic` only, a diagnostic: > 0 adds w mu/2 ||F - F0||^2 about a reference to the
+    // closed-form energy and solves with plasticitynet's predictor and outer iteration on F0, the
+    // learned energy's solve without its learning error (AnalyticElastoplasticEnergy).
+    double analytic_regularizer = 0.0;
     // PCG preconditioner: "jacobi", "block_jacobi" (the d x d block of each
     // node) or "ichol" (incomplete Cholesky of the assembled grid Hessian; MPM only). Jacobi is the default: block
     // Jacobi saved 2-3% of the CG iterations on sand_column_2d and snowball_2d (measured), not its cost.
@@ -117,6 +130,15 @@ struct ImplicitOptions {
     /// tolerance, acceleration, Hessian reuse and inexact inner solves.
     ReferenceSolveOptions reference_solve_options(bool fixed_point) const;
     nlohmann::json to_json() const;
+    /// `hessian` as the learned energy's option.
+    template <int dim>
+    typename NeuralElastoplasticEnergy<dim>::Options::Hessian neural_hessian() const {
+        using Hessian = typename NeuralElastoplasticEnergy<dim>::Options::Hessian;
+        if (hessian == "tangent") return Hessian::Tangent;
+        // The paper's fixed point keeps the paper's Hessian: its solves about a fixed F0 need w mu.
+        if (hessian == "network" || outer_iteration == "fixed_point") return Hessian::Network;
+        return Hessian::Auto;
+    }
 };
 
 template <int dim>

@@ -30,6 +30,8 @@ struct StepStats {
     int line_search_steps = 0;
     int fixed_point_iterations = 0;  // Newton solves (plasticitynet: fixed-point iterations on F0, eq. 10)
     double fixed_point_change = 0.0; // max_p ||F_p(v) - F0_p|| after the last solve (plasticitynet)
+    int reference_updates = 0;       // plasticitynet: times F0 was set to F(v) (outer iterations)
+    double true_residual = 0.0;      // plasticitynet: |R(v)| of the exact elastoplastic step at the end, m/s
     double initial_residual = 0.0, residual = 0.0;  // scaled gradient before the first and after the last solve, m/s
     double energy = 0.0;             // incremental potential at the solution, J
     bool converged = true;           // every Newton solve reached its tolerance
@@ -60,6 +62,8 @@ inline void record_solve(const ReferenceSolveStats& s, StepStats& stats) {
     stats.line_search_steps += s.line_search_steps;
     stats.fixed_point_iterations = s.solves;
     stats.fixed_point_change = s.change;
+    stats.reference_updates = s.reference_updates;
+    stats.true_residual = s.true_residual;
     stats.residual = s.residual;
     stats.energy = s.energy;
     stats.converged = s.converged;

@@ -90,7 +90,8 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
             for (const SceneObject& object : scene.objects)
                 context.push_back(scene.file + ": " + object.json_path + ".model");
             auto neural = std::make_unique<NeuralParticleEnergy<2>>(models, mpm_.materials, context,
-                                                                    settings.implicit.regularizer_weight);
+                                                                    settings.implicit.regularizer_weight,
+                                                 settings.implicit.neural_hessian<2>());
             for (std::size_t k = 0; k < scene.objects.size(); ++k)
                 return_maps.push_back(
                     settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);

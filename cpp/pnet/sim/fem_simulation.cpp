@@ -242,7 +242,8 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
         } else if (settings.name == "analytic") {
             method = FemMethod::Analytic;
             for (auto& c : context) c = c.substr(0, c.size() - 6) + ".material";
-            energy = std::make_unique<AnalyticElastoplasticEnergy<dim>>(s.materials, context);
+            energy = std::make_unique<AnalyticElastoplasticEnergy<dim>>(s.materials, context,
+                                                                      settings.implicit.analytic_regularizer);
         } else if (settings.name == "plasticitynet") {
             method = FemMethod::PlasticityNet;
             std::vector<std::shared_ptr<const ModelFile>> models(scene.meshes.size());
@@ -258,7 +259,8 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
                     context[k] = context[deformable];
                 }
             auto neural = std::make_unique<NeuralParticleEnergy<dim>>(models, s.materials, context,
-                                                                    settings.implicit.regularizer_weight);
+                                                                    settings.implicit.regularizer_weight,
+                                                 settings.implicit.neural_hessian<dim>());
             built_.system.return_maps.clear();
             for (std::size_t k = 0; k < scene.meshes.size(); ++k)
                 built_.system.return_maps.push_back(

@@ -1,6 +1,7 @@
 #include "pnet/solver/fixed_point.hpp"
 
 #include <Eigen/QR>
+#include <algorithm>
 #include <cstring>
 #include <limits>
 
@@ -40,12 +41,98 @@ void anderson_update(ReferenceSolveWork<dim>& work, int depth, int iteration) {
     Eigen::Map<VecX>(work.F0.data()->data(), n) = next;
 }
 
+/// The referenced objective seen by Newton with the reference following the iterate
+/// (NewtonOptions::rebase): every call is forwarded; rebase(v) sets F0 = F(v) and records how far
+/// F0 moved.
+template <int dim>
+class FollowingReference final : public Objective {
+public:
+    FollowingReference(ReferencedObjective<dim>& objective, ReferenceSolveWork<dim>& work,
+                       const std::function<void()>& after_reference)
+        : objective_(objective), work_(work), after_reference_(after_reference) {}
+
+    Eigen::Index size() const override { return objective_.size(); }
+    double value(const VecX& x) override { return objective_.value(x); }
+    double value_gradient(const VecX& x, VecX& g) override { return objective_.value_gradient(x, g); }
+    void prepare_hessian(const VecX& x) override { objective_.prepare_hessian(x); }
+    double value_gradient_hessian(const VecX& x, VecX& g) override { return objective_.value_gradient_hessian(x, g); }
+    void hessian_multiply(const VecX& d, VecX& out) const override { objective_.hessian_multiply(d, out); }
+    void hessian_diagonal(VecX& diagonal) const override { objective_.hessian_diagonal(diagonal); }
+    int hessian_block_size() const override { return objective_.hessian_block_size(); }
+    void hessian_block_diagonal(VecX& blocks) const override { objective_.hessian_block_diagonal(blocks); }
+    bool has_preconditioner() const override { return objective_.has_preconditioner(); }
+    void apply_preconditioner(const VecX& r, VecX& z) const override { objective_.apply_preconditioner(r, z); }
+    const SparseMatrix* hessian_matrix() const override { return objective_.hessian_matrix(); }
+    double max_step(const VecX& x, const VecX& d) override { return objective_.max_step(x, d); }
+
+    bool rebase(const VecX& x) override {
+        objective_.deformation(x, work_.F);
+        if (updates_ > 0) {
+            double change = 0.0;
+            for (std::size_t p = 0; p < work_.F.size(); ++p)
+                change = std::max(change, (work_.F[p] - work_.F0[p]).norm());
+            last_change_ = change;
+        }
+        work_.F0.swap(work_.F);
+        objective_.set_reference(work_.F0);
+        if (after_reference_) after_reference_();
+        ++updates_;
+        return true;
+    }
+    int updates() const { return updates_; }
+    /// max_p ||F(v) - F0|| of the last move (0 before the second).
+    double last_change() const { return last_change_; }
+
+private:
+    ReferencedObjective<dim>& objective_;
+    ReferenceSolveWork<dim>& work_;
+    const std::function<void()>& after_reference_;
+    int updates_ = 0;
+    double last_change_ = 0.0;
+};
+
+std::string unconverged_message(const std::string& where, const NewtonStats& s, double tolerance) {
+    return where + ": the Newton solve did not converge (" +
+           (s.line_search_failed ? std::string("line search failed") : std::to_string(s.iterations) + " iterations") +
+           ", residual " + std::to_string(s.residual) + " m/s > tolerance " + std::to_string(tolerance) + " m/s)";
+}
+
+/// plasticitynet with OuterIteration::Newton: one solve, the reference at every iterate.
+template <int dim>
+ReferenceSolveStats solve_following_reference(ReferencedObjective<dim>& objective, VecX& v,
+                                              const NewtonOptions& newton, const ReferenceSolveOptions& options,
+                                              const std::string& context, ReferenceSolveWork<dim>& work,
+                                              const std::function<void()>& after_reference) {
+    FollowingReference<dim> following(objective, work, after_reference);
+    NewtonOptions solve_newton = newton;
+    solve_newton.rebase = true;
+    const NewtonStats s = minimize(following, v, solve_newton, context, &work.newton);
+    ReferenceSolveStats stats;
+    stats.solves = 1;
+    stats.newton_iterations = s.iterations;
+    stats.cg_iterations = s.cg_iterations;
+    stats.line_search_steps = s.line_search_steps;
+    stats.initial_residual = s.initial_residual;
+    stats.residual = stats.true_residual = s.residual;  // at the last reference, F0 = F(v): R(v) itself
+    stats.energy = s.energy;
+    stats.reference_updates = following.updates();
+    stats.change = following.last_change();
+    const bool converged = s.converged || s.roundoff_floor;
+    stats.converged = stats.fixed_point_converged = converged;
+    stats.line_search_failed = s.line_search_failed;
+    if (options.fail_on_unconverged && !converged)
+        throw NewtonError(unconverged_message(context, s, newton.tolerance));
+    return stats;
+}
+
 }  // namespace
 
 template <int dim>
 ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
                                          const ReferenceSolveOptions& options, const std::string& context,
                                          ReferenceSolveWork<dim>& work, const std::function<void()>& after_reference) {
+    if (options.fixed_point && options.outer == OuterIteration::Newton)
+        return solve_following_reference(objective, v, newton, options, context, work, after_reference);
     ReferenceSolveStats stats;
     const bool fixed_point = options.fixed_point;
     const int solves = fixed_point ? options.max_solves : 1;
@@ -71,11 +158,7 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
         stats.converged = stats.converged && converged;
         stats.line_search_failed = stats.line_search_failed || s.line_search_failed;
         if (options.fail_on_unconverged && !converged)
-            throw NewtonError(where + ": the Newton solve did not converge (" +
-                              (s.line_search_failed ? std::string("line search failed")
-                                                    : std::to_string(s.iterations) + " iterations") +
-                              ", residual " + std::to_string(s.residual) + " m/s > tolerance " +
-                              std::to_string(newton.tolerance) + " m/s)");
+            throw NewtonError(unconverged_message(where, s, newton.tolerance));
         ++stats.solves;
         if (!fixed_point) break;
         objective.deformation(v, work.F);
@@ -106,6 +189,15 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
     if (fixed_point) {
         if (have_best) v.swap(work.best_v);  // else: every solve was inexact (the cap); the last one stands
         stats.fixed_point_converged = have_best && best_change <= options.tolerance;
+        stats.reference_updates = stats.solves;
+        // The true residual at the returned v: the gradient about F0 = F(v) (a diagnostic; the
+        // reference is moved there, which the caller's next use does not depend on).
+        objective.deformation(v, work.F0);
+        objective.set_reference(work.F0);
+        if (after_reference) after_reference();
+        VecX g(objective.size());
+        objective.value_gradient(v, g);
+        stats.true_residual = newton_residual(objective, g, newton);
     }
     return stats;
 }

@@ -1,13 +1,20 @@
 #pragma once
 // The solve of one implicit step with a reference deformation (DESIGN.md
-// §4.1-4.2, paper eq. 10), shared by MPM and FEM around the one Newton loop:
+// §4.1-4.2, paper eq. 10, docs/solver.md), shared by MPM, FEM and coupling around the one Newton
+// loop. The learned energy is exact (in slope) only at F = F0, so the step is converged when v is
+// the root of the true residual R(v) = grad E(v; F0 = F(v)): inertia, the exact elastoplastic stress
+// Ptilde(F(v), h^n) and contact, in Newton's units (m/s, mass-weighted).
 //
-//   plasticitynet: F0^0 = F(v); solve j minimizes E(v; F0^j) from the previous
-//     v, then F0^{j+1} = F(v^{j+1}), until max_p ||F(v) - F0||_F <= tolerance or
-//     max_solves. If the change grows from one solve to the next (far outside
-//     the network's training regime the iteration can stop contracting) it
-//     stops; the solution with the smallest change is kept.
+//   plasticitynet, outer iteration "newton" (the default): one Newton solve whose reference follows
+//     the iterate (NewtonOptions::rebase): at every accepted iterate F0 = F(v), so the gradient
+//     Newton tests and steps on is R(v) itself and the network is evaluated only within one Newton
+//     step of its reference. Converged when |R| <= the Newton tolerance.
+//   plasticitynet, outer iteration "fixed_point" (paper eq. 10): F0^0 = F(v); solve j minimizes
+//     E(v; F0^j) from the previous v, then F0^{j+1} = F(v^{j+1}), until max_p ||F(v) - F0||_F <=
+//     tolerance or max_solves. If the change grows from one solve to the next it stops; the solution
+//     with the smallest change is kept.
 //   otherwise (lagged, analytic): one solve with the reference the caller set.
+// Either plasticitynet iteration reports |R| at the v it returns (ReferenceSolveStats::true_residual).
 #include <functional>
 #include <string>
 #include <vector>
@@ -30,8 +37,15 @@ public:
     virtual void set_reference(const std::vector<Mat<dim>>& F0) = 0;
 };
 
+/// How plasticitynet's reference F0 is iterated to F(v).
+enum class OuterIteration {
+    Newton,      // F0 = F(v) at every Newton iterate: one solve on the true residual
+    FixedPoint,  // paper eq. 10: a full solve per F0, then F0 = F(v)
+};
+
 struct ReferenceSolveOptions {
     bool fixed_point = false;          // iterate on F0 (plasticitynet)
+    OuterIteration outer = OuterIteration::Newton;
     int max_solves = 8;                // fixed point: the cap
     double tolerance = 1e-3;           // fixed point: on max_p ||F(v) - F0||_F
     bool fail_on_unconverged = false;  // an unconverged Newton solve throws NewtonError
@@ -55,6 +69,8 @@ struct ReferenceSolveStats {
     int solves = 0, newton_iterations = 0, cg_iterations = 0, line_search_steps = 0;
     double initial_residual = 0.0, residual = 0.0, energy = 0.0;
     double change = 0.0;    // fixed point: the smallest max_p ||F(v) - F0|| reached
+    int reference_updates = 0;  // times F0 was set to F(v) (plasticitynet)
+    double true_residual = 0.0;  // plasticitynet: |R(v)| at the returned v, m/s (Newton's residual units)
     bool converged = true;  // every Newton solve reached its tolerance
     bool line_search_failed = false;
     bool fixed_point_converged = true;  // the change reached the tolerance (not the cap)
@@ -69,6 +85,8 @@ struct ReferenceSolveStats {
         residual = later.residual;
         energy = later.energy;
         change = later.change;
+        reference_updates += later.reference_updates;
+        true_residual = later.true_residual;
         converged = converged && later.converged;
         line_search_failed = line_search_failed || later.line_search_failed;
         fixed_point_converged = later.fixed_point_converged;

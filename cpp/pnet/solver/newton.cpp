@@ -90,6 +90,12 @@ std::string where(const std::string& context, int iteration, double residual) {
 
 }  // namespace
 
+double newton_residual(const Objective& objective, const VecX& g, const NewtonOptions& options) {
+    VecX diagonal(g.size());
+    objective.hessian_diagonal(diagonal);
+    return residual_of(g, options, diagonal);
+}
+
 struct NewtonWorkspace::Impl {
     DirectSolver direct;
 };
@@ -123,6 +129,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     // may not be kept.
     double energy;
     bool contracted = false;  // the last iterate was reached by a full step that cut the residual enough
+    if (options.rebase && objective.rebase(x)) ++stats.rebases;
     if (options.keep_prepared_hessian) {
         energy = objective.value_gradient(x, g);
         contracted = true;  // the kept Hessian is treated as a lazy one
@@ -249,6 +256,15 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                                       std::to_string(energy) + ", last trial " + std::to_string(trial) + ")");
                 break;  // x and g are those of the last accepted iterate
             }
+        }
+        if (options.rebase && objective.rebase(x)) {
+            // The exact gradient at the new reference; the Hessian prepared last (at x, about the
+            // previous reference) stays unless the lazy rule below asks for a fresh one.
+            ++stats.rebases;
+            energy = objective.value_gradient(x, g);
+            if (!std::isfinite(energy) || !g.allFinite())
+                throw NewtonError(where(context, it, residual) + "the energy or its gradient is not finite after "
+                                  "moving the reference to the iterate");
         }
         objective.hessian_diagonal(diagonal);  // of the Hessian prepared last
         residual = residual_of(g, options, diagonal);

@@ -74,6 +74,14 @@ struct NewtonOptions {
     /// Inexact solve: also stop once the residual is at most this fraction of the starting one
     /// (0: only the absolute tolerance). converged then means the looser of the two was met.
     double relative_tolerance = 0.0;
+    /// Rebase the objective (Objective::rebase) at the start and at every accepted iterate: the
+    /// learned energy's reference F0 follows F(v), so every gradient Newton tests and steps on is
+    /// the exact one (the true residual of the elastoplastic step), the energy is only ever
+    /// evaluated within one Newton step of its reference, and the outer fixed point on F0 (paper
+    /// eq. 10) merges into the Newton loop. The line search compares energies about the iterate's
+    /// own reference; the Hessian of the trial point (about the previous reference) is kept for the
+    /// next direction, so a rebase costs one gradient pass (docs/solver.md).
+    bool rebase = false;
 };
 
 struct NewtonStats {
@@ -91,6 +99,7 @@ struct NewtonStats {
     bool line_search_failed = false;
     int hessians = 0;                      // Hessian passes (value_gradient_hessian or prepare_hessian)
     int factorizations = 0, analyses = 0;  // Cholesky: numeric factorizations, symbolic analyses
+    int rebases = 0;                       // Objective::rebase calls that changed the objective
 };
 
 /// A solve that cannot go on: non-finite energy or gradient at the start or
@@ -120,6 +129,10 @@ public:
 private:
     std::unique_ptr<Impl> impl_;
 };
+
+/// The residual NewtonOptions defines (mass-weighted m/s, or the scaled max-norm) of a gradient g,
+/// weighted by the diagonal of the Hessian the objective prepared last.
+double newton_residual(const Objective& objective, const VecX& g, const NewtonOptions& options);
 
 /// Minimizes `objective` from x (updated in place). Returns the statistics;
 /// not converging within max_iterations, or a failed line search, is not an

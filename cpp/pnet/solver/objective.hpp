@@ -70,6 +70,12 @@ public:
     /// search's filter: for contact, what CCD allows, so that no iterate
     /// intersects); E must be finite on [x, x + max_step d]. Default 1.
     virtual double max_step(const VecX& /*x*/, const VecX& /*d*/) { return 1.0; }
+
+    /// For an energy defined about an expansion point (the learned energy about its reference F0,
+    /// exact in value slope only there): moves the point to x, so that the gradient at x becomes the
+    /// exact one (NewtonOptions::rebase). Returns whether the objective changed; value, gradient and
+    /// Hessian must then be evaluated anew. Default: nothing to move.
+    virtual bool rebase(const VecX& /*x*/) { return false; }
 };
 
 }  // namespace pnet

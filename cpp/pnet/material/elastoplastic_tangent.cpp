@@ -1,0 +1,47 @@
+#include "pnet/material/elastoplastic_tangent.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace pnet {
+
+namespace {
+
+// Central-difference step in log-strain: the truncation error (~delta^2 tau''') and the round-off
+// (~1e-16 |tau| / delta) balance near 1e-5; a return mapping's kink (the yield surface) within
+// delta of eps averages the two one-sided tangents.
+constexpr double kDelta = 1e-5;
+// Singular values closer than this (in log) take the limit of the difference quotient.
+constexpr double kCloseLog = 1e-4;
+
+}  // namespace
+
+template <int dim>
+Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity,
+                                   const PrincipalReturnMap<dim>& return_map, bool project_psd) {
+    const Vec<dim>& S = svd.Sigma;
+    const Vec<dim> eps = S.array().log().matrix();
+    auto tau_at = [&](const Vec<dim>& e) { return elasticity.tau(return_map(e.array().exp().matrix())); };
+    const Vec<dim> t = elasticity.tau(return_map(S));
+    Mat<dim> dtau;
+    for (int j = 0; j < dim; ++j) {
+        Vec<dim> plus = eps, minus = eps;
+        plus[j] += kDelta;
+        minus[j] -= kDelta;
+        dtau.col(j) = (tau_at(plus) - tau_at(minus)) / (2.0 * kDelta);
+    }
+    dtau = 0.5 * (dtau + dtau.transpose()).eval();
+    auto quotient = [&](int i, int j) {
+        if (std::abs(eps[i] - eps[j]) > kCloseLog) return (t[i] - t[j]) / (S[i] - S[j]);
+        // The limit Sigma_i -> Sigma_j: d(tau_i - tau_j)/d eps_i / Sigma_i.
+        return (dtau(i, i) - dtau(j, i)) / (0.5 * (S[i] + S[j]));
+    };
+    return isotropic_dPdF<dim>(svd, t, dtau, quotient, project_psd);
+}
+
+template Tensor4<2> elastoplastic_tangent<2>(const PolarSVD<2>&, const Elasticity<2>&, const PrincipalReturnMap<2>&,
+                                             bool);
+template Tensor4<3> elastoplastic_tangent<3>(const PolarSVD<3>&, const Elasticity<3>&, const PrincipalReturnMap<3>&,
+                                             bool);
+
+}  // namespace pnet

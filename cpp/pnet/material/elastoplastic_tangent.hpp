@@ -1,0 +1,37 @@
+#pragma once
+// The consistent tangent of the elastoplastic stress (docs/solver.md):
+//
+//   dPtilde/dF at F = U diag(Sigma) V^T, Ptilde(F, h) = U diag(tau(Z(Sigma, h))_i / Sigma_i) V^T,
+//
+// for any isotropic return mapping Z (the material library's or a learned one) and elasticity tau.
+// The return-mapped Kirchhoff stress tau_Z(eps) = tau(Z(exp eps, h)) is differentiated in the
+// principal log-strains by central differences (a return mapping has no closed-form derivative
+// in general: Cam-Clay's scalar solve, a network); the rotational part comes from the difference
+// quotients (tau_i - tau_j) / (Sigma_i - Sigma_j), exactly as for a hyperelastic energy
+// (isotropic_dPdF). Non-associative flow (Drucker-Prager, Cam-Clay) makes dtau_Z/deps
+// non-symmetric: it is symmetrized. For StVK-Hencky with von Mises this is the Hessian of the ECI
+// energy (AnalyticElastoplasticEnergy) up to the differencing error.
+//
+// It is what Newton needs on the true residual R(v) of an elastoplastic step (the learned energy's
+// gradient at F = F0): a learned energy's own Hessian Hess N at F0 is never trained and is a
+// smoothed secant of the stress over the training neighbourhood, so Newton steps with it converge
+// only linearly (measured on metal_frame_2d: docs/solver.md).
+#include <functional>
+
+#include "pnet/material/elasticity.hpp"
+#include "pnet/math/svd.hpp"
+#include "pnet/math/types.hpp"
+
+namespace pnet {
+
+/// The singular values of Z(Sigma) for the particle's hardening state (the return mapping).
+template <int dim>
+using PrincipalReturnMap = std::function<Vec<dim>(const Vec<dim>& Sigma)>;
+
+/// dPtilde/dF (row-major vec(F) basis) at the clamped polar SVD `svd`, projected to positive
+/// semi-definite when project_psd. Costs 2d + 1 return mappings.
+template <int dim>
+Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity,
+                                   const PrincipalReturnMap<dim>& return_map, bool project_psd);
+
+}  // namespace pnet
