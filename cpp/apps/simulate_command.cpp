@@ -50,7 +50,7 @@ constexpr const char* kUsage =
     "                     [--analytic-regularizer W] (analytic + W mu/2 |F - F0|^2 under plasticitynet's outer\n"
     "                     iteration: the learned solve without learning error, a diagnostic)\n"
     "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
-    "                     material's exact one)\n";
+    "                     material's exact one) [--kinematic-start scaled|last_velocity]\n";
 
 struct Options {
     std::string scene, out, integrator, color = "speed";
@@ -62,7 +62,7 @@ struct Options {
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
     std::optional<double> analytic_regularizer;
-    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian;
+    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, kinematic_start;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
     std::optional<bool> fixed_point_keep_hessian;
 };
@@ -126,6 +126,11 @@ Options parse(int argc, char** argv) {
             if (text != "newton" && text != "fixed_point")
                 throw UsageError("--outer-iteration: expected newton or fixed_point, got \"" + text + "\"");
             o.outer_iteration = text;
+        } else if (arg == "--kinematic-start") {
+            const std::string text = value();
+            if (text != "scaled" && text != "last_velocity")
+                throw UsageError("--kinematic-start: expected scaled or last_velocity, got \"" + text + "\"");
+            o.kinematic_start = text;
         } else if (arg == "--hessian") {
             const std::string text = value();
             if (text != "auto" && text != "network" && text != "tangent")
@@ -717,6 +722,7 @@ int simulate_command(int argc, char** argv) {
         if (o.fixed_point_anderson) settings.implicit.fixed_point_anderson = *o.fixed_point_anderson;
         if (o.outer_iteration) settings.implicit.outer_iteration = *o.outer_iteration;
         if (o.hessian) settings.implicit.hessian = *o.hessian;
+        if (o.kinematic_start) settings.implicit.kinematic_start = *o.kinematic_start;
         if (o.fixed_point_inexact) settings.implicit.fixed_point_inexact = *o.fixed_point_inexact;
         if (o.fixed_point_keep_hessian) settings.implicit.fixed_point_keep_hessian = *o.fixed_point_keep_hessian;
         if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";

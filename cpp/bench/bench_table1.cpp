@@ -24,7 +24,11 @@
 // comes late); --with-lagged adds lagged and, on metal_frame_2d, analytic.
 //
 // --with-one-solve adds plasticitynet with one solve per step (F0 = F(v*), the
-// fixed point not converged) beside the default.
+// fixed point not converged) beside the default; --with-fixed-point adds
+// plasticitynet with the paper's outer iteration (eq. 10, the default before
+// issue 31). Implicit rows give the Newton solves, the updates of F0 to F(v)
+// (outer iterations) per step and the largest true residual |R(v)| at a step's
+// end (docs/solver.md).
 //
 // Every integrator runs the same simulated interval, frames [0, N) from the
 // scene's initial state (default N = 10: 0.2 s, the sand column collapsing, the
@@ -59,7 +63,9 @@ struct Row {
     std::string integrator;
     double dt = 0.0;  // 0: CFL
     double seconds_per_frame = 0.0, mean_dt = 0.0;
-    double newton = 0.0, cg = 0.0, fixed_point = 0.0;  // per step
+    double newton = 0.0, cg = 0.0, fixed_point = 0.0;  // per step (fixed_point: Newton solves)
+    double reference_updates = 0.0;  // per step: F0 set to F(v) (plasticitynet's outer iterations)
+    double max_true_residual = 0.0;  // the largest |R(v)| of a step's end, m/s (plasticitynet)
     double energy_share = 0.0, cg_share = 0.0;
     double contact_share = -1.0;  // broad phase + CCD (3D FEM); < 0: not measured
     int frames = 0;               // frames completed
@@ -91,6 +97,8 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
         cg_iterations += s.cg_iterations;
         fixed_point += s.fixed_point_iterations;
         for (const pnet::StepStats& step : sim.last_frame_steps()) {
+            row.reference_updates += step.reference_updates;
+            row.max_true_residual = std::max(row.max_true_residual, step.true_residual);
             energy += step.energy_seconds;
             cg += step.cg_seconds;
             contact += step.broad_phase_seconds + step.ccd_seconds;
@@ -106,9 +114,20 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
     row.newton = static_cast<double>(newton) / steps;
     row.cg = static_cast<double>(cg_iterations) / steps;
     row.fixed_point = static_cast<double>(fixed_point) / steps;
+    row.reference_updates /= steps;
     row.energy_share = energy / wall;
     row.cg_share = cg / wall;
     if (contact > 0.0) row.contact_share = contact / wall;
+    return row;
+}
+
+/// plasticitynet with the paper's outer iteration (eq. 10: a full solve per F0, the network's Hessian
+/// with w mu), the default before issue 31, beside the default.
+template <class Sim>
+Row fixed_point_row(const pnet::Scene& scene, pnet::IntegratorSettings settings, int frames) {
+    settings.implicit.outer_iteration = "fixed_point";
+    Row row = measure<Sim>(scene, settings, frames);
+    row.integrator = "plasticitynet, fixed point";
     return row;
 }
 
@@ -120,7 +139,7 @@ double reference_step(const std::string& name) {
 
 template <int dim>
 std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_implicit, double reference_dt,
-                             bool with_lagged, bool with_one_solve) {
+                             bool with_lagged, bool with_one_solve, bool with_fixed_point) {
     pnet::IntegratorSettings base = pnet::IntegratorSettings::from_scene(scene);
     for (const pnet::SceneObject& object : scene.objects) {
         pnet::LoadOptions load;
@@ -145,6 +164,7 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
         rows.push_back(measure<Sim>(scene, one, frames));
         rows.back().integrator = "plasticitynet, 1 solve";
     }
+    if (with_fixed_point) rows.push_back(fixed_point_row<Sim>(scene, with("plasticitynet", dt_implicit), frames));
     if (with_lagged) rows.push_back(measure<Sim>(scene, with("lagged", dt_implicit), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", reference_dt), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
@@ -153,7 +173,7 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
 
 /// The metal rows: the scene's own implicit settings (dt 1e-2) against explicit at 1e-5 and CFL.
 template <int dim>
-std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with_lagged) {
+std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with_lagged, bool with_fixed_point) {
     using Sim = pnet::FemSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
@@ -165,6 +185,7 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with
     };
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
+    if (with_fixed_point) rows.push_back(fixed_point_row<Sim>(scene, base, frames));
     if (with_lagged) {
         if (scene.meshes[0].material.name == "metal")
             rows.push_back(measure<Sim>(scene, with("analytic", base.dt), frames));
@@ -177,7 +198,7 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with
 
 /// The MPM-FEM coupling row: plasticitynet (the sand's learned energy) at the scene's step against
 /// explicit coupling at 1e-6 s and at its CFL step.
-std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool with_lagged) {
+std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool with_lagged, bool with_fixed_point) {
     using Sim = pnet::CoupledSimulation2d;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
@@ -189,6 +210,7 @@ std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool 
     };
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
+    if (with_fixed_point) rows.push_back(fixed_point_row<Sim>(scene, base, frames));
     if (with_lagged) rows.push_back(measure<Sim>(scene, with("lagged", base.dt), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", 1e-6), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
@@ -200,7 +222,8 @@ std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool 
 int main(int argc, char** argv) {
     int frames = 10, fem_frames = 0, coupling_frames = 10, stiff_frames = 0, threads = 0;
     double dt_implicit = 1e-3;
-    bool with_lagged = false, with_one_solve = false, three_d = false, fem = true, stiff = true;
+    bool with_lagged = false, with_one_solve = false, with_fixed_point = false, three_d = false, fem = true,
+         stiff = true;
     std::string scenes_dir = PNET_SCENES_DIR, only;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
@@ -235,13 +258,15 @@ int main(int argc, char** argv) {
             with_lagged = true;
         else if (arg == "--with-one-solve")
             with_one_solve = true;
+        else if (arg == "--with-fixed-point")
+            with_fixed_point = true;
         else if (arg == "--3d")
             three_d = true;
         else {
             std::fprintf(stderr,
                          "usage: bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] "
                          "[--threads T] [--dt-implicit S] [--scenes DIR] [--only NAME] [--with-lagged] "
-                         "[--with-one-solve] [--3d] [--no-fem] [--no-stiff]\n");
+                         "[--with-one-solve] [--with-fixed-point] [--3d] [--no-fem] [--no-stiff]\n");
             return 2;
         }
     }
@@ -271,10 +296,11 @@ int main(int argc, char** argv) {
         frames, fem_frames > 0 ? ("0-" + std::to_string(fem_frames)).c_str() : "all the scene's frames",
         omp_get_max_threads());
     std::printf(
-        "| scene | integrator | dt (s) | s/frame | Newton/step | CG/step | fixed-point/step | energy %% | CG %% |"
+        "| scene | integrator | dt (s) | s/frame | Newton/step | CG/step | solves/step | F0 updates/step |"
+        " max |R| (m/s) | energy %% | CG %% |"
         " contact %% | speed-up vs explicit 1e-5 (coupling, stiff: 1e-6) | speed-up vs explicit at CFL |"
         " paper s/frame | paper speed-up |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const std::string& name : names) {
         if (!only.empty() && only != name) continue;
         std::vector<Row> rows;
@@ -284,18 +310,20 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "%s:\n", name.c_str());
             if (scene.has_meshes() && scene.has_particles()) {
                 scene_frames = coupling_frames;
-                rows = bench_coupled_scene(scene, scene_frames, with_lagged);
+                rows = bench_coupled_scene(scene, scene_frames, with_lagged, with_fixed_point);
             } else if (scene.has_meshes()) {
                 scene_frames = fem_frames > 0 ? fem_frames : scene.frames;
-                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, with_lagged)
-                                      : bench_fem_scene<3>(scene, scene_frames, with_lagged);
+                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, with_lagged, with_fixed_point)
+                                      : bench_fem_scene<3>(scene, scene_frames, with_lagged, with_fixed_point);
             } else {
                 if (name.rfind("stiff/", 0) == 0) scene_frames = stiff_frames;
                 const double reference_dt = reference_step(name);
                 rows =
                     scene.dim == 2
-                        ? bench_scene<2>(scene, scene_frames, dt_implicit, reference_dt, with_lagged, with_one_solve)
-                        : bench_scene<3>(scene, scene_frames, dt_implicit, reference_dt, with_lagged, with_one_solve);
+                        ? bench_scene<2>(scene, scene_frames, dt_implicit, reference_dt, with_lagged, with_one_solve,
+                                         with_fixed_point)
+                        : bench_scene<3>(scene, scene_frames, dt_implicit, reference_dt, with_lagged, with_one_solve,
+                                         with_fixed_point);
             }
         } catch (const std::exception& e) {
             std::fprintf(stderr, "bench_table1: %s: %s\n", name.c_str(), e.what());
@@ -337,11 +365,16 @@ int main(int argc, char** argv) {
                 std::snprintf(speedup_cfl, sizeof speedup_cfl, "(explicit at CFL failed)");
             const std::string contact =
                 r.contact_share >= 0.0 ? std::to_string(static_cast<int>(100 * r.contact_share + 0.5)) : "-";
-            std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", name.c_str(),
+            char residual[32] = "-";
+            if (implicit && r.reference_updates > 0.0)
+                std::snprintf(residual, sizeof residual, "%.2e", r.max_true_residual);
+            std::printf("| %s | %s | %s | %s | %s | %s | %s | %.2f | %s | %s | %s | %s | %s | %s | %s |\n",
+                        name.c_str(),
                         r.integrator.c_str(), dt, seconds.c_str(),
                         implicit ? std::to_string(r.newton).substr(0, 4).c_str() : "-",
                         implicit ? std::to_string(static_cast<int>(r.cg + 0.5)).c_str() : "-",
-                        implicit ? std::to_string(r.fixed_point).substr(0, 4).c_str() : "-",
+                        implicit ? std::to_string(r.fixed_point).substr(0, 4).c_str() : "-", r.reference_updates,
+                        residual,
                         implicit ? std::to_string(static_cast<int>(100 * r.energy_share + 0.5)).c_str() : "-",
                         implicit ? std::to_string(static_cast<int>(100 * r.cg_share + 0.5)).c_str() : "-",
                         contact.c_str(), speedup, speedup_cfl, paper_cells);

@@ -543,3 +543,16 @@ def test_ablation_model_forms_match_torch(form):
     assert np.allclose(model.gradient(F, F0, w=1.0), reference.gradient(tF, tF0, w=1.0).numpy(), rtol=0, atol=1e-10 * scale)
     assert np.allclose(model.hessian(F, F0, w=1.0), reference.hessian(tF, tF0, w=1.0).numpy(), rtol=0, atol=1e-10 * scale)
     assert not np.allclose(model.gradient(F0, F0), model.stress(F0), rtol=0, atol=1e-4 * scale)
+
+
+def test_default_threads_are_every_available_core():
+    # Set when the module is imported, before LibTorch loads a model (which would otherwise impose
+    # its own intra-op count on OpenMP).
+    env = os.environ.get("OMP_NUM_THREADS", "")
+    cores = int(env) if env.isdigit() and int(env) > 0 else len(os.sched_getaffinity(0))
+    assert pns.available_cores() == cores
+    sim = pns.Simulation(TINY / "sand_column_2d.json", integrator="plasticitynet")
+    sim.step()
+    assert pns.threads() == cores
+    stats = sim.step_stats()
+    assert stats["reference_updates"][-1] >= 1 and 0.0 < stats["true_residual"][-1] <= 1e-3

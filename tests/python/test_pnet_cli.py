@@ -222,6 +222,9 @@ def test_implicit_options_override_the_scene(tmp_path):
     (["--dt", -1], "--dt must be a number >= 0"),
     (["--dt", "nan"], "--dt must be a number >= 0"),
     (["--cfl", 0], "--cfl must be a number > 0"),
+    (["--outer-iteration", "anderson"], '--outer-iteration: expected newton or fixed_point, got "anderson"'),
+    (["--hessian", "exact"], '--hessian: expected auto, network or tangent, got "exact"'),
+    (["--analytic-regularizer", -1], "--analytic-regularizer must be a finite number >= 0"),
 ])
 def test_implicit_usage_errors(tmp_path, args, expected):
     r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", *args)
@@ -265,9 +268,9 @@ def test_unconverged_steps_are_counted_reported_and_can_fail_the_run(tmp_path):
     steps = (out / "steps.csv").read_text().splitlines()
     assert all(dict(zip(steps[0].split(","), line.split(",")))["converged"] == "0" for line in steps[1:])
 
-    # A fixed point on F0 stopped by its cap is reported too.
-    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--fixed-point-iterations", 1,
-             "--fixed-point-tol", 0, "--out", tmp_path / "capped")
+    # A fixed point on F0 (the paper's outer iteration) stopped by its cap is reported too.
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--outer-iteration", "fixed_point",
+             "--fixed-point-iterations", 1, "--fixed-point-tol", 0, "--out", tmp_path / "capped")
     assert r.returncode == 0, r.stderr
     steps = (tmp_path / "capped" / "steps.csv").read_text().splitlines()
     capped = sum(dict(zip(steps[0].split(","), line.split(",")))["fixed_point_converged"] == "0" for line in steps[1:])
@@ -476,3 +479,37 @@ def test_scene_view_frames_the_pictures(tmp_path):
     path = write_scene(tmp_path, scene, "bad.json")
     r = pnet("simulate", path, "--integrator", "explicit", "--frames", 1, "--out", tmp_path / "c")
     assert r.returncode == 2 and f"{path}: view.max[1]: must exceed view.min[1]" in r.stderr, r.stderr
+
+
+def _available_cores() -> int:
+    env = os.environ.get("OMP_NUM_THREADS", "")
+    return int(env) if env.isdigit() and int(env) > 0 else len(os.sched_getaffinity(0))
+
+
+def test_default_threads_are_every_available_core(tmp_path):
+    # LibTorch's first operation (loading the model) used to impose its own intra-op count (1 on a
+    # 2-core machine) on OpenMP, so runs without --threads used one core and run.json said so.
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "plasticitynet", "--frames", 1, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((out / "run.json").read_text())["threads"] == _available_cores()
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--threads", 1, "--out", tmp_path / "one")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "one" / "run.json").read_text())["threads"] == 1
+
+
+@pytest.mark.parametrize("outer", ["newton", "fixed_point"])
+def test_steps_report_the_true_residual_of_the_outer_iteration(tmp_path, outer):
+    out = tmp_path / "run"
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--outer-iteration", outer, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((out / "run.json").read_text())["solver"]["outer_iteration"] == outer
+    lines = (out / "steps.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    rows = [dict(zip(header, line.split(","))) for line in lines[1:]]
+    assert rows and all(int(r["reference_updates"]) >= 1 for r in rows)
+    residuals = [float(r["true_residual_m_per_s"]) for r in rows]
+    assert all(x > 0.0 for x in residuals), "the true residual was measured"
+    if outer == "newton":  # one solve per step, converged on the true residual (the Newton tolerance, m/s)
+        assert all(int(r["fixed_point_iterations"]) == 1 for r in rows)
+        assert all(x <= 1e-3 for x in residuals) and all(r["converged"] == "1" for r in rows)

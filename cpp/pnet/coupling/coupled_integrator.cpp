@@ -75,7 +75,8 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     const double alpha = coupled_.max_step(VecX::Zero(v_.size()), v_);
     if (alpha < 1.0) v_ *= alpha;
 
-    const ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
+    ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
+    solve.work_line_search = mpm_energy_->tangent_hessian();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     ReferenceSolveStats s;
     try {

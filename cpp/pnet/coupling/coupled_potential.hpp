@@ -63,6 +63,7 @@ public:
     // ReferencedObjective: the MPM particles (the FEM body is elastic).
     void deformation(const VecX& v, std::vector<Mat<2>>& F) const override;
     void set_reference(const std::vector<Mat<2>>& F0) override { mpm_.set_reference(F0); }
+    bool set_damping(double lambda) override { return mpm_.set_damping(lambda); }
 
     // Objective
     Eigen::Index size() const override { return mpm_.size() + fem_.size(); }

@@ -131,7 +131,7 @@ Mat<dim> NeuralElastoplasticEnergy<dim>::correction(std::size_t p) const {
 /// no large constant is formed and cancelled.
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
-    const double wmu = w_ * mu_train_;
+    const double wmu = (w_ + damping_) * mu_train_;
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
 #pragma omp parallel for schedule(static) if (count >= 1024)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
@@ -168,7 +168,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
     static_assert(sizeof(Tensor4<dim>) == kM * kM * sizeof(double), "Tensor4 must be a plain d^2 x d^2 array");
     if (hessian_kind_ == Options::Hessian::Tangent) {
         value_gradient(F, psi, gradient);  // the network's value and gradient (set_reference's pass at F = F0)
-        const double wmu = w_ * mu_train_;
+        const double wmu = (w_ + damping_) * mu_train_;
         const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
 #pragma omp parallel for schedule(static) if (count >= 64)
         for (std::ptrdiff_t p = 0; p < count; ++p) {
@@ -190,7 +190,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
     net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
                   reinterpret_cast<double*>(hessian));
     finish(F, psi, gradient);
-    const double wmu = w_ * mu_train_;
+    const double wmu = (w_ + damping_) * mu_train_;
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
 #pragma omp parallel for schedule(static) if (count >= 256)
     for (std::ptrdiff_t p = 0; p < count; ++p) {

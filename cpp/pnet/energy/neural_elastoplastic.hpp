@@ -86,6 +86,9 @@ public:
     double mu() const { return E_ * mu_train_; }
     /// The Hessian Newton gets (Options::hessian, Auto resolved) and the regularizer weight w.
     typename Options::Hessian hessian_kind() const { return hessian_kind_; }
+    /// An extra proximal weight added to w (value, gradient and Hessian), Newton's damping
+    /// (Objective::set_damping); 0 by default.
+    void set_damping(double lambda) { damping_ = lambda; }
     double regularizer_weight() const { return w_; }
     const EnergyNetwork<dim>& network() const { return net_; }
     bool has_hardening() const { return has_hardening_; }
@@ -102,6 +105,7 @@ private:
     bool relative_;
     double E_;  // scene E / training E
     double w_;
+    double damping_ = 0.0;  // set_damping(): added to w_
     double mu_train_;  // shear modulus at the training E
     typename Options::Hessian hessian_kind_;  // Network or Tangent (Auto resolved)
 

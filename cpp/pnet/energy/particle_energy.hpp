@@ -45,6 +45,14 @@ public:
     /// Particles of the last set_reference() whose hardening state was outside
     /// the range a learned energy was trained on (its input was clamped).
     virtual std::size_t hardening_clamped() const { return 0; }
+
+    /// Objective::set_damping: an extra proximal weight lambda mu/2 ||F - F0||^2 about the reference
+    /// (in units of each material's shear modulus). Returns whether the energy supports it.
+    virtual bool set_damping(double /*lambda*/) { return false; }
+
+    /// Whether the Hessian is the consistent tangent of the elastoplastic stress for every point
+    /// (NeuralElastoplasticEnergy::Options::Hessian::Tangent) rather than the energy's own.
+    virtual bool tangent_hessian() const { return false; }
 };
 
 /// psi(F) of the elasticity model of each particle's material.
@@ -91,6 +99,15 @@ public:
     /// Object k's energy (its learned return mapping, if any, included).
     const NeuralElastoplasticEnergy<dim>& object_energy(std::size_t k) const { return *objects_[k].energy; }
     std::size_t hardening_clamped() const override { return hardening_clamped_; }
+    bool set_damping(double lambda) override {
+        for (Group& g : objects_) g.energy->set_damping(lambda);
+        return true;
+    }
+    bool tangent_hessian() const override {
+        for (const Group& g : objects_)
+            if (g.energy->hessian_kind() != NeuralElastoplasticEnergy<dim>::Options::Hessian::Tangent) return false;
+        return !objects_.empty();
+    }
 
 private:
     struct Group {

@@ -92,6 +92,7 @@ public:
     /// The energy's reference (plasticitynet: F0 per element; ignored by the
     /// elastic and analytic energies, which only record the material state).
     void set_reference(const std::vector<Mat<dim>>& F0) override;
+    bool set_damping(double lambda) override { return energy_.set_damping(lambda); }
 
     const VecX& v_star() const { return v_star_; }
     /// m_i on free components, 0 on fixed ones (NewtonOptions::residual_mass).

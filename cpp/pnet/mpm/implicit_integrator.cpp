@@ -92,6 +92,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                 context + ": integrator.coupled_solver: expected \"block\" or \"cholesky\", got " + it->dump());
         o.coupled_solver = it->get<std::string>();
     }
+    if (const auto it = block.find("kinematic_start"); it != block.end()) {
+        if (!it->is_string() || (*it != "scaled" && *it != "last_velocity"))
+            throw std::invalid_argument(context + ": integrator.kinematic_start: expected \"scaled\" or "
+                                        "\"last_velocity\", got " + it->dump());
+        o.kinematic_start = it->get<std::string>();
+    }
     if (const auto it = block.find("hessian"); it != block.end()) {
         if (!it->is_string() || (*it != "auto" && *it != "network" && *it != "tangent"))
             throw std::invalid_argument(
@@ -157,6 +163,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"lazy_hessian", lazy_hessian},
             {"fail_on_unconverged", fail_on_unconverged},
             {"max_kinematic_stages", max_kinematic_stages},
+            {"kinematic_start", kinematic_start},
             {"learned_return_map", learned_return_map}};
 }
 
@@ -197,7 +204,8 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     potential_.set_assemble(options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();
-    const ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
+    ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
+    solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
     ReferenceSolveStats s;

@@ -114,6 +114,11 @@ struct ImplicitOptions {
     // FEM: the most extra solves per step that move kinematic nodes (the plate)
     // to targets that contact's CCD kept them from at the start.
     int max_kinematic_stages = 20;
+    // FEM with kinematic nodes: the start of a step when CCD holds v* back: "scaled" (v* as far as
+    // CCD allows, the kinematic nodes then led to their targets in stages) or "last_velocity" (the
+    // free nodes at their last velocities with the kinematic nodes on their targets, where that is
+    // intersection-free; else "scaled").
+    std::string kinematic_start = "scaled";
     // plasticitynet: after each step, the return mapping of a model that ships
     // one (metal_nh_2d.pt: metal_nh_rm_2d.pt) instead of the material's exact
     // one; false: the material library's (for the comparison of the two).

@@ -59,6 +59,7 @@ public:
     /// The energy's reference state (plasticitynet: F0 of eq. 10, with the
     /// particles' start-of-step hardening).
     void set_reference(const std::vector<Mat<dim>>& F0) override;
+    bool set_damping(double lambda) override { return energy_.set_damping(lambda); }
 
     /// Writes v into the grid's Node::momentum (velocities) for G2P.
     void write_velocity(const VecX& v, Grid<dim>& grid) const;

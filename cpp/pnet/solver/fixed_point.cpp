@@ -64,6 +64,7 @@ public:
     void apply_preconditioner(const VecX& r, VecX& z) const override { objective_.apply_preconditioner(r, z); }
     const SparseMatrix* hessian_matrix() const override { return objective_.hessian_matrix(); }
     double max_step(const VecX& x, const VecX& d) override { return objective_.max_step(x, d); }
+    bool set_damping(double lambda) override { return objective_.set_damping(lambda); }
 
     bool rebase(const VecX& x) override {
         objective_.deformation(x, work_.F);
@@ -106,6 +107,7 @@ ReferenceSolveStats solve_following_reference(ReferencedObjective<dim>& objectiv
     FollowingReference<dim> following(objective, work, after_reference);
     NewtonOptions solve_newton = newton;
     solve_newton.rebase = true;
+    solve_newton.work_line_search = options.work_line_search;
     const NewtonStats s = minimize(following, v, solve_newton, context, &work.newton);
     ReferenceSolveStats stats;
     stats.solves = 1;

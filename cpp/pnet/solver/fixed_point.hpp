@@ -46,6 +46,9 @@ enum class OuterIteration {
 struct ReferenceSolveOptions {
     bool fixed_point = false;          // iterate on F0 (plasticitynet)
     OuterIteration outer = OuterIteration::Newton;
+    // Newton outer iteration: line search on the work of the true residual
+    // (NewtonOptions::work_line_search), for an energy whose Hessian is the consistent tangent.
+    bool work_line_search = false;
     int max_solves = 8;                // fixed point: the cap
     double tolerance = 1e-3;           // fixed point: on max_p ||F(v) - F0||_F
     bool fail_on_unconverged = false;  // an unconverged Newton solve throws NewtonError

@@ -80,6 +80,11 @@ private:
     std::vector<SparseMatrix::StorageIndex> outer_, inner_;
 };
 
+// Rebased solves' Levenberg-Marquardt damping (Objective::set_damping), in units of the shear modulus:
+// the first weight, and the largest (the paper's regularizer w = 1, whose iteration always contracts).
+constexpr double kFirstDamping = 1e-2;
+constexpr double kMaxDamping = 1.0;
+
 std::string where(const std::string& context, int iteration, double residual) {
     char text[160];
     std::snprintf(text, sizeof text,
@@ -130,6 +135,11 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     double energy;
     bool contracted = false;  // the last iterate was reached by a full step that cut the residual enough
     if (options.rebase && objective.rebase(x)) ++stats.rebases;
+    // Rebased solves: the proximal damping of the Levenberg-Marquardt rule below (0: none).
+    const bool work_search = options.rebase && options.work_line_search;
+    const bool damped = options.rebase && !work_search && objective.set_damping(0.0);
+    double work_energy = 0.0;  // work_search: the potential's change from the start, J
+    double damping = 0.0;
     if (options.keep_prepared_hessian) {
         energy = objective.value_gradient(x, g);
         contracted = true;  // the kept Hessian is treated as a lazy one
@@ -189,6 +199,46 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                               std::to_string(alpha_max) + ")");
         if (alpha_max < 1.0) d *= alpha_max;
         const double slope_full = g.dot(d);  // the slope of the (possibly shortened) step
+        if (work_search) {
+            // Trial points about their own reference: g_trial = R(x + alpha d), and the change of
+            // the step's potential is the work of R along the segment, by the trapezoid rule
+            // (exact for a quadratic): Armijo on it, halving alpha.
+            double alpha = 1.0, trial = energy;
+            bool accepted = false;
+            for (int halvings = 0; halvings <= options.max_line_search && !accepted; ++halvings) {
+                if (halvings > 0) alpha *= 0.5;
+                x_trial = x + alpha * d;
+                if (objective.rebase(x_trial)) ++stats.rebases;
+                trial = objective.value_gradient(x_trial, g_trial);
+                ++stats.line_search_steps;
+                if (!std::isfinite(trial) || !g_trial.allFinite()) continue;
+                const double work = 0.5 * alpha * (slope_full + g_trial.dot(d));
+                accepted = work <= options.armijo * alpha * slope_full;
+            }
+            if (!accepted) {
+                // Back to the last iterate's own reference, unconverged.
+                if (objective.rebase(x)) ++stats.rebases;
+                energy = objective.value_gradient(x, g);
+                stats.line_search_failed = true;
+                if (options.throw_on_line_search_failure)
+                    throw NewtonError(where(context, it, residual) + "line search failed after " +
+                                      std::to_string(options.max_line_search) + " halvings (the work of the true "
+                                      "residual along the Newton direction did not decrease)");
+                break;
+            }
+            work_energy += 0.5 * alpha * (slope_full + g_trial.dot(d));
+            x.swap(x_trial);
+            g.swap(g_trial);
+            energy = trial;
+            objective.prepare_hessian(x);
+            ++stats.hessians;
+            objective.hessian_diagonal(diagonal);
+            residual = residual_of(g, options, diagonal);
+            stats.iterations = it + 1;
+            stats.energy = work_energy;
+            stats.residual = residual;
+            continue;
+        }
         // The full step first, with its gradient; with its Hessian too unless the
         // last iteration contracted (then this one likely does, and keeps the Hessian).
         x_trial = x + d;
@@ -208,6 +258,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         }
         const double residual_before = residual;
         bool full_step = alpha_max >= 1.0;
+        bool backtracked = false;  // the line search shortened the step (not CCD)
         bool hessian_at_x = trial_hessian;  // whether the Hessian prepared last is at the new iterate
         if (roundoff || (full_finite && e_full <= energy + options.armijo * slope_full)) {
             x.swap(x_trial);
@@ -228,6 +279,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 alpha *= 0.5;
             }
             if (decreased) {
+                backtracked = true;
                 // A backtracked iterate always gets its own Hessian.
                 x.swap(x_trial);
                 energy = objective.value_gradient_hessian(x, g);
@@ -268,6 +320,30 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         }
         objective.hessian_diagonal(diagonal);  // of the Hessian prepared last
         residual = residual_of(g, options, diagonal);
+        if (damped) {
+            // The merit is re-defined at every rebase, so nothing stops Newton from cycling where
+            // the consistent tangent jumps (an element crossing the yield surface and back), and
+            // along a mode of near-zero true stiffness (perfectly plastic flow) the full step can
+            // leave the region where the network matches the stress, so that the line search
+            // backtracks. When the true residual grew or the step was backtracked, damp the next
+            // steps with a proximal weight about the new reference (a trust region: value,
+            // gradient and Hessian alike; zero at F = F0, so R is unchanged), fourfold while it
+            // goes on; relax it fourfold after a step that lowered R.
+            if (residual > residual_before || backtracked) {
+                damping = damping > 0.0 ? std::min(4.0 * damping, kMaxDamping) : kFirstDamping;
+                objective.set_damping(damping);
+                energy = objective.value_gradient_hessian(x, g);
+                ++stats.hessians;
+                ++stats.dampings;
+                hessian_at_x = true;
+                full_step = false;  // the fresh Hessian is kept below
+                objective.hessian_diagonal(diagonal);
+                residual = residual_of(g, options, diagonal);
+            } else if (damping > 0.0) {
+                damping = damping * 0.25 < kFirstDamping ? 0.0 : 0.25 * damping;
+                objective.set_damping(damping);  // from the next Hessian on
+            }
+        }
         contracted = full_step && residual <= options.lazy_hessian * residual_before;
         if (!hessian_at_x && !contracted) {
             // The lazy Hessian may be kept only after a contracting full step.
@@ -281,6 +357,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         stats.residual = residual;
     }
     if (residual <= target) stats.converged = true;
+    if (damped) objective.set_damping(0.0);
     return stats;
 }
 

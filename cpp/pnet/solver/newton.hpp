@@ -80,8 +80,17 @@ struct NewtonOptions {
     /// evaluated within one Newton step of its reference, and the outer fixed point on F0 (paper
     /// eq. 10) merges into the Newton loop. The line search compares energies about the iterate's
     /// own reference; the Hessian of the trial point (about the previous reference) is kept for the
-    /// next direction, so a rebase costs one gradient pass (docs/solver.md).
+    /// next direction, so a rebase costs one gradient pass. Where the true residual grows from one
+    /// iterate to the next, a proximal damping lambda mu/2 |F - F0|^2 (Objective::set_damping; 0.01,
+    /// x4 while it keeps growing, at most 1) is added until it falls again (docs/solver.md).
     bool rebase = false;
+    /// With rebase: the line search evaluates each trial point about its own reference (its
+    /// gradient is then the true residual R there) and takes Armijo's test on the work of R along
+    /// the step, 1/2 alpha (R(x) + R(x + alpha d)) . d, instead of the energy about the iterate's
+    /// reference. For a Hessian that is the Jacobian of R (the consistent tangent) rather than the
+    /// energy's own: where the two disagree at second order (perfectly plastic flow) the energy
+    /// rejects the tangent's steps (docs/solver.md). A trial point costs one gradient pass.
+    bool work_line_search = false;
 };
 
 struct NewtonStats {
@@ -100,6 +109,7 @@ struct NewtonStats {
     int hessians = 0;                      // Hessian passes (value_gradient_hessian or prepare_hessian)
     int factorizations = 0, analyses = 0;  // Cholesky: numeric factorizations, symbolic analyses
     int rebases = 0;                       // Objective::rebase calls that changed the objective
+    int dampings = 0;                      // rebased solves: iterates where the damping grew
 };
 
 /// A solve that cannot go on: non-finite energy or gradient at the start or

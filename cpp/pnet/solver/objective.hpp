@@ -76,6 +76,12 @@ public:
     /// exact one (NewtonOptions::rebase). Returns whether the objective changed; value, gradient and
     /// Hessian must then be evaluated anew. Default: nothing to move.
     virtual bool rebase(const VecX& /*x*/) { return false; }
+
+    /// An extra proximal weight lambda about the expansion point (the learned energy: lambda mu/2
+    /// |F - F0|^2, in value, gradient and Hessian from the next evaluation on), Newton's damping
+    /// of a rebased solve that stopped contracting (NewtonOptions::rebase). Returns whether the
+    /// objective supports it. Default: it does not.
+    virtual bool set_damping(double /*lambda*/) { return false; }
 };
 
 }  // namespace pnet

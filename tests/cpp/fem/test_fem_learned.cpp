@@ -5,6 +5,10 @@
 #include <gtest/gtest.h>
 
 #include <memory>
+#include <cstdio>
+#include <string>
+
+#include <omp.h>
 
 #include "pnet/energy/analytic_elastoplastic.hpp"
 #include "pnet/fem/fem_integrator.hpp"
@@ -18,7 +22,23 @@ namespace {
 
 using test::crushed_bar;
 
-FemState<2> run(const FemSystem<2>& system, FemMethod method, double dt, double T, int* unconverged) {
+struct RunCounts {
+    int unconverged = 0;           // steps whose solve ended above its tolerance
+    int fixed_point_capped = 0;    // steps whose outer iteration did not reach its tolerance
+    double max_true_residual = 0;  // plasticitynet: the largest |R(v)| at a step's end, m/s
+};
+
+FemState<2> run(const FemSystem<2>& system, FemMethod method, double dt, double T, int* unconverged,
+                const std::string& outer = "newton", RunCounts* counts = nullptr, double newton_tolerance = 1e-6) {
+    ImplicitOptions options;
+    options.newton_tolerance = newton_tolerance;
+    options.max_newton_iterations = 200;
+    // FEM metal moves far less per step than MPM sand (here 0.05% strain per step at dt 1e-3): the
+    // paper's fixed point on F0 must be converged much tighter than MPM's 1e-3 (measured: mean distance
+    // to analytic 0.34% of the diagonal at 1e-3, 0.0095% at 1e-6).
+    options.fixed_point_tolerance = 1e-6;
+    options.max_fixed_point_iterations = 50;
+    options.outer_iteration = outer;
     std::unique_ptr<ParticleEnergy<2>> energy;
     const std::vector<std::string> context = {"bar"};
     if (method == FemMethod::Analytic) {
@@ -26,25 +46,32 @@ FemState<2> run(const FemSystem<2>& system, FemMethod method, double dt, double 
     } else if (method == FemMethod::Lagged) {
         energy = std::make_unique<ElasticParticleEnergy<2>>(system.materials);
     } else {
+        // As a scene builds it: the default Hessian ("auto": the consistent tangent with w = 0 for von
+        // Mises under the Newton outer iteration, the network's with w = 1 under the fixed point).
         auto model = std::make_shared<const ModelFile>(load_model_file(std::string(PNET_MODELS_DIR) + "/metal_2d.pt"));
         energy = std::make_unique<NeuralParticleEnergy<2>>(std::vector<std::shared_ptr<const ModelFile>>{model},
-                                                           system.materials, context, 1.0);
+                                                           system.materials, context, options.regularizer_weight,
+                                                           options.neural_hessian<2>());
     }
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-6;
-    // FEM metal moves far less per step than MPM sand (here 0.05% strain per step at dt 1e-3): the
-    // fixed point on F0 must be converged much tighter than MPM's 1e-3 (measured: mean distance to
-    // analytic 0.34% of the diagonal at 1e-3, 0.0095% at 1e-6).
-    options.fixed_point_tolerance = 1e-6;
-    options.max_fixed_point_iterations = 50;
     FemImplicitIntegrator<2> integrator(system, method, options, std::move(energy), nullptr);
     FemState<2> state = FemState<2>::at_rest(system);
     const int steps = static_cast<int>(std::lround(T / dt));
     for (int s = 0; s < steps; ++s) {
         const StepStats st = integrator.step(state, dt, s);
         *unconverged += !st.converged;
+        if (counts) {
+            counts->unconverged += !st.converged;
+            counts->fixed_point_capped += !st.fixed_point_converged;
+            counts->max_true_residual = std::max(counts->max_true_residual, st.true_residual);
+        }
     }
     return state;
+}
+
+std::string scientific(double x) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.3e", x);
+    return text;
 }
 
 double mean_distance(const FemState<2>& a, const FemState<2>& b) {
@@ -63,28 +90,74 @@ TEST(FemLearned, PlasticityNetReproducesTheAnalyticEnergyAndBeatsLagged) {
     for (double dt : {1e-2, 1e-3}) {
         SCOPED_TRACE("dt " + std::to_string(dt));
         int unconverged = 0;
-        const FemState<2> analytic = run(system, FemMethod::Analytic, dt, T, &unconverged);
-        const FemState<2> learned = run(system, FemMethod::PlasticityNet, dt, T, &unconverged);
+        // A tight tolerance (m/s): the bar's perfectly plastic flow is a mode of near-zero stiffness, in
+        // which the mass-weighted residual at 1e-6 m/s still allows 2.5e-5 m between two converged
+        // steps (measured at dt 1e-2).
+        const double tolerance = 1e-9;
+        const FemState<2> analytic = run(system, FemMethod::Analytic, dt, T, &unconverged, "newton", nullptr, tolerance);
+        const FemState<2> learned =
+            run(system, FemMethod::PlasticityNet, dt, T, &unconverged, "newton", nullptr, tolerance);
         const FemState<2> lagged = run(system, FemMethod::Lagged, dt, T, &unconverged);
         EXPECT_EQ(unconverged, 0) << "every Newton solve converged";
         const double d_learned = mean_distance(learned, analytic), d_lagged = mean_distance(lagged, analytic);
-        RecordProperty("dt_" + std::to_string(dt), std::to_string(d_learned / diagonal) + " / " +
-                                                       std::to_string(d_lagged / diagonal));
-        // Measured (mean nodal distance to analytic / diagonal, plasticitynet and lagged): dt 1e-3:
-        // 0.061% and 11.2%; dt 1e-2: 1.97% and 7.0%. At 1e-2 the fixed point on F0 stalls near a
-        // change of 1e-4 once the bar yields (the cap of 50 solves is hit in most plastic steps), so
-        // the learned run is not yet the exact backward Euler step it is at 1e-3: DESIGN §7's 0.1% is
-        // met at 1e-3 only.
-        if (dt < 5e-3) {
-            EXPECT_LT(d_learned, 0.001 * diagonal) << "mean nodal distance to analytic <= 0.1% of the diagonal";
-        } else {
-            EXPECT_LT(d_learned, 0.03 * diagonal) << "a regression guard at 1e-2 (measured 1.97%)";
-        }
+        RecordProperty("dt_" + std::to_string(dt), scientific(d_learned / diagonal) + " / " +
+                                                       scientific(d_lagged / diagonal));
+        // The outer iteration merged into Newton (F0 = F(v) at every iterate, the return mapping's
+        // consistent tangent) converges each step on the true residual, whose root is the analytic
+        // step's: what is left is the Newton tolerance. (The paper's fixed point, before issue 31: 0.061% at 1e-3 and 1.97% at 1e-2, where
+        // it stalled near a change of 1e-4; FemLearned.PlainFixedPointStallsWhereNewtonConverges.)
+        EXPECT_LT(d_learned, 1e-6 * diagonal) << "mean nodal distance to analytic (measured 2.5e-8 m at 1e-2, 1.2e-8 m "
+                                                  "at 1e-3)";
         EXPECT_LT(d_learned, 0.5 * d_lagged) << "closer than lagged";
         double yielded = 0.0;
         for (double h : analytic.hardening) yielded = std::max(yielded, h - 0.05);
         EXPECT_GT(yielded, 0.005);
     }
+}
+
+// The mechanism of issue 31 on the crushed bar at the paper's step: with h held at h^n within a step
+// the yielded bar is perfectly plastic, its plastic-flow modes have a near-zero true stiffness while
+// each solve of the paper's fixed point (eq. 10) adds the network's Hessian and w mu: the plain
+// iteration (no Anderson) contracts slowly there and hits its cap, and its steps end above the
+// Newton tolerance on the true residual. The outer iteration merged into Newton ends every step
+// converged on the true residual (the stopping test is in Newton's units, m/s).
+TEST(FemLearned, PlainFixedPointStallsWhereNewtonConverges) {
+    const FemSystem<2> system = crushed_bar(0.05);
+    const double dt = 1e-2, T = 0.3;
+    int unconverged = 0;
+    RunCounts plain, newton;
+    const double tolerance = 1e-9;  // m/s: tight, so that the steps are the analytic ones to round-off
+    RunCounts exact;
+    const FemState<2> analytic = run(system, FemMethod::Analytic, dt, T, &unconverged, "newton", &exact, tolerance);
+    const FemState<2> a = run(system, FemMethod::PlasticityNet, dt, T, &unconverged, "fixed_point", &plain, tolerance);
+    const FemState<2> b = run(system, FemMethod::PlasticityNet, dt, T, &unconverged, "newton", &newton, tolerance);
+    RecordProperty("plain_capped_steps", plain.fixed_point_capped);
+    RecordProperty("plain_max_true_residual", scientific(plain.max_true_residual));
+    RecordProperty("newton_max_true_residual", scientific(newton.max_true_residual));
+    RecordProperty("plain_distance", scientific(mean_distance(a, analytic)));
+    RecordProperty("newton_distance", scientific(mean_distance(b, analytic)));
+    EXPECT_GT(plain.fixed_point_capped, 0) << "the plain fixed point stalls on the yielded bar";
+    EXPECT_EQ(newton.fixed_point_capped, 0);
+    EXPECT_EQ(newton.unconverged, 0);
+    EXPECT_GT(newton.max_true_residual, 0.0) << "the true residual was measured";
+    EXPECT_LE(newton.max_true_residual, tolerance) << "every step converged on the true residual (m/s)";
+    EXPECT_LT(mean_distance(b, analytic), 1e-8) << "the analytic step (m)";
+    EXPECT_GT(mean_distance(a, analytic), 10.0 * mean_distance(b, analytic));
+}
+
+// Results do not depend on the thread count: the outer iteration with 1 and 2 threads, bitwise.
+TEST(FemLearned, OuterIterationIsIndependentOfTheThreadCount) {
+    const FemSystem<2> system = crushed_bar(0.05);
+    const int threads = omp_get_max_threads();
+    int unconverged = 0;
+    omp_set_num_threads(1);
+    const FemState<2> one = run(system, FemMethod::PlasticityNet, 1e-2, 0.1, &unconverged);
+    omp_set_num_threads(2);
+    const FemState<2> two = run(system, FemMethod::PlasticityNet, 1e-2, 0.1, &unconverged);
+    omp_set_num_threads(threads);
+    EXPECT_EQ(unconverged, 0);
+    for (std::size_t i = 0; i < one.x.size(); ++i) ASSERT_EQ(one.x[i], two.x[i]) << "node " << i;
+    for (std::size_t e = 0; e < one.hardening.size(); ++e) ASSERT_EQ(one.hardening[e], two.hardening[e]);
 }
 
 }  // namespace

@@ -1,0 +1,73 @@
+// The consistent tangent dPtilde/dF of the return-mapped stress (material/elastoplastic_tangent.hpp):
+// for von Mises (associative, the Jacobian is symmetric) it is the finite-difference Jacobian of the
+// material library's Ptilde(F, h), elastic and plastic branches, 2D and 3D; for the non-associative
+// models it is symmetric and, projected, positive semi-definite.
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+
+#include "pnet/material/elastoplastic_tangent.hpp"
+#include "pnet/material/material.hpp"
+#include "support/finite_difference.hpp"
+#include "support/random.hpp"
+
+namespace pnet {
+namespace {
+
+template <typename T>
+class ElastoplasticTangentTest : public ::testing::Test {};
+using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
+TYPED_TEST_SUITE(ElastoplasticTangentTest, Dims);
+
+template <int dim>
+Tensor4<dim> tangent_of(const Material<dim>& material, const Mat<dim>& F, double h, bool project) {
+    const PrincipalReturnMap<dim> Z = [&](const Vec<dim>& Sigma) { return material.return_map(Sigma, h).Sigma; };
+    return elastoplastic_tangent<dim>(clamped_svd<dim>(F), material.elasticity(), Z, project);
+}
+
+TYPED_TEST(ElastoplasticTangentTest, VonMisesTangentIsTheJacobianOfTheStress) {
+    constexpr int dim = TypeParam::value;
+    const Material<dim> metal(material_preset("metal"));
+    const double E = metal.description().elastic.E;
+    test::Random random(29);
+    test::FdStats fd;
+    int plastic = 0, elastic = 0;
+    for (int k = 0; k < 16; ++k) {
+        const Mat<dim> F = random.template deformation<dim>(k % 2 ? 0.02 : 0.3);
+        const double h = random.uniform(0.02, 0.1);
+        const Vec<dim> e = clamped_svd<dim>(F).Sigma.array().log().matrix();
+        ((e.array() - e.mean()).matrix().norm() > h ? plastic : elastic) += 1;
+        const Tensor4<dim> K = tangent_of<dim>(metal, F, h, false);
+        auto stress = [&](const Eigen::VectorXd& f) -> Eigen::VectorXd {
+            return flatten<dim>(metal.elastoplastic_stress(unflatten<dim>(f), h));
+        };
+        EXPECT_TRUE(test::check_jacobian(stress, K, flatten<dim>(F), fd, 1e-6, 1e-4, 1e-3 * E)) << "sample " << k;
+    }
+    EXPECT_GT(plastic, 2);
+    EXPECT_GT(elastic, 2);
+    EXPECT_EQ(fd.checks, 16 * dim * dim * dim * dim);
+}
+
+TYPED_TEST(ElastoplasticTangentTest, NonAssociativeTangentIsSymmetricAndProjectsToPsd) {
+    constexpr int dim = TypeParam::value;
+    test::Random random(31);
+    for (const char* preset : {"sand", "snow"}) {
+        const Material<dim> material(material_preset(preset));
+        const double h = material.description().initial_hardening;
+        int checked = 0;
+        for (int k = 0; k < 12; ++k) {
+            const Mat<dim> F = random.template deformation<dim>(0.2);
+            const Tensor4<dim> K = tangent_of<dim>(material, F, h, false);
+            ASSERT_TRUE(K.allFinite()) << preset << " sample " << k;
+            EXPECT_LE((K - K.transpose()).cwiseAbs().maxCoeff(), 1e-9 * K.cwiseAbs().maxCoeff()) << preset;
+            const Tensor4<dim> P = tangent_of<dim>(material, F, h, true);
+            const double smallest = Eigen::SelfAdjointEigenSolver<Tensor4<dim>>(P).eigenvalues().minCoeff();
+            EXPECT_GE(smallest, -1e-9 * P.cwiseAbs().maxCoeff()) << preset << " sample " << k;
+            ++checked;
+        }
+        EXPECT_EQ(checked, 12);
+    }
+}
+
+}  // namespace
+}  // namespace pnet
