@@ -170,6 +170,31 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
         value_gradient(F, psi, gradient);  // the network's value and gradient (set_reference's pass at F = F0)
         const double wmu = (w_ + damping_) * mu_train_;
         const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
+        if (return_map_) {
+            // A learned return mapping: every point's 2d + 1 stencil states in one network evaluation.
+            constexpr int k = kTangentStencil<dim>;
+            std::vector<PolarSVD<dim>> svd(count);
+            std::vector<Vec<dim>> stencil(count * k);
+            std::vector<double> h(count * k);
+            std::vector<ReturnResult<dim>> returned(count * k);
+#pragma omp parallel for schedule(static) if (count >= 64)
+            for (std::ptrdiff_t p = 0; p < count; ++p) {
+                svd[p] = clamped_svd<dim>(F[p]);
+                tangent_stencil<dim>(svd[p].Sigma, &stencil[p * k]);
+                for (int j = 0; j < k; ++j) h[p * k + j] = hardening_[p];
+            }
+            return_map_->return_map(stencil.data(), h.data(), stencil.size(), returned.data());
+#pragma omp parallel for schedule(static) if (count >= 64)
+            for (std::ptrdiff_t p = 0; p < count; ++p) {
+                Vec<dim> Z[k];
+                for (int j = 0; j < k; ++j) Z[j] = returned[p * k + j].Sigma;
+                Tensor4<dim> H =
+                    elastoplastic_tangent_from<dim>(svd[p], training_material_.elasticity(), Z, project_psd);
+                H.diagonal().array() += wmu;
+                hessian[p] = E_ * H;
+            }
+            return;
+        }
 #pragma omp parallel for schedule(static) if (count >= 64)
         for (std::ptrdiff_t p = 0; p < count; ++p) {
             const double h = hardening_[p];

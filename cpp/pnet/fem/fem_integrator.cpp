@@ -140,7 +140,11 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     }
     if (alpha < 1.0) v *= alpha;
 
-    if (iterates_reference_) {
+    // The elastic predictor keeps the paper's fixed point's first F0 near the solution; the Newton
+    // outer iteration evaluates the energy only within a step of its reference and needs none
+    // (ImplicitOptions::fem_predictor).
+    const bool predictor = iterates_reference_ && (options_.outer_iteration == "fixed_point" || options_.fem_predictor);
+    if (predictor) {
         predictor_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
         predictor_.set_material_state(system_.element_object, state.hardening);
         predictor_.set_reference({});

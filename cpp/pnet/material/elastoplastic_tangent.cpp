@@ -17,19 +17,24 @@ constexpr double kCloseLog = 1e-4;
 }  // namespace
 
 template <int dim>
-Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity,
-                                   const PrincipalReturnMap<dim>& return_map, bool project_psd) {
+void tangent_stencil(const Vec<dim>& Sigma, Vec<dim>* stencil) {
+    stencil[0] = Sigma;
+    for (int j = 0; j < dim; ++j) {
+        stencil[1 + 2 * j] = Sigma;
+        stencil[2 + 2 * j] = Sigma;
+        stencil[1 + 2 * j][j] *= std::exp(kDelta);
+        stencil[2 + 2 * j][j] *= std::exp(-kDelta);
+    }
+}
+
+template <int dim>
+Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity, const Vec<dim>* Z,
+                                        bool project_psd) {
     const Vec<dim>& S = svd.Sigma;
     const Vec<dim> eps = S.array().log().matrix();
-    auto tau_at = [&](const Vec<dim>& e) { return elasticity.tau(return_map(e.array().exp().matrix())); };
-    const Vec<dim> t = elasticity.tau(return_map(S));
+    const Vec<dim> t = elasticity.tau(Z[0]);
     Mat<dim> dtau;
-    for (int j = 0; j < dim; ++j) {
-        Vec<dim> plus = eps, minus = eps;
-        plus[j] += kDelta;
-        minus[j] -= kDelta;
-        dtau.col(j) = (tau_at(plus) - tau_at(minus)) / (2.0 * kDelta);
-    }
+    for (int j = 0; j < dim; ++j) dtau.col(j) = (elasticity.tau(Z[1 + 2 * j]) - elasticity.tau(Z[2 + 2 * j])) / (2.0 * kDelta);
     dtau = 0.5 * (dtau + dtau.transpose()).eval();
     auto quotient = [&](int i, int j) {
         if (std::abs(eps[i] - eps[j]) > kCloseLog) return (t[i] - t[j]) / (S[i] - S[j]);
@@ -39,9 +44,22 @@ Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<di
     return isotropic_dPdF<dim>(svd, t, dtau, quotient, project_psd);
 }
 
+template <int dim>
+Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity,
+                                   const PrincipalReturnMap<dim>& return_map, bool project_psd) {
+    Vec<dim> stencil[kTangentStencil<dim>], Z[kTangentStencil<dim>];
+    tangent_stencil<dim>(svd.Sigma, stencil);
+    for (int k = 0; k < kTangentStencil<dim>; ++k) Z[k] = return_map(stencil[k]);
+    return elastoplastic_tangent_from<dim>(svd, elasticity, Z, project_psd);
+}
+
 template Tensor4<2> elastoplastic_tangent<2>(const PolarSVD<2>&, const Elasticity<2>&, const PrincipalReturnMap<2>&,
                                              bool);
 template Tensor4<3> elastoplastic_tangent<3>(const PolarSVD<3>&, const Elasticity<3>&, const PrincipalReturnMap<3>&,
                                              bool);
+template void tangent_stencil<2>(const Vec<2>&, Vec<2>*);
+template void tangent_stencil<3>(const Vec<3>&, Vec<3>*);
+template Tensor4<2> elastoplastic_tangent_from<2>(const PolarSVD<2>&, const Elasticity<2>&, const Vec<2>*, bool);
+template Tensor4<3> elastoplastic_tangent_from<3>(const PolarSVD<3>&, const Elasticity<3>&, const Vec<3>*, bool);
 
 }  // namespace pnet

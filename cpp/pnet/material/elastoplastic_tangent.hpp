@@ -34,4 +34,15 @@ template <int dim>
 Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity,
                                    const PrincipalReturnMap<dim>& return_map, bool project_psd);
 
+/// The same in two halves, for return mappings evaluated in batches (a learned one): the 2d + 1
+/// singular values at which the return mapping is needed (Sigma, then Sigma e^{+-delta} along each
+/// axis), and the tangent from the returned ones, Z[k] = Z(stencil[k]).
+template <int dim>
+constexpr int kTangentStencil = 2 * dim + 1;
+template <int dim>
+void tangent_stencil(const Vec<dim>& Sigma, Vec<dim>* stencil);
+template <int dim>
+Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity, const Vec<dim>* Z,
+                                        bool project_psd);
+
 }  // namespace pnet

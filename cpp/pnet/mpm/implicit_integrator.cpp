@@ -74,6 +74,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                 context + ": integrator.fixed_point_keep_hessian: expected true or false, got " + it->dump());
         o.fixed_point_keep_hessian = it->get<bool>();
     }
+    if (const auto it = block.find("fem_predictor"); it != block.end()) {
+        if (!it->is_boolean())
+            throw std::invalid_argument(context + ": integrator.fem_predictor: expected true or false, got " +
+                                        it->dump());
+        o.fem_predictor = it->get<bool>();
+    }
     if (const auto it = block.find("learned_return_map"); it != block.end()) {
         if (!it->is_boolean())
             throw std::invalid_argument(context + ": integrator.learned_return_map: expected true or false, got " +
@@ -164,6 +170,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"fail_on_unconverged", fail_on_unconverged},
             {"max_kinematic_stages", max_kinematic_stages},
             {"kinematic_start", kinematic_start},
+            {"fem_predictor", fem_predictor},
             {"learned_return_map", learned_return_map}};
 }
 

@@ -119,6 +119,10 @@ struct ImplicitOptions {
     // free nodes at their last velocities with the kinematic nodes on their targets, where that is
     // intersection-free; else "scaled").
     std::string kinematic_start = "scaled";
+    // FEM plasticitynet with the Newton outer iteration: first solve the step with the elastic
+    // energy and start from there (always done under the fixed point, whose first F0 must be near
+    // the solution).
+    bool fem_predictor = true;
     // plasticitynet: after each step, the return mapping of a model that ships
     // one (metal_nh_2d.pt: metal_nh_rm_2d.pt) instead of the material's exact
     // one; false: the material library's (for the comparison of the two).
