@@ -452,3 +452,70 @@ TEST(Newton, NonFiniteEnergyIsReported) {
 
 }  // namespace
 }  // namespace pnet
+
+namespace pnet {
+namespace {
+
+// A rebased objective whose gradient is the true residual R(x) = x - 1 (a linear spring to 1) and
+// whose Hessian is `stiffness` (the tangent Newton uses), counting its rebases.
+class RebasedSpring : public Objective {
+public:
+    explicit RebasedSpring(double stiffness) : k_(stiffness) {}
+    Eigen::Index size() const override { return 1; }
+    double value(const VecX& x) override { return 0.5 * (x[0] - 1.0) * (x[0] - 1.0); }
+    double value_gradient(const VecX& x, VecX& g) override {
+        g.resize(1);
+        g[0] = x[0] - 1.0;
+        return value(x);
+    }
+    void prepare_hessian(const VecX&) override {}
+    void hessian_multiply(const VecX& d, VecX& out) const override { out = k_ * d; }
+    void hessian_diagonal(VecX& diagonal) const override { diagonal = VecX::Constant(1, k_); }
+    bool rebase(const VecX&) override {
+        ++rebases_;
+        return true;
+    }
+    int rebases() const { return rebases_; }
+
+private:
+    double k_;
+    int rebases_ = 0;
+};
+
+// With the work line search a Newton step whose tangent is right converges in one iteration, and
+// every trial point is evaluated about its own reference.
+TEST(Newton, WorkLineSearchTakesTheTangentStep) {
+    RebasedSpring spring(1.0);
+    NewtonOptions options;
+    options.rebase = true;
+    options.work_line_search = true;
+    options.tolerance = 1e-12;
+    VecX x = VecX::Constant(1, 5.0);
+    const NewtonStats s = minimize(spring, x, options);
+    EXPECT_TRUE(s.converged);
+    EXPECT_EQ(s.iterations, 1);
+    EXPECT_NEAR(x[0], 1.0, 1e-14);
+    EXPECT_EQ(spring.rebases(), 2) << "the start and the trial point";
+}
+
+// A tangent far too soft (1e-6 for a true stiffness of 1) overshoots by 1e6: no halving within the
+// cap makes the work of R along the step decrease, so the solve ends unconverged and says so, back
+// at the last iterate and its own reference; with throw_on_line_search_failure it is an error.
+TEST(Newton, FailedWorkLineSearchEndsTheSolveUnconvergedAtTheLastIterate) {
+    RebasedSpring spring(1e-6);
+    NewtonOptions options;
+    options.rebase = true;
+    options.work_line_search = true;
+    VecX x = VecX::Constant(1, 2.0);
+    const NewtonStats s = minimize(spring, x, options);
+    EXPECT_FALSE(s.converged);
+    EXPECT_TRUE(s.line_search_failed);
+    EXPECT_EQ(x[0], 2.0) << "the last accepted iterate";
+    EXPECT_EQ(spring.rebases(), 1 + (options.max_line_search + 1) + 1) << "start, trials, back to the iterate";
+    options.throw_on_line_search_failure = true;
+    x[0] = 2.0;
+    EXPECT_THROW(minimize(spring, x, options), NewtonError);
+}
+
+}  // namespace
+}  // namespace pnet
