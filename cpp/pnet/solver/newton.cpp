@@ -203,7 +203,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             // Trial points about their own reference: g_trial = R(x + alpha d), and the change of
             // the step's potential is the work of R along the segment, by the trapezoid rule
             // (exact for a quadratic): Armijo on it, halving alpha.
-            double alpha = 1.0, trial = energy;
+            double alpha = 1.0, trial = energy, work = 0.0;
             bool accepted = false;
             for (int halvings = 0; halvings <= options.max_line_search && !accepted; ++halvings) {
                 if (halvings > 0) alpha *= 0.5;
@@ -212,7 +212,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 trial = objective.value_gradient(x_trial, g_trial);
                 ++stats.line_search_steps;
                 if (!std::isfinite(trial) || !g_trial.allFinite()) continue;
-                const double work = 0.5 * alpha * (slope_full + g_trial.dot(d));
+                work = 0.5 * alpha * (slope_full + g_trial.dot(d));
                 accepted = work <= options.armijo * alpha * slope_full;
             }
             if (!accepted) {
@@ -226,7 +226,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                                       "residual along the Newton direction did not decrease)");
                 break;
             }
-            work_energy += 0.5 * alpha * (slope_full + g_trial.dot(d));
+            work_energy += work;
             x.swap(x_trial);
             g.swap(g_trial);
             energy = trial;
