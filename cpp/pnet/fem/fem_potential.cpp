@@ -193,43 +193,90 @@ double FemPotential<dim>::value_gradient(const VecX& v, VecX& gradient) {
 }
 
 template <int dim>
+void FemPotential<dim>::build_hessian_pattern() {
+    constexpr int nodes_per_element = dim + 1, block = nodes_per_element * nodes_per_element * dim * dim;
+    const Eigen::Index n = size();
+    const std::size_t elements = mesh_.elements.size();
+    // Every entry an element touches, fixed components included (their values stay 0).
+    std::vector<Eigen::Triplet<double>> pattern;
+    pattern.reserve(elements * block + n);
+    for (Eigen::Index k = 0; k < n; ++k) pattern.emplace_back(k, k, 1.0);
+    for (std::size_t e = 0; e < elements; ++e)
+        for (int a = 0; a <= dim; ++a)
+            for (int b = 0; b <= dim; ++b)
+                for (int i = 0; i < dim; ++i)
+                    for (int k = 0; k < dim; ++k)
+                        pattern.emplace_back(dim * mesh_.elements[e][a] + i, dim * mesh_.elements[e][b] + k, 1.0);
+    element_hessian_.resize(n, n);
+    element_hessian_.setFromTriplets(pattern.begin(), pattern.end());
+    element_hessian_.makeCompressed();
+    const auto slot = [&](Eigen::Index row, Eigen::Index col) {
+        const auto* inner = element_hessian_.innerIndexPtr();
+        const auto* first = inner + element_hessian_.outerIndexPtr()[col];
+        const auto* last = inner + element_hessian_.outerIndexPtr()[col + 1];
+        return static_cast<int>(std::lower_bound(first, last, row) - inner);
+    };
+    diagonal_slots_.resize(n);
+    for (Eigen::Index k = 0; k < n; ++k) diagonal_slots_[k] = slot(k, k);
+    element_slots_.resize(elements * block);
+    for (std::size_t e = 0; e < elements; ++e) {
+        int* slots = &element_slots_[e * block];
+        for (int a = 0; a <= dim; ++a)
+            for (int b = 0; b <= dim; ++b)
+                for (int i = 0; i < dim; ++i)
+                    for (int k = 0; k < dim; ++k)
+                        *slots++ = slot(dim * mesh_.elements[e][a] + i, dim * mesh_.elements[e][b] + k);
+    }
+}
+
+template <int dim>
 void FemPotential<dim>::prepare_hessian(const VecX& v) {
     evaluate(v, ParticleEnergy<dim>::Order::Hessian);
+    constexpr int block = (dim + 1) * (dim + 1) * dim * dim;
     const Eigen::Index n = size();
-    triplets_.clear();
-    triplets_.reserve(mesh_.elements.size() * (dim + 1) * (dim + 1) * dim * dim + n);
-    for (Eigen::Index k = 0; k < n; ++k) triplets_.emplace_back(k, k, mass_[k] * (free_[k] > 0.0 ? inertia_scale_[k] : 1.0));
+    if (element_hessian_.rows() != n || element_slots_.size() != mesh_.elements.size() * block) build_hessian_pattern();
+    double* values = element_hessian_.valuePtr();
+    std::fill(values, values + element_hessian_.nonZeros(), 0.0);
+    for (Eigen::Index k = 0; k < n; ++k) values[diagonal_slots_[k]] = mass_[k] * (free_[k] > 0.0 ? inertia_scale_[k] : 1.0);
     for (std::size_t e = 0; e < mesh_.elements.size(); ++e) {
         const Tensor4<dim>& H = H_[e];
         const double scale = rest_.volume[e] * dt_ * dt_;
+        const int* slots = &element_slots_[e * block];
         for (int a = 0; a <= dim; ++a)
             for (int b = 0; b <= dim; ++b) {
                 const Vec<dim>& ga = grad_[e][a];
                 const Vec<dim>& gb = grad_[e][b];
                 for (int i = 0; i < dim; ++i)
                     for (int k = 0; k < dim; ++k) {
+                        const int slot = *slots++;
+                        const Eigen::Index row = dim * mesh_.elements[e][a] + i, col = dim * mesh_.elements[e][b] + k;
+                        if (free_[row] == 0.0 || free_[col] == 0.0) continue;
                         double s = 0.0;
                         for (int j = 0; j < dim; ++j)
                             for (int l = 0; l < dim; ++l) s += ga[j] * H(i * dim + j, k * dim + l) * gb[l];
-                        const Eigen::Index row = dim * mesh_.elements[e][a] + i, col = dim * mesh_.elements[e][b] + k;
-                        if (free_[row] > 0.0 && free_[col] > 0.0) triplets_.emplace_back(row, col, scale * s);
+                        values[slot] += scale * s;
                     }
             }
     }
+    with_contact_ = false;
     if (contact_ || friction_) {
         positions(v, x_);
-        const std::size_t first = triplets_.size();
+        triplets_.clear();
         if (contact_) contact_->add_hessian(x_, dt_ * dt_, triplets_, project_psd_);
         if (friction_) friction_->add_hessian(v, dt_, triplets_);
         // Fixed components keep only their mass.
-        triplets_.erase(std::remove_if(triplets_.begin() + first, triplets_.end(),
+        triplets_.erase(std::remove_if(triplets_.begin(), triplets_.end(),
                                        [&](const Eigen::Triplet<double>& t) {
                                            return free_[t.row()] == 0.0 || free_[t.col()] == 0.0;
                                        }),
                         triplets_.end());
+        if (!triplets_.empty()) {
+            contact_hessian_.resize(n, n);
+            contact_hessian_.setFromTriplets(triplets_.begin(), triplets_.end());  // duplicates summed in order
+            hessian_ = element_hessian_ + contact_hessian_;
+            with_contact_ = true;
+        }
     }
-    hessian_.resize(n, n);
-    hessian_.setFromTriplets(triplets_.begin(), triplets_.end());  // duplicates summed in triplet order
 }
 
 template <int dim>
@@ -241,12 +288,12 @@ double FemPotential<dim>::value_gradient_hessian(const VecX& v, VecX& gradient) 
 
 template <int dim>
 void FemPotential<dim>::hessian_multiply(const VecX& d, VecX& out) const {
-    out.noalias() = hessian_ * d;
+    out.noalias() = hessian() * d;
 }
 
 template <int dim>
 void FemPotential<dim>::hessian_diagonal(VecX& diagonal) const {
-    diagonal = hessian_.diagonal();
+    diagonal = hessian().diagonal();
 }
 
 template <int dim>
@@ -255,7 +302,7 @@ void FemPotential<dim>::hessian_block_diagonal(VecX& blocks) const {
     blocks.setZero(nodes * dim * dim);
     for (Eigen::Index k = 0; k < nodes; ++k)
         for (int a = 0; a < dim; ++a)
-            for (int b = 0; b < dim; ++b) blocks[k * dim * dim + a * dim + b] = hessian_.coeff(dim * k + a, dim * k + b);
+            for (int b = 0; b < dim; ++b) blocks[k * dim * dim + a * dim + b] = hessian().coeff(dim * k + a, dim * k + b);
 }
 
 template struct ElementRest<2>;

@@ -18,8 +18,11 @@
 // max_step() is its CCD filter on the motion x -> x + dt d.
 // The Hessian is assembled as a sparse matrix (hessian_matrix()) for a direct
 // solve by CHOLMOD; fixed components (Dirichlet nodes: targets reached by
-// v = v*) keep only their mass on the diagonal. Sums run in element order, so
-// results do not depend on the thread count.
+// v = v*) keep only their mass on the diagonal. The mass and element part has
+// the mesh's pattern, built once: each Hessian pass refills its values through
+// a map from element entries to value slots, and contact and friction (whose
+// pattern changes with the active pairs) are added as a second matrix. Sums
+// run in element order, so results do not depend on the thread count.
 #include <Eigen/SparseCore>
 #include <vector>
 
@@ -108,7 +111,7 @@ public:
     void hessian_diagonal(VecX& diagonal) const override;
     int hessian_block_size() const override { return dim; }
     void hessian_block_diagonal(VecX& blocks) const override;
-    const SparseMatrix* hessian_matrix() const override { return &hessian_; }
+    const SparseMatrix* hessian_matrix() const override { return &hessian(); }
     double max_step(const VecX& v, const VecX& d) override;
 
     /// CCD queries of max_step() since the last begin_step(), and how many of them shortened the step.
@@ -125,6 +128,9 @@ private:
     double assemble_gradient(const VecX& v, VecX& gradient);
     double potential_sum() const;
     double contact_value(const VecX& v);
+    /// Builds element_hessian_'s pattern (mass diagonal + element blocks) and the slot maps.
+    void build_hessian_pattern();
+    const SparseMatrix& hessian() const { return with_contact_ ? hessian_ : element_hessian_; }
 
     const Mesh<dim>& mesh_;
     const ElementRest<dim>& rest_;
@@ -141,7 +147,11 @@ private:
     std::vector<Mat<dim>> FE_, P_;
     std::vector<double> psi_;
     std::vector<Tensor4<dim>> H_;
-    SparseMatrix hessian_;
+    SparseMatrix element_hessian_;        // mass + elements, the mesh's fixed pattern
+    std::vector<int> element_slots_;      // per element, (dim+1)^2 dim^2 indices into its values
+    std::vector<int> diagonal_slots_;     // per component, the index of its diagonal entry
+    SparseMatrix contact_hessian_, hessian_;  // hessian_ = element_hessian_ + contact_hessian_
+    bool with_contact_ = false;           // whether hessian_ (not element_hessian_) is the Hessian
     std::vector<Eigen::Triplet<double>> triplets_;
     bool project_psd_ = true;
     int ccd_queries_ = 0, ccd_limited_ = 0;

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "pnet/contact/friction.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/solver/newton.hpp"
@@ -115,6 +116,86 @@ TEST(FemPotential, GradientAndHessianMatchFiniteDifferences) {
     VecX d = VecX::Random(2 * n), Hd;
     f.potential.hessian_multiply(d, Hd);
     EXPECT_LT((Hd - H * d).cwiseAbs().maxCoeff(), 1e-12 * (H * d).cwiseAbs().maxCoeff());
+}
+
+// The assembled Hessian with contact and friction (a second matrix added to the mesh's
+// fixed pattern) against finite differences of the gradient, after the kinematic stages'
+// soften/harden cycle refilled the pattern: a block resting within dhat of the ground,
+// sliding, with one fixed node.
+TEST(FemPotential, AssembledHessianWithContactAndFrictionMatchesFiniteDifferences) {
+    Fixture f(box_mesh(0.1, 0.05, 0.025), jelly(1e5, 0.3));
+    const std::size_t n = f.mesh.nodes(), ne = f.mesh.elements.size();
+    std::vector<Vec<2>> x(n);
+    for (std::size_t i = 0; i < n; ++i) x[i] = f.mesh.x[i] + Vec<2>(0.0, 5e-4);  // the bottom within dhat
+    const double dhat = 1e-3;
+    Contact2d contact(f.mesh.boundary, dhat, 1e8);
+    contact.add_half_space({Vec<2>(0.0, 0.0), Vec<2>(0.0, 1.0)});
+    ASSERT_GT(contact.active_pairs(x), 2u);
+    Friction2d friction(0.3, 1e-3);
+    friction.lag(contact, x);
+    ASSERT_GT(friction.pairs(), 2u);
+    f.potential.set_contact(&contact);
+    f.potential.set_friction(&friction);
+    test::Random random(5);
+    VecX v_star(2 * n);
+    for (std::size_t i = 0; i < n; ++i) v_star.segment<2>(2 * i) = Vec<2>(0.02, -0.01);
+    std::vector<char> fixed(2 * n, 0);
+    Eigen::Index node = 0;  // the bottom-left corner is fixed
+    for (std::size_t i = 0; i < n; ++i)
+        if (x[i][0] + x[i][1] < x[node][0] + x[node][1]) node = static_cast<Eigen::Index>(i);
+    ASSERT_LT(x[node][1], dhat);
+    fixed[2 * node] = fixed[2 * node + 1] = 1;
+    const double dt = 1e-2;
+    f.potential.begin_step(x, v_star, dt, std::vector<Mat<2>>(ne, Mat<2>::Identity()), fixed);
+    f.potential.set_material_state(f.object, f.hardening);
+    f.potential.set_reference({});
+    f.potential.set_project_psd(false);
+    VecX v = v_star;
+    for (Eigen::Index k = 0; k < v.size(); ++k)
+        if (!fixed[k]) v[k] += random.uniform(-0.005, 0.005);
+    ASSERT_GE(f.potential.max_step(VecX::Zero(v.size()), v), 1.0) << "an intersection-free test point";
+    f.potential.soften_fixed(1e3);
+    f.potential.prepare_hessian(v);
+    const Eigen::MatrixXd soft(*f.potential.hessian_matrix());
+    f.potential.harden_fixed();
+
+    std::vector<Eigen::Index> free;
+    for (Eigen::Index k = 0; k < v.size(); ++k)
+        if (!fixed[k]) free.push_back(k);
+    auto expand = [&](const VecX& y) {
+        VecX full = v;
+        for (std::size_t k = 0; k < free.size(); ++k) full[free[k]] = y[k];
+        return full;
+    };
+    auto restrict_to_free = [&](const VecX& full) {
+        VecX y(free.size());
+        for (std::size_t k = 0; k < free.size(); ++k) y[k] = full[free[k]];
+        return y;
+    };
+    f.potential.prepare_hessian(v);
+    const Eigen::MatrixXd H(*f.potential.hessian_matrix());
+    Eigen::MatrixXd H_free(free.size(), free.size());
+    for (std::size_t a = 0; a < free.size(); ++a)
+        for (std::size_t b = 0; b < free.size(); ++b) H_free(a, b) = H(free[a], free[b]);
+    auto grad_of = [&](const VecX& y) {
+        VecX gy;
+        f.potential.value_gradient(expand(y), gy);
+        return restrict_to_free(gy);
+    };
+    test::FdStats fd;
+    EXPECT_TRUE(test::check_jacobian(grad_of, H_free, restrict_to_free(v), fd, 1e-7, 1e-4,
+                                     1e-6 * H.cwiseAbs().maxCoeff()));
+    EXPECT_EQ(fd.checks, static_cast<int>(free.size() * free.size())) << "every entry was compared";
+    // The fixed node keeps only its mass, although its contact and element entries are in the pattern.
+    for (Eigen::Index k = 0; k < H.cols(); ++k)
+        for (const Eigen::Index c : {2 * node, 2 * node + 1}) {
+            EXPECT_EQ(H(c, k), c == k ? f.rest.node_mass[node] : 0.0) << c << ", " << k;
+            EXPECT_EQ(H(k, c), c == k ? f.rest.node_mass[node] : 0.0) << k << ", " << c;
+        }
+    // Softened, the fixed node's row holds its elasticity and contact, and its weighted mass.
+    EXPECT_NE(soft(2 * node + 1, 2 * node + 3), 0.0);
+    EXPECT_GT(soft(2 * node + 1, 2 * node + 1), 1e3 * f.rest.node_mass[node]);
+    EXPECT_LT((H - H.transpose()).cwiseAbs().maxCoeff(), 1e-12 * H.cwiseAbs().maxCoeff()) << "symmetric";
 }
 
 // CHOLMOD's direct solve and PCG find the same minimizer; the direct solve

@@ -436,6 +436,68 @@ TEST(Newton, FailedLineSearchEndsTheSolveUnconvergedAfterCappedHalvings) {
     }
 }
 
+/// A chain of double wells, E(x) = sum (x_i^2 - 1)^2 / 4 + k/2 sum (x_i - x_{i+1})^2, with its
+/// assembled Hessian: indefinite where |x_i| < 1/sqrt(3) (less the coupling).
+class DoubleWells : public Objective {
+public:
+    explicit DoubleWells(int n) : n_(n) {}
+    Eigen::Index size() const override { return n_; }
+    double value(const VecX& x) override {
+        double e = 0.0;
+        for (int i = 0; i < n_; ++i) e += 0.25 * std::pow(x[i] * x[i] - 1.0, 2);
+        for (int i = 0; i + 1 < n_; ++i) e += 0.5 * k_ * std::pow(x[i] - x[i + 1], 2);
+        return e;
+    }
+    double value_gradient(const VecX& x, VecX& g) override {
+        g.resize(n_);
+        for (int i = 0; i < n_; ++i) g[i] = x[i] * (x[i] * x[i] - 1.0);
+        for (int i = 0; i + 1 < n_; ++i) {
+            g[i] += k_ * (x[i] - x[i + 1]);
+            g[i + 1] -= k_ * (x[i] - x[i + 1]);
+        }
+        return value(x);
+    }
+    void prepare_hessian(const VecX& x) override {
+        std::vector<Eigen::Triplet<double>> t;
+        for (int i = 0; i < n_; ++i) t.emplace_back(i, i, 3.0 * x[i] * x[i] - 1.0);
+        for (int i = 0; i + 1 < n_; ++i) {
+            t.emplace_back(i, i, k_);
+            t.emplace_back(i + 1, i + 1, k_);
+            t.emplace_back(i, i + 1, -k_);
+            t.emplace_back(i + 1, i, -k_);
+        }
+        H_.resize(n_, n_);
+        H_.setFromTriplets(t.begin(), t.end());
+    }
+    void hessian_multiply(const VecX& d, VecX& out) const override { out = H_ * d; }
+    void hessian_diagonal(VecX& diagonal) const override { diagonal = H_.diagonal(); }
+    const SparseMatrix* hessian_matrix() const override { return &H_; }
+
+private:
+    int n_;
+    double k_ = 0.1;
+    SparseMatrix H_;
+};
+
+// The direct solver must recognize an indefinite Hessian (the Newton direction would climb) and
+// fall back to PCG, which stops at negative curvature along a descent direction: CHOLMOD's
+// simplicial LDL^T factorizes an indefinite matrix without a complaint, so the factorization
+// has to be LL^T.
+TEST(Newton, DirectSolveFallsBackToPcgOnAnIndefiniteHessian) {
+    for (const int n : {4, 3000}) {  // CHOLMOD picks simplicial for the short chain and long
+        DoubleWells objective(n);
+        VecX x = VecX::Constant(n, 0.3);  // where every diagonal entry of H is negative
+        x[0] = 0.31;
+        NewtonOptions options;
+        options.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+        options.tolerance = 1e-10;
+        const NewtonStats s = minimize(objective, x, options, "double wells");  // LDL^T: "not a descent direction"
+        EXPECT_TRUE(s.converged) << n;
+        EXPECT_LT(s.energy, s.initial_energy) << n;
+        EXPECT_LT((x.cwiseAbs() - VecX::Ones(n)).cwiseAbs().maxCoeff(), 1e-6) << n << ": in a well";
+    }
+}
+
 TEST(Newton, NonFiniteEnergyIsReported) {
     NanAway objective;
     VecX x = VecX::Zero(8);
