@@ -16,8 +16,8 @@
 // step, the integrator a user would otherwise pick.
 //
 //   bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] [--threads T]
-//                [--scenes DIR] [--only NAME] [--dt-implicit S] [--with-lagged] [--with-one-solve] [--3d]
-//                [--no-fem] [--no-stiff]
+//                [--scenes DIR] [--only NAME] [--dt-implicit S] [--with-lagged] [--with-one-solve]
+//                [--with-fixed-point] [--with-last-velocity] [--3d] [--no-fem] [--no-stiff]
 //
 // The metal frames run --fem-frames frames (default: all 100 of the scene: the
 // plate's whole travel, since the plastic phase that costs the most solves
@@ -26,7 +26,9 @@
 // --with-one-solve adds plasticitynet with one solve per step (F0 = F(v*), the
 // fixed point not converged) beside the default; --with-fixed-point adds
 // plasticitynet with the paper's outer iteration (eq. 10, the default before
-// issue 31). Implicit rows give the Newton solves, the updates of F0 to F(v)
+// issue 31); --with-last-velocity adds the metal frames' plasticitynet with
+// every step started from the last velocities with the plate on its target
+// (ImplicitOptions::kinematic_start). Implicit rows give the Newton solves, the updates of F0 to F(v)
 // (outer iterations) per step and the largest true residual |R(v)| at a step's
 // end (docs/solver.md).
 //
@@ -173,7 +175,8 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
 
 /// The metal rows: the scene's own implicit settings (dt 1e-2) against explicit at 1e-5 and CFL.
 template <int dim>
-std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with_lagged, bool with_fixed_point) {
+std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with_lagged, bool with_fixed_point,
+                                 bool with_last_velocity) {
     using Sim = pnet::FemSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
@@ -186,6 +189,12 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
     if (with_fixed_point) rows.push_back(fixed_point_row<Sim>(scene, base, frames));
+    if (with_last_velocity) {  // each step from the last velocities with the plate on its target
+        pnet::IntegratorSettings last = base;
+        last.implicit.kinematic_start = "last_velocity";
+        rows.push_back(measure<Sim>(scene, last, frames));
+        rows.back().integrator = "plasticitynet, last-velocity start";
+    }
     if (with_lagged) {
         if (scene.meshes[0].material.name == "metal")
             rows.push_back(measure<Sim>(scene, with("analytic", base.dt), frames));
@@ -222,8 +231,8 @@ std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool 
 int main(int argc, char** argv) {
     int frames = 10, fem_frames = 0, coupling_frames = 10, stiff_frames = 0, threads = 0;
     double dt_implicit = 1e-3;
-    bool with_lagged = false, with_one_solve = false, with_fixed_point = false, three_d = false, fem = true,
-         stiff = true;
+    bool with_lagged = false, with_one_solve = false, with_fixed_point = false, with_last_velocity = false,
+         three_d = false, fem = true, stiff = true;
     std::string scenes_dir = PNET_SCENES_DIR, only;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
@@ -260,13 +269,16 @@ int main(int argc, char** argv) {
             with_one_solve = true;
         else if (arg == "--with-fixed-point")
             with_fixed_point = true;
+        else if (arg == "--with-last-velocity")
+            with_last_velocity = true;
         else if (arg == "--3d")
             three_d = true;
         else {
             std::fprintf(stderr,
                          "usage: bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] "
                          "[--threads T] [--dt-implicit S] [--scenes DIR] [--only NAME] [--with-lagged] "
-                         "[--with-one-solve] [--with-fixed-point] [--3d] [--no-fem] [--no-stiff]\n");
+                         "[--with-one-solve] [--with-fixed-point] [--with-last-velocity] [--3d] [--no-fem] "
+                         "[--no-stiff]\n");
             return 2;
         }
     }
@@ -313,8 +325,10 @@ int main(int argc, char** argv) {
                 rows = bench_coupled_scene(scene, scene_frames, with_lagged, with_fixed_point);
             } else if (scene.has_meshes()) {
                 scene_frames = fem_frames > 0 ? fem_frames : scene.frames;
-                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, with_lagged, with_fixed_point)
-                                      : bench_fem_scene<3>(scene, scene_frames, with_lagged, with_fixed_point);
+                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, with_lagged, with_fixed_point,
+                                                                           with_last_velocity)
+                                      : bench_fem_scene<3>(scene, scene_frames, with_lagged, with_fixed_point,
+                                                           with_last_velocity);
             } else {
                 if (name.rfind("stiff/", 0) == 0) scene_frames = stiff_frames;
                 const double reference_dt = reference_step(name);

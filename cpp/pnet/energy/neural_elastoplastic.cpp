@@ -92,6 +92,10 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
         identity_gradient_.resize(n * kM);
         net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
     }
+    if (form == EnergyForm::Eq8 && return_map_) {  // a learned return mapping: all states in one evaluation
+        stress_.resize(n);
+        return_map_->elastoplastic_stress(F0, hardening_.data(), n, stress_.data());
+    }
 #pragma omp parallel for schedule(static) if (count >= 64)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
         if (relative_) offset_[p] = net_value_[p];  // N(F0, slot, h)
@@ -99,8 +103,7 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
             case EnergyForm::Eq8: {
                 // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
                 const double h = hardening ? hardening[p] : h0;
-                const Mat<dim> P = return_map_ ? return_map_->elastoplastic_stress(F0[p], h)
-                                               : training_material_.elastoplastic_stress(F0[p], h);
+                const Mat<dim> P = return_map_ ? stress_[p] : training_material_.elastoplastic_stress(F0[p], h);
                 for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - P(k / dim, k % dim);
                 break;
             }

@@ -121,6 +121,7 @@ private:
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> net_value_, net_gradient_;
+    std::vector<Mat<dim>> stress_;  // Ptilde(F0, h) of a learned return mapping (set_reference)
     // net_value_ and net_gradient_ hold N and grad N at F0 (set_reference's own pass) until another
     // evaluation: the fixed point's next solve starts at F(v) = F0 and reuses them.
     mutable bool buffers_at_reference_ = false;

@@ -33,6 +33,8 @@ public:
     /// Ptilde(F, h) = U diag(tau(Z) / Sigma) V^T at the training Young's
     /// modulus (dimensionless: multiply by E).
     Mat<dim> elastoplastic_stress(const Mat<dim>& F, double hardening) const;
+    /// The same for n states at once (one network evaluation), P[p] = Ptilde(F[p], hardening[p]).
+    void elastoplastic_stress(const Mat<dim>* F, const double* hardening, std::size_t n, Mat<dim>* P) const;
 
     /// The material at the training E (its yield function decides who yields).
     const Material<dim>& material() const { return material_; }

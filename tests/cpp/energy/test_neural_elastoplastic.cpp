@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -431,6 +432,31 @@ int check_python_return_map_case(const nlohmann::json& c) {
         EXPECT_NEAR(r.hardening, c["expect"]["hardening_new"][p].get<double>(), 1e-10) << "h " << p;
         EXPECT_EQ(r.branch == ReturnBranch::Yield, c["expect"]["yielding"][p].get<bool>()) << "branch " << p;
         checks += 3;
+    }
+    // All states at once (the network runs on the yielding ones only) give the same as one by one,
+    // and so do the stresses of deformation gradients with these singular values.
+    const std::size_t n = c["Sigma"].size();
+    std::vector<Vec<dim>> Sigma(n);
+    std::vector<double> h(n);
+    std::vector<Mat<dim>> F(n), P(n);
+    test::Random random(11);
+    for (std::size_t p = 0; p < n; ++p) {
+        for (int i = 0; i < dim; ++i) Sigma[p][i] = c["Sigma"][p][i];
+        h[p] = c["hardening"][p];
+        const Mat<dim> U = Eigen::AngleAxis<double>(random.uniform(-3, 3), Vec<3>::UnitZ()).matrix().template topLeftCorner<dim, dim>();
+        F[p] = U * Sigma[p].asDiagonal();
+    }
+    std::vector<ReturnResult<dim>> batch(n);
+    rm.return_map(Sigma.data(), h.data(), n, batch.data());
+    rm.elastoplastic_stress(F.data(), h.data(), n, P.data());
+    for (std::size_t p = 0; p < n; ++p) {
+        const ReturnResult<dim> one = rm.return_map(Sigma[p], h[p]);
+        EXPECT_LE((batch[p].Sigma - one.Sigma).cwiseAbs().maxCoeff(), 1e-14) << "batched Z " << p;
+        EXPECT_EQ(batch[p].hardening, one.hardening) << "batched h " << p;
+        EXPECT_EQ(batch[p].branch, one.branch) << "batched branch " << p;
+        const Mat<dim> P_one = rm.elastoplastic_stress(F[p], h[p]);
+        EXPECT_LE((P[p] - P_one).cwiseAbs().maxCoeff(), 1e-13 * std::max(1.0, P_one.cwiseAbs().maxCoeff())) << p;
+        checks += 4;
     }
     return checks;
 }
