@@ -1,5 +1,6 @@
 #include "pnet/energy/neural_elastoplastic.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -84,29 +85,42 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
     // The network's F0 slot: F0, or the identity for a global form.
     net_.set_reference(global ? identity_.data() : F0, has_hardening_ ? network_h.data() : nullptr, n);
     hardening_clamped_ = clamped;
-    // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next solve's first evaluation.
-    net_.evaluate(F0, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
+    correction_ready_ = false;
+    buffers_at_reference_ = false;
+    if (form == EnergyForm::Eq8) {
+        stress_.resize(n);
+        if (return_map_) {  // a learned return mapping: all states in one evaluation
+            return_map_->elastoplastic_stress(F0, hardening_.data(), n, stress_.data());
+        } else {
+#pragma omp parallel for schedule(static) if (count >= 64)
+            for (std::ptrdiff_t p = 0; p < count; ++p)
+                stress_[p] = training_material_.elastoplastic_stress(F0[p], hardening_[p]);
+        }
+    }
+    if (!(form == EnergyForm::Eq8 && relative_)) ensure_correction();
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::ensure_correction() const {
+    if (correction_ready_) return;
+    const std::size_t n = F0_.size();
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+    const EnergyForm form = metadata_.energy_form;
+    // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next evaluation at F0.
+    net_.evaluate(F0_.data(), FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
     if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {
         // c = grad_F N(I, slot, h), the rejected forms' correction at the identity.
         identity_value_.resize(n);
         identity_gradient_.resize(n * kM);
         net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
     }
-    if (form == EnergyForm::Eq8 && return_map_) {  // a learned return mapping: all states in one evaluation
-        stress_.resize(n);
-        return_map_->elastoplastic_stress(F0, hardening_.data(), n, stress_.data());
-    }
 #pragma omp parallel for schedule(static) if (count >= 64)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
         if (relative_) offset_[p] = net_value_[p];  // N(F0, slot, h)
         switch (form) {
-            case EnergyForm::Eq8: {
-                // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
-                const double h = hardening ? hardening[p] : h0;
-                const Mat<dim> P = return_map_ ? stress_[p] : training_material_.elastoplastic_stress(F0[p], h);
-                for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - P(k / dim, k % dim);
+            case EnergyForm::Eq8:  // c = grad_F N(F0, F0, h) - Ptilde(F0, h), at the training E.
+                for (int k = 0; k < kM; ++k) c_[p][k] = net_gradient_[p * kM + k] - stress_[p](k / dim, k % dim);
                 break;
-            }
             case EnergyForm::LocalIdentity:
             case EnergyForm::GlobalIdentity:
                 for (int k = 0; k < kM; ++k) c_[p][k] = identity_gradient_[p * kM + k];
@@ -114,7 +128,14 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
             case EnergyForm::Global: c_[p].setZero(); break;
         }
     }
+    correction_ready_ = true;
     buffers_at_reference_ = true;
+}
+
+template <int dim>
+bool NeuralElastoplasticEnergy<dim>::exactly_at_reference(const Mat<dim>* F) const {
+    return metadata_.energy_form == EnergyForm::Eq8 && relative_ && !F0_.empty() &&
+           std::memcmp(F, F0_.data(), F0_.size() * sizeof(Mat<dim>)) == 0;
 }
 
 template <int dim>
@@ -124,6 +145,7 @@ bool NeuralElastoplasticEnergy<dim>::at_reference(const Mat<dim>* F) const {
 
 template <int dim>
 Mat<dim> NeuralElastoplasticEnergy<dim>::correction(std::size_t p) const {
+    ensure_correction();
     Mat<dim> c;
     for (int k = 0; k < kM; ++k) c(k / dim, k % dim) = E_ * c_.at(p)[k];
     return c;
@@ -151,6 +173,11 @@ void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const {
+    if (exactly_at_reference(F)) {
+        std::fill(psi, psi + size(), 0.0);
+        return;
+    }
+    ensure_correction();
     if (at_reference(F)) return finish(F, psi, nullptr);
     buffers_at_reference_ = false;
     net_.evaluate(F, FusedMlp::Order::Value, net_value_.data());
@@ -159,6 +186,12 @@ void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
+    if (exactly_at_reference(F)) {
+        std::fill(psi, psi + size(), 0.0);
+        for (std::size_t p = 0; p < size(); ++p) gradient[p] = E_ * stress_[p];
+        return;
+    }
+    ensure_correction();
     if (at_reference(F)) return finish(F, psi, gradient);
     buffers_at_reference_ = false;
     net_.evaluate(F, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
@@ -170,7 +203,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
                                                             Tensor4<dim>* hessian, bool project_psd) const {
     static_assert(sizeof(Tensor4<dim>) == kM * kM * sizeof(double), "Tensor4 must be a plain d^2 x d^2 array");
     if (hessian_kind_ == Options::Hessian::Tangent) {
-        value_gradient(F, psi, gradient);  // the network's value and gradient (set_reference's pass at F = F0)
+        value_gradient(F, psi, gradient);  // at F = F0: Ptilde(F0) without the network
         const double wmu = (w_ + damping_) * mu_train_;
         const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
         if (return_map_) {
@@ -212,6 +245,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
         }
         return;
     }
+    ensure_correction();
     buffers_at_reference_ = false;
     // Hess_F N is symmetric, so the row-major output is also the column-major
     // Eigen matrix.

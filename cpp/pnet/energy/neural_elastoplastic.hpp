@@ -112,21 +112,29 @@ private:
     std::vector<double> hardening_;  // per particle, the state (not the network's clamped input)
 
     std::vector<Mat<dim>> F0_;
-    std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)
-    std::vector<double> offset_;                   // Psi(F0) / E when relative_, else 0
+    std::vector<Mat<dim>> stress_;  // Ptilde(F0, h), dimensionless (eq. 8's form)
+    // The correction and offset need the network at F0: computed by ensure_correction() when an
+    // evaluation first needs them (not at all where every evaluation is at the reference).
+    mutable bool correction_ready_ = false;
+    mutable std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)
+    mutable std::vector<double> offset_;                   // Psi(F0) / E when relative_, else 0
     // The rejected energy forms only: identities (the F0 slot or the correction point) and N, grad N there.
     std::vector<Mat<dim>> identity_;
-    std::vector<double> identity_value_, identity_gradient_;
+    mutable std::vector<double> identity_value_, identity_gradient_;
     std::size_t hardening_clamped_ = 0;
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> net_value_, net_gradient_;
-    std::vector<Mat<dim>> stress_;  // Ptilde(F0, h) of a learned return mapping (set_reference)
-    // net_value_ and net_gradient_ hold N and grad N at F0 (set_reference's own pass) until another
+    // net_value_ and net_gradient_ hold N and grad N at F0 (ensure_correction()'s pass) until another
     // evaluation: the fixed point's next solve starts at F(v) = F0 and reuses them.
     mutable bool buffers_at_reference_ = false;
     /// Whether F[0..size()) is bitwise the reference F0 and the buffers still hold its pass.
     bool at_reference(const Mat<dim>* F) const;
+    /// Eq. 8 relative to the reference, evaluated at F = F0 exactly: psi = 0 and grad = E Ptilde(F0)
+    /// by construction, so no network pass is needed (the Newton outer iteration's every point).
+    bool exactly_at_reference(const Mat<dim>* F) const;
+    /// Evaluates the network at F0 for c and the offset (once per set_reference()).
+    void ensure_correction() const;
 };
 
 }  // namespace pnet

@@ -85,7 +85,7 @@ private:
                std::equal(outer_.begin(), outer_.end(), H.outerIndexPtr()) &&
                std::equal(inner_.begin(), inner_.end(), H.innerIndexPtr());
     }
-    Eigen::CholmodDecomposition<SparseMatrix, Eigen::Lower> cholesky_;
+    Eigen::CholmodDecomposition<SparseMatrix, Eigen::Upper> cholesky_;  // CHOLMOD transposes a lower one first
     std::vector<SparseMatrix::StorageIndex> outer_, inner_;
 };
 
