@@ -125,6 +125,50 @@ void check_model(const std::string& file) {
     }
 }
 
+// Relative to the reference (the integrators' form), eq. 8 at F = F0 exactly is psi = 0 and
+// grad = E Ptilde(F0) without a network pass; away from it, the network's correction is computed
+// when first needed, and the energy equals the absolute one less Psi(F0), with the same gradient.
+template <int dim>
+void check_relative_to_reference(const std::string& file) {
+    SCOPED_TRACE(file);
+    const ModelFile model = load_model_file(kModels + "/" + file);
+    const double E = 3.0e5;
+    using Options = typename NeuralElastoplasticEnergy<dim>::Options;
+    NeuralElastoplasticEnergy<dim> relative(model, Options{E, 1.0, true});
+    NeuralElastoplasticEnergy<dim> absolute(model, Options{E, 1.0, false});
+    const std::size_t n = 9;
+    const Batch<dim> b = make_batch<dim>(model.metadata, n, 23);
+    relative.set_reference(b.F0.data(), b.h.data(), n);
+    absolute.set_reference(b.F0.data(), b.h.data(), n);
+    std::vector<double> psi(n), psi_abs(n), psi0_abs(n);
+    std::vector<Mat<dim>> grad(n), grad_abs(n);
+    auto at_reference_is_the_stress = [&](const char* when) {
+        relative.value_gradient(b.F0.data(), psi.data(), grad.data());
+        for (std::size_t p = 0; p < n; ++p) {
+            EXPECT_EQ(psi[p], 0.0) << when << ", particle " << p;
+            EXPECT_EQ(grad[p], relative.elastoplastic_stress(b.F0[p], b.h[p])) << when << ", particle " << p;
+        }
+    };
+    at_reference_is_the_stress("first");
+    relative.value_gradient(b.F.data(), psi.data(), grad.data());  // off the reference
+    absolute.value_gradient(b.F.data(), psi_abs.data(), grad_abs.data());
+    absolute.value(b.F0.data(), psi0_abs.data());
+    for (std::size_t p = 0; p < n; ++p) {
+        EXPECT_NEAR(psi[p], psi_abs[p] - psi0_abs[p], 1e-9 * E) << "particle " << p;
+        EXPECT_LE((grad[p] - grad_abs[p]).cwiseAbs().maxCoeff(), 1e-9 * E) << "particle " << p;
+        EXPECT_NE(psi[p], 0.0) << "particle " << p;
+    }
+    EXPECT_LE((relative.correction(0) - absolute.correction(0)).cwiseAbs().maxCoeff(), 1e-12 * E);
+    at_reference_is_the_stress("after an evaluation away from it");
+}
+
+TEST(NeuralElastoplasticEnergy, RelativeToTheReferenceNeedsNoNetworkAtIt) {
+    check_relative_to_reference<2>("metal_2d.pt");
+    check_relative_to_reference<2>("metal_nh_2d.pt");  // the learned return mapping
+    check_relative_to_reference<2>("sand_2d.pt");
+    check_relative_to_reference<3>("snow_3d.pt");
+}
+
 TEST(NeuralElastoplasticEnergy, Sand2d) {
     check_model<2>("sand_2d.pt");
 }
