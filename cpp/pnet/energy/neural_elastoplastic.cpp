@@ -31,9 +31,10 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
       mu_train_(model.metadata.material.elastic.mu()),
       hessian_kind_(options.hessian) {
     if (hessian_kind_ == Options::Hessian::Auto) {
-        const bool associative = model.metadata.material.plasticity == PlasticityModel::VonMises;
-        hessian_kind_ = associative ? Options::Hessian::Tangent : Options::Hessian::Network;
-        if (associative) w_ = 0.0;
+        // The tangent for every material (docs/solver.md, measured); w = 0 for associative flow,
+        // where the tangent is the exact Jacobian, and the scene's w as a damping otherwise.
+        hessian_kind_ = Options::Hessian::Tangent;
+        if (model.metadata.material.plasticity == PlasticityModel::VonMises) w_ = 0.0;
     }
     if (!(std::isfinite(options.youngs_modulus) && options.youngs_modulus > 0.0))
         throw std::invalid_argument(model.path + ": Young's modulus must be a positive number of Pa, got " +

@@ -48,10 +48,11 @@ public:
         /// The Hessian Newton gets: the network's, E [Hess_F N + w mu I] (paper eq. 11), or the
         /// consistent tangent of the elastoplastic stress, E [dPtilde/dF(F, h) + w mu I]
         /// (material/elastoplastic_tangent.hpp), the Jacobian of the true residual when F = F0.
-        /// Auto: the tangent with w = 0 for associative plasticity (von Mises: the tangent is the
+        /// Auto: the tangent, with w = 0 for associative plasticity (von Mises: the tangent is the
         /// symmetric Jacobian, and w mu would only slow Newton on plastic flow, where the true
-        /// stiffness is near zero), the network's with w otherwise (non-associative Drucker-Prager
-        /// and Cam-Clay, whose symmetrized tangent is not the Jacobian). Measured: docs/solver.md.
+        /// stiffness is near zero) and the scene's w otherwise (non-associative Drucker-Prager and
+        /// Cam-Clay, whose symmetrized tangent is not the Jacobian: measured to converge in the
+        /// same Newton iterations as the network's Hessian at half the cost; docs/solver.md).
         enum class Hessian { Auto, Network, Tangent } hessian = Hessian::Network;
     };
 

@@ -83,8 +83,8 @@ struct ImplicitOptions {
     double fixed_point_inexact = 0.0;
     double regularizer_weight = 1.0;  // w of eq. 11 (plasticitynet; 0: the ablation)
     // plasticitynet: the Hessian of Newton's steps, "network" (Hess N + w mu, the paper's), "tangent"
-    // (the return mapping's consistent tangent + w mu) or "auto" (the tangent with w = 0 for von
-    // Mises, the network's otherwise, and the network's under the fixed point;
+    // (the return mapping's consistent tangent + w mu) or "auto" (the tangent, with w = 0 for von
+    // Mises, and the network's under the fixed point;
     // NeuralElastoplasticEnergy::Options::Hessian).
     std::string hessian = "auto";
     // FEM `analytic` only, a diagnostic: > 0 adds w mu/2 ||F - F0||^2 about a reference to the
