@@ -56,6 +56,23 @@ struct Fixture {
           hardening(mesh.elements.size(), 0.0) {}
 };
 
+/// The free components of a velocity vector v: restrict() picks them, expand() writes them back
+/// into a copy of v (the fixed ones keep v's values), for derivative checks along them only.
+struct FreeComponents {
+    VecX v;
+    std::vector<Eigen::Index> free;
+    VecX expand(const VecX& y) const {
+        VecX full = v;
+        for (std::size_t k = 0; k < free.size(); ++k) full[free[k]] = y[k];
+        return full;
+    }
+    VecX restrict(const VecX& full) const {
+        VecX y(free.size());
+        for (std::size_t k = 0; k < free.size(); ++k) y[k] = full[free[k]];
+        return y;
+    }
+};
+
 TEST(FemPotential, GradientAndHessianMatchFiniteDifferences) {
     Fixture f(box_mesh(0.1, 0.05, 0.025), jelly(1e5, 0.3));
     const std::size_t n = f.mesh.nodes(), ne = f.mesh.elements.size();
@@ -78,18 +95,11 @@ TEST(FemPotential, GradientAndHessianMatchFiniteDifferences) {
 
     // Derivatives along the free components (node 0's are fixed: its gradient is 0 and its
     // Hessian rows and columns hold only the mass).
-    std::vector<Eigen::Index> free;
-    for (Eigen::Index k = 2; k < v.size(); ++k) free.push_back(k);
-    auto expand = [&](const VecX& y) {
-        VecX full = v;
-        for (std::size_t k = 0; k < free.size(); ++k) full[free[k]] = y[k];
-        return full;
-    };
-    auto restrict_to_free = [&](const VecX& full) {
-        VecX y(free.size());
-        for (std::size_t k = 0; k < free.size(); ++k) y[k] = full[free[k]];
-        return y;
-    };
+    FreeComponents components{v, {}};
+    for (Eigen::Index k = 2; k < v.size(); ++k) components.free.push_back(k);
+    const std::vector<Eigen::Index>& free = components.free;
+    auto expand = [&](const VecX& y) { return components.expand(y); };
+    auto restrict_to_free = [&](const VecX& full) { return components.restrict(full); };
     VecX g;
     f.potential.value_gradient(v, g);
     EXPECT_EQ(g[0], 0.0);
@@ -159,19 +169,12 @@ TEST(FemPotential, AssembledHessianWithContactAndFrictionMatchesFiniteDifference
     const Eigen::MatrixXd soft(*f.potential.hessian_matrix());
     f.potential.harden_fixed();
 
-    std::vector<Eigen::Index> free;
+    FreeComponents components{v, {}};
     for (Eigen::Index k = 0; k < v.size(); ++k)
-        if (!fixed[k]) free.push_back(k);
-    auto expand = [&](const VecX& y) {
-        VecX full = v;
-        for (std::size_t k = 0; k < free.size(); ++k) full[free[k]] = y[k];
-        return full;
-    };
-    auto restrict_to_free = [&](const VecX& full) {
-        VecX y(free.size());
-        for (std::size_t k = 0; k < free.size(); ++k) y[k] = full[free[k]];
-        return y;
-    };
+        if (!fixed[k]) components.free.push_back(k);
+    const std::vector<Eigen::Index>& free = components.free;
+    auto expand = [&](const VecX& y) { return components.expand(y); };
+    auto restrict_to_free = [&](const VecX& full) { return components.restrict(full); };
     f.potential.prepare_hessian(v);
     const Eigen::MatrixXd H(*f.potential.hessian_matrix());
     Eigen::MatrixXd H_free(free.size(), free.size());
