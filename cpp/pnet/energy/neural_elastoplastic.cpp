@@ -92,10 +92,13 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
         stress_.resize(n);
         if (return_map_) {  // a learned return mapping: all states in one evaluation
             return_map_->elastoplastic_stress(F0, hardening_.data(), n, stress_.data());
-        } else {
+        } else {  // the SVDs are kept for the tangent at F0
+            svd0_.resize(n);
 #pragma omp parallel for schedule(static) if (count >= 64)
-            for (std::ptrdiff_t p = 0; p < count; ++p)
-                stress_[p] = training_material_.elastoplastic_stress(F0[p], hardening_[p]);
+            for (std::ptrdiff_t p = 0; p < count; ++p) {
+                svd0_[p] = clamped_svd<dim>(F0[p]);
+                stress_[p] = training_material_.elastoplastic_stress(svd0_[p], hardening_[p]);
+            }
         }
     }
     if (!(form == EnergyForm::Eq8 && relative_)) ensure_correction();
@@ -232,15 +235,11 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
             }
             return;
         }
+        const bool at_F0 = exactly_at_reference(F);  // the usual case: the SVDs of set_reference
 #pragma omp parallel for schedule(static) if (count >= 64)
         for (std::ptrdiff_t p = 0; p < count; ++p) {
-            const double h = hardening_[p];
-            const PrincipalReturnMap<dim> Z = [&](const Vec<dim>& Sigma) {
-                return return_map_ ? return_map_->return_map(Sigma, h).Sigma
-                                   : training_material_.return_map(Sigma, h).Sigma;
-            };
-            Tensor4<dim> H = elastoplastic_tangent<dim>(clamped_svd<dim>(F[p]), training_material_.elasticity(), Z,
-                                                        project_psd);
+            const PolarSVD<dim> svd = at_F0 ? svd0_[p] : clamped_svd<dim>(F[p]);
+            Tensor4<dim> H = training_material_.elastoplastic_tangent(svd, hardening_[p], project_psd);
             H.diagonal().array() += wmu;  // PSD plus w mu I stays PSD
             hessian[p] = E_ * H;
         }

@@ -31,17 +31,35 @@ DruckerPrager<dim>::DruckerPrager(const DruckerPragerParams& params, const Elast
 }
 
 template <int dim>
-ReturnResult<dim> DruckerPrager<dim>::project(const Vec<dim>& Sigma, double hardening) const {
-    const Vec<dim> eps = Sigma.array().log().matrix();
+Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, ReturnBranch* branch) const {
+    ReturnBranch taken = ReturnBranch::Elastic;
+    Vec<dim> eps_Z = eps;
     const double tr_eps = eps.sum();
-    if (tr_eps > 0.0) return {Vec<dim>::Ones(), hardening, ReturnBranch::Apex, true, Vec<dim>::Zero()};
-    const Vec<dim> eps_hat = eps - tr_eps / dim * Vec<dim>::Ones();
-    const double eps_hat_norm = eps_hat.norm();
-    const double dgamma = eps_hat_norm + alpha_ * (dim * lambda_ + 2.0 * mu_) * tr_eps / (2.0 * mu_);
-    if (dgamma <= 0.0) return {Sigma, hardening, ReturnBranch::Elastic, true, eps};
-    // dgamma > 0 implies eps_hat_norm > 0 because tr_eps <= 0 here.
-    const Vec<dim> eps_Z = eps - dgamma / eps_hat_norm * eps_hat;
-    return {eps_Z.array().exp().matrix(), hardening, ReturnBranch::Cone, true, eps_Z};
+    if (tr_eps > 0.0) {
+        taken = ReturnBranch::Apex;
+        eps_Z.setZero();
+    } else {
+        const Vec<dim> eps_hat = eps - tr_eps / dim * Vec<dim>::Ones();
+        const double eps_hat_norm = eps_hat.norm();
+        const double dgamma = eps_hat_norm + alpha_ * (dim * lambda_ + 2.0 * mu_) * tr_eps / (2.0 * mu_);
+        if (dgamma > 0.0) {  // implies eps_hat_norm > 0 because tr_eps <= 0 here
+            taken = ReturnBranch::Cone;
+            eps_Z = eps - dgamma / eps_hat_norm * eps_hat;
+        }
+    }
+    if (branch) *branch = taken;
+    return eps_Z;
+}
+
+template <int dim>
+ReturnResult<dim> DruckerPrager<dim>::project(const Vec<dim>& Sigma, double hardening) const {
+    ReturnBranch branch;
+    const Vec<dim> eps_Z = project_strain(Sigma.array().log().matrix(), &branch);
+    switch (branch) {
+        case ReturnBranch::Apex: return {Vec<dim>::Ones(), hardening, branch, true, Vec<dim>::Zero()};
+        case ReturnBranch::Elastic: return {Sigma, hardening, branch, true, eps_Z};
+        default: return {eps_Z.array().exp().matrix(), hardening, branch, true, eps_Z};
+    }
 }
 
 template <int dim>

@@ -26,6 +26,9 @@ public:
     /// Z = exp(eps - dgamma dev(eps)/||dev eps||) when dgamma > 0 (cone).
     /// The hardening argument is passed through unchanged.
     ReturnResult<dim> project(const Vec<dim>& Sigma, double hardening) const;
+    /// The same projection in Hencky strain: log Z from eps = log Sigma (no log or exp: the
+    /// consistent tangent evaluates it 2d + 1 times per point).
+    Vec<dim> project_strain(const Vec<dim>& eps, ReturnBranch* branch = nullptr) const;
 
     /// y(tau) = ||dev tau|| + alpha tr(tau), Pa; <= 0 inside the elastic cone.
     double yield_function(const Vec<dim>& tau) const;

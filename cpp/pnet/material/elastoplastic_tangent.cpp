@@ -28,13 +28,23 @@ void tangent_stencil(const Vec<dim>& Sigma, Vec<dim>* stencil) {
 }
 
 template <int dim>
-Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity, const Vec<dim>* Z,
-                                        bool project_psd) {
+void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil) {
+    stencil[0] = eps;
+    for (int j = 0; j < dim; ++j) {
+        stencil[1 + 2 * j] = eps;
+        stencil[2 + 2 * j] = eps;
+        stencil[1 + 2 * j][j] += kDelta;
+        stencil[2 + 2 * j][j] -= kDelta;
+    }
+}
+
+template <int dim>
+Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd) {
     const Vec<dim>& S = svd.Sigma;
     const Vec<dim> eps = S.array().log().matrix();
-    const Vec<dim> t = elasticity.tau(Z[0]);
+    const Vec<dim>& t = tau[0];
     Mat<dim> dtau;
-    for (int j = 0; j < dim; ++j) dtau.col(j) = (elasticity.tau(Z[1 + 2 * j]) - elasticity.tau(Z[2 + 2 * j])) / (2.0 * kDelta);
+    for (int j = 0; j < dim; ++j) dtau.col(j) = (tau[1 + 2 * j] - tau[2 + 2 * j]) / (2.0 * kDelta);
     dtau = 0.5 * (dtau + dtau.transpose()).eval();
     auto quotient = [&](int i, int j) {
         if (std::abs(eps[i] - eps[j]) > kCloseLog) return (t[i] - t[j]) / (S[i] - S[j]);
@@ -42,6 +52,14 @@ Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elastici
         return (dtau(i, i) - dtau(j, i)) / (0.5 * (S[i] + S[j]));
     };
     return isotropic_dPdF<dim>(svd, t, dtau, quotient, project_psd);
+}
+
+template <int dim>
+Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity, const Vec<dim>* Z,
+                                        bool project_psd) {
+    Vec<dim> tau[kTangentStencil<dim>];
+    for (int k = 0; k < kTangentStencil<dim>; ++k) tau[k] = elasticity.tau(Z[k]);
+    return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd);
 }
 
 template <int dim>
@@ -59,6 +77,10 @@ template Tensor4<3> elastoplastic_tangent<3>(const PolarSVD<3>&, const Elasticit
                                              bool);
 template void tangent_stencil<2>(const Vec<2>&, Vec<2>*);
 template void tangent_stencil<3>(const Vec<3>&, Vec<3>*);
+template void tangent_strain_stencil<2>(const Vec<2>&, Vec<2>*);
+template void tangent_strain_stencil<3>(const Vec<3>&, Vec<3>*);
+template Tensor4<2> elastoplastic_tangent_of_stress<2>(const PolarSVD<2>&, const Vec<2>*, bool);
+template Tensor4<3> elastoplastic_tangent_of_stress<3>(const PolarSVD<3>&, const Vec<3>*, bool);
 template Tensor4<2> elastoplastic_tangent_from<2>(const PolarSVD<2>&, const Elasticity<2>&, const Vec<2>*, bool);
 template Tensor4<3> elastoplastic_tangent_from<3>(const PolarSVD<3>&, const Elasticity<3>&, const Vec<3>*, bool);
 

@@ -45,4 +45,12 @@ template <int dim>
 Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity, const Vec<dim>* Z,
                                         bool project_psd);
 
+/// The same stencil in Hencky strain, log Sigma + (0, +-delta e_j), for return mappings that work
+/// in strain (Material::elastoplastic_tangent: no log or exp per evaluation), and the tangent from
+/// the return-mapped Kirchhoff stresses there, tau[k] = tau(Z(exp strain_stencil[k])).
+template <int dim>
+void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil);
+template <int dim>
+Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd);
+
 }  // namespace pnet

@@ -7,6 +7,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "pnet/material/elastoplastic_tangent.hpp"
+
 namespace pnet {
 
 std::string to_string(PlasticityModel model) {
@@ -202,9 +204,39 @@ double Material<dim>::yield(const Vec<dim>& Sigma, double hardening, bool scale)
 
 template <int dim>
 Mat<dim> Material<dim>::elastoplastic_stress(const Mat<dim>& F, double hardening) const {
-    const PolarSVD<dim> svd = clamped_svd<dim>(F);
+    return elastoplastic_stress(clamped_svd<dim>(F), hardening);
+}
+
+template <int dim>
+Mat<dim> Material<dim>::elastoplastic_stress(const PolarSVD<dim>& svd, double hardening) const {
     const ReturnResult<dim> Z = return_map(svd.Sigma, hardening);
-    return svd.compose(elasticity_.tau(Z.Sigma).cwiseQuotient(svd.Sigma));
+    return svd.compose(elasticity_.tau_of_strain(Z.hencky_strain()).cwiseQuotient(svd.Sigma));
+}
+
+template <int dim>
+Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening,
+                                                  bool project_psd) const {
+    constexpr int k = kTangentStencil<dim>;
+    Vec<dim> strain[k], tau[k];
+    tangent_strain_stencil<dim>(svd.Sigma.array().log().matrix(), strain);
+    std::visit(
+        [&](const auto& model) {
+            using Model = std::decay_t<decltype(model)>;
+            for (int j = 0; j < k; ++j) {
+                if constexpr (std::is_same_v<Model, std::monostate>) {
+                    tau[j] = elasticity_.tau_of_strain(strain[j]);
+                } else if constexpr (std::is_same_v<Model, DruckerPrager<dim>>) {
+                    tau[j] = elasticity_.tau_of_strain(model.project_strain(strain[j]));
+                } else if constexpr (std::is_same_v<Model, VonMises<dim>>) {
+                    tau[j] = elasticity_.tau_of_strain(model.project_strain(strain[j], hardening));
+                } else {  // a return mapping in singular values
+                    const ReturnResult<dim> Z = model.project(strain[j].array().exp().matrix(), hardening);
+                    tau[j] = elasticity_.tau_of_strain(Z.hencky_strain());
+                }
+            }
+        },
+        plasticity_);
+    return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd);
 }
 
 template <int dim>

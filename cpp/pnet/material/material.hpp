@@ -74,6 +74,11 @@ public:
 
     /// Ptilde(F, h) = U diag(tau(Z)_i / Sigma_i) V^T.
     Mat<dim> elastoplastic_stress(const Mat<dim>& F, double hardening) const;
+    /// The same at a precomputed clamped SVD of F.
+    Mat<dim> elastoplastic_stress(const PolarSVD<dim>& svd, double hardening) const;
+    /// Its consistent tangent dPtilde/dF at the clamped SVD of F, the hardening held at h
+    /// (material/elastoplastic_tangent.hpp), the return mapping evaluated in Hencky strain.
+    Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening, bool project_psd) const;
 
     /// The return mapping in F space: F_elastic = U diag(Z) V^T.
     struct Projection {

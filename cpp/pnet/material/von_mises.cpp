@@ -1,5 +1,6 @@
 #include "pnet/material/von_mises.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -77,6 +78,13 @@ double VonMises<dim>::solve_path(const Vec<dim>& eps, const Vec<dim>& n, double 
 }
 
 template <int dim>
+double VonMises<dim>::plastic_multiplier(const Vec<dim>& eps, const Vec<dim>& eps_hat, double L, double h) const {
+    if (closed_form()) return std::max(L - h, 0.0);  // eq. 22
+    if (L == 0.0 || yield_function(eps.array().exp().matrix(), h) <= 0.0) return 0.0;
+    return solve_path(eps, eps_hat / L, L, h);
+}
+
+template <int dim>
 ReturnResult<dim> VonMises<dim>::project(const Vec<dim>& Sigma, double h) const {
     if (!(h >= 0.0)) {
         std::ostringstream msg;
@@ -86,16 +94,18 @@ ReturnResult<dim> VonMises<dim>::project(const Vec<dim>& Sigma, double h) const 
     const Vec<dim> eps = Sigma.array().log().matrix();
     const Vec<dim> eps_hat = eps - eps.sum() / dim * Vec<dim>::Ones();
     const double L = eps_hat.norm();
-    double dgamma;
-    if (closed_form()) {
-        dgamma = L - h;  // eq. 22
-        if (dgamma <= 0.0) return {Sigma, h, ReturnBranch::Elastic};
-    } else {
-        if (L == 0.0 || yield_function(Sigma, h) <= 0.0) return {Sigma, h, ReturnBranch::Elastic};
-        dgamma = solve_path(eps, eps_hat / L, L, h);
-    }
-    const Vec<dim> Z = (eps - dgamma / L * eps_hat).array().exp().matrix();
-    return {Z, h + params_.hardening_coefficient * dgamma, ReturnBranch::Yield};
+    const double dgamma = plastic_multiplier(eps, eps_hat, L, h);
+    if (dgamma <= 0.0) return {Sigma, h, ReturnBranch::Elastic, true, eps};
+    const Vec<dim> eps_Z = eps - dgamma / L * eps_hat;
+    return {eps_Z.array().exp().matrix(), h + params_.hardening_coefficient * dgamma, ReturnBranch::Yield, true, eps_Z};
+}
+
+template <int dim>
+Vec<dim> VonMises<dim>::project_strain(const Vec<dim>& eps, double h) const {
+    const Vec<dim> eps_hat = eps - eps.sum() / dim * Vec<dim>::Ones();
+    const double L = eps_hat.norm();
+    const double dgamma = plastic_multiplier(eps, eps_hat, L, h);
+    return dgamma > 0.0 ? Vec<dim>(eps - dgamma / L * eps_hat) : eps;
 }
 
 template class VonMises<2>;

@@ -26,6 +26,9 @@ public:
 
     /// Z(Sigma, h) and h_new = h + xi dgamma. Throws std::invalid_argument if h < 0.
     ReturnResult<dim> project(const Vec<dim>& Sigma, double h) const;
+    /// log Z from eps = log Sigma, without the hardening update (the consistent tangent's
+    /// 2d + 1 evaluations at a fixed h; no log or exp in the closed form). Requires h >= 0.
+    Vec<dim> project_strain(const Vec<dim>& eps, double h) const;
 
     /// y(Sigma, h) = ||dev tau(Sigma)||^2 - (2 mu h)^2, Pa^2 (eq. 25).
     double yield_function(const Vec<dim>& Sigma, double h) const;
@@ -38,6 +41,8 @@ public:
     const VonMisesParams& params() const { return params_; }
 
 private:
+    /// dgamma >= 0 of the projection of eps (0 inside the yield surface).
+    double plastic_multiplier(const Vec<dim>& eps, const Vec<dim>& eps_hat, double L, double h) const;
     /// Smallest root in (0, L] of y along eps - dg n (y(0) > 0 >= y(L)).
     double solve_path(const Vec<dim>& eps, const Vec<dim>& n, double L, double h) const;
 

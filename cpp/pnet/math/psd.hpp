@@ -14,7 +14,11 @@ Eigen::Matrix<double, n, n> project_psd(const Eigen::Matrix<double, n, n>& A) {
     // Most Hessians near the reference state are positive definite: a Cholesky
     // factorization (n^3/6 flops) proves it far cheaper than the eigensolver.
     if (Eigen::LLT<Eigen::Matrix<double, n, n>>(S).info() == Eigen::Success) return S;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, n, n>> eig(S);
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, n, n>> eig;
+    if constexpr (n == 2)
+        eig.computeDirect(S);  // closed form, as accurate as the iterative solver in 2x2
+    else
+        eig.compute(S);
     Eigen::Matrix<double, n, 1> lambda = eig.eigenvalues();
     if (lambda.minCoeff() >= 0.0) return S;
     lambda = lambda.cwiseMax(0.0);

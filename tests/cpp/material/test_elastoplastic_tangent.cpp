@@ -4,6 +4,9 @@
 // models it is symmetric and, projected, positive semi-definite.
 #include <gtest/gtest.h>
 
+#include <map>
+#include <string>
+
 #include <Eigen/Eigenvalues>
 
 #include "pnet/material/elastoplastic_tangent.hpp"
@@ -66,6 +69,56 @@ TYPED_TEST(ElastoplasticTangentTest, NonAssociativeTangentIsSymmetricAndProjects
             ++checked;
         }
         EXPECT_EQ(checked, 12);
+    }
+}
+
+// Material::elastoplastic_tangent runs the return mapping in Hencky strain (no log/exp per stencil
+// point); it must be the same tangent as the generic one through singular values, on every branch.
+TYPED_TEST(ElastoplasticTangentTest, MaterialTangentInStrainMatchesTheGenericOne) {
+    constexpr int dim = TypeParam::value;
+    test::Random random(37);
+    for (const char* preset : {"sand", "snow", "metal", "metal_nh"}) {
+        const Material<dim> material(material_preset(preset));
+        std::map<ReturnBranch, int> branches;
+        for (int k = 0; k < 40; ++k) {
+            const Mat<dim> F = random.template deformation<dim>(k % 4 == 0 ? 0.02 : 0.3);
+            const double h = material.description().plasticity == PlasticityModel::VonMises
+                                 ? random.uniform(0.02, 0.1)
+                                 : material.description().initial_hardening;
+            const PolarSVD<dim> svd = clamped_svd<dim>(F);
+            branches[material.return_map(svd.Sigma, h).branch] += 1;
+            for (bool project : {false, true}) {
+                const Tensor4<dim> expected = tangent_of<dim>(material, F, h, project);
+                const Tensor4<dim> K = material.elastoplastic_tangent(svd, h, project);
+                EXPECT_LE((K - expected).cwiseAbs().maxCoeff(), 1e-6 * expected.cwiseAbs().maxCoeff())
+                    << preset << " sample " << k << " project " << project;
+            }
+        }
+        EXPECT_GE(branches.size(), 2u) << preset << ": the samples must reach an elastic and a plastic branch";
+    }
+}
+
+TYPED_TEST(ElastoplasticTangentTest, StrainProjectionIsTheLogOfTheProjection) {
+    constexpr int dim = TypeParam::value;
+    test::Random random(41);
+    const Material<dim> sand_material(material_preset("sand"));
+    const DruckerPrager<dim> sand(sand_material.description().drucker_prager, sand_material.elasticity());
+    for (const char* preset : {"metal", "metal_nh"}) {
+        const Material<dim> metal_material(material_preset(preset));
+        const VonMises<dim> metal(metal_material.description().von_mises, metal_material.elasticity());
+        for (int k = 0; k < 30; ++k) {
+            const Vec<dim> Sigma = clamped_svd<dim>(random.template deformation<dim>(0.3)).Sigma;
+            const Vec<dim> eps = Sigma.array().log().matrix();
+            const double h = random.uniform(0.02, 0.1);
+            const Vec<dim> expected = metal.project(Sigma, h).Sigma.array().log().matrix();
+            EXPECT_LE((metal.project_strain(eps, h) - expected).cwiseAbs().maxCoeff(), 1e-12) << preset << " " << k;
+            if (preset == std::string("metal")) {
+                ReturnBranch branch;
+                const Vec<dim> sand_expected = sand.project(Sigma, 0.0).Sigma.array().log().matrix();
+                EXPECT_LE((sand.project_strain(eps, &branch) - sand_expected).cwiseAbs().maxCoeff(), 1e-12) << k;
+                EXPECT_EQ(branch, sand.project(Sigma, 0.0).branch) << k;
+            }
+        }
     }
 }
 
