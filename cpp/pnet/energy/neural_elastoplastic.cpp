@@ -70,21 +70,18 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
     net_gradient_.resize(n * kM);
     const double h0 = training_material_.description().initial_hardening;
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
-    std::vector<double> network_h(has_hardening_ ? n : 0);
+    network_h_.resize(has_hardening_ ? n : 0);
     std::size_t clamped = 0;
     if (has_hardening_) {
 #pragma omp parallel for schedule(static) reduction(+ : clamped) if (count >= 1024)
         for (std::ptrdiff_t p = 0; p < count; ++p) {
             bool outside = false;
-            network_h[p] = metadata_.network_hardening(hardening ? hardening[p] : h0, &outside);
+            network_h_[p] = metadata_.network_hardening(hardening ? hardening[p] : h0, &outside);
             clamped += outside;
         }
     }
     const EnergyForm form = metadata_.energy_form;
-    const bool global = form == EnergyForm::GlobalIdentity || form == EnergyForm::Global;
     if (form != EnergyForm::Eq8) identity_.assign(n, Mat<dim>::Identity());
-    // The network's F0 slot: F0, or the identity for a global form.
-    net_.set_reference(global ? identity_.data() : F0, has_hardening_ ? network_h.data() : nullptr, n);
     hardening_clamped_ = clamped;
     correction_ready_ = false;
     buffers_at_reference_ = false;
@@ -110,6 +107,10 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction() const {
     const std::size_t n = F0_.size();
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
     const EnergyForm form = metadata_.energy_form;
+    // The network's F0 slot (F0, or the identity for a global form), set here: the first network
+    // evaluation since set_reference.
+    const bool global = form == EnergyForm::GlobalIdentity || form == EnergyForm::Global;
+    net_.set_reference(global ? identity_.data() : F0_.data(), has_hardening_ ? network_h_.data() : nullptr, n);
     // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next evaluation at F0.
     net_.evaluate(F0_.data(), FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
     if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {

@@ -91,14 +91,13 @@ public:
     /// (Objective::set_damping); 0 by default.
     void set_damping(double lambda) { damping_ = lambda; }
     double regularizer_weight() const { return w_; }
-    const EnergyNetwork<dim>& network() const { return net_; }
     bool has_hardening() const { return has_hardening_; }
     const LearnedReturnMap<dim>* learned_return_map() const { return return_map_.get(); }
 
 private:
     void finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const;
 
-    EnergyNetwork<dim> net_;
+    mutable EnergyNetwork<dim> net_;  // its reference is set lazily (ensure_correction)
     Material<dim> training_material_;
     std::shared_ptr<const LearnedReturnMap<dim>> return_map_;
     ModelMetadata metadata_;
@@ -114,7 +113,8 @@ private:
 
     std::vector<Mat<dim>> F0_;
     std::vector<Mat<dim>> stress_;  // Ptilde(F0, h), dimensionless (eq. 8's form)
-    std::vector<PolarSVD<dim>> svd0_;  // clamped SVD of F0 (eq. 8, the material's return mapping)
+    std::vector<PolarSVD<dim>> svd0_;
+    std::vector<double> network_h_;  // the network's hardening input (clamped to its range)  // clamped SVD of F0 (eq. 8, the material's return mapping)
     // The correction and offset need the network at F0: computed by ensure_correction() when an
     // evaluation first needs them (not at all where every evaluation is at the reference).
     mutable bool correction_ready_ = false;
