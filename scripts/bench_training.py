@@ -4,7 +4,7 @@ training step (sampling + targets + loss of eq. 9 with its double backward + Ada
 for the 2D net ([9, 32, 32, 32, 1]) and the 3D net ([19, 64, 64, 64, 1]), float32.
 
     .venv/bin/python scripts/bench_training.py [--threads 2] [--batches 14 16] [--steps 5]
-        [--materials metal snow] [--dims 2 3]
+        [--materials metal snow] [--dims 2 3] [--device cpu|cuda|auto]
 
 Timings are the median over --steps steps after one warm-up step. A benchmark, not a test: other
 jobs on the machine slow it down (the load average is printed).
@@ -23,28 +23,35 @@ import torch
 from plasticitynet.training import TrainConfig
 from plasticitynet.training.energy import energy_loss
 from plasticitynet.training.sampling import sample_batch
-from plasticitynet.training.trainer import make_task
+from plasticitynet.training.trainer import make_task, resolve_device
 
 
-def _median_time(fn, steps: int) -> float:
-    fn(0)  # warm-up
+def _median_time(fn, steps: int, device: torch.device) -> float:
+    """Median wall time of fn(k), k = 1..steps, after fn(0); on CUDA each call ends with a synchronise, so
+    the time is the kernels' and not their launch."""
+    def timed(k):
+        fn(k)
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    timed(0)  # warm-up
     times = []
     for k in range(1, steps + 1):
         t0 = time.perf_counter()
-        fn(k)
+        timed(k)
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
 
 
-def bench(material: str, dim: int, batch: int, steps: int) -> dict:
+def bench(material: str, dim: int, batch: int, steps: int, device: torch.device = torch.device("cpu")) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = TrainConfig(material=material, dim=dim, batch=batch, out=os.path.join(tmp, "m.pt"), progress=False)
-        task = make_task(cfg)
+        task = make_task(cfg, device)
     net, spec, stress = task.net, task.spec, task.stress
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
 
     def sample(k):
-        return sample_batch(spec, batch, 0, k)
+        return sample_batch(spec, batch, 0, k, device=device)
 
     def targets(b):
         with torch.no_grad():
@@ -65,10 +72,10 @@ def bench(material: str, dim: int, batch: int, steps: int) -> dict:
         task.loss(k).backward()
         opt.step()
 
-    t_sample = _median_time(sample, steps)
-    t_targets = _median_time(lambda k: targets(b), steps)
-    t_network = _median_time(network_step, steps)
-    t_full = _median_time(full_step, steps)
+    t_sample = _median_time(sample, steps, device)
+    t_targets = _median_time(lambda k: targets(b), steps, device)
+    t_network = _median_time(network_step, steps, device)
+    t_full = _median_time(full_step, steps, device)
     return {
         "material": material, "dim": dim, "widths": net.widths, "batch": batch,
         "sample_s": t_sample, "targets_s": t_targets, "network_s": t_network, "step_s": t_full,
@@ -94,21 +101,23 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=5)
     p.add_argument("--materials", nargs="+", default=["metal"], help="energy materials (hardening input: 9/19 wide)")
     p.add_argument("--dims", type=int, nargs="+", default=[2, 3])
+    p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:N or auto (cpu)")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
+    device = resolve_device(args.device)
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, float32; load average {load}")
+    print(f"torch {torch.__version__}, {device}, {torch.get_num_threads()} threads, float32; load average {load}")
     print(f"BLAS: {blas_library()}")
-    header = f"{'material':<9}{'dim':>4} {'widths':<20}{'batch':>7}{'step s':>9}{'samples/s':>11}" \
+    header = f"{'material':<9}{'dim':>4} {'widths':<20}{'batch':>7}{'step s':>9}{'steps/s':>9}{'samples/s':>11}" \
              f"{'net only':>11}{'sample s':>10}{'target s':>10}{'net s':>8}"
     print(header)
     print("-" * len(header))
     for material in args.materials:
         for dim in args.dims:
             for log2 in args.batches:
-                r = bench(material, dim, 1 << log2, args.steps)
+                r = bench(material, dim, 1 << log2, args.steps, device)
                 print(
-                    f"{material:<9}{dim:>4} {str(r['widths']):<20}{r['batch']:>7}{r['step_s']:>9.3f}"
+                    f"{material:<9}{dim:>4} {str(r['widths']):<20}{r['batch']:>7}{r['step_s']:>9.3f}{1 / r['step_s']:>9.2f}"
                     f"{r['batch'] / r['step_s']:>11.0f}{r['batch'] / r['network_s']:>11.0f}"
                     f"{r['sample_s']:>10.3f}{r['targets_s']:>10.3f}{r['network_s']:>8.3f}",
                     flush=True,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import torch
 
 from .branches import COMPRESSION_TIP, ELASTIC, ELLIPSE, TENSION_TIP
+from .device import should_test, sync_interval
 from .elasticity import NeoHookeanSnow
 from .params import CamClayParams
 from .plasticity import PlasticityModel
@@ -128,14 +129,15 @@ def unimodular_shift(t: torch.Tensor) -> torch.Tensor:
     tol = max(1e-15, 4.0 * torch.finfo(t.dtype).eps)
     c = 1.0 + t.abs().amax(-1)
     active = torch.ones_like(c, dtype=torch.bool)
-    for _ in range(100):
+    every = sync_interval(t.device)
+    for it in range(100):
         x = c[:, None] + t
         f = x.prod(-1) - 1.0
         fp = x[:, 0] * x[:, 1] + x[:, 0] * x[:, 2] + x[:, 1] * x[:, 2]
         dc = f / fp
         c = torch.where(active, c - dc, c)
         active = active & ~(dc.abs() <= tol * c)
-        if not bool(active.any()):
+        if should_test(it, every) and not bool(active.any()):
             break
     return c
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import torch
 
 from .branches import ELASTIC, YIELD
+from .device import should_test, sync_interval
 from .elasticity import StVKHencky
 from .params import VonMisesParams
 from .plasticity import PlasticityModel
@@ -99,10 +100,11 @@ class VonMises(PlasticityModel):
         lo = first.to(eps.dtype) * L / SCAN_STEPS  # dg_{k-1}; g(lo) > 0
 
         # Bisection keeping g(lo) > 0 >= g(hi) until lo and hi are adjacent floats.
-        for _ in range(MAX_BISECTION_STEPS):
+        every = sync_interval(eps.device)
+        for it in range(MAX_BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
             done = (mid <= lo) | (mid >= hi) | ~yielding
-            if bool(done.all()):
+            if should_test(it, every) and bool(done.all()):
                 break
             above = g(mid[:, None], h)[:, 0] > 0
             lo = torch.where(above & ~done, mid, lo)

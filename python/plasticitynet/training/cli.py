@@ -2,7 +2,12 @@
 
     python train.py --material {sand,snow,metal,metal_nh,metal_nh_rm} --dim {2,3}
                     [--epochs --batch --lr --lr-decay --decay-steps --seed --sampling --out --resume
-                     --return-map FILE --checkpoint-every N --eval-every N --eval-samples N --threads N]
+                     --return-map FILE --checkpoint-every N --eval-every N --eval-samples N --threads N
+                     --device cpu|cuda|cuda:N|auto --shards N]
+
+Several processes (data parallel, torch.distributed): torchrun --nproc-per-node W train.py ... (gloo on
+the CPU, NCCL with --device cuda, one GPU per process); across machines, torchrun's --nnodes /
+--rdzv-endpoint, with --out on a filesystem every machine sees.
 
 Defaults are the paper's recipe (Adam, lr 0.01 x0.95 every 1000 steps, batch 2^16, 20000 epochs).
 metal_nh_rm trains the learned return mapping of metal_nh; metal_nh trains the energy whose target
@@ -127,6 +132,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--eval-samples", type=_non_negative_int, default=100_000, help="final held-out samples (1e5; 0: skip)"
     )
     p.add_argument("--threads", type=_non_negative_int, default=0, help="torch threads (0: torch's default)")
+    p.add_argument(
+        "--device",
+        default="cpu",
+        help="where to train: cpu, cuda (under torchrun: each process's own GPU), cuda:N, or auto (CUDA where "
+        "available) (cpu)",
+    )
+    p.add_argument(
+        "--shards",
+        type=_non_negative_int,
+        default=0,
+        help="parts of each batch with their own random stream, a multiple of the process count; a run with "
+        "the same --shards draws the same batches on any number of processes (0: one per process)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -177,13 +195,22 @@ def main(argv=None, root: str | Path | None = None) -> int:
         eval_samples=args.eval_samples,
         progress=not args.no_progress,
         threads=args.threads,
+        device=args.device,
+        shards=args.shards,
         command="python train.py " + shlex.join(argv_list),
     )
     try:
         trainer = Trainer(config)
-    except ValueError as err:  # unreadable or mismatched checkpoint / return-map model
+    except ValueError as err:  # unreadable or mismatched checkpoint / return-map model, bad device
         parser.error(str(err))
+    leader = trainer.parallel.leader
     kind = "return mapping" if args.material == RETURN_MAP_MATERIAL else "energy"
+    where = f" on {trainer.device}" + (
+        f", {trainer.parallel.world} processes ({trainer.shards} shards)" if trainer.parallel.world > 1 else ""
+    )
+    if not leader:  # the other ranks of a data-parallel run train silently
+        trainer.run()
+        return 0
     print(
         f"training the {args.dim}D {args.material} {kind}: {config.epochs} steps of batch {config.batch}, "
         f"lr {config.lr} x{config.lr_decay} every {config.decay_steps}, sampling {config.sampling}, seed {config.seed}"
@@ -192,6 +219,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
             if args.material != RETURN_MAP_MATERIAL
             else ""
         )
+        + where
         + (f" (resuming at step {trainer.step})" if args.resume else "")
     )
     try:

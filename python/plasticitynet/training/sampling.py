@@ -95,20 +95,26 @@ def sampling_spec(material: Material, sampling: str = "paper", deps_scale: float
     raise ValueError(f"plasticity.model = {plasticity!r}: no training distribution defined")
 
 
-def generator_for(seed: int, step: int, stream: str = "train") -> torch.Generator:
-    """A CPU generator whose state depends only on (seed, step, stream) (numpy SeedSequence mixing,
-    so that neighbouring seeds and steps give unrelated streams)."""
+def generator_for(
+    seed: int, step: int, stream: str = "train", device: torch.device | str = "cpu", shard: int = 0
+) -> torch.Generator:
+    """A generator on `device` whose state depends only on (seed, step, stream, shard) (numpy SeedSequence
+    mixing, so that neighbouring seeds and steps give unrelated streams). Draws are reproducible per
+    device type: a CUDA generator seeded alike yields other numbers than the CPU one. Shard 0 is the
+    stream of an unsharded batch; shard k > 0 (a data-parallel rank's part, `sample_batch(shards=...)`)
+    mixes k in as a fourth word."""
     if stream not in STREAMS:
         raise ValueError(f"stream = {stream!r}: expected one of {', '.join(STREAMS)}")
-    if seed < 0 or step < 0:
-        raise ValueError(f"seed = {seed}, step = {step}: must be >= 0")
-    state = np.random.SeedSequence([STREAMS[stream], int(seed), int(step)]).generate_state(2, dtype=np.uint32)
-    return torch.Generator().manual_seed((int(state[0]) << 31) ^ int(state[1]))
+    if seed < 0 or step < 0 or shard < 0:
+        raise ValueError(f"seed = {seed}, step = {step}, shard = {shard}: must be >= 0")
+    words = [STREAMS[stream], int(seed), int(step)] + ([int(shard)] if shard else [])
+    state = np.random.SeedSequence(words).generate_state(2, dtype=np.uint32)
+    return torch.Generator(device=torch.device(device)).manual_seed((int(state[0]) << 31) ^ int(state[1]))
 
 
 def uniform(n: int, lo: float, hi: float, generator: torch.Generator, cols: int | None = None) -> torch.Tensor:
     shape = (n,) if cols is None else (n, cols)
-    return lo + (hi - lo) * torch.rand(shape, generator=generator, dtype=torch.float64)
+    return lo + (hi - lo) * torch.rand(shape, generator=generator, dtype=torch.float64, device=generator.device)
 
 
 def random_rotations(n: int, d: int, generator: torch.Generator) -> torch.Tensor:
@@ -119,7 +125,7 @@ def random_rotations(n: int, d: int, generator: torch.Generator) -> torch.Tensor
     Gram-Schmidt on the first d-1 columns of A (this is exactly Q of the QR with diag(R) > 0;
     projected twice for round-off), then the last column completing a right-handed frame
     (2D: q1 rotated by +90 deg; 3D: q1 x q2), i.e. Q's last column with its sign fixed so that det Q = +1."""
-    A = torch.randn(n, d, d, generator=generator, dtype=torch.float64)
+    A = torch.randn(n, d, d, generator=generator, dtype=torch.float64, device=generator.device)
     columns: list[torch.Tensor] = []
     for k in range(d - 1):
         q = A[:, :, k]
@@ -143,7 +149,7 @@ def small_rotations(n: int, d: int, max_angle: float, generator: torch.Generator
         c, s = torch.cos(theta), torch.sin(theta)
         return torch.stack([torch.stack([c, -s], -1), torch.stack([s, c], -1)], -2)
     theta = uniform(n, 0.0, max_angle, generator)
-    k = torch.randn(n, 3, generator=generator, dtype=torch.float64)
+    k = torch.randn(n, 3, generator=generator, dtype=torch.float64, device=generator.device)
     k = k / torch.linalg.vector_norm(k, dim=-1, keepdim=True)
     zero = torch.zeros_like(theta)
     K = torch.stack(
@@ -154,7 +160,7 @@ def small_rotations(n: int, d: int, max_angle: float, generator: torch.Generator
         ],
         -2,
     )
-    eye = torch.eye(3, dtype=torch.float64).expand(n, 3, 3)
+    eye = torch.eye(3, dtype=torch.float64, device=generator.device).expand(n, 3, 3)
     return eye + torch.sin(theta)[:, None, None] * K + (1.0 - torch.cos(theta))[:, None, None] * (K @ K)
 
 
@@ -174,35 +180,73 @@ class DeformationBatch:
     Sigma0: torch.Tensor
     V0: torch.Tensor
 
-    def to(self, dtype: torch.dtype) -> "DeformationBatch":
-        return DeformationBatch(**{k: getattr(self, k).to(dtype) for k in self.__dataclass_fields__})
+    def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None) -> "DeformationBatch":
+        """The batch in another dtype and/or on another device."""
+        return DeformationBatch(**{k: getattr(self, k).to(device=device, dtype=dtype) for k in self.__dataclass_fields__})
+
+    @staticmethod
+    def cat(parts: list["DeformationBatch"]) -> "DeformationBatch":
+        if len(parts) == 1:
+            return parts[0]
+        return DeformationBatch(
+            **{k: torch.cat([getattr(p, k) for p in parts]) for k in DeformationBatch.__dataclass_fields__}
+        )
 
     def __len__(self) -> int:
         return self.F.shape[0]
 
 
-def sample_batch(
-    spec: SamplingSpec, n: int, seed: int, step: int = 0, stream: str = "train", dtype=torch.float64
-) -> DeformationBatch:
-    """n samples (F, F0, h) of `spec`, determined by (seed, step, stream); built in float64 and cast."""
+def _shard_parts(n: int, shards: int, shard_range: tuple[int, int] | None) -> tuple[int, range]:
+    """(samples per part, the parts drawn) of a batch of n split into `shards` parts."""
     if n <= 0:
         raise ValueError(f"n = {n}: must be > 0")
+    if shards < 1 or n % shards:
+        raise ValueError(f"shards = {shards}: must be >= 1 and divide the batch size {n}")
+    lo, hi = shard_range if shard_range is not None else (0, shards)
+    if not 0 <= lo < hi <= shards:
+        raise ValueError(f"shard_range = {shard_range}: expected 0 <= first < last <= shards = {shards}")
+    return n // shards, range(lo, hi)
+
+
+def sample_batch(
+    spec: SamplingSpec,
+    n: int,
+    seed: int,
+    step: int = 0,
+    stream: str = "train",
+    dtype=torch.float64,
+    device: torch.device | str = "cpu",
+    shards: int = 1,
+    shard_range: tuple[int, int] | None = None,
+) -> DeformationBatch:
+    """n samples (F, F0, h) of `spec`, determined by (seed, step, stream) and the device type; built in
+    float64 on `device` and cast.
+
+    shards > 1 splits the batch into `shards` equal parts, part k drawn from its own stream (shard k):
+    a data-parallel run of W processes draws parts [r S/W, (r + 1) S/W) on rank r, and the union over
+    the ranks is the batch a single process draws with the same `shards`. shard_range selects those
+    parts (default: all)."""
+    size, parts = _shard_parts(n, shards, shard_range)
+    return DeformationBatch.cat([_sample_part(spec, size, seed, step, stream, dtype, device, k) for k in parts])
+
+
+def _sample_part(spec, n, seed, step, stream, dtype, device, shard) -> DeformationBatch:
     if spec.sampling == "mixed":
-        paper = sample_batch(spec.with_(sampling="paper"), n - n // 2, seed, step, stream, dtype)
+        paper = _sample_part(spec.with_(sampling="paper"), n - n // 2, seed, step, stream, dtype, device, shard)
         if n < 2:
             return paper
-        near = sample_batch(spec.with_(sampling="near"), n // 2, seed, step + _MIXED_NEAR_STEP, stream, dtype)
-        return DeformationBatch(
-            **{k: torch.cat([getattr(paper, k), getattr(near, k)]) for k in DeformationBatch.__dataclass_fields__}
+        near = _sample_part(
+            spec.with_(sampling="near"), n // 2, seed, step + _MIXED_NEAR_STEP, stream, dtype, device, shard
         )
-    g = generator_for(seed, step, stream)
+        return DeformationBatch.cat([paper, near])
+    g = generator_for(seed, step, stream, device, shard)
     d = spec.dim
     r = spec.deps * spec.deps_scale
     # Fixed draw order: eps, deps, h, then the rotations.
     eps = uniform(n, -EPS_RANGE, EPS_RANGE, g, d)
     deps = uniform(n, -r, r, g, d)
     if spec.h_range is None:
-        h = torch.zeros(n, dtype=torch.float64)
+        h = torch.zeros(n, dtype=torch.float64, device=g.device)
     else:
         h = uniform(n, spec.h_range[0], spec.h_range[1], g)
     Sigma0, Sigma = torch.exp(eps), torch.exp(eps + deps)
@@ -223,12 +267,26 @@ def sample_batch(
     return batch if dtype == torch.float64 else batch.to(dtype)
 
 
-def sample_return_map_states(dim: int, n: int, seed: int, step: int = 0, stream: str = "train", dtype=torch.float64):
+def sample_return_map_states(
+    dim: int,
+    n: int,
+    seed: int,
+    step: int = 0,
+    stream: str = "train",
+    dtype=torch.float64,
+    device: torch.device | str = "cpu",
+    shards: int = 1,
+    shard_range: tuple[int, int] | None = None,
+):
     """(Sigma, h) for the learned return mapping (paper sec. 4.3, appendix A.2.4):
-    Sigma = e^eps, eps ~ U[-1, 1]^d, h ~ U[0, 1] (von Mises h = tau_Y / (2 mu))."""
-    if n <= 0:
-        raise ValueError(f"n = {n}: must be > 0")
-    g = generator_for(seed, step, stream)
+    Sigma = e^eps, eps ~ U[-1, 1]^d, h ~ U[0, 1] (von Mises h = tau_Y / (2 mu)); shards as sample_batch."""
+    size, parts = _shard_parts(n, shards, shard_range)
+    drawn = [_return_map_part(dim, size, seed, step, stream, dtype, device, k) for k in parts]
+    return torch.cat([p[0] for p in drawn]), torch.cat([p[1] for p in drawn])
+
+
+def _return_map_part(dim, n, seed, step, stream, dtype, device, shard):
+    g = generator_for(seed, step, stream, device, shard)
     eps = uniform(n, -EPS_RANGE, EPS_RANGE, g, dim)
     h = uniform(n, 0.0, 1.0, g)
     return torch.exp(eps).to(dtype), h.to(dtype)

@@ -10,8 +10,22 @@ Outputs beside the model file OUT (default models/{material}_{dim}d.pt):
   OUT_loss.png             the loss curve (log y) and, if logged, the error curve;
   OUT.ckpt                 checkpoint (model, Adam, StepLR, step, RNG state, logs), written atomically
                            every checkpoint_every steps and at the end.
-Batch k depends only on (seed, k) (sampling.py), so a resumed run sees the batches an uninterrupted run
-would, and reaches the same weights.
+Batch k depends only on (seed, k, the device type, shards) (sampling.py), so a resumed run sees the
+batches an uninterrupted run would, and reaches the same weights.
+
+Devices: `device` "cpu", "cuda", "cuda:N" or "auto" (CUDA where available); sampling, targets, loss and
+the in-training error curve run there (the curve's held-out samples are drawn on the CPU and moved, so
+every device measures the same set; the final evaluation of the exported float64 model runs on the CPU).
+
+Data parallel (torch.distributed): started by `torchrun --nproc-per-node W train.py ...` (or any
+launcher that sets RANK / WORLD_SIZE / MASTER_ADDR / MASTER_PORT), each of the W processes draws its
+share of the `shards` parts of the global batch (sampling.sample_batch), computes the loss and its
+parameter gradient on them, and one all-reduce per step averages the gradients (and the logged loss):
+the update is the one a single process makes with the same batch and shards, to round-off. gloo on the
+CPU, NCCL on CUDA (one GPU per process, cuda:LOCAL_RANK). DistributedDataParallel itself is not used:
+eq. 9 differentiates through an input gradient (double backward), which DDP does not support
+(pytorch/pytorch#47562); the explicit all-reduce of the flattened gradient is the same data parallelism.
+Rank 0 writes the logs, checkpoints and the model.
 """
 
 from __future__ import annotations
@@ -24,6 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
+import torch.distributed as dist
 
 from . import return_map_net
 from .energy import ENERGY_FORMS, energy_loss, psi_gradient, stress_directional_derivative
@@ -39,11 +54,14 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 #: Fields that must agree between a checkpoint and the run resuming it (epochs may grow).
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
-    "representation", "hessian_weight", "energy_form",
+    "representation", "hessian_weight", "energy_form", "device_type", "shards",
 )
 
 #: What checkpoints written before a field existed were trained with.
-_LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8"}
+_LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1}
+
+#: --device choices besides "cuda:N".
+DEVICES = ("cpu", "cuda", "auto")
 
 #: Held-out samples of the in-training error curve (eval_every), "eval" stream at this step index
 #: (disjoint from the final evaluation, which uses steps 0, 1, ...).
@@ -74,6 +92,8 @@ class TrainConfig:
     eval_samples: int = 100_000  # final evaluation (0: skip)
     progress: bool = True
     threads: int = 0  # 0: torch's default
+    device: str = "cpu"  # DEVICES or "cuda:N"
+    shards: int = 0  # parts of each batch with their own random stream; 0: the data-parallel world size
     command: str = ""  # the command line, recorded in the metadata
 
     def __post_init__(self):
@@ -108,6 +128,10 @@ class TrainConfig:
             raise ValueError("eval_every and eval_samples must be >= 0")
         if self.material == "metal_nh" and not self.return_map:
             raise ValueError("material metal_nh: return_map (the learned return-map model file) is required")
+        if self.device not in DEVICES and not _is_cuda_index(self.device):
+            raise ValueError(f"device = {self.device!r}: expected cpu, cuda, cuda:N or auto")
+        if self.shards < 0:
+            raise ValueError(f"shards = {self.shards!r}: must be >= 0 (0: one per process)")
         if not self.out:
             self.out = str(Path("models") / f"{self.material}_{self.dim}d.pt")
 
@@ -123,14 +147,61 @@ class TrainConfig:
         }
 
 
+def _is_cuda_index(device: str) -> bool:
+    head, _, index = device.partition(":")
+    return head == "cuda" and index.isdigit()
+
+
+def resolve_device(name: str, local_rank: int = 0) -> torch.device:
+    """The torch.device of a --device value: "auto" is CUDA where available; "cuda" in a data-parallel
+    run is the process's own GPU, cuda:LOCAL_RANK. A CUDA device without CUDA is an error naming it."""
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cpu":
+        return torch.device("cpu")
+    if not torch.cuda.is_available():
+        raise ValueError(f"device = {name!r}: this torch ({torch.__version__}) sees no CUDA device")
+    device = torch.device(f"cuda:{local_rank}") if name == "cuda" else torch.device(name)
+    if device.index is not None and device.index >= torch.cuda.device_count():
+        raise ValueError(f"device = {device}: only {torch.cuda.device_count()} CUDA device(s) visible")
+    return device
+
+
+@dataclass(frozen=True)
+class Parallel:
+    """This process's place in a data-parallel run (world 1: a single process)."""
+
+    rank: int = 0
+    world: int = 1
+    local_rank: int = 0
+
+    @staticmethod
+    def from_environment() -> "Parallel":
+        """RANK / WORLD_SIZE / LOCAL_RANK as torchrun sets them (absent: a single process)."""
+        try:
+            world = int(os.environ.get("WORLD_SIZE", "1"))
+            rank = int(os.environ.get("RANK", "0"))
+            local = int(os.environ.get("LOCAL_RANK", "0"))
+        except ValueError as err:
+            raise ValueError(f"RANK / WORLD_SIZE / LOCAL_RANK must be integers ({err})") from None
+        if world < 1 or not 0 <= rank < world:
+            raise ValueError(f"RANK = {rank}, WORLD_SIZE = {world}: expected 0 <= RANK < WORLD_SIZE")
+        return Parallel(rank, world, local)
+
+    @property
+    def leader(self) -> bool:
+        return self.rank == 0
+
+
 # --- tasks: what is trained -------------------------------------------------------------------------
 class EnergyTask:
     """The energy MLP of eq. 8, trained with the loss of eq. 9."""
 
     kind = "energy"
 
-    def __init__(self, config: TrainConfig):
+    def __init__(self, config: TrainConfig, device: torch.device = torch.device("cpu")):
         self.config = config
+        self.device = device
         self.material = nondimensional_material(config.material, config.dim)
         self.spec = sampling_spec(self.material, config.sampling)
         self.return_map = None
@@ -141,19 +212,25 @@ class EnergyTask:
             rm = load_model(config.return_map)
             if not isinstance(rm, LearnedReturnMap) or rm.dim != config.dim:
                 raise ValueError(f"{config.return_map}: not a {config.dim}D return-map model")
+            rm.network.to(device)
             self.return_map = rm
             rel = os.path.relpath(Path(config.return_map).resolve(), Path(config.out).resolve().parent)
             self.return_map_info = {"type": "learned", "file": rel, "sha256": sha256_of(config.return_map)}
         self.stress = ElastoplasticStress(self.material, self.return_map)
         self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed)
+        self.net.to(device)
         self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
 
     def _h(self, h: torch.Tensor):
         return h if self.spec.has_hardening else None
 
-    def loss(self, step: int) -> torch.Tensor:
-        """Eq. 9 on batch `step`: samples and targets in float64 (no grad), the network in float32."""
-        b = sample_batch(self.spec, self.config.batch, self.config.seed, step)
+    def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
+        """Eq. 9 on batch `step` (the parts shard_range of its `shards`): samples and targets in float64
+        (no grad), the network in float32."""
+        b = sample_batch(
+            self.spec, self.config.batch, self.config.seed, step, device=self.device, shards=shards,
+            shard_range=shard_range,
+        )
         with torch.no_grad():
             P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h)
             P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
@@ -162,7 +239,8 @@ class EnergyTask:
         v = Sv = None
         if weight > 0.0:
             d = self.config.dim
-            v = torch.randn(len(b), d, d, dtype=torch.float64, generator=generator_for(self.config.seed, step, "hessian"))
+            g = generator_for(self.config.seed, step, "hessian", self.device, shard_range[0] if shard_range else 0)
+            v = torch.randn(len(b), d, d, dtype=torch.float64, device=self.device, generator=g)
             with torch.no_grad():
                 Sv = stress_directional_derivative(self.stress, b.F, b.h, v).float()
             v = v.float()
@@ -176,6 +254,7 @@ class EnergyTask:
         out = {}
         for s in SAMPLINGS:
             b = sample_batch(self.spec.with_(sampling=s), CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
+            b = b.to(device=self.device)  # drawn on the CPU: the same held-out set on every device
             with torch.no_grad():
                 P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).float()
                 P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).float()
@@ -201,17 +280,23 @@ class ReturnMapTask:
 
     kind = "return_map"
 
-    def __init__(self, config: TrainConfig):
+    def __init__(self, config: TrainConfig, device: torch.device = torch.device("cpu")):
         self.config = config
+        self.device = device
         self.material = nondimensional_material("metal_nh", config.dim)
         self.net = make_mlp(return_map_widths(config.dim), config.seed)
+        self.net.to(device)
 
-    def loss(self, step: int) -> torch.Tensor:
-        Sigma, h = sample_return_map_states(self.config.dim, self.config.batch, self.config.seed, step)
+    def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
+        Sigma, h = sample_return_map_states(
+            self.config.dim, self.config.batch, self.config.seed, step, device=self.device, shards=shards,
+            shard_range=shard_range,
+        )
         return return_map_net.return_map_loss(self.net, self.material, Sigma.float(), h.float(), self.config.rm_loss)
 
     def curve_error(self) -> dict:
         Sigma, h = sample_return_map_states(self.config.dim, CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
+        Sigma, h = Sigma.to(self.device), h.to(self.device)
         with torch.no_grad():
             loss = return_map_net.return_map_loss(
                 self.net, self.material, Sigma.float(), h.float(), self.config.rm_loss
@@ -227,8 +312,9 @@ class ReturnMapTask:
         return LearnedReturnMap(script_network(self.net), metadata)
 
 
-def make_task(config: TrainConfig):
-    return ReturnMapTask(config) if config.material == RETURN_MAP_MATERIAL else EnergyTask(config)
+def make_task(config: TrainConfig, device: torch.device = torch.device("cpu")):
+    task = ReturnMapTask if config.material == RETURN_MAP_MATERIAL else EnergyTask
+    return task(config, device)
 
 
 # --- files --------------------------------------------------------------------------------------------
@@ -299,11 +385,27 @@ class TrainResult:
 
 
 class Trainer:
-    def __init__(self, config: TrainConfig):
+    def __init__(self, config: TrainConfig, parallel: Parallel | None = None):
         self.config = config
+        self.parallel = parallel if parallel is not None else Parallel.from_environment()
         if config.threads:
             torch.set_num_threads(config.threads)
-        self.task = make_task(config)
+        self.device = resolve_device(config.device, self.parallel.local_rank)
+        world = self.parallel.world
+        shards = config.shards or world
+        if shards % world or config.batch % shards:
+            raise ValueError(
+                f"shards = {shards}: must be a multiple of the {world} process(es) and divide the batch {config.batch}"
+            )
+        self.shards = shards
+        per_rank = shards // world
+        self.shard_range = (self.parallel.rank * per_rank, (self.parallel.rank + 1) * per_rank)
+        if world > 1 and not dist.is_initialized():
+            dist.init_process_group(backend="nccl" if self.device.type == "cuda" else "gloo")
+            self._owns_process_group = True
+        else:
+            self._owns_process_group = False
+        self.task = make_task(config, self.device)
         self.net: MLP = self.task.net
         self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
         self.scheduler = torch.optim.lr_scheduler.StepLR(
@@ -317,10 +419,17 @@ class Trainer:
         if config.resume:
             self._load_checkpoint()
 
+    def _resume_value(self, key: str):
+        if key == "device_type":
+            return self.device.type
+        if key == "shards":
+            return self.shards
+        return getattr(self.config, key)
+
     # checkpoints
     def _state(self) -> dict:
         return {
-            "config": {k: getattr(self.config, k) for k in _RESUME_FIELDS},
+            "config": {k: self._resume_value(k) for k in _RESUME_FIELDS},
             "model": self.net.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "scheduler": self.scheduler.state_dict(),
@@ -342,22 +451,36 @@ class Trainer:
         if not path.is_file():
             raise ValueError(f"{path}: no checkpoint to resume from")
         try:
-            state = torch.load(path, map_location="cpu")
+            state = torch.load(path, map_location=self.device)
         except Exception as err:
             raise ValueError(f"{path}: unreadable checkpoint ({err})") from None
         for key in _RESUME_FIELDS:
             saved = state["config"].get(key, _LEGACY_FIELDS.get(key))
-            if saved != getattr(self.config, key):
-                raise ValueError(f"{path}: checkpoint has {key} = {saved!r}, this run {getattr(self.config, key)!r}")
+            if saved != self._resume_value(key):
+                raise ValueError(f"{path}: checkpoint has {key} = {saved!r}, this run {self._resume_value(key)!r}")
         self.net.load_state_dict(state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.scheduler.load_state_dict(state["scheduler"])
         self.step = int(state["step"])
         self.wall = float(state["wall_seconds"])
-        torch.set_rng_state(state["torch_rng_state"])
+        torch.set_rng_state(state["torch_rng_state"].cpu())
         self.log_rows = [tuple(r) for r in state["log_rows"]]
         self.eval_rows = [tuple(r) for r in state["eval_rows"]]
         self.eval_header = tuple(state["eval_header"])
+
+    def _average_across_processes(self, loss: torch.Tensor) -> torch.Tensor:
+        """All-reduce the parameter gradients and the loss in one flat buffer, divided by the world size:
+        the gradient of the global batch's mean loss (equal parts per process). Returns the global loss."""
+        params = [p for p in self.net.parameters() if p.grad is not None]
+        flat = torch.cat([p.grad.reshape(-1) for p in params] + [loss.detach().reshape(1).to(params[0].grad.dtype)])
+        dist.all_reduce(flat)
+        flat /= self.parallel.world
+        offset = 0
+        for p in params:
+            n = p.grad.numel()
+            p.grad.copy_(flat[offset : offset + n].view_as(p.grad))
+            offset += n
+        return flat[-1]
 
     # training
     def _curve_point(self) -> None:
@@ -374,11 +497,14 @@ class Trainer:
         cfg = self.config
         paths = cfg.paths
         end = cfg.epochs if stop_at is None else min(stop_at, cfg.epochs)
-        _write_csv(paths["log"], LOG_HEADER, self.log_rows)  # (re)start the log at the checkpoint
-        log = open(paths["log"], "a", newline="", buffering=1)  # line-buffered: the log can be watched live
-        writer = csv.writer(log, lineterminator="\n")
+        leader = self.parallel.leader
+        log = writer = None
+        if leader:
+            _write_csv(paths["log"], LOG_HEADER, self.log_rows)  # (re)start the log at the checkpoint
+            log = open(paths["log"], "a", newline="", buffering=1)  # line-buffered: the log can be watched live
+            writer = csv.writer(log, lineterminator="\n")
         bar = None
-        if cfg.progress:
+        if cfg.progress and leader:
             from tqdm import tqdm
 
             bar = tqdm(total=cfg.epochs, initial=self.step, desc=f"{cfg.material} {cfg.dim}D", unit="step")
@@ -387,9 +513,11 @@ class Trainer:
             while self.step < end:
                 t0 = time.perf_counter()
                 lr = self.optimizer.param_groups[0]["lr"]
-                loss = self.task.loss(self.step)
+                loss = self.task.loss(self.step, self.shards, self.shard_range)
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
+                if self.parallel.world > 1:
+                    loss = self._average_across_processes(loss)
                 self.optimizer.step()
                 self.scheduler.step()
                 self.step += 1
@@ -399,24 +527,34 @@ class Trainer:
                     raise FloatingPointError(f"loss is {value} at step {self.step}")
                 row = (self.step, value, lr, round(self.wall, 3))
                 self.log_rows.append(row)
-                writer.writerow(row)
+                if writer is not None:
+                    writer.writerow(row)
                 if bar is not None:
                     bar.update(1)
                     if self.step % 10 == 0 or self.step == end:
                         bar.set_postfix(loss=f"{value:.3e}", lr=f"{lr:.2e}")
-                if cfg.eval_every and (self.step % cfg.eval_every == 0 or self.step == cfg.epochs):
+                if leader and cfg.eval_every and (self.step % cfg.eval_every == 0 or self.step == cfg.epochs):
                     self._curve_point()
-                if self.step % cfg.checkpoint_every == 0 or self.step == end:
+                if leader and (self.step % cfg.checkpoint_every == 0 or self.step == end):
                     log.flush()
                     self.save_checkpoint()
         finally:
-            log.close()
+            if log is not None:
+                log.close()
             if bar is not None:
                 bar.close()
         final_loss = self.log_rows[-1][1] if self.log_rows else float("nan")
-        if self.step < cfg.epochs:
-            return TrainResult(paths, self.step, final_loss, self.wall, finished=False)
-        return self.finish()
+        if self.step < cfg.epochs or not leader:
+            self._close_process_group()
+            return TrainResult(paths, self.step, final_loss, self.wall, finished=self.step >= cfg.epochs)
+        result = self.finish()
+        self._close_process_group()
+        return result
+
+    def _close_process_group(self) -> None:
+        if self._owns_process_group and dist.is_initialized():
+            dist.destroy_process_group()
+            self._owns_process_group = False
 
     def recipe(self) -> dict:
         cfg = self.config
@@ -432,6 +570,9 @@ class Trainer:
             "optimizer": "adam",
             "dtype": "float32",
             "threads": torch.get_num_threads(),
+            "device": str(self.device),
+            "processes": self.parallel.world,
+            "shards": self.shards,
             "final_loss": self.log_rows[-1][1] if self.log_rows else None,
         }
         if hasattr(self.task, "spec"):
@@ -453,6 +594,9 @@ class Trainer:
         cfg = self.config
         paths = cfg.paths
         self.net.eval()
+        self.net.to("cpu")  # the evaluation and the export run on the CPU (float64 TorchScript)
+        if getattr(self.task, "return_map", None) is not None:
+            self.task.return_map.network.to("cpu")
         recipe = self.recipe()
         errors = {}
         if cfg.eval_samples:
