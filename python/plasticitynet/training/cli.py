@@ -28,7 +28,7 @@ from .evaluate import format_errors
 from .nets import REPRESENTATIONS
 from .return_map_net import RESIDUALS
 from .sampling import TRAINING_SAMPLINGS
-from .trainer import MATERIALS, RETURN_MAP_MATERIAL, TrainConfig, Trainer
+from .trainer import MATERIALS, RETURN_MAP_MATERIAL, SCHEDULES, TrainConfig, Trainer
 
 
 def _positive_int(text: str) -> int:
@@ -90,6 +90,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lr", type=_positive_float, default=0.01, help="Adam learning rate (0.01)")
     p.add_argument("--lr-decay", type=_decay, default=0.95, help="learning-rate factor per decay period (0.95)")
     p.add_argument("--decay-steps", type=_positive_int, default=1000, help="steps per decay period (1000)")
+    p.add_argument(
+        "--schedule",
+        choices=SCHEDULES,
+        default="step",
+        help="learning-rate schedule: step (the paper's: x lr-decay every decay-steps), cosine (to 1%% of lr at the "
+        "last step), onecycle (up to lr and down) (step)",
+    )
+    p.add_argument("--warmup", type=_non_negative_int, default=0, help="steps of linear lr warm-up (step, cosine) (0)")
     p.add_argument("--seed", type=_non_negative_int, default=0, help="seed of the initialisation and batches (0)")
     p.add_argument("--sampling", choices=TRAINING_SAMPLINGS, default="paper", help="(F, F0) distribution: paper, near, or mixed (half each) (paper)")
     p.add_argument(
@@ -170,6 +178,8 @@ def main(argv=None, root: str | Path | None = None) -> int:
         parser.error(f"--return-map applies to --material metal_nh only, not {args.material}")
     if args.energy_form != "eq8" and args.material == RETURN_MAP_MATERIAL:
         parser.error(f"--energy-form applies to energies, not --material {RETURN_MAP_MATERIAL}")
+    if args.warmup and args.schedule == "onecycle":
+        parser.error("--warmup applies to the step and cosine schedules (onecycle warms up by itself)")
     if args.resume and not out.with_suffix(".ckpt").is_file():
         parser.error(f"--resume: no checkpoint {out.with_suffix('.ckpt')}")
     argv_list = sys.argv[1:] if argv is None else list(argv)
@@ -181,6 +191,8 @@ def main(argv=None, root: str | Path | None = None) -> int:
         lr=args.lr,
         lr_decay=args.lr_decay,
         decay_steps=args.decay_steps,
+        schedule=args.schedule,
+        warmup=args.warmup,
         seed=args.seed,
         sampling=args.sampling,
         rm_loss=args.rm_loss,
@@ -213,7 +225,10 @@ def main(argv=None, root: str | Path | None = None) -> int:
         return 0
     print(
         f"training the {args.dim}D {args.material} {kind}: {config.epochs} steps of batch {config.batch}, "
-        f"lr {config.lr} x{config.lr_decay} every {config.decay_steps}, sampling {config.sampling}, seed {config.seed}"
+        + (f"lr {config.lr} x{config.lr_decay} every {config.decay_steps}" if config.schedule == "step"
+           else f"lr {config.lr} {config.schedule}")
+        + (f" after {config.warmup} warm-up steps" if config.warmup else "")
+        + f", sampling {config.sampling}, seed {config.seed}"
         + (
             f", {config.representation} input, Hessian weight {config.hessian_weight}, energy form {config.energy_form}"
             if args.material != RETURN_MAP_MATERIAL

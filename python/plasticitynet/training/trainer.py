@@ -54,11 +54,17 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 #: Fields that must agree between a checkpoint and the run resuming it (epochs may grow).
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
-    "representation", "hessian_weight", "energy_form", "device_type", "shards",
+    "representation", "hessian_weight", "energy_form", "device_type", "shards", "schedule", "warmup",
 )
 
 #: What checkpoints written before a field existed were trained with.
-_LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1}
+_LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1,
+                  "schedule": "step", "warmup": 0}
+
+#: Learning-rate schedules (--schedule): the paper's step decay (lr x lr_decay every decay_steps), cosine
+#: annealing from lr to lr_min_fraction x lr over the run, and one-cycle (up to lr and down, torch's
+#: OneCycleLR with its default momentum cycling). `warmup` steps ramp the first two linearly from 0.
+SCHEDULES = ("step", "cosine", "onecycle")
 
 #: --device choices besides "cuda:N".
 DEVICES = ("cpu", "cuda", "auto")
@@ -78,6 +84,9 @@ class TrainConfig:
     lr: float = 0.01
     lr_decay: float = 0.95
     decay_steps: int = 1000
+    schedule: str = "step"  # SCHEDULES
+    warmup: int = 0  # steps of linear warm-up (step and cosine schedules)
+    lr_min_fraction: float = 0.01  # cosine: the last step's lr / lr
     seed: int = 0
     sampling: str = "paper"
     rm_loss: str = "radius"  # metal_nh_rm: residual of eq. 13 (return_map_net.RESIDUALS)
@@ -110,6 +119,12 @@ class TrainConfig:
             raise ValueError(f"lr_decay = {self.lr_decay!r}: must be in (0, 1]")
         if self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be >= 0")
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"schedule = {self.schedule!r}: expected one of {', '.join(SCHEDULES)}")
+        if self.warmup < 0 or (self.warmup and self.schedule == "onecycle"):
+            raise ValueError(f"warmup = {self.warmup!r}: must be >= 0, and 0 with the onecycle schedule (it has its own)")
+        if not (0 <= self.lr_min_fraction <= 1):
+            raise ValueError(f"lr_min_fraction = {self.lr_min_fraction!r}: must be in [0, 1]")
         if self.sampling not in TRAINING_SAMPLINGS:
             raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(TRAINING_SAMPLINGS)}")
         if self.rm_loss not in return_map_net.RESIDUALS:
@@ -384,6 +399,24 @@ class TrainResult:
     finished: bool = True
 
 
+def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig):
+    """The learning-rate schedule of `config` (SCHEDULES), stepped once per training step."""
+    if config.schedule == "onecycle":
+        return torch.optim.lr_scheduler.OneCycleLR(optimizer, max_lr=config.lr, total_steps=config.epochs)
+    if config.schedule == "step" and config.warmup == 0:  # the paper's, as in every shipped model's checkpoint
+        return torch.optim.lr_scheduler.StepLR(optimizer, step_size=config.decay_steps, gamma=config.lr_decay)
+    warmup, total, floor = config.warmup, config.epochs, config.lr_min_fraction
+
+    def factor(step: int) -> float:
+        ramp = min(1.0, (step + 1) / warmup) if warmup else 1.0
+        if config.schedule == "step":
+            return ramp * config.lr_decay ** (step // config.decay_steps)
+        t = min(1.0, max(0, step - warmup) / max(1, total - warmup))
+        return ramp * (floor + (1.0 - floor) * 0.5 * (1.0 + math.cos(math.pi * t)))
+
+    return torch.optim.lr_scheduler.LambdaLR(optimizer, factor)
+
+
 class Trainer:
     def __init__(self, config: TrainConfig, parallel: Parallel | None = None):
         self.config = config
@@ -408,9 +441,7 @@ class Trainer:
         self.task = make_task(config, self.device)
         self.net: MLP = self.task.net
         self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
-        self.scheduler = torch.optim.lr_scheduler.StepLR(
-            self.optimizer, step_size=config.decay_steps, gamma=config.lr_decay
-        )
+        self.scheduler = make_scheduler(self.optimizer, config)
         self.step = 0  # number of completed steps
         self.wall = 0.0  # training seconds, summed over sessions
         self.log_rows: list[tuple] = []
@@ -424,6 +455,8 @@ class Trainer:
             return self.device.type
         if key == "shards":
             return self.shards
+        if key == "schedule" and self.config.schedule != "step":  # its shape depends on the run's length
+            return f"{self.config.schedule}:{self.config.epochs}:{self.config.lr_min_fraction}"
         return getattr(self.config, key)
 
     # checkpoints
@@ -564,6 +597,8 @@ class Trainer:
             "lr": cfg.lr,
             "decay": cfg.lr_decay,
             "decay_steps": cfg.decay_steps,
+            "schedule": cfg.schedule,
+            "warmup": cfg.warmup,
             "sampling": cfg.sampling,
             "seed": cfg.seed,
             "wall_seconds": round(self.wall, 1),
