@@ -173,3 +173,40 @@ def test_resume_after_a_kill_equals_an_uninterrupted_run(tmp_path):
     assert a["step"] == b["step"] == 300
     for name in a["model"]:
         assert torch.equal(a["model"][name], b["model"][name]), name
+
+
+def test_cosine_schedule_warms_up_then_anneals_to_its_floor(tmp_path):
+    trainer = Trainer(_config(tmp_path, epochs=30, batch=16, lr=0.02, schedule="cosine", warmup=5, lr_min_fraction=0.1))
+    trainer.run()
+    lrs = [r[2] for r in trainer.log_rows]
+    assert lrs[:5] == pytest.approx([0.004, 0.008, 0.012, 0.016, 0.02])
+    assert lrs[5] == pytest.approx(0.02)
+    assert all(a >= b for a, b in zip(lrs[5:], lrs[6:]))  # non-increasing after the warm-up
+    assert lrs[-1] == pytest.approx(0.002, rel=0.05)  # near lr_min_fraction x lr at the end
+    assert trainer.recipe()["schedule"] == "cosine" and trainer.recipe()["warmup"] == 5
+
+
+def test_onecycle_rises_and_falls(tmp_path):
+    trainer = Trainer(_config(tmp_path, epochs=40, batch=16, schedule="onecycle"))
+    trainer.run()
+    lrs = [r[2] for r in trainer.log_rows]
+    peak = lrs.index(max(lrs))
+    assert 0 < peak < 39 and max(lrs) == pytest.approx(0.01) and lrs[-1] < 1e-4 and lrs[0] < 0.002
+
+
+@pytest.mark.parametrize("kwargs, message", [(dict(schedule="linear"), "schedule"),
+                                             (dict(schedule="onecycle", warmup=3), "warmup"),
+                                             (dict(lr_min_fraction=2.0), "lr_min_fraction")])
+def test_bad_schedules_are_refused(tmp_path, kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        _config(tmp_path, **kwargs)
+
+
+def test_resume_with_another_schedule_or_length_is_refused(tmp_path):
+    Trainer(_config(tmp_path, epochs=10, schedule="cosine")).run(stop_at=3)
+    with pytest.raises(ValueError, match="schedule"):
+        Trainer(_config(tmp_path, epochs=20, schedule="cosine", resume=True))  # its shape depends on the length
+    with pytest.raises(ValueError, match="schedule"):
+        Trainer(_config(tmp_path, epochs=10, schedule="step", resume=True))
+    resumed = Trainer(_config(tmp_path, epochs=10, schedule="cosine", resume=True))
+    assert resumed.step == 3
