@@ -43,7 +43,8 @@ def _median_time(fn, steps: int, device: torch.device) -> float:
     return statistics.median(times)
 
 
-def bench(material: str, dim: int, batch: int, steps: int, device: torch.device = torch.device("cpu")) -> dict:
+def bench(material: str, dim: int, batch: int, steps: int, device: torch.device = torch.device("cpu"),
+          profile: bool = False) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = TrainConfig(material=material, dim=dim, batch=batch, out=os.path.join(tmp, "m.pt"), progress=False)
         task = make_task(cfg, device)
@@ -76,6 +77,18 @@ def bench(material: str, dim: int, batch: int, steps: int, device: torch.device 
     t_targets = _median_time(lambda k: targets(b), steps, device)
     t_network = _median_time(network_step, steps, device)
     t_full = _median_time(full_step, steps, device)
+    if profile:
+        from torch.profiler import ProfilerActivity
+        from torch.profiler import profile as torch_profile
+
+        activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
+        with torch_profile(activities=activities) as prof:
+            full_step(steps + 1)
+            if device.type == "cuda":
+                torch.cuda.synchronize(device)
+        sort = "cuda_time_total" if device.type == "cuda" else "self_cpu_time_total"
+        print(f"\n{material} {dim}D batch {batch}: one training step, top operators by {sort}")
+        print(prof.key_averages().table(sort_by=sort, row_limit=15))
     return {
         "material": material, "dim": dim, "widths": net.widths, "batch": batch,
         "sample_s": t_sample, "targets_s": t_targets, "network_s": t_network, "step_s": t_full,
@@ -102,6 +115,8 @@ def main() -> None:
     p.add_argument("--materials", nargs="+", default=["metal"], help="energy materials (hardening input: 9/19 wide)")
     p.add_argument("--dims", type=int, nargs="+", default=[2, 3])
     p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:N or auto (cpu)")
+    p.add_argument("--profile", action="store_true",
+                   help="also print torch.profiler's top operators of one full training step per case")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     device = resolve_device(args.device)
@@ -115,7 +130,7 @@ def main() -> None:
     for material in args.materials:
         for dim in args.dims:
             for log2 in args.batches:
-                r = bench(material, dim, 1 << log2, args.steps, device)
+                r = bench(material, dim, 1 << log2, args.steps, device, args.profile)
                 print(
                     f"{material:<9}{dim:>4} {str(r['widths']):<20}{r['batch']:>7}{r['step_s']:>9.3f}{1 / r['step_s']:>9.2f}"
                     f"{r['batch'] / r['step_s']:>11.0f}{r['batch'] / r['network_s']:>11.0f}"
