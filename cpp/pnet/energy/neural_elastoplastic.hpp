@@ -113,8 +113,8 @@ private:
 
     std::vector<Mat<dim>> F0_;
     std::vector<Mat<dim>> stress_;  // Ptilde(F0, h), dimensionless (eq. 8's form)
-    std::vector<PolarSVD<dim>> svd0_;
-    std::vector<double> network_h_;  // the network's hardening input (clamped to its range)  // clamped SVD of F0 (eq. 8, the material's return mapping)
+    std::vector<PolarSVD<dim>> svd0_;  // clamped SVD of F0 (eq. 8, the material's return mapping)
+    std::vector<double> network_h_;    // the network's hardening input (clamped to its range)
     // The correction and offset need the network at F0: computed by ensure_correction() when an
     // evaluation first needs them (not at all where every evaluation is at the reference).
     mutable bool correction_ready_ = false;
