@@ -210,3 +210,17 @@ def test_resume_with_another_schedule_or_length_is_refused(tmp_path):
         Trainer(_config(tmp_path, epochs=10, schedule="step", resume=True))
     resumed = Trainer(_config(tmp_path, epochs=10, schedule="cosine", resume=True))
     assert resumed.step == 3
+
+
+@pytest.mark.parametrize("material, hessian_weight", [("snow", 0.0), ("metal", 0.1), ("metal_nh_rm", 0.0)])
+def test_the_weighted_mean_of_the_shards_losses_is_the_whole_batchs_loss(tmp_path, material, hessian_weight):
+    """What the all-reduce relies on: the batch's loss (Hessian term and its random directions included)
+    is its shards' losses averaged with the weights the tasks report (equal parts for the energies, the
+    yielding samples for eq. 13)."""
+    trainer = Trainer(_config(tmp_path, material=material, dim=3, batch=64, hessian_weight=hessian_weight))
+    whole = trainer.task.loss(5, 4).item()
+    parts, weights = [], []
+    for k in (0, 2):
+        parts.append(trainer.task.loss(5, 4, (k, k + 2)).item())
+        weights.append(float(trainer.task.loss_weight))
+    assert whole == pytest.approx(sum(w * l for w, l in zip(weights, parts)) / sum(weights), rel=1e-5)

@@ -196,7 +196,7 @@ class DeformationBatch:
         return self.F.shape[0]
 
 
-def _shard_parts(n: int, shards: int, shard_range: tuple[int, int] | None) -> tuple[int, range]:
+def shard_parts(n: int, shards: int, shard_range: tuple[int, int] | None) -> tuple[int, range]:
     """(samples per part, the parts drawn) of a batch of n split into `shards` parts."""
     if n <= 0:
         raise ValueError(f"n = {n}: must be > 0")
@@ -226,7 +226,7 @@ def sample_batch(
     a data-parallel run of W processes draws parts [r S/W, (r + 1) S/W) on rank r, and the union over
     the ranks is the batch a single process draws with the same `shards`. shard_range selects those
     parts (default: all)."""
-    size, parts = _shard_parts(n, shards, shard_range)
+    size, parts = shard_parts(n, shards, shard_range)
     return DeformationBatch.cat([_sample_part(spec, size, seed, step, stream, dtype, device, k) for k in parts])
 
 
@@ -280,7 +280,7 @@ def sample_return_map_states(
 ):
     """(Sigma, h) for the learned return mapping (paper sec. 4.3, appendix A.2.4):
     Sigma = e^eps, eps ~ U[-1, 1]^d, h ~ U[0, 1] (von Mises h = tau_Y / (2 mu)); shards as sample_batch."""
-    size, parts = _shard_parts(n, shards, shard_range)
+    size, parts = shard_parts(n, shards, shard_range)
     drawn = [_return_map_part(dim, size, seed, step, stream, dtype, device, k) for k in parts]
     return torch.cat([p[0] for p in drawn]), torch.cat([p[1] for p in drawn])
 

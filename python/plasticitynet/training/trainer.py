@@ -44,7 +44,9 @@ from . import return_map_net
 from .energy import ENERGY_FORMS, energy_loss, psi_gradient, stress_directional_derivative
 from .export import energy_metadata, export_model, return_map_metadata, script_network, sha256_of
 from .nets import MLP, REPRESENTATIONS, make_energy_net, make_mlp, return_map_widths
-from .sampling import SAMPLINGS, TRAINING_SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec
+from .sampling import (
+    SAMPLINGS, TRAINING_SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec, shard_parts,
+)
 from .targets import ElastoplasticStress, nondimensional_material
 
 #: --material choices: the energies of the four presets and the learned return mapping of metal_nh.
@@ -250,12 +252,17 @@ class EnergyTask:
             P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h)
             P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
         b32 = b.to(torch.float32)
+        self.loss_weight = float(len(b))  # the loss is a mean over these samples
         weight = self.config.hessian_weight
         v = Sv = None
         if weight > 0.0:
             d = self.config.dim
-            g = generator_for(self.config.seed, step, "hessian", self.device, shard_range[0] if shard_range else 0)
-            v = torch.randn(len(b), d, d, dtype=torch.float64, device=self.device, generator=g)
+            size, parts = shard_parts(self.config.batch, shards, shard_range)  # a direction stream per part
+            v = torch.cat([
+                torch.randn(size, d, d, dtype=torch.float64, device=self.device,
+                            generator=generator_for(self.config.seed, step, "hessian", self.device, k))
+                for k in parts
+            ])
             with torch.no_grad():
                 Sv = stress_directional_derivative(self.stress, b.F, b.h, v).float()
             v = v.float()
@@ -307,7 +314,10 @@ class ReturnMapTask:
             self.config.dim, self.config.batch, self.config.seed, step, device=self.device, shards=shards,
             shard_range=shard_range,
         )
-        return return_map_net.return_map_loss(self.net, self.material, Sigma.float(), h.float(), self.config.rm_loss)
+        Sigma, h = Sigma.float(), h.float()
+        # Eq. 13 is a mean over the yielding samples: their number weighs this part's loss across processes.
+        self.loss_weight = return_map_net.yielding(self.material, Sigma, h).sum()
+        return return_map_net.return_map_loss(self.net, self.material, Sigma, h, self.config.rm_loss)
 
     def curve_error(self) -> dict:
         Sigma, h = sample_return_map_states(self.config.dim, CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
@@ -502,12 +512,16 @@ class Trainer:
         self.eval_header = tuple(state["eval_header"])
 
     def _average_across_processes(self, loss: torch.Tensor) -> torch.Tensor:
-        """All-reduce the parameter gradients and the loss in one flat buffer, divided by the world size:
-        the gradient of the global batch's mean loss (equal parts per process). Returns the global loss."""
+        """All-reduce the parameter gradients and the loss in one flat buffer, each process's weighted by
+        the number of samples its mean is over (task.loss_weight: its part of the batch, or its yielding
+        samples for eq. 13): the gradient of the global batch's loss. Returns the global loss."""
         params = [p for p in self.net.parameters() if p.grad is not None]
-        flat = torch.cat([p.grad.reshape(-1) for p in params] + [loss.detach().reshape(1).to(params[0].grad.dtype)])
+        dtype = params[0].grad.dtype
+        w = torch.as_tensor(self.task.loss_weight, dtype=dtype, device=self.device).reshape(1)
+        flat = torch.cat([p.grad.reshape(-1) * w for p in params] + [loss.detach().reshape(1).to(dtype) * w, w])
         dist.all_reduce(flat)
-        flat /= self.parallel.world
+        total = flat[-1]
+        flat = flat[:-1] / total if total > 0 else flat[:-1] * 0.0
         offset = 0
         for p in params:
             n = p.grad.numel()
