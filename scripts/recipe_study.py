@@ -82,6 +82,11 @@ RUNS = [
     Run("sand2d_b512_cosine", "sand", 2, 512, 40000, "cosine", warmup=1000),
     Run("metal2d_b512_cosine", "metal", 2, 512, 40000, "cosine", warmup=1000),
     Run("metalnh2d_b512_cosine", "metal_nh", 2, 512, 40000, "cosine", warmup=1000),
+    # Training precision: the network and loss in float32 (every run above) against float64, metal_2d
+    # (exact gradient-field targets: pure approximation and optimisation error), same batches.
+    Run("metal2d_b512_cosine10k", "metal", 2, 512, 10000, "cosine", warmup=250, note="float32"),
+    Run("metal2d_b512_cosine10k_fp64", "metal", 2, 512, 10000, "cosine", warmup=250, note="float64",
+        extra=("--precision", "float64")),
 ]
 
 #: The shipped models' batch (their recipe in models/MANIFEST).

@@ -53,6 +53,29 @@ def test_return_map_training_lowers_the_loss(tmp_path):
     assert _loss_factor(trainer.log_rows) > 20
 
 
+@pytest.mark.parametrize("material", ["snow", "metal_nh_rm"])
+def test_float64_training_follows_float32(tmp_path, material):
+    """--precision float64: the network and the loss in float64 (parameters, Adam state, recipe), from the
+    same initialisation and batches as float32: the first loss agrees to float32's round-off, and a resume
+    in the other precision is refused."""
+    kw = dict(material=material, epochs=5, batch=64, checkpoint_every=5, hessian_weight=0.1 if material == "snow" else 0.0)
+    lo = Trainer(_config(tmp_path / "32", **kw))
+    hi = Trainer(_config(tmp_path / "64", precision="float64", **kw))
+    assert all(q.dtype == torch.float64 for q in hi.net.parameters())
+    assert all(q.dtype == torch.float32 for q in lo.net.parameters())
+    for a, b in zip(lo.net.parameters(), hi.net.parameters()):
+        assert torch.equal(a.double(), b)  # float64 starts from float32's initial weights
+    lo.run()
+    hi.run()
+    first32, first64 = lo.log_rows[0][1], hi.log_rows[0][1]
+    assert first32 != first64 and abs(first32 - first64) <= 1e-5 * abs(first64)
+    assert hi.recipe()["dtype"] == "float64" and lo.recipe()["dtype"] == "float32"
+    with pytest.raises(ValueError, match="precision"):
+        Trainer(_config(tmp_path / "64", resume=True, **{**kw, "epochs": 10}))
+    with pytest.raises(ValueError, match="precision = 'float16'"):
+        _config(tmp_path, precision="float16")
+
+
 def test_lr_schedule(tmp_path):
     trainer = Trainer(_config(tmp_path, epochs=12, batch=16, lr=0.02, lr_decay=0.5, decay_steps=5))
     trainer.run(stop_at=12)

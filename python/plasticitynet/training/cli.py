@@ -3,7 +3,7 @@
     python train.py --material {sand,snow,metal,metal_nh,metal_nh_rm} --dim {2,3}
                     [--epochs --batch --lr --lr-decay --decay-steps --seed --sampling --out --resume
                      --return-map FILE --checkpoint-every N --eval-every N --eval-samples N --threads N
-                     --device cpu|cuda|cuda:N|auto --shards N]
+                     --device cpu|cuda|cuda:N|auto --precision float32|float64 --shards N]
 
 Several processes (data parallel, torch.distributed): torchrun --nproc-per-node W train.py ... (gloo on
 the CPU, NCCL with --device cuda, one GPU per process); across machines, torchrun's --nnodes /
@@ -147,6 +147,13 @@ def build_parser() -> argparse.ArgumentParser:
         "available) (cpu)",
     )
     p.add_argument(
+        "--precision",
+        choices=PRECISIONS,
+        default="float32",
+        help="the network's floating-point type in training (samples and targets are float64, the exported "
+        "model float64 either way) (float32)",
+    )
+    p.add_argument(
         "--shards",
         type=_non_negative_int,
         default=0,
@@ -208,6 +215,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
         progress=not args.no_progress,
         threads=args.threads,
         device=args.device,
+        precision=args.precision,
         shards=args.shards,
         command="python train.py " + shlex.join(argv_list),
     )

@@ -1,5 +1,5 @@
 """The training loop (paper sec. 5.1, appendix A.1): Adam, learning rate lr decayed by lr_decay every
-decay_steps steps (StepLR), one fresh batch of `batch` samples per epoch (= step), float32.
+decay_steps steps (StepLR), one fresh batch of `batch` samples per epoch (= step), the network in float32 (or float64: precision).
 The paper's recipe is the default: lr 0.01, x0.95 every 1000 steps, batch 2^16, 20000 epochs.
 
 Outputs beside the model file OUT (default models/{material}_{dim}d.pt):
@@ -56,12 +56,12 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 #: Fields that must agree between a checkpoint and the run resuming it (epochs may grow).
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
-    "representation", "hessian_weight", "energy_form", "device_type", "shards", "schedule", "warmup",
+    "representation", "hessian_weight", "energy_form", "device_type", "shards", "schedule", "warmup", "precision",
 )
 
 #: What checkpoints written before a field existed were trained with.
 _LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1,
-                  "schedule": "step", "warmup": 0}
+                  "schedule": "step", "warmup": 0, "precision": "float32"}
 
 #: Learning-rate schedules (--schedule): the paper's step decay (lr x lr_decay every decay_steps), cosine
 #: annealing from lr to lr_min_fraction x lr over the run, and one-cycle (up to lr and down, torch's
@@ -75,6 +75,10 @@ DEVICES = ("cpu", "cuda", "auto")
 #: (disjoint from the final evaluation, which uses steps 0, 1, ...).
 CURVE_SAMPLES = 1 << 14
 CURVE_STEP = 1_000_000
+
+
+#: The network's floating-point types in training (the exported model is float64 either way).
+PRECISIONS = ("float32", "float64")
 
 
 @dataclass
@@ -104,6 +108,7 @@ class TrainConfig:
     progress: bool = True
     threads: int = 0  # 0: torch's default
     device: str = "cpu"  # DEVICES or "cuda:N"
+    precision: str = "float32"  # PRECISIONS: the network's parameters and the loss (samples and targets: float64)
     shards: int = 0  # parts of each batch with their own random stream; 0: the data-parallel world size
     command: str = ""  # the command line, recorded in the metadata
 
@@ -121,6 +126,8 @@ class TrainConfig:
             raise ValueError(f"lr_decay = {self.lr_decay!r}: must be in (0, 1]")
         if self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be >= 0")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision = {self.precision!r}: expected one of {', '.join(PRECISIONS)}")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"schedule = {self.schedule!r}: expected one of {', '.join(SCHEDULES)}")
         if self.warmup < 0 or (self.warmup and self.schedule == "onecycle"):
@@ -235,7 +242,8 @@ class EnergyTask:
             self.return_map_info = {"type": "learned", "file": rel, "sha256": sha256_of(config.return_map)}
         self.stress = ElastoplasticStress(self.material, self.return_map)
         self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed)
-        self.net.to(device)
+        self.dtype = getattr(torch, config.precision)
+        self.net.to(device=device, dtype=self.dtype)
         self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
 
     def _h(self, h: torch.Tensor):
@@ -243,7 +251,7 @@ class EnergyTask:
 
     def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
         """Eq. 9 on batch `step` (the parts shard_range of its `shards`): samples and targets in float64
-        (no grad), the network in float32."""
+        (no grad), the network in config.precision."""
         b = sample_batch(
             self.spec, self.config.batch, self.config.seed, step, device=self.device, shards=shards,
             shard_range=shard_range,
@@ -251,7 +259,7 @@ class EnergyTask:
         with torch.no_grad():
             P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h)
             P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
-        b32 = b.to(torch.float32)
+        bn = b.to(self.dtype)
         self.loss_weight = float(len(b))  # the loss is a mean over these samples
         weight = self.config.hessian_weight
         v = Sv = None
@@ -264,24 +272,24 @@ class EnergyTask:
                 for k in parts
             ])
             with torch.no_grad():
-                Sv = stress_directional_derivative(self.stress, b.F, b.h, v).float()
-            v = v.float()
+                Sv = stress_directional_derivative(self.stress, b.F, b.h, v).to(self.dtype)
+            v = v.to(self.dtype)
         return energy_loss(
-            self.net, b32.F, b32.F0, self._h(b32.h), P.float(), P0.float(), weight, v, Sv, self.loss_parts,
+            self.net, bn.F, bn.F0, self._h(bn.h), P.to(self.dtype), P0.to(self.dtype), weight, v, Sv, self.loss_parts,
             self.config.energy_form,
         )
 
     def curve_error(self) -> dict:
-        """Relative RMS gradient error of the float32 net on CURVE_SAMPLES held-out samples, per sampling."""
+        """Relative RMS gradient error of the training net on CURVE_SAMPLES held-out samples, per sampling."""
         out = {}
         for s in SAMPLINGS:
             b = sample_batch(self.spec.with_(sampling=s), CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
             b = b.to(device=self.device)  # drawn on the CPU: the same held-out set on every device
             with torch.no_grad():
-                P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).float()
-                P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).float()
-            b32 = b.to(torch.float32)
-            g = psi_gradient(self.net, b32.F, b32.F0, self._h(b32.h), P0, form=self.config.energy_form).detach()
+                P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).to(self.dtype)
+                P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).to(self.dtype)
+            bn = b.to(self.dtype)
+            g = psi_gradient(self.net, bn.F, bn.F0, self._h(bn.h), P0, form=self.config.energy_form).detach()
             out[s] = float(((g - P) ** 2).sum() / (P**2).sum()) ** 0.5
         return out
 
@@ -307,14 +315,15 @@ class ReturnMapTask:
         self.device = device
         self.material = nondimensional_material("metal_nh", config.dim)
         self.net = make_mlp(return_map_widths(config.dim), config.seed)
-        self.net.to(device)
+        self.dtype = getattr(torch, config.precision)
+        self.net.to(device=device, dtype=self.dtype)
 
     def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
         Sigma, h = sample_return_map_states(
             self.config.dim, self.config.batch, self.config.seed, step, device=self.device, shards=shards,
             shard_range=shard_range,
         )
-        Sigma, h = Sigma.float(), h.float()
+        Sigma, h = Sigma.to(self.dtype), h.to(self.dtype)
         # Eq. 13 is a mean over the yielding samples: their number weighs this part's loss across processes.
         self.loss_weight = return_map_net.yielding(self.material, Sigma, h).sum()
         return return_map_net.return_map_loss(self.net, self.material, Sigma, h, self.config.rm_loss)
@@ -324,7 +333,7 @@ class ReturnMapTask:
         Sigma, h = Sigma.to(self.device), h.to(self.device)
         with torch.no_grad():
             loss = return_map_net.return_map_loss(
-                self.net, self.material, Sigma.float(), h.float(), self.config.rm_loss
+                self.net, self.material, Sigma.to(self.dtype), h.to(self.dtype), self.config.rm_loss
             )
         return {"heldout_loss": float(loss)}
 
@@ -617,7 +626,7 @@ class Trainer:
             "seed": cfg.seed,
             "wall_seconds": round(self.wall, 1),
             "optimizer": "adam",
-            "dtype": "float32",
+            "dtype": cfg.precision,
             "threads": torch.get_num_threads(),
             "device": str(self.device),
             "processes": self.parallel.world,
