@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import shlex
 import sys
 from pathlib import Path
 
@@ -21,6 +22,20 @@ from plasticitynet.training.export import sha256_of
 
 #: The models this release ships (issue 3), in training order.
 SHIPPED = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_rm_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d")
+
+
+def shipped_command(command: str | None, path: Path) -> str | None:
+    """The command that writes `path`: the recorded one without --resume and without an --out naming another folder (a model
+    trained elsewhere, e.g. by scripts/recipe_study.py, and copied into models/ is written there by the
+    same command with train.py's default output, models/<material>_<dim>d.pt)."""
+    if command is None:
+        return None
+    words = [w for w in shlex.split(command) if w != "--resume"]  # a resumed run is the same run
+    if "--out" in words:
+        k = words.index("--out")
+        if Path(words[k + 1]).name != path.name or "models" not in Path(words[k + 1]).parts:
+            del words[k : k + 2]
+    return shlex.join(words)
 
 
 def entry(path: Path) -> dict:
@@ -35,7 +50,7 @@ def entry(path: Path) -> dict:
         "material": meta["material"]["name"],
         "dim": meta["dim"],
         "widths": meta["widths"],
-        "command": recipe.get("command"),
+        "command": shipped_command(recipe.get("command"), path),
         **(
             {
                 "representation": meta.get("representation", "raw"),
@@ -54,6 +69,7 @@ def entry(path: Path) -> dict:
         "seed": recipe.get("seed"),
         "wall_seconds": recipe.get("wall_seconds"),
         "threads": recipe.get("threads"),
+        **({"schedule": recipe["schedule"], "warmup": recipe.get("warmup", 0)} if "schedule" in recipe else {}),
         "errors": meta.get("errors"),
         "return_map": meta.get("return_map"),
         "loss_curve": f"{stem}_loss.png" if (path.parent / f"{stem}_loss.png").exists() else None,

@@ -87,6 +87,12 @@ RUNS = [
     Run("metal2d_b512_cosine10k", "metal", 2, 512, 10000, "cosine", warmup=250, note="float32"),
     Run("metal2d_b512_cosine10k_fp64", "metal", 2, 512, 10000, "cosine", warmup=250, note="float64",
         extra=("--precision", "float64")),
+    # Width and depth (Table 2's [7, 32, 32, 32, 1] against twice as wide and one layer deeper), snow_2d:
+    # the target farthest from a gradient field, where capacity might buy the most.
+    Run("snow2d_w64_b512_cosine", "snow", 2, 512, 40000, "cosine", warmup=1000, note="hidden 64 64 64",
+        extra=("--hidden", "64", "64", "64")),
+    Run("snow2d_d4_b512_cosine", "snow", 2, 512, 40000, "cosine", warmup=1000, note="hidden 32 32 32 32",
+        extra=("--hidden", "32", "32", "32", "32")),
 ]
 
 #: The shipped models' batch (their recipe in models/MANIFEST).
@@ -119,10 +125,11 @@ def read_curve(model: Path) -> list[dict]:
 
 
 def _recipe_and_errors(model: Path) -> tuple[dict, dict]:
+    """The model's recipe (with its network's widths) and its final held-out errors."""
     from plasticitynet.model import read_model_file
 
     metadata = read_model_file(str(model))[1]
-    return metadata["recipe"], metadata.get("errors", {})
+    return {**metadata["recipe"], "widths": metadata.get("widths")}, metadata.get("errors", {})
 
 
 def summarize(runs: list[Run], out_dir: Path) -> None:
@@ -168,16 +175,18 @@ def summarize(runs: list[Run], out_dir: Path) -> None:
     lines = ["# Training recipes: held-out error against compute (scripts/recipe_study.py)", "",
              "Every run: mixed sampling, principal input, Hessian weight 0.1, seed 0, 1 thread; errors are the",
              "final evaluation on 10^5 held-out samples (relative RMS gradient error, %).", "",
-             "| run | model | batch | steps | schedule | wall s | paper 1x | near 1x | note |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| run | model | widths | precision | batch | steps | schedule | wall s | paper 1x | near 1x | Hessian near | note |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for run, recipe, errors in rows:
         paper = errors.get("rel_rms", {}).get("paper", {}).get("1x")
         near = errors.get("rel_rms", {}).get("near", {}).get("1x")
         fmt = (lambda x: f"{100 * x:.2f}" if isinstance(x, (int, float)) else "-")
         sched = recipe.get("schedule", "step") + (f" /{recipe.get('decay_steps')}" if recipe.get("schedule", "step") == "step" else "") + (
             f", warm-up {run.warmup}" if run.warmup else "")
-        lines.append(f"| {run.name} | {run.model} | {run.batch} | {recipe.get('epochs')} | {sched} | "
-                     f"{recipe.get('wall_seconds')} | {fmt(paper)} | {fmt(near)} | {run.note} |")
+        hidden = (recipe.get("widths") or [None])[1:-1]
+        lines.append(f"| {run.name} | {run.model} | {'x'.join(map(str, hidden))} | {recipe.get('dtype', 'float32')} | "
+                     f"{run.batch} | {recipe.get('epochs')} | {sched} | {recipe.get('wall_seconds')} | {fmt(paper)} | "
+                     f"{fmt(near)} | {fmt(errors.get('hessian_rel_rms_near'))} | {run.note} |")
     (out_dir / "summary.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -147,6 +147,31 @@ def test_two_process_gloo_training_matches_one_process(tmp_path):
     assert plain.log_rows[0][1] != pytest.approx(one.log_rows[0][1], rel=1e-3)
 
 
+def test_two_machines_through_torchrun_match_one_process(tmp_path):
+    """Two launchers as on two machines (--nnodes 2, --node_rank 0 and 1, one process each, rendezvous over
+    TCP at --master_addr), writing to one shared --out: the same weights as one process with 2 shards."""
+    args = ["--material", "sand", "--dim", "2", "--epochs", "4", "--batch", "64", "--shards", "2",
+            "--eval-samples", "0", "--no-progress", "--checkpoint-every", "2", "--out", str(tmp_path / "shared" / "model.pt")]
+    launchers = [
+        subprocess.Popen(
+            [sys.executable, "-m", "plasticitynet.training.torchrun", "--nnodes", "2", "--node_rank", str(rank),
+             "--nproc_per_node", "1", "--master_addr", "127.0.0.1", "--master_port", "29541", str(TRAIN_PY), *args],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=_environment(), cwd=tmp_path,
+        )
+        for rank in (0, 1)
+    ]
+    outputs = [launcher.communicate(timeout=600)[0] for launcher in launchers]
+    for launcher, output in zip(launchers, outputs):
+        assert launcher.returncode == 0, output[-4000:]
+    assert "2 processes (2 shards)" in outputs[0]
+    two = torch.load(tmp_path / "shared" / "model.ckpt")
+    one = Trainer(_config(tmp_path / "one", material="sand", epochs=4, batch=64, shards=2))
+    one.run()
+    assert two["step"] == 4
+    for name, weight in one.net.state_dict().items():
+        assert (weight - two["model"][name]).abs().max().item() <= 1e-5 * weight.abs().max().item(), name
+
+
 def test_resume_after_a_kill_equals_an_uninterrupted_run(tmp_path):
     """train.py killed (SIGKILL) once a checkpoint is on disk, then resumed: the model of an uninterrupted run."""
     args = ["--material", "sand", "--dim", "2", "--epochs", "300", "--batch", "512", "--eval-samples", "0",

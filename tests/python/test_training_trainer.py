@@ -76,6 +76,21 @@ def test_float64_training_follows_float32(tmp_path, material):
         _config(tmp_path, precision="float16")
 
 
+def test_hidden_widths(tmp_path):
+    """--hidden: any number and width of hidden layers, exported and reloaded with them; a resume with other
+    widths is refused; the default is Table 2's."""
+    kw = dict(material="metal", epochs=4, batch=32, checkpoint_every=2)
+    assert Trainer(_config(tmp_path / "default", **kw)).net.widths == [7, 32, 32, 32, 1]
+    result = train(_config(tmp_path / "deep", hidden=(16, 24, 16, 8), **kw))
+    assert result.metadata["widths"] == [7, 16, 24, 16, 8, 1]
+    model = plasticitynet.load_model(result.paths["model"])
+    assert model.metadata["widths"] == [7, 16, 24, 16, 8, 1]
+    with pytest.raises(ValueError, match="hidden"):
+        Trainer(_config(tmp_path / "deep", resume=True, **{**kw, "epochs": 6}))
+    with pytest.raises(ValueError, match=r"hidden = \[16, 0\]"):
+        _config(tmp_path, hidden=(16, 0))
+
+
 def test_lr_schedule(tmp_path):
     trainer = Trainer(_config(tmp_path, epochs=12, batch=16, lr=0.02, lr_decay=0.5, decay_steps=5))
     trainer.run(stop_at=12)
@@ -168,6 +183,8 @@ def test_train_py_end_to_end(tmp_path):
         (["--material", "sand", "--dim", "2", "--sampling", "far"], "invalid choice: 'far'"),
         (["--material", "sand", "--dim", "2", "--energy-form", "eq9"], "invalid choice: 'eq9'"),
         (["--material", "metal_nh_rm", "--dim", "2", "--energy-form", "global"], "--energy-form applies to energies"),
+        (["--material", "sand", "--dim", "2", "--hidden", "64", "0"], "--hidden: 0 must be > 0"),
+        (["--material", "sand", "--dim", "2", "--precision", "float16"], "invalid choice: 'float16'"),
     ],
 )
 def test_bad_arguments_exit_2(args, message, capsys):

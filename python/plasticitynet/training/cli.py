@@ -3,7 +3,7 @@
     python train.py --material {sand,snow,metal,metal_nh,metal_nh_rm} --dim {2,3}
                     [--epochs --batch --lr --lr-decay --decay-steps --seed --sampling --out --resume
                      --return-map FILE --checkpoint-every N --eval-every N --eval-samples N --threads N
-                     --device cpu|cuda|cuda:N|auto --precision float32|float64 --shards N]
+                     --device cpu|cuda|cuda:N|auto --precision float32|float64 --hidden W.. --shards N]
 
 Several processes (data parallel, torch.distributed): torchrun --nproc-per-node W train.py ... (gloo on
 the CPU, NCCL with --device cuda, one GPU per process); across machines, torchrun's --nnodes /
@@ -28,7 +28,7 @@ from .evaluate import format_errors
 from .nets import REPRESENTATIONS
 from .return_map_net import RESIDUALS
 from .sampling import TRAINING_SAMPLINGS
-from .trainer import MATERIALS, RETURN_MAP_MATERIAL, SCHEDULES, TrainConfig, Trainer
+from .trainer import MATERIALS, PRECISIONS, RETURN_MAP_MATERIAL, SCHEDULES, TrainConfig, Trainer
 
 
 def _positive_int(text: str) -> int:
@@ -147,6 +147,15 @@ def build_parser() -> argparse.ArgumentParser:
         "available) (cpu)",
     )
     p.add_argument(
+        "--hidden",
+        type=_positive_int,
+        nargs="+",
+        default=[],
+        metavar="W",
+        help="the hidden layers' widths, e.g. 64 64 64 64 (default: Table 2's, 32 32 32 in 2D and 64 64 64 in 3D; "
+        "the simulator's fused kernel has Table 2's and a few wider shapes compiled)",
+    )
+    p.add_argument(
         "--precision",
         choices=PRECISIONS,
         default="float32",
@@ -216,6 +225,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
         threads=args.threads,
         device=args.device,
         precision=args.precision,
+        hidden=tuple(args.hidden),
         shards=args.shards,
         command="python train.py " + shlex.join(argv_list),
     )

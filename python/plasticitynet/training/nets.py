@@ -64,13 +64,23 @@ def mlp_input_width(dim: int, has_hardening: bool, representation: str = "raw") 
     return base + (1 if has_hardening else 0)
 
 
-def energy_widths(dim: int, has_hardening: bool, representation: str = "raw") -> list[int]:
-    return [mlp_input_width(dim, has_hardening, representation), *HIDDEN_WIDTHS[dim], 1]
+def hidden_widths(dim: int, hidden=None) -> tuple[int, ...]:
+    """The hidden layers' widths: `hidden` (any number of layers) or Table 2's for `dim`."""
+    if not hidden:
+        return HIDDEN_WIDTHS[dim]
+    hidden = tuple(int(w) for w in hidden)
+    if any(w <= 0 for w in hidden):
+        raise ValueError(f"hidden = {list(hidden)}: widths must be > 0")
+    return hidden
 
 
-def return_map_widths(dim: int) -> list[int]:
+def energy_widths(dim: int, has_hardening: bool, representation: str = "raw", hidden=None) -> list[int]:
+    return [mlp_input_width(dim, has_hardening, representation), *hidden_widths(dim, hidden), 1]
+
+
+def return_map_widths(dim: int, hidden=None) -> list[int]:
     """[d + 1, hidden..., 1]: input [Sigma (d), h]."""
-    return [dim + 1, *HIDDEN_WIDTHS[dim], 1]
+    return [dim + 1, *hidden_widths(dim, hidden), 1]
 
 
 def make_mlp(widths, seed: int) -> MLP:
@@ -109,9 +119,9 @@ class EnergyNet(nn.Module):
         return self.mlp(torch.cat([G, Sigma0, x[:, 2 * m :]], dim=1))
 
 
-def make_energy_net(dim: int, has_hardening: bool, representation: str, seed: int) -> EnergyNet:
-    """An energy network with PyTorch's default initialisation drawn from `seed`."""
-    return EnergyNet(make_mlp(energy_widths(dim, has_hardening, representation), seed), dim, representation)
+def make_energy_net(dim: int, has_hardening: bool, representation: str, seed: int, hidden=None) -> EnergyNet:
+    """An energy network with PyTorch's default initialisation drawn from `seed` (hidden: hidden_widths)."""
+    return EnergyNet(make_mlp(energy_widths(dim, has_hardening, representation, hidden), seed), dim, representation)
 
 
 def energy_input(F: torch.Tensor, F0: torch.Tensor, h: torch.Tensor | None) -> torch.Tensor:

@@ -57,11 +57,13 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
     "representation", "hessian_weight", "energy_form", "device_type", "shards", "schedule", "warmup", "precision",
+    "hidden",
 )
 
 #: What checkpoints written before a field existed were trained with.
 _LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1,
-                  "schedule": "step", "warmup": 0, "precision": "float32"}
+                  "schedule": "step", "warmup": 0, "precision": "float32",
+                  "hidden": []}
 
 #: Learning-rate schedules (--schedule): the paper's step decay (lr x lr_decay every decay_steps), cosine
 #: annealing from lr to lr_min_fraction x lr over the run, and one-cycle (up to lr and down, torch's
@@ -108,6 +110,7 @@ class TrainConfig:
     progress: bool = True
     threads: int = 0  # 0: torch's default
     device: str = "cpu"  # DEVICES or "cuda:N"
+    hidden: tuple = ()  # hidden layers' widths; (): Table 2's (nets.HIDDEN_WIDTHS)
     precision: str = "float32"  # PRECISIONS: the network's parameters and the loss (samples and targets: float64)
     shards: int = 0  # parts of each batch with their own random stream; 0: the data-parallel world size
     command: str = ""  # the command line, recorded in the metadata
@@ -126,6 +129,9 @@ class TrainConfig:
             raise ValueError(f"lr_decay = {self.lr_decay!r}: must be in (0, 1]")
         if self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be >= 0")
+        self.hidden = tuple(int(w) for w in self.hidden)
+        if any(w <= 0 for w in self.hidden):
+            raise ValueError(f"hidden = {list(self.hidden)}: widths must be > 0")
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision = {self.precision!r}: expected one of {', '.join(PRECISIONS)}")
         if self.schedule not in SCHEDULES:
@@ -241,7 +247,7 @@ class EnergyTask:
             rel = os.path.relpath(Path(config.return_map).resolve(), Path(config.out).resolve().parent)
             self.return_map_info = {"type": "learned", "file": rel, "sha256": sha256_of(config.return_map)}
         self.stress = ElastoplasticStress(self.material, self.return_map)
-        self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed)
+        self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed, config.hidden)
         self.dtype = getattr(torch, config.precision)
         self.net.to(device=device, dtype=self.dtype)
         self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
@@ -314,7 +320,7 @@ class ReturnMapTask:
         self.config = config
         self.device = device
         self.material = nondimensional_material("metal_nh", config.dim)
-        self.net = make_mlp(return_map_widths(config.dim), config.seed)
+        self.net = make_mlp(return_map_widths(config.dim, config.hidden), config.seed)
         self.dtype = getattr(torch, config.precision)
         self.net.to(device=device, dtype=self.dtype)
 
@@ -474,6 +480,8 @@ class Trainer:
             return self.device.type
         if key == "shards":
             return self.shards
+        if key == "hidden":
+            return list(self.config.hidden)
         if key == "schedule" and self.config.schedule != "step":  # its shape depends on the run's length
             return f"{self.config.schedule}:{self.config.epochs}:{self.config.lr_min_fraction}"
         return getattr(self.config, key)
