@@ -6,6 +6,9 @@
 #   steps then cosine to 1e-4 (issue 32: the error falls with the number of
 #   optimizer steps, not with samples; notebooks/results/model_eval/recipe/),
 #   one thread: 25-45 min each on one core (two queues side by side with --threads 1);
+#   except snow_2d: batch 8192, 15000 steps, x0.95 every 300 (the small batch gave
+#   12.3% against 9.8%: snow's targets are far from a gradient field, and its
+#   gradient noise calls for the larger batch);
 #   metal_nh_rm_2d (learned return mapping): batch 4096, 20000 steps, x0.95 every 400.
 # The paper's full recipe (batch 2^16, 20000 steps, x0.95 every 1000) remains
 # the default of train.py for a GPU.
@@ -22,6 +25,8 @@ for model in "${models[@]}"; do
   material=${model%_*d}; dim=${model##*_}; dim=${dim%d}
   case "$model" in
     metal_nh_rm_*) schedule=(--batch 4096 --epochs 20000 --decay-steps 400 --lr-decay 0.95 --eval-every 5000) ;;
+    snow_2d)       schedule=(--batch 8192 --epochs 15000 --decay-steps 300 --lr-decay 0.95 --sampling mixed
+                             --eval-every 1000 --representation principal --hessian-weight 0.1) ;;
     *)             schedule=(--batch 512 --epochs 40000 --schedule cosine --warmup 1000 --sampling mixed
                              --eval-every 1600 --representation principal --hessian-weight 0.1) ;;
   esac

@@ -248,13 +248,17 @@ std::shared_ptr<const FusedMlp::Kernel> make_kernel(const MlpWeights& w) {
 // The shapes of Table 2: energy nets [2d^2 (+1 for h), W, W, W, 1] with
 // derivatives in the d^2 entries of F (raw input) or [d^2 + d (+1), W, W, W, 1]
 // with derivatives in the d^2 entries of G (principal input,
-// energy_network.hpp), and return-mapping nets [d + 1, W, W, W, 1].
+// energy_network.hpp), and return-mapping nets [d + 1, W, W, W, 1]; and the
+// principal-input energies twice as wide (train.py --hidden 64 64 64 in 2D,
+// 128 128 128 in 3D).
 constexpr Architecture kArchitectures[] = {
     {8, 32, 4, make_kernel<8, 32, 4>},    {9, 32, 4, make_kernel<9, 32, 4>},
     {18, 64, 9, make_kernel<18, 64, 9>},  {19, 64, 9, make_kernel<19, 64, 9>},
     {6, 32, 4, make_kernel<6, 32, 4>},    {7, 32, 4, make_kernel<7, 32, 4>},
     {12, 64, 9, make_kernel<12, 64, 9>},  {13, 64, 9, make_kernel<13, 64, 9>},
     {3, 32, 0, make_kernel<3, 32, 0>},    {4, 64, 0, make_kernel<4, 64, 0>},
+    {6, 64, 4, make_kernel<6, 64, 4>},    {7, 64, 4, make_kernel<7, 64, 4>},
+    {12, 128, 9, make_kernel<12, 128, 9>}, {13, 128, 9, make_kernel<13, 128, 9>},
 };
 
 const Architecture* find_architecture(const std::vector<int>& widths, int derivative_inputs) {

@@ -27,10 +27,11 @@ TEST(Friction, SmoothedCoulombDerivatives) {
         h[0] = friction_f1_derivative(x, eps);
         EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return friction_f0(y[0], eps); }, g, p, fd,
                                          1e-9, 1e-5));
-        if (h[0] != 0.0)
+        if (h[0] != 0.0) {
             EXPECT_TRUE(test::check_jacobian(
                 [&](const Eigen::VectorXd& y) { return Eigen::VectorXd::Constant(1, friction_f1(y[0], eps)); }, h, p,
                 fd, 1e-9, 1e-5));
+        }
     }
     EXPECT_EQ(fd.checks, 7);
     EXPECT_NEAR(friction_f0(eps, eps), eps, 1e-18) << "C1 at eps";

@@ -163,6 +163,20 @@ INSTANTIATE_TEST_SUITE_P(
                                          Architecture{{19, 64, 64, 64, 1}, 9}),
                        ::testing::Values(1.0, 3.0)));
 
+// The principal-input energies (derivatives in the d^2 entries of G), Table 2's width and twice it.
+INSTANTIATE_TEST_SUITE_P(
+    PrincipalArchitectures, FusedMlpTest,
+    ::testing::Combine(::testing::Values(Architecture{{7, 32, 32, 32, 1}, 4}, Architecture{{13, 64, 64, 64, 1}, 9},
+                                         Architecture{{6, 64, 64, 64, 1}, 4}, Architecture{{7, 64, 64, 64, 1}, 4},
+                                         Architecture{{12, 128, 128, 128, 1}, 9},
+                                         Architecture{{13, 128, 128, 128, 1}, 9}),
+                       ::testing::Values(1.0)));
+
+INSTANTIATE_TEST_SUITE_P(
+    PrincipalArchitectures, FusedMlpDerivativeTest,
+    ::testing::Combine(::testing::Values(Architecture{{7, 64, 64, 64, 1}, 4}, Architecture{{13, 128, 128, 128, 1}, 9}),
+                       ::testing::Values(1.0)));
+
 TEST(FusedMlp, RejectsArchitecturesWithoutAKernel) {
     EXPECT_FALSE(FusedMlp::supports({9, 16, 16, 16, 1}, 4));
     EXPECT_FALSE(FusedMlp::supports({9, 32, 32, 1}, 4));
