@@ -25,7 +25,7 @@ import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -95,8 +95,41 @@ RUNS = [
         extra=("--hidden", "32", "32", "32", "32")),
 ]
 
-#: The shipped models' batch (their recipe in models/MANIFEST).
-SHIPPED_BATCH = 8192
+#: The models the study started from (issue 16's, before the retraining of issue 32): their curves and
+#: recipes are kept under <out>/baseline/ (--baseline COMMIT extracts them from git).
+BASELINE_COMMIT = "df17245"
+BASELINE_MODELS = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d")
+
+
+def extract_baseline(out_dir: Path, commit: str) -> None:
+    """<out>/baseline/<model>_eval.csv and <model>.json (recipe, widths, errors) of models/ at `commit`."""
+    import tempfile
+
+    from plasticitynet.model import read_model_file
+
+    folder = out_dir / "baseline"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in BASELINE_MODELS:
+        def show(path):
+            return subprocess.run(["git", "show", f"{commit}:models/{path}"], cwd=ROOT, capture_output=True,
+                                  check=True).stdout
+        (folder / f"{name}_eval.csv").write_bytes(show(f"{name}_eval.csv"))
+        with tempfile.TemporaryDirectory() as tmp:
+            model = Path(tmp) / f"{name}.pt"
+            model.write_bytes(show(f"{name}.pt"))
+            meta = read_model_file(model)[1]
+        info = {"commit": commit, "recipe": meta["recipe"], "widths": meta["widths"], "errors": meta.get("errors", {})}
+        (folder / f"{name}.json").write_text(json.dumps(info, indent=1) + "\n")
+    print(f"baseline: models/ at {commit} -> {folder}")
+
+
+def _shipped_errors(model_name: str) -> dict | None:
+    """The held-out errors models/MANIFEST records for models/<model_name>.pt (they identify the run it came
+    from: scripts/ship_model.py keeps a model's metadata, errors included)."""
+    for e in json.loads((ROOT / "models" / "MANIFEST").read_text())["models"]:
+        if e["file"] == f"{model_name}.pt":
+            return e.get("errors")
+    return None
 
 
 def run_one(run: Run, out_dir: Path) -> Path:
@@ -144,14 +177,20 @@ def summarize(runs: list[Run], out_dir: Path) -> None:
         if not group:
             continue
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-        shipped = ROOT / "models" / f"{model_name}.pt"
-        if shipped.with_name(f"{model_name}_eval.csv").is_file():
-            curve = read_curve(shipped)
+        shipped_errors = _shipped_errors(model_name)
+        base = out_dir / "baseline" / f"{model_name}.json"
+        if base.is_file():
+            info = json.loads(base.read_text())
+            with open(base.with_name(f"{model_name}_eval.csv")) as f:
+                curve = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+            batch = info["recipe"]["batch"]
             axes[0].plot([c["wall_seconds"] / 60 for c in curve], [100 * c["paper"] for c in curve], "k--", marker="o",
-                         label=f"shipped {model_name} (batch {SHIPPED_BATCH}, step decay)")
-            axes[1].plot([c["step"] * SHIPPED_BATCH for c in curve], [100 * c["paper"] for c in curve], "k--", marker="o")
-            rows.append((Run(f"shipped {model_name}.pt", model_name.split("_")[0], int(model_name[-2]), SHIPPED_BATCH, 0,
-                             note="models/MANIFEST"), *_recipe_and_errors(shipped)))
+                         label=f"before (batch {batch}, step decay)")
+            axes[1].plot([c["step"] * batch for c in curve], [100 * c["paper"] for c in curve], "k--", marker="o")
+            material, dim = model_name.rsplit("_", 1)
+            rows.append((Run(f"before: models/{model_name}.pt", material, int(dim[0]), batch, info["recipe"]["epochs"],
+                             note=f"git {info['commit']}" + ("; still shipped" if info["errors"] == shipped_errors else "")),
+                         {**info["recipe"], "widths": info["widths"]}, info["errors"]))
         for run in group:
             curve = read_curve(out_dir / "runs" / run.name / "model.pt")
             wall = [c["wall_seconds"] / 60 for c in curve]
@@ -171,7 +210,10 @@ def summarize(runs: list[Run], out_dir: Path) -> None:
         fig.savefig(out_dir / f"error_vs_compute_{model_name}.png", dpi=110)
         plt.close(fig)
         for run in group:
-            rows.append((run, *_recipe_and_errors(out_dir / "runs" / run.name / "model.pt")))
+            recipe, errors = _recipe_and_errors(out_dir / "runs" / run.name / "model.pt")
+            if errors and errors == shipped_errors:
+                run = replace(run, note=(run.note + "; " if run.note else "") + f"shipped as models/{model_name}.pt")
+            rows.append((run, recipe, errors))
     lines = ["# Training recipes: held-out error against compute (scripts/recipe_study.py)", "",
              "Every run: mixed sampling, principal input, Hessian weight 0.1, seed 0, 1 thread; errors are the",
              "final evaluation on 10^5 held-out samples (relative RMS gradient error, %).", "",
@@ -198,6 +240,8 @@ def main() -> int:
     p.add_argument("--jobs", type=int, default=2, help="runs at once, one thread each (2)")
     p.add_argument("--list", action="store_true")
     p.add_argument("--summary-only", action="store_true", help="plot and tabulate the finished runs")
+    p.add_argument("--baseline", metavar="COMMIT", help=f"extract the starting models' curves and errors from git "
+                   f"(the study's: {BASELINE_COMMIT}) into <out>/baseline/")
     args = p.parse_args()
     if args.list:
         for run in RUNS:
@@ -208,6 +252,8 @@ def main() -> int:
     if unknown:
         p.error(f"unknown run(s): {', '.join(sorted(unknown))} (see --list)")
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.baseline:
+        extract_baseline(args.out, args.baseline)
     if not args.summary_only:
         with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
             list(pool.map(lambda r: run_one(r, args.out), chosen))
