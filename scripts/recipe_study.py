@@ -87,6 +87,11 @@ RUNS = [
     Run("metal2d_b512_cosine10k", "metal", 2, 512, 10000, "cosine", warmup=250, note="float32"),
     Run("metal2d_b512_cosine10k_fp64", "metal", 2, 512, 10000, "cosine", warmup=250, note="float64",
         extra=("--precision", "float64")),
+    # Width and depth at the float32/float64 pair's budget (batch 512 x 10000 cosine steps), metal_2d:
+    Run("metal2d_w64_b512_cosine10k", "metal", 2, 512, 10000, "cosine", warmup=250, note="hidden 64 64 64",
+        extra=("--hidden", "64", "64", "64")),
+    Run("metal2d_d4_b512_cosine10k", "metal", 2, 512, 10000, "cosine", warmup=250, note="hidden 32 32 32 32",
+        extra=("--hidden", "32", "32", "32", "32")),
     # Width and depth (Table 2's [7, 32, 32, 32, 1] against twice as wide and one layer deeper), snow_2d:
     # the target farthest from a gradient field, where capacity might buy the most.
     Run("snow2d_w64_b512_cosine", "snow", 2, 512, 40000, "cosine", warmup=1000, note="hidden 64 64 64",
