@@ -260,10 +260,17 @@ def main() -> int:
     if args.baseline:
         extract_baseline(args.out, args.baseline)
     if not args.summary_only:
+        # Every run is submitted and waited for: a failed one is reported at the end and leaves the others
+        # running (Executor.map cancels the queued runs at the first failure it returns).
         with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-            list(pool.map(lambda r: run_one(r, args.out), chosen))
+            futures = {run.name: pool.submit(run_one, run, args.out) for run in chosen}
+        failed = [(name, f.exception()) for name, f in futures.items() if f.exception() is not None]
+        for name, err in failed:
+            print(f"[failed] {err}", file=sys.stderr, flush=True)
+    else:
+        failed = []
     summarize(RUNS, args.out)
-    return 0
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":
