@@ -91,6 +91,24 @@ def test_hidden_widths(tmp_path):
         _config(tmp_path, hidden=(16, 0))
 
 
+@pytest.mark.parametrize("material", ["metal", "metal_nh_rm"])
+def test_export_does_not_compile_again(tmp_path, monkeypatch, material):
+    """The network is scripted when training starts and that module (sharing the trained parameters) is
+    exported: compiling at the end re-read the package's source, so editing nets.py during a run broke the
+    export after 40000 steps (TorchScript 'Don't support conversion in JoinedStr' at a shifted line)."""
+    trainer = Trainer(_config(tmp_path, material=material, epochs=3, batch=32, eval_samples=64))
+
+    def no_compiling(*args, **kwargs):
+        raise RuntimeError("compiled at export")
+
+    monkeypatch.setattr(torch.jit, "script", no_compiling)
+    result = trainer.run()
+    assert result.finished and result.paths["model"].is_file()
+    exported = torch.jit.load(str(result.paths["model"]))
+    for (name, a), b in zip(trainer.net.state_dict().items(), exported.state_dict().values()):
+        assert b.dtype == torch.float64 and torch.equal(a.double().cpu(), b), name
+
+
 def test_lr_schedule(tmp_path):
     trainer = Trainer(_config(tmp_path, epochs=12, batch=16, lr=0.02, lr_decay=0.5, decay_steps=5))
     trainer.run(stop_at=12)

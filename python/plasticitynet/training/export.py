@@ -62,12 +62,15 @@ def sha256_of(path: str | os.PathLike) -> str:
     return digest.hexdigest()
 
 
-def script_network(net: MLP) -> torch.jit.ScriptModule:
-    """A float64 TorchScript copy of `net` (forward(x) -> N(x), (B, 1)), in eval mode."""
-    net64 = copy.deepcopy(net).to(torch.float64).eval()
+def script_network(net: MLP | torch.jit.ScriptModule) -> torch.jit.ScriptModule:
+    """A float64 TorchScript copy of `net` (forward(x) -> N(x), (B, 1)), in eval mode. `net` may be a
+    ScriptModule already (the trainer scripts its network when training starts, sharing its parameters:
+    compiling reads the class's source file, which may have changed by the end of a long run)."""
+    with torch.no_grad():  # a ScriptModule's copy clones its tensors: under no_grad they are leaves again
+        net64 = copy.deepcopy(net).to(torch.float64).eval()
     for p in net64.parameters():
         p.requires_grad_(True)
-    return torch.jit.script(net64)
+    return net64 if isinstance(net64, torch.jit.ScriptModule) else torch.jit.script(net64)
 
 
 def _layer_parameters(net: nn.Module) -> list[list[str]]:

@@ -250,6 +250,7 @@ class EnergyTask:
         self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed, config.hidden)
         self.dtype = getattr(torch, config.precision)
         self.net.to(device=device, dtype=self.dtype)
+        self.scripted = torch.jit.script(self.net)  # compiled now, exported at the end: it shares the parameters
         self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
 
     def _h(self, h: torch.Tensor):
@@ -308,7 +309,7 @@ class EnergyTask:
     def in_memory_model(self, metadata: dict):
         from ..model import LearnedEnergy
 
-        return LearnedEnergy(script_network(self.net), metadata, return_map=self.return_map)
+        return LearnedEnergy(script_network(self.scripted), metadata, return_map=self.return_map)
 
 
 class ReturnMapTask:
@@ -323,6 +324,7 @@ class ReturnMapTask:
         self.net = make_mlp(return_map_widths(config.dim, config.hidden), config.seed)
         self.dtype = getattr(torch, config.precision)
         self.net.to(device=device, dtype=self.dtype)
+        self.scripted = torch.jit.script(self.net)  # compiled now, exported at the end: it shares the parameters
 
     def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
         Sigma, h = sample_return_map_states(
@@ -349,7 +351,7 @@ class ReturnMapTask:
     def in_memory_model(self, metadata: dict):
         from ..model import LearnedReturnMap
 
-        return LearnedReturnMap(script_network(self.net), metadata)
+        return LearnedReturnMap(script_network(self.scripted), metadata)
 
 
 def make_task(config: TrainConfig, device: torch.device = torch.device("cpu")):
@@ -668,7 +670,10 @@ class Trainer:
         if cfg.eval_samples:
             errors = evaluate(self.task.in_memory_model(self.task.metadata(recipe)), cfg.eval_samples)
         metadata = self.task.metadata(recipe, errors)
-        export_model(paths["model"], self.net, metadata)
+        # The network compiled when training started (same parameters): a model that cannot be scripted
+        # fails before training rather than after it, and editing the package's source during a long run
+        # does not break its export (compiling reads the class's source file).
+        export_model(paths["model"], self.task.scripted, metadata)
         plot_curves(self.log_rows, self.eval_rows, self.eval_header, paths["plot"], f"{cfg.material} {cfg.dim}D")
         final_loss = self.log_rows[-1][1] if self.log_rows else float("nan")
         return TrainResult(paths, self.step, final_loss, self.wall, errors, metadata, finished=True)
