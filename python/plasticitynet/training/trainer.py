@@ -43,7 +43,7 @@ import torch.distributed as dist
 from . import return_map_net
 from .energy import ENERGY_FORMS, energy_loss, psi_gradient, stress_directional_derivative
 from .export import energy_metadata, export_model, return_map_metadata, script_network, sha256_of
-from .nets import MLP, REPRESENTATIONS, make_energy_net, make_mlp, return_map_widths
+from .nets import MLP, REPRESENTATIONS, hidden_widths, make_energy_net, make_mlp, return_map_widths
 from .sampling import (
     SAMPLINGS, TRAINING_SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec, shard_parts,
 )
@@ -130,8 +130,7 @@ class TrainConfig:
         if self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be >= 0")
         self.hidden = tuple(int(w) for w in self.hidden)
-        if any(w <= 0 for w in self.hidden):
-            raise ValueError(f"hidden = {list(self.hidden)}: widths must be > 0")
+        hidden_widths(self.dim, self.hidden)  # checks them
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision = {self.precision!r}: expected one of {', '.join(PRECISIONS)}")
         if self.schedule not in SCHEDULES:
@@ -224,6 +223,14 @@ class Parallel:
 
 
 # --- tasks: what is trained -------------------------------------------------------------------------
+def _place(net: torch.nn.Module, config: TrainConfig, device: torch.device) -> tuple[torch.dtype, torch.jit.ScriptModule]:
+    """Moves `net` to `device` in config.precision and compiles it now: (dtype, the ScriptModule, which shares
+    net's parameters and is what the trainer exports at the end)."""
+    dtype = getattr(torch, config.precision)
+    net.to(device=device, dtype=dtype)
+    return dtype, torch.jit.script(net)
+
+
 class EnergyTask:
     """The energy MLP of eq. 8, trained with the loss of eq. 9."""
 
@@ -248,9 +255,7 @@ class EnergyTask:
             self.return_map_info = {"type": "learned", "file": rel, "sha256": sha256_of(config.return_map)}
         self.stress = ElastoplasticStress(self.material, self.return_map)
         self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed, config.hidden)
-        self.dtype = getattr(torch, config.precision)
-        self.net.to(device=device, dtype=self.dtype)
-        self.scripted = torch.jit.script(self.net)  # compiled now, exported at the end: it shares the parameters
+        self.dtype, self.scripted = _place(self.net, config, device)
         self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
 
     def _h(self, h: torch.Tensor):
@@ -322,9 +327,7 @@ class ReturnMapTask:
         self.device = device
         self.material = nondimensional_material("metal_nh", config.dim)
         self.net = make_mlp(return_map_widths(config.dim, config.hidden), config.seed)
-        self.dtype = getattr(torch, config.precision)
-        self.net.to(device=device, dtype=self.dtype)
-        self.scripted = torch.jit.script(self.net)  # compiled now, exported at the end: it shares the parameters
+        self.dtype, self.scripted = _place(self.net, config, device)
 
     def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
         Sigma, h = sample_return_map_states(
