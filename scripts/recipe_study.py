@@ -186,8 +186,7 @@ def summarize(runs: list[Run], out_dir: Path) -> None:
         base = out_dir / "baseline" / f"{model_name}.json"
         if base.is_file():
             info = json.loads(base.read_text())
-            with open(base.with_name(f"{model_name}_eval.csv")) as f:
-                curve = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+            curve = read_curve(base)  # baseline/<model>_eval.csv
             batch = info["recipe"]["batch"]
             axes[0].plot([c["wall_seconds"] / 60 for c in curve], [100 * c["paper"] for c in curve], "k--", marker="o",
                          label=f"before (batch {batch}, step decay)")
@@ -263,9 +262,9 @@ def main() -> int:
         # Every run is submitted and waited for: a failed one is reported at the end and leaves the others
         # running (Executor.map cancels the queued runs at the first failure it returns).
         with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-            futures = {run.name: pool.submit(run_one, run, args.out) for run in chosen}
-        failed = [(name, f.exception()) for name, f in futures.items() if f.exception() is not None]
-        for name, err in failed:
+            futures = [pool.submit(run_one, run, args.out) for run in chosen]
+        failed = [f.exception() for f in futures if f.exception() is not None]
+        for err in failed:
             print(f"[failed] {err}", file=sys.stderr, flush=True)
     else:
         failed = []

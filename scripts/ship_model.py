@@ -15,7 +15,6 @@ atomically.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import sys
@@ -26,8 +25,8 @@ import torch
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "python"))
 
-from plasticitynet.model import METADATA_KEY, read_model_file  # noqa: E402
-from plasticitynet.training.export import sha256_of  # noqa: E402
+from plasticitynet.model import read_model_file  # noqa: E402
+from plasticitynet.training.export import export_model, sha256_of  # noqa: E402
 
 #: The files beside a model, by suffix after its stem.
 SIDECARS = (".csv", "_eval.csv", "_loss.png")
@@ -60,14 +59,7 @@ def main(argv=None) -> int:
     except ValueError as err:
         print(f"ship_model: {err}", file=sys.stderr)
         return 2
-    module = torch.jit.load(str(args.source), map_location="cpu")
-    tmp = dest.with_name(dest.name + f".{os.getpid()}.tmp")
-    try:
-        torch.jit.save(module, str(tmp), _extra_files={METADATA_KEY: json.dumps(meta, indent=2, sort_keys=False)})
-        os.replace(tmp, dest)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    export_model(dest, torch.jit.load(str(args.source), map_location="cpu"), meta)  # atomic, as train.py writes
     copied = [dest.name]
     for suffix in SIDECARS:
         side = args.source.with_name(args.source.stem + suffix)
