@@ -6,7 +6,8 @@ for the 2D net ([9, 32, 32, 32, 1]) and the 3D net ([19, 64, 64, 64, 1]), float3
     .venv/bin/python scripts/bench_training.py [--threads 2] [--batches 14 16] [--steps 5]
         [--materials metal snow] [--dims 2 3] [--device cpu|cuda|auto]
 
-Timings are the median over --steps steps after one warm-up step. A benchmark, not a test: other
+Timings are the median over --steps steps after one warm-up step (the whole step: the mean over whole
+groups of the steps a GPU training prepares together). A benchmark, not a test: other
 jobs on the machine slow it down (the load average is printed).
 """
 
@@ -22,6 +23,7 @@ import torch
 
 from plasticitynet.training import TrainConfig
 from plasticitynet.training.energy import energy_loss
+from plasticitynet.training.frames import principal_frame
 from plasticitynet.training.sampling import sample_batch
 from plasticitynet.training.trainer import make_task, resolve_device
 
@@ -43,10 +45,25 @@ def _median_time(fn, steps: int, device: torch.device) -> float:
     return statistics.median(times)
 
 
+def _mean_time(fn, steps: int, device: torch.device) -> float:
+    """Mean wall time of fn(k), k = 1..steps, after fn(0), synchronised once at the end: the time per call of
+    a run of calls, which is what a training step costs when some calls prepare the following ones."""
+    fn(0)
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    t0 = time.perf_counter()
+    for k in range(1, steps + 1):
+        fn(k)
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return (time.perf_counter() - t0) / steps
+
+
 def bench(material: str, dim: int, batch: int, steps: int, device: torch.device = torch.device("cpu"),
-          profile: bool = False) -> dict:
+          profile: bool = False, hidden=None, hessian_weight: float = 0.0) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = TrainConfig(material=material, dim=dim, batch=batch, out=os.path.join(tmp, "m.pt"), progress=False)
+        cfg = TrainConfig(material=material, dim=dim, batch=batch, out=os.path.join(tmp, "m.pt"), progress=False,
+                          hidden=tuple(hidden or ()), hessian_weight=hessian_weight)
         task = make_task(cfg, device)
     net, spec, stress = task.net, task.spec, task.stress
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
@@ -62,10 +79,11 @@ def bench(material: str, dim: int, batch: int, steps: int, device: torch.device 
     P, P0 = targets(b)
     b32, P, P0 = b.to(torch.float32), P.float(), P0.float()
     h = b32.h if spec.has_hardening else None
+    frame = principal_frame(b32.F0) if net.representation == "principal" else None  # as training prepares it
 
     def network_step(k):
         opt.zero_grad(set_to_none=True)
-        energy_loss(net, b32.F, b32.F0, h, P, P0).backward()
+        energy_loss(net, b32.F, b32.F0, h, P, P0, frame=frame).backward()
         opt.step()
 
     def full_step(k):
@@ -76,7 +94,8 @@ def bench(material: str, dim: int, batch: int, steps: int, device: torch.device 
     t_sample = _median_time(sample, steps, device)
     t_targets = _median_time(lambda k: targets(b), steps, device)
     t_network = _median_time(network_step, steps, device)
-    t_full = _median_time(full_step, steps, device)
+    # whole prefetch groups (a GPU training prepares task.prefetch_steps steps' inputs at once)
+    t_full = _mean_time(full_step, -(-steps // task.prefetch_steps) * task.prefetch_steps, device)
     if profile:
         from torch.profiler import ProfilerActivity
         from torch.profiler import profile as torch_profile
@@ -115,6 +134,8 @@ def main() -> None:
     p.add_argument("--materials", nargs="+", default=["metal"], help="energy materials (hardening input: 9/19 wide)")
     p.add_argument("--dims", type=int, nargs="+", default=[2, 3])
     p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:N or auto (cpu)")
+    p.add_argument("--hidden", type=int, nargs="+", default=None, help="hidden widths (default: Table 2's)")
+    p.add_argument("--hessian-weight", type=float, default=0.0, help="the Hessian term of the loss (0: off)")
     p.add_argument("--profile", action="store_true",
                    help="also print torch.profiler's top operators of one full training step per case")
     args = p.parse_args()
@@ -130,14 +151,15 @@ def main() -> None:
     for material in args.materials:
         for dim in args.dims:
             for log2 in args.batches:
-                r = bench(material, dim, 1 << log2, args.steps, device, args.profile)
+                r = bench(material, dim, 1 << log2, args.steps, device, args.profile, args.hidden, args.hessian_weight)
                 print(
                     f"{material:<9}{dim:>4} {str(r['widths']):<20}{r['batch']:>7}{r['step_s']:>9.3f}{1 / r['step_s']:>9.2f}"
                     f"{r['batch'] / r['step_s']:>11.0f}{r['batch'] / r['network_s']:>11.0f}"
                     f"{r['sample_s']:>10.3f}{r['targets_s']:>10.3f}{r['network_s']:>8.3f}",
                     flush=True,
                 )
-    print("samples/s: whole training step; net only: loss (double backward) + Adam on a ready batch")
+    print("samples/s: whole training step (mean over whole prefetch groups); net only: loss (double backward) + Adam "
+          "on a ready batch with its frame")
 
 
 if __name__ == "__main__":

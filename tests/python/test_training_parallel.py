@@ -249,3 +249,22 @@ def test_the_weighted_mean_of_the_shards_losses_is_the_whole_batchs_loss(tmp_pat
         parts.append(trainer.task.loss(5, 4, (k, k + 2)).item())
         weights.append(float(trainer.task.loss_weight))
     assert whole == pytest.approx(sum(w * l for w, l in zip(weights, parts)) / sum(weights), rel=1e-5)
+
+
+def test_a_complete_run_from_another_device_is_finished_here(tmp_path):
+    """A checkpoint written on another device (here: its device_type rewritten to cuda) resumes only if it has
+    no steps left: then it is exported and evaluated on this one (how a GPU machine's run is shipped with this
+    machine's torch); with steps left it is refused, naming the device."""
+    trainer = Trainer(_config(tmp_path, epochs=4))
+    trainer.run()
+    ckpt, model = trainer.config.paths["checkpoint"], trainer.config.paths["model"]
+    state = torch.load(ckpt)
+    state["config"]["device_type"] = "cuda"
+    torch.save(state, ckpt)
+    model.unlink()
+    with pytest.raises(ValueError, match="device_type = 'cuda'"):
+        Trainer(_config(tmp_path, epochs=6, resume=True))
+    resumed = Trainer(_config(tmp_path, epochs=4, resume=True))
+    for p, q in zip(trainer.net.parameters(), resumed.net.parameters()):
+        assert torch.equal(p, q)
+    assert resumed.run().finished and model.is_file()

@@ -295,3 +295,48 @@ def test_trainer_with_hessian_weight_runs_and_resumes(tmp_path):
         Trainer(TrainConfig(out=str(tmp_path / "b.pt"), hessian_weight=0.0, resume=True, **common))
     with pytest.raises(ValueError, match="representation"):
         Trainer(TrainConfig(out=str(tmp_path / "b.pt"), hessian_weight=0.3, representation="raw", resume=True, **common))
+
+
+@pytest.mark.parametrize("form", ["eq8", "global"])
+def test_loss_with_the_frame_computed_beforehand_is_the_same_loss(form):
+    """energy_loss given principal_frame of the F0 slot (what training prepares for many steps at once) gives
+    the loss and parameter gradient of the network computing the frame itself, in 3D (Jacobi SVD) and for a
+    form whose F0 slot is the identity."""
+    dim, n = 3, 40
+    m = nondimensional_material("sand", dim)
+    b = sample_batch(sampling_spec(m, "paper"), n, seed=5)
+    stress = ElastoplasticStress(m)
+    P = stress.from_factors(b.U, b.Sigma, b.V, b.h)
+    P0 = stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
+    v = torch.randn(n, dim, dim, dtype=D64, generator=torch.Generator().manual_seed(6))
+    Jv = stress_directional_derivative(stress, b.F, b.h, v)
+    net = make_energy_net(dim, False, "principal", seed=2).double()
+    from plasticitynet.training.energy import network_reference
+
+    results = []
+    for frame in (None, principal_frame(network_reference(form, b.F0))):
+        net.zero_grad()
+        loss = energy_loss(net, b.F, b.F0, None, P, P0, 0.3, v, Jv, form=form, frame=frame)
+        loss.backward()
+        results.append((loss.detach(), [torch.zeros_like(p) if p.grad is None else p.grad.clone() for p in net.parameters()]))
+    (l1, g1), (l2, g2) = results
+    assert torch.equal(l1, l2)
+    for a, c in zip(g1, g2):
+        torch.testing.assert_close(a, c, rtol=1e-12, atol=0.0)
+
+
+def test_steps_prepared_together_train_as_steps_prepared_one_by_one(tmp_path):
+    """A GPU training prepares PREFETCH_STEPS steps' batches, targets and frames in one go; forced on the CPU
+    (groups of 4, resumed in the middle of a group), it trains the same weights as one step at a time."""
+    common = dict(material="snow", dim=3, epochs=7, batch=32, progress=False, eval_samples=0, checkpoint_every=3,
+                  hessian_weight=0.2)
+    one = Trainer(TrainConfig(out=str(tmp_path / "a.pt"), **common))
+    one.run()
+    grouped = Trainer(TrainConfig(out=str(tmp_path / "b.pt"), **common))
+    grouped.task.prefetch_steps = 4
+    grouped.run(stop_at=3)
+    resumed = Trainer(TrainConfig(out=str(tmp_path / "b.pt"), resume=True, **common))
+    resumed.task.prefetch_steps = 4
+    resumed.run()
+    for p, q in zip(one.net.parameters(), resumed.net.parameters()):
+        torch.testing.assert_close(p, q, rtol=1e-6, atol=1e-7)

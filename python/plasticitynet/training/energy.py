@@ -148,6 +148,7 @@ def energy_loss(
     S_direction: torch.Tensor | None = None,
     parts: dict | None = None,
     form: str = "eq8",
+    frame: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
 ) -> torch.Tensor:
     """Eq. 9: mean ||grad_F Psi(F, F0, h) - Ptilde(F, h)||_F^2 with, for eq. 8,
     grad_F Psi = grad_F N(F, F0, h) - grad_F N(F0, F0, h) + Ptilde(F0, h).
@@ -158,7 +159,9 @@ def energy_loss(
 
     With hessian_weight > 0, plus hessian_weight * mean ||Hess_F N(F, F0, h) v - J v||^2 / ||v||^2 for the
     directions v = `direction` (B, d, d) and the targets J v = `S_direction` (B, d, d), J = d Ptilde/dF
-    (see the module docstring). `parts`, if given, receives the two terms' values (floats)."""
+    (see the module docstring). `parts`, if given, receives the two terms' values (floats).
+    `frame`, for a principal network (nets.EnergyNet), is principal_frame of its F0 slot (B rows) computed
+    beforehand: the same loss without the polar SVD inside it."""
     B = F.shape[0]
     slot = network_reference(form, F0)
     if form == "global":
@@ -169,7 +172,13 @@ def energy_loss(
         first = torch.cat([F, _correction_point(form, F0)]).detach().requires_grad_(True)
         second = torch.cat([slot, slot])
         hh = None if h is None else torch.cat([h, h])
-    N = net(energy_input(first, second, hh))
+    if frame is None:
+        N = net(energy_input(first, second, hh))
+    else:
+        copies = first.shape[0] // B  # the frame of the F0 slot, once per block of `first`
+        U, Sigma0, V = (torch.cat([t] * copies) for t in frame)
+        rest = first.new_zeros(first.shape[0], 0) if hh is None else hh.reshape(-1, 1).to(first.dtype)
+        N = net.in_frame(first, U, Sigma0, V, rest)
     (dN,) = torch.autograd.grad(N.sum(), first, create_graph=True)
     grad_psi = dN[:B]
     if form != "global":

@@ -113,10 +113,19 @@ class EnergyNet(nn.Module):
         d = self.dim
         m = d * d
         B = x.shape[0]
-        F = x[:, :m].reshape(B, d, d)
         U, Sigma0, V = principal_frame(x[:, m : 2 * m].reshape(B, d, d))
-        G = to_frame(F, U, V).reshape(B, m)
-        return self.mlp(torch.cat([G, Sigma0, x[:, 2 * m :]], dim=1))
+        return self.in_frame(x[:, :m].reshape(B, d, d), U, Sigma0, V, x[:, 2 * m :])
+
+    def in_frame(
+        self, F: torch.Tensor, U: torch.Tensor, Sigma0: torch.Tensor, V: torch.Tensor, rest: torch.Tensor
+    ) -> torch.Tensor:
+        """A principal network on F (B, d, d) given the frame (U, Sigma0, V) = principal_frame(F0) and the
+        inputs after F0 (`rest`, (B, 0) or (B, 1) with h): forward(x) with the frame computed beforehand.
+        Training computes the frames of many batches at once this way (the frame is a constant of F, and
+        its batched polar SVD is most of a step's small kernels on a GPU)."""
+        B = F.shape[0]
+        G = to_frame(F, U, V).reshape(B, self.dim * self.dim)
+        return self.mlp(torch.cat([G, Sigma0, rest], dim=1))
 
 
 def make_energy_net(dim: int, has_hardening: bool, representation: str, seed: int, hidden=None) -> EnergyNet:

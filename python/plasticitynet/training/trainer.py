@@ -41,11 +41,12 @@ import torch
 import torch.distributed as dist
 
 from . import return_map_net
-from .energy import ENERGY_FORMS, energy_loss, psi_gradient, stress_directional_derivative
+from .energy import ENERGY_FORMS, energy_loss, network_reference, psi_gradient, stress_directional_derivative
+from .frames import principal_frame
 from .export import energy_metadata, export_model, return_map_metadata, script_network, sha256_of
 from .nets import MLP, REPRESENTATIONS, hidden_widths, make_energy_net, make_mlp, return_map_widths
 from .sampling import (
-    SAMPLINGS, TRAINING_SAMPLINGS, generator_for, sample_batch, sample_return_map_states, sampling_spec, shard_parts,
+    SAMPLINGS, TRAINING_SAMPLINGS, DeformationBatch, generator_for, sample_batch, sample_return_map_states, sampling_spec, shard_parts,
 )
 from .targets import ElastoplasticStress, nondimensional_material
 
@@ -76,6 +77,8 @@ DEVICES = ("cpu", "cuda", "auto")
 #: Held-out samples of the in-training error curve (eval_every), "eval" stream at this step index
 #: (disjoint from the final evaluation, which uses steps 0, 1, ...).
 CURVE_SAMPLES = 1 << 14
+#: Steps whose inputs a GPU training prepares in one go (EnergyTask._prepare).
+PREFETCH_STEPS = 32
 CURVE_STEP = 1_000_000
 
 
@@ -257,6 +260,10 @@ class EnergyTask:
         self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed, config.hidden)
         self.dtype, self.scripted = _place(self.net, config, device)
         self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
+        # Steps whose batches, targets and frames are prepared together: on a GPU a step is bound by kernel
+        # launches (issue 32's profile), and these are most of them; on the CPU one at a time.
+        self.prefetch_steps = PREFETCH_STEPS if device.type == "cuda" else 1
+        self._prepared: dict = {}
 
     def _h(self, h: torch.Tensor):
         return h if self.spec.has_hardening else None
@@ -264,32 +271,55 @@ class EnergyTask:
     def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
         """Eq. 9 on batch `step` (the parts shard_range of its `shards`): samples and targets in float64
         (no grad), the network in config.precision."""
-        b = sample_batch(
-            self.spec, self.config.batch, self.config.seed, step, device=self.device, shards=shards,
-            shard_range=shard_range,
+        key = (step, shards, shard_range)
+        if key not in self._prepared:
+            self._prepared = self._prepare(step, shards, shard_range)
+        b = self._prepared.pop(key)
+        self.loss_weight = float(len(b["F"]))  # the loss is a mean over these samples
+        return energy_loss(
+            self.net, b["F"], b["F0"], b["h"], b["P"], b["P0"], self.config.hessian_weight, b["v"], b["Sv"],
+            self.loss_parts, self.config.energy_form, b["frame"],
         )
+
+    def _prepare(self, step: int, shards: int, shard_range) -> dict:
+        """The inputs of the loss for steps step .. step + prefetch_steps - 1: each step's batch drawn from its
+        own streams as always, then the targets, the Hessian directions' targets and the principal frames
+        computed for all of them at once (row by row, so a step's numbers do not depend on the grouping)."""
+        cfg, d = self.config, self.config.dim
+        steps = range(step, step + self.prefetch_steps)
+        batches = [
+            sample_batch(self.spec, cfg.batch, cfg.seed, s, device=self.device, shards=shards, shard_range=shard_range)
+            for s in steps
+        ]
+        sizes = [len(b) for b in batches]
+        b = DeformationBatch.cat(batches)
         with torch.no_grad():
-            P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h)
-            P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h)
+            P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).to(self.dtype)
+            P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).to(self.dtype)
         bn = b.to(self.dtype)
-        self.loss_weight = float(len(b))  # the loss is a mean over these samples
-        weight = self.config.hessian_weight
         v = Sv = None
-        if weight > 0.0:
-            d = self.config.dim
-            size, parts = shard_parts(self.config.batch, shards, shard_range)  # a direction stream per part
+        if cfg.hessian_weight > 0.0:
+            size, parts = shard_parts(cfg.batch, shards, shard_range)  # a direction stream per part
             v = torch.cat([
                 torch.randn(size, d, d, dtype=torch.float64, device=self.device,
-                            generator=generator_for(self.config.seed, step, "hessian", self.device, k))
-                for k in parts
+                            generator=generator_for(cfg.seed, s, "hessian", self.device, k))
+                for s in steps for k in parts
             ])
             with torch.no_grad():
                 Sv = stress_directional_derivative(self.stress, b.F, b.h, v).to(self.dtype)
             v = v.to(self.dtype)
-        return energy_loss(
-            self.net, bn.F, bn.F0, self._h(bn.h), P.to(self.dtype), P0.to(self.dtype), weight, v, Sv, self.loss_parts,
-            self.config.energy_form,
-        )
+        frame = (None,) * 3
+        if self.net.representation == "principal":
+            frame = principal_frame(network_reference(cfg.energy_form, bn.F0))
+        fields = {"F": bn.F, "F0": bn.F0, "h": bn.h if self.spec.has_hardening else None, "P": P, "P0": P0,
+                  "v": v, "Sv": Sv, "U": frame[0], "Sigma0": frame[1], "V": frame[2]}
+        split = {k: (None,) * len(sizes) if t is None else t.split(sizes) for k, t in fields.items()}
+        prepared = {}
+        for i, s in enumerate(steps):
+            one = {k: parts[i] for k, parts in split.items()}
+            one["frame"] = None if one["U"] is None else (one.pop("U"), one.pop("Sigma0"), one.pop("V"))
+            prepared[(s, shards, shard_range)] = one
+        return prepared
 
     def curve_error(self) -> dict:
         """Relative RMS gradient error of the training net on CURVE_SAMPLES held-out samples, per sampling."""
@@ -519,8 +549,13 @@ class Trainer:
             state = torch.load(path, map_location=self.device)
         except Exception as err:
             raise ValueError(f"{path}: unreadable checkpoint ({err})") from None
+        # The device decides the random streams of the batches to come: a run that has none left (trained on a
+        # GPU machine, say) may be finished -- exported and evaluated -- on another device.
+        complete = int(state["step"]) >= self.config.epochs
         for key in _RESUME_FIELDS:
             saved = state["config"].get(key, _LEGACY_FIELDS.get(key))
+            if key == "device_type" and complete:
+                continue
             if saved != self._resume_value(key):
                 raise ValueError(f"{path}: checkpoint has {key} = {saved!r}, this run {self._resume_value(key)!r}")
         self.net.load_state_dict(state["model"])
