@@ -69,6 +69,8 @@ def entry(path: Path) -> dict:
         "seed": recipe.get("seed"),
         "wall_seconds": recipe.get("wall_seconds"),
         "threads": recipe.get("threads"),
+        "device": recipe.get("device"),
+        **({"exported_on": recipe["exported_on"]} if "exported_on" in recipe else {}),
         **({"schedule": recipe["schedule"], "warmup": recipe.get("warmup", 0)} if "schedule" in recipe else {}),
         "errors": meta.get("errors"),
         "return_map": meta.get("return_map"),

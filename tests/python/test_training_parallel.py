@@ -267,4 +267,6 @@ def test_a_complete_run_from_another_device_is_finished_here(tmp_path):
     resumed = Trainer(_config(tmp_path, epochs=4, resume=True))
     for p, q in zip(trainer.net.parameters(), resumed.net.parameters()):
         assert torch.equal(p, q)
-    assert resumed.run().finished and model.is_file()
+    result = resumed.run()
+    assert result.finished and model.is_file()
+    assert result.metadata["recipe"]["device"] == "cuda" and result.metadata["recipe"]["exported_on"] == "cpu"

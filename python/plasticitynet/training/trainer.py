@@ -33,6 +33,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import shlex
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -503,6 +504,7 @@ class Trainer:
         self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
         self.scheduler = make_scheduler(self.optimizer, config)
         self.step = 0  # number of completed steps
+        self.trained_device_type = self.device.type  # a checkpoint's, when resumed
         self.wall = 0.0  # training seconds, summed over sessions
         self.log_rows: list[tuple] = []
         self.eval_rows: list[tuple] = []
@@ -552,6 +554,7 @@ class Trainer:
         # The device decides the random streams of the batches to come: a run that has none left (trained on a
         # GPU machine, say) may be finished -- exported and evaluated -- on another device.
         complete = int(state["step"]) >= self.config.epochs
+        self.trained_device_type = state["config"].get("device_type", _LEGACY_FIELDS["device_type"])
         for key in _RESUME_FIELDS:
             saved = state["config"].get(key, _LEGACY_FIELDS.get(key))
             if key == "device_type" and complete:
@@ -691,6 +694,16 @@ class Trainer:
             recipe["rm_loss"] = cfg.rm_loss
         if cfg.command:
             recipe["command"] = cfg.command
+        if self.trained_device_type != self.device.type:  # trained elsewhere, finished here
+            recipe["device"] = self.trained_device_type
+            recipe["exported_on"] = str(self.device)
+            if cfg.command:
+                words = shlex.split(cfg.command)
+                if "--device" in words:
+                    words[words.index("--device") + 1] = self.trained_device_type
+                else:
+                    words += ["--device", self.trained_device_type]
+                recipe["command"] = shlex.join(words)
         return recipe
 
     def finish(self) -> TrainResult:
