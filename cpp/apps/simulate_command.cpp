@@ -41,6 +41,7 @@ constexpr const char* kUsage =
     "                     [--color speed|hardening] [--model FILE.pt] [--trust-model] [--vtu]\n"
     "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--outer-iteration newton|fixed_point]\n"
+    "                     [--time-integrator backward_euler|bdf2]\n"
     "                     [--hessian auto|network|tangent] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
@@ -62,7 +63,7 @@ struct Options {
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
     std::optional<double> analytic_regularizer;
-    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, kinematic_start;
+    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, kinematic_start, time_integrator;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
     std::optional<bool> fixed_point_keep_hessian;
 };
@@ -121,7 +122,12 @@ Options parse(int argc, char** argv) {
             o.lazy_hessian = number(value());
         else if (arg == "--preconditioner")
             o.preconditioner = value();
-        else if (arg == "--outer-iteration") {
+        else if (arg == "--time-integrator") {
+            const std::string text = value();
+            if (text != "backward_euler" && text != "bdf2")
+                throw UsageError("--time-integrator: expected backward_euler or bdf2, got \"" + text + "\"");
+            o.time_integrator = text;
+        } else if (arg == "--outer-iteration") {
             const std::string text = value();
             if (text != "newton" && text != "fixed_point")
                 throw UsageError("--outer-iteration: expected newton or fixed_point, got \"" + text + "\"");
@@ -721,6 +727,7 @@ int simulate_command(int argc, char** argv) {
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         if (o.fixed_point_anderson) settings.implicit.fixed_point_anderson = *o.fixed_point_anderson;
         if (o.outer_iteration) settings.implicit.outer_iteration = *o.outer_iteration;
+        if (o.time_integrator) settings.implicit.time_integrator = *o.time_integrator;
         if (o.hessian) settings.implicit.hessian = *o.hessian;
         if (o.kinematic_start) settings.implicit.kinematic_start = *o.kinematic_start;
         if (o.fixed_point_inexact) settings.implicit.fixed_point_inexact = *o.fixed_point_inexact;

@@ -106,11 +106,26 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     StepStats stats;
     stats.dt = dt;
     const std::size_t n = system_.mesh.nodes();
-    VecX v_star(dim * n);
-    for (std::size_t i = 0; i < n; ++i)
-        v_star.template segment<dim>(dim * i) =
-            system_.fixed_node[i] ? system_.prescribed_velocity[i] : Vec<dim>(state.v[i] + dt * system_.gravity);
-    potential_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
+    // The potential is over v with x(v) = x^ + h v (fem_integrator.hpp): backward Euler x^ = x^n, h = dt;
+    // BDF2, once the state has history, x^ = (4 x^n - x^{n-1}) / 3, h = 2/3 dt.
+    const bool bdf2 = options_.time_integrator == "bdf2" && state.x_previous.size() == n;
+    const double h = bdf2 ? 2.0 / 3.0 * dt : dt;
+    std::vector<Vec<dim>> x_hat = state.x;
+    VecX at_start(dim * n), v_star(dim * n);  // at_start: the v that leaves x at x^n (0 for backward Euler)
+    for (std::size_t i = 0; i < n; ++i) {
+        Vec<dim> v_hat = state.v[i];
+        if (bdf2) {
+            x_hat[i] = (4.0 * state.x[i] - state.x_previous[i]) / 3.0;
+            v_hat = (4.0 * state.v[i] - state.v_previous[i]) / 3.0;
+        }
+        const Vec<dim> rest = bdf2 ? Vec<dim>((state.x[i] - x_hat[i]) / h) : Vec<dim>::Zero();
+        at_start.template segment<dim>(dim * i) = rest;
+        // A kinematic node's v puts it on its target x^n + dt v_prescribed.
+        v_star.template segment<dim>(dim * i) = system_.fixed_node[i]
+                                                    ? Vec<dim>(rest + (dt / h) * system_.prescribed_velocity[i])
+                                                    : Vec<dim>(v_hat + h * system_.gravity);
+    }
+    potential_.begin_step(x_hat, v_star, h, state.plastic_inverse, fixed_components_);
     potential_.set_material_state(system_.element_object, state.hardening);
 
     NewtonOptions newton = options_.newton_options();
@@ -124,7 +139,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     // lands the crushed frame in another minimum: metal_nh_frame_2d at 1e-2 ended
     // 2.36% of the diagonal from the ground truth instead of 0.52%.)
     VecX v = v_star;
-    double alpha = potential_.max_step(VecX::Zero(v.size()), v_star);
+    double alpha = potential_.max_step(at_start, v_star - at_start);
     if (alpha < 1.0 && has_kinematic_ && options_.kinematic_start == "last_velocity") {
         // CCD usually holds v* back because gravity's increment pushes the nodes resting on the
         // ground into it, and the uniform scaling then holds the plate back too. The free nodes at
@@ -133,19 +148,20 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         VecX last(v.size());
         for (std::size_t i = 0; i < n; ++i)
             last.template segment<dim>(dim * i) = system_.fixed_node[i] ? system_.prescribed_velocity[i] : state.v[i];
-        if (potential_.max_step(VecX::Zero(v.size()), last) >= 1.0) {
+        last = at_start + (dt / h) * last;  // the unknowns that move x^n by dt times those velocities
+        if (potential_.max_step(at_start, last - at_start) >= 1.0) {
             v = last;
             alpha = 1.0;
         }
     }
-    if (alpha < 1.0) v *= alpha;
+    if (alpha < 1.0) v = at_start + alpha * (v_star - at_start);
 
     // The elastic predictor keeps the paper's fixed point's first F0 near the solution; the Newton
     // outer iteration evaluates the energy only within a step of its reference and needs none
     // (ImplicitOptions::fem_predictor).
     const bool predictor = iterates_reference_ && (options_.outer_iteration == "fixed_point" || options_.fem_predictor);
     if (predictor) {
-        predictor_.begin_step(state.x, v_star, dt, state.plastic_inverse, fixed_components_);
+        predictor_.begin_step(x_hat, v_star, h, state.plastic_inverse, fixed_components_);
         predictor_.set_material_state(system_.element_object, state.hardening);
         predictor_.set_reference({});
         try {
@@ -186,7 +202,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         double worst = 0.0;
         for (Eigen::Index k = 0; k < v.size(); ++k)
             if (fixed_components_[k]) worst = std::max(worst, std::abs(v[k] - v_star[k]));
-        return worst * dt;  // m
+        return worst * h;  // m
     };
     if (has_kinematic_ && deviation() > 0.0) {
         try {
@@ -230,9 +246,11 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     const auto after_solve = std::chrono::steady_clock::now();
 
     double max_speed = 0.0;
+    state.x_previous = state.x;  // the history of the next step (BDF2)
+    state.v_previous = state.v;
     for (std::size_t i = 0; i < n; ++i) {
         state.v[i] = v.template segment<dim>(dim * i);
-        state.x[i] += dt * state.v[i];
+        state.x[i] = x_hat[i] + h * state.v[i];
         if (!state.x[i].allFinite())
             throw SimulationError("step " + std::to_string(step_index) + ": node " + std::to_string(i) +
                                   " has a non-finite position");

@@ -15,6 +15,11 @@
 // crushes a 3 mm element by a sixth), far from where the network was trained. Then x += dt v, and per element
 //   F^E_tr = F(x) (F^P)^-1,  F^E = Z(F^E_tr, h),  (F^P)^-1 = F^-1 F^E,  h updated
 // (the materials' return mappings, the same as MPM's).
+// BDF2 (ImplicitOptions::time_integrator "bdf2"): the same potential about x^ = (4 x^n - x^{n-1}) / 3
+// with v* = (4 v^n - v^{n-1}) / 3 + beta dt g and the step beta dt, beta = 2/3: its minimizer satisfies
+// v^{n+1} = v^ + beta dt a(x^{n+1}), x^{n+1} = x^ + beta dt v^{n+1}. A kinematic node's unknown is then
+// the v that puts it on its target; the intersection-free start is the v that leaves x at x^n. A step
+// without history (the first) is backward Euler.
 // Explicit (the ground truth): symplectic Euler with the elastic stress of the
 // admissible F^E and the same contact potential's force, then the same return
 // mapping; a step whose motion CCD finds intersecting is a blow-up.
@@ -61,6 +66,9 @@ struct FemState {
     std::vector<Vec<dim>> x, v;                // nodes, m and m/s
     std::vector<Mat<dim>> plastic_inverse;     // (F^P)^-1 per element
     std::vector<double> hardening;             // per element
+    // The previous step's start (BDF2's history; ImplicitOptions::time_integrator): written by every
+    // implicit step, empty before the first one.
+    std::vector<Vec<dim>> x_previous, v_previous;
 
     /// At rest in the mesh's rest shape, with each element's material's initial hardening.
     static FemState at_rest(const FemSystem<dim>& system);

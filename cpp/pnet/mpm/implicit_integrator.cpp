@@ -116,6 +116,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                 context + ": integrator.outer_iteration: expected \"newton\" or \"fixed_point\", got " + it->dump());
         o.outer_iteration = it->get<std::string>();
     }
+    if (const auto it = block.find("time_integrator"); it != block.end()) {
+        if (!it->is_string() || (*it != "backward_euler" && *it != "bdf2"))
+            throw std::invalid_argument(context + ": integrator.time_integrator: expected \"backward_euler\" or "
+                                        "\"bdf2\", got " + it->dump());
+        o.time_integrator = it->get<std::string>();
+    }
     if (const auto it = block.find("preconditioner"); it != block.end()) {
         if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi" && *it != "ichol"))
             throw std::invalid_argument(
@@ -155,6 +161,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"max_cg_iterations", max_cg_iterations},
             {"cg_tolerance", cg_tolerance},
             {"outer_iteration", outer_iteration},
+            {"time_integrator", time_integrator},
             {"fixed_point_tolerance", fixed_point_tolerance},
             {"max_fixed_point_iterations", max_fixed_point_iterations},
             {"fixed_point_anderson", fixed_point_anderson},
@@ -187,6 +194,9 @@ ImplicitIntegrator<dim>::ImplicitIntegrator(const MpmSystem<dim>& system, Implic
       potential_(*energy_) {
     if (!return_maps_.empty() && return_maps_.size() != system.materials.size())
         throw std::invalid_argument("ImplicitIntegrator: one return map (or null) per object is needed");
+    if (options_.time_integrator != "backward_euler")
+        throw std::invalid_argument("integrator.time_integrator: \"" + options_.time_integrator +
+                                    "\" is implemented for FEM scenes only; MPM steps are backward Euler");
 }
 
 template <int dim>

@@ -58,6 +58,11 @@ struct ImplicitOptions {
     // "newton", F0 = F(v) at every Newton iterate, one solve converged on the true residual; or
     // "fixed_point", the paper's eq. 10, a full solve per F0 (the keys fixed_point_* below).
     std::string outer_iteration = "newton";
+    // The time discretization of the implicit step: "backward_euler" (first order) or "bdf2" (second
+    // order, FEM: x^{n+1} = x^ + beta dt v^{n+1}, v^{n+1} = v^ + beta dt a^{n+1} with beta = 2/3,
+    // x^ = (4 x^n - x^{n-1}) / 3, v^ = (4 v^n - v^{n-1}) / 3: the same incremental potential about x^ with
+    // the step beta dt; the first step, without history, is backward Euler).
+    std::string time_integrator = "backward_euler";
     double fixed_point_tolerance = 1e-3;  // max_p ||F_p(v) - F0_p||_F (plasticitynet)
     // Solves per step (plasticitynet): the fixed point on F0 is converged to
     // fixed_point_tolerance, with this cap. On sand_column_2d at dt 1e-3 one

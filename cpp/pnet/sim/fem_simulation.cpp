@@ -329,7 +329,10 @@ FrameStats FemSimulation<dim>::advance_frame(const std::function<void()>& after_
 
 namespace {
 
-constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'F', 'E', 'M', '1'};
+// Version 2 adds the BDF2 history (a flag, then the previous step's start positions and velocities);
+// version 1 files (no history) still load.
+constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'F', 'E', 'M', '2'};
+constexpr char kMagicVersion1[8] = {'P', 'N', 'E', 'T', 'F', 'E', 'M', '1'};
 constexpr std::size_t kNameBytes = 16;
 
 }  // namespace
@@ -350,6 +353,12 @@ void FemSimulation<dim>::save_checkpoint(const std::string& path) const {
         write_array(out, state_.v);
         write_array(out, state_.plastic_inverse);
         write_array(out, state_.hardening);
+        const std::int64_t history = state_.x_previous.size() == state_.x.size() ? 1 : 0;
+        out.write(reinterpret_cast<const char*>(&history), sizeof history);
+        if (history) {
+            write_array(out, state_.x_previous);
+            write_array(out, state_.v_previous);
+        }
     });
 }
 
@@ -365,7 +374,8 @@ void FemSimulation<dim>::load_checkpoint(const std::string& path) {
     in.read(reinterpret_cast<char*>(&time), sizeof time);
     in.read(digest.data(), 64);
     in.read(name.data(), kNameBytes);
-    if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
+    const bool version1 = in && std::memcmp(magic, kMagicVersion1, sizeof kMagic) == 0;
+    if (!in || (!version1 && std::memcmp(magic, kMagic, sizeof kMagic) != 0))
         throw std::invalid_argument(path + ": not a PlasticityNet FEM checkpoint");
     if (header[0] != kDim) throw std::invalid_argument(path + ": a " + std::to_string(header[0]) + "D checkpoint");
     if (digest != scene_digest_)
@@ -383,11 +393,20 @@ void FemSimulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, s.v, state_.v.size(), path);
     read_array(in, s.plastic_inverse, state_.plastic_inverse.size(), path);
     read_array(in, s.hardening, state_.hardening.size(), path);
+    std::int64_t history = 0;
+    if (!version1) in.read(reinterpret_cast<char*>(&history), sizeof history);
+    if (!in || (history != 0 && history != 1))
+        throw std::invalid_argument(path + ": corrupt checkpoint (the history flag)");
+    if (history) {
+        read_array(in, s.x_previous, state_.x.size(), path);
+        read_array(in, s.v_previous, state_.x.size(), path);
+    }
     in.peek();
     if (!in.eof()) throw std::invalid_argument(path + ": longer than its header says (corrupt checkpoint)");
     // A state no run could have written is refused naming the node or element (see the MPM loader).
     for (std::size_t i = 0; i < s.x.size(); ++i)
-        if (!s.x[i].allFinite() || !s.v[i].allFinite())
+        if (!s.x[i].allFinite() || !s.v[i].allFinite() ||
+            (history && (!s.x_previous[i].allFinite() || !s.v_previous[i].allFinite())))
             throw std::invalid_argument(path + ": node " + std::to_string(i) +
                                         "'s position or velocity is not finite (corrupt checkpoint state)");
     for (std::size_t e = 0; e < s.hardening.size(); ++e)

@@ -28,6 +28,8 @@ void expect_identical(const FemState<dim>& a, const FemState<dim>& b) {
     EXPECT_TRUE(same_bytes(a.v, b.v));
     EXPECT_TRUE(same_bytes(a.plastic_inverse, b.plastic_inverse));
     EXPECT_TRUE(same_bytes(a.hardening, b.hardening));
+    EXPECT_TRUE(same_bytes(a.x_previous, b.x_previous));
+    EXPECT_TRUE(same_bytes(a.v_previous, b.v_previous));
 }
 
 IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
@@ -100,10 +102,12 @@ TEST(FemSimulation, ExplicitConvergesAndImplicitStaysCloseOnTheTinyFrame) {
 }
 
 TEST(FemSimulation, CheckpointThenResumeEqualsAnUninterruptedRun) {
-    for (const std::string integrator : {"lagged", "explicit"}) {
-        SCOPED_TRACE(integrator);
+    for (const std::string variant : {"lagged", "explicit", "lagged bdf2"}) {  // bdf2: the history resumes too
+        SCOPED_TRACE(variant);
+        const std::string integrator = variant.substr(0, variant.find(' '));
         const Scene scene = load_scene(kTinyFrame);
-        const IntegratorSettings settings = settings_for(scene, integrator, integrator == "explicit" ? 0.0 : 1e-2);
+        IntegratorSettings settings = settings_for(scene, integrator, integrator == "explicit" ? 0.0 : 1e-2);
+        if (variant == "lagged bdf2") settings.implicit.time_integrator = "bdf2";
         test::TempDir dir;
         FemSimulation<2> uninterrupted(scene, settings), first(scene, settings), resumed(scene, settings);
         for (int f = 0; f < 3; ++f) uninterrupted.advance_frame();
@@ -162,15 +166,20 @@ TEST(FemSimulation, OneAndTwoThreadsGiveIdenticalFrames) {
     const Scene scene = load_scene(kTinyFrame);
     const int threads = omp_get_max_threads();
     std::vector<FemState<2>> results;
-    for (int t : {1, 2}) {
-        omp_set_num_threads(t);
-        FemSimulation<2> sim(scene, settings_for(scene, "analytic", 1e-2));
-        sim.advance_frame();
-        sim.advance_frame();
-        results.push_back(sim.state());
-    }
+    for (const std::string time_integrator : {"backward_euler", "bdf2"})
+        for (int t : {1, 2}) {
+            omp_set_num_threads(t);
+            IntegratorSettings settings = settings_for(scene, "analytic", 1e-2);
+            settings.implicit.time_integrator = time_integrator;
+            FemSimulation<2> sim(scene, settings);
+            sim.advance_frame();
+            sim.advance_frame();
+            results.push_back(sim.state());
+        }
     omp_set_num_threads(threads);
     expect_identical(results[0], results[1]);
+    expect_identical(results[2], results[3]);
+    EXPECT_FALSE(same_bytes(results[0].x, results[2].x)) << "bdf2 is another integrator";
 }
 
 /// The tiny frame scene with its meshes edited.
