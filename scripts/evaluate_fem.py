@@ -57,6 +57,10 @@ RUNS = {
     "lagged_1e-2": ("lagged", 1e-2, [], None),
     "plasticitynet_1e-2_w0": ("plasticitynet", 1e-2, ["--regularizer", "0"], {"metal_frame_2d"}),
     "plasticitynet_1e-2_exact_rm": ("plasticitynet", 1e-2, ["--return-map", "exact"], {"metal_nh_frame_2d"}),
+    # BDF2 (issue 34) beside the backward-Euler runs above.
+    "plasticitynet_1e-2_bdf2": ("plasticitynet", 1e-2, ["--time-integrator", "bdf2"], None),
+    "analytic_1e-2_bdf2": ("analytic", 1e-2, ["--time-integrator", "bdf2"], {"metal_frame_2d", "metal_frame_3d"}),
+    "lagged_1e-2_bdf2": ("lagged", 1e-2, ["--time-integrator", "bdf2"], None),
 }
 # The same-dt reference each implicit run is also compared with.
 REFERENCE = {"metal_frame_2d": "analytic_1e-2", "metal_nh_frame_2d": "plasticitynet_1e-2_exact_rm",

@@ -518,6 +518,8 @@ def test_fem_analytic_is_refused_for_neo_hookean_metal():
     (dict(solver={"fixed_point_tolerance": float("nan")}), "fixed_point_tolerance"),
     (dict(solver={"max_newton_iterations": 2.5}), "max_newton_iterations"),
     (dict(solver={"preconditioner": "ilu"}), "preconditioner"),
+    (dict(solver={"time_integrator": "rk4"}), "time_integrator"),
+    (dict(integrator="lagged", solver={"time_integrator": "bdf2"}), "time_integrator"),  # MPM: FEM only
     (dict(solver=[1, 2]), "solver"),
 ])
 def test_bad_keyword_is_a_value_or_type_error_naming_it(kwargs, names):
@@ -556,3 +558,15 @@ def test_default_threads_are_every_available_core():
     assert pns.threads() == cores
     stats = sim.step_stats()
     assert stats["reference_updates"][-1] >= 1 and 0.0 < stats["true_residual"][-1] <= 1e-3
+
+
+def test_bdf2_is_a_solver_option_of_fem_scenes():
+    """solver={"time_integrator": "bdf2"} steps a FEM scene with BDF2 (after a backward-Euler first step)."""
+    path = TINY / "metal_frame_2d.json"
+    frames = {}
+    for name in ("backward_euler", "bdf2"):
+        sim = pns.Simulation(path, integrator="lagged", dt=1e-2, solver={"time_integrator": name})
+        assert sim.solver["time_integrator"] == name
+        sim.advance(2)
+        frames[name] = np.array(sim.nodes)
+    assert np.abs(frames["bdf2"] - frames["backward_euler"]).max() > 0.0
