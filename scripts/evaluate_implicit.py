@@ -54,6 +54,9 @@ RUNS = {
     "plasticitynet_1e-3": ("plasticitynet", 1e-3, [], "main", None),
     "plasticitynet_1e-4": ("plasticitynet", 1e-4, [], "main", None),
     "lagged_1e-3": ("lagged", 1e-3, [], "main", None),
+    # BDF2 (issue 34) beside backward Euler.
+    "plasticitynet_1e-3_bdf2": ("plasticitynet", 1e-3, ["--time-integrator", "bdf2"], "time_integrator", None),
+    "lagged_1e-3_bdf2": ("lagged", 1e-3, ["--time-integrator", "bdf2"], "time_integrator", None),
     "plasticitynet_1e-3_w0": ("plasticitynet", 1e-3, ["--regularizer", "0"], "ablation", {"sand_column_2d"}),
     "plasticitynet_1e-3_fp1": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "1"], "ablation", None),
     "plasticitynet_1e-3_fp2": ("plasticitynet", 1e-3, ["--fixed-point-iterations", "2", "--fixed-point-tol", "0"],
@@ -226,7 +229,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenes", nargs="+", default=["sand_column_2d", "snowball_2d"],
                         help="scene names under scenes/ (stiff/sand_column_2d: a stiff variant)")
-    parser.add_argument("--groups", nargs="+", default=["main", "floor"], choices=["main", "floor", "ablation", "fixed_point", "representation"])
+    parser.add_argument("--groups", nargs="+", default=["main", "floor"], choices=["main", "floor", "ablation", "fixed_point", "representation", "time_integrator"])
     parser.add_argument("--runs", nargs="+", help="only these runs (names as in the summary; gt is always run)")
     parser.add_argument("--frames", type=int, default=50)
     parser.add_argument("--threads", type=int, default=2)

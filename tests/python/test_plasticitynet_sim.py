@@ -519,7 +519,6 @@ def test_fem_analytic_is_refused_for_neo_hookean_metal():
     (dict(solver={"max_newton_iterations": 2.5}), "max_newton_iterations"),
     (dict(solver={"preconditioner": "ilu"}), "preconditioner"),
     (dict(solver={"time_integrator": "rk4"}), "time_integrator"),
-    (dict(integrator="lagged", solver={"time_integrator": "bdf2"}), "time_integrator"),  # MPM: FEM only
     (dict(solver=[1, 2]), "solver"),
 ])
 def test_bad_keyword_is_a_value_or_type_error_naming_it(kwargs, names):

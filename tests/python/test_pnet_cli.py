@@ -227,7 +227,6 @@ def test_implicit_options_override_the_scene(tmp_path):
     (["--analytic-regularizer", -1], "--analytic-regularizer must be a finite number >= 0"),
     (["--kinematic-start", "warm"], '--kinematic-start: expected scaled or last_velocity, got "warm"'),
     (["--time-integrator", "euler"], '--time-integrator: expected backward_euler or bdf2, got "euler"'),
-    (["--time-integrator", "bdf2"], 'integrator.time_integrator: "bdf2" is implemented for FEM scenes only'),
 ])
 def test_implicit_usage_errors(tmp_path, args, expected):
     r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", *args)
@@ -535,6 +534,13 @@ def test_kinematic_start_from_the_last_velocities_skips_plate_stages(tmp_path):
         stages[start] = sum(int(r["kinematic_stages"]) for r in rows)
     assert stages["scaled"] > 0, "the plate is held back by CCD in this scene, or the test shows nothing"
     assert stages["last_velocity"] < stages["scaled"]
+
+
+def test_bdf2_is_refused_on_the_coupling_naming_the_key(tmp_path):
+    r = pnet("simulate", TINY / "sand_fem_coupling_2d.json", "--integrator", "lagged", "--frames", 1,
+             "--time-integrator", "bdf2", "--out", tmp_path / "o")
+    assert r.returncode == 2, r.stderr
+    assert 'integrator.time_integrator: "bdf2" is implemented for MPM and FEM scenes' in r.stderr, r.stderr
 
 
 def test_bdf2_runs_a_fem_scene_and_records_itself(tmp_path):

@@ -38,7 +38,7 @@ CoupledImplicitIntegrator2d::CoupledImplicitIntegrator2d(const MpmSystem<2>& mpm
       coupled_(mpm_, fem_, contact) {
     if (options_.time_integrator != "backward_euler")
         throw std::invalid_argument("integrator.time_integrator: \"" + options_.time_integrator +
-                                    "\" is implemented for FEM scenes only; MPM-FEM coupling steps are backward Euler");
+                                    "\" is implemented for MPM and FEM scenes; MPM-FEM coupling steps are backward Euler");
     if (!return_maps_.empty() && return_maps_.size() != mpm.materials.size())
         throw std::invalid_argument("CoupledImplicitIntegrator2d: one return map (or null) per object is needed");
     fem_.set_contact(fem_contact);

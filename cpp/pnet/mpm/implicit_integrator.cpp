@@ -191,12 +191,49 @@ ImplicitIntegrator<dim>::ImplicitIntegrator(const MpmSystem<dim>& system, Implic
       energy_(std::move(energy)),
       return_maps_(std::move(return_maps)),
       grid_(system.origin, system.dx, system.cells),
-      potential_(*energy_) {
+      potential_(*energy_),
+      history_grid_(system.origin, system.dx, system.cells) {
     if (!return_maps_.empty() && return_maps_.size() != system.materials.size())
         throw std::invalid_argument("ImplicitIntegrator: one return map (or null) per object is needed");
-    if (options_.time_integrator != "backward_euler")
-        throw std::invalid_argument("integrator.time_integrator: \"" + options_.time_integrator +
-                                    "\" is implemented for FEM scenes only; MPM steps are backward Euler");
+}
+
+template <int dim>
+void ImplicitIntegrator<dim>::reset(const Particles<dim>&) {
+    previous_v_.clear();
+    rate_.clear();
+    previous_C_.clear();
+    rate_C_.clear();
+}
+
+template <int dim>
+std::vector<Mat<dim>> ImplicitIntegrator<dim>::checkpoint_state() const {
+    const std::size_t n = rate_.size();
+    std::vector<Mat<dim>> state;
+    if (n == 0) return state;
+    state.reserve(3 * n);
+    state.insert(state.end(), previous_C_.begin(), previous_C_.end());
+    state.insert(state.end(), rate_C_.begin(), rate_C_.end());
+    for (std::size_t p = 0; p < n; ++p) {
+        Mat<dim> m = Mat<dim>::Zero();
+        m.col(0) = previous_v_[p];
+        m.col(1) = rate_[p];
+        state.push_back(m);
+    }
+    return state;
+}
+
+template <int dim>
+void ImplicitIntegrator<dim>::restore_checkpoint_state(std::vector<Mat<dim>> state) {
+    reset({});
+    if (state.empty()) return;
+    if (state.size() % 3 != 0) throw std::invalid_argument("implicit integrator state: expected 3 n matrices (BDF2 history)");
+    const std::size_t n = state.size() / 3;
+    previous_C_.assign(state.begin(), state.begin() + n);
+    rate_C_.assign(state.begin() + n, state.begin() + 2 * n);
+    for (std::size_t p = 0; p < n; ++p) {
+        previous_v_.push_back(state[2 * n + p].col(0));
+        rate_.push_back(state[2 * n + p].col(1));
+    }
 }
 
 template <int dim>
@@ -212,6 +249,14 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     solve_boundary.slip_walls = false;
     grid_.update_velocity(dt, system_.gravity, solve_boundary);
     potential_.begin_step(grid_, particles, dt, solve_boundary);
+    const bool bdf2 = options_.time_integrator == "bdf2";
+    if (bdf2 && rate_.size() == particles.size()) {  // BDF2 once there is history
+        field_to_grid<dim>(history_grid_, particles, rate_, rate_C_, nullptr);
+        potential_.grid_field(history_grid_, history_u_);
+        field_to_grid<dim>(history_grid_, particles, previous_v_, previous_C_, nullptr);
+        potential_.grid_field(history_grid_, history_v_);
+        potential_.use_bdf2(history_u_, history_v_, system_.gravity);
+    }
 
     NewtonOptions newton = options_.newton_options();
     newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
@@ -234,7 +279,8 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         throw SimulationError(e.what());
     }
     record_solve(s, stats);
-    potential_.write_velocity(v_, grid_);
+    // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).
+    potential_.write_velocity(potential_.displacement_rate(v_), grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM
     double max_speed = 0.0;
     for (Eigen::Index k = 0; k < v_.size() / dim; ++k) max_speed = std::max(max_speed, v_.segment<dim>(dim * k).norm());
@@ -248,8 +294,26 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         if (!return_maps_.empty() && return_maps_[object]) return return_maps_[object]->return_map(Sigma, hardening);
         return system_.materials[object].return_map(Sigma, hardening);
     };
+    if (bdf2) {  // the next step's history
+        previous_v_ = particles.v;
+        previous_C_ = particles.C;
+        start_x_ = particles.x;
+    }
     grid_to_particles(grid_, particles, dt, return_map,
                       [](std::ptrdiff_t, const PolarSVD<dim>&, const ReturnResult<dim>&) {});
+    if (bdf2) {
+        // What G2P gathered is the displacement rate; the velocity comes from v at the start positions.
+        rate_ = particles.v;
+        rate_C_ = particles.C;
+        potential_.write_velocity(v_, grid_);
+        grid_.project_velocity(system_.boundary);
+        const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+#pragma omp parallel for schedule(static)
+        for (std::ptrdiff_t p = 0; p < n; ++p) {
+            Mat<dim> grad_v;
+            gather_velocity(grid_, start_x_[p], particles.v[p], particles.C[p], grad_v);
+        }
+    }
     // Large steps legitimately move particles several cells; a quarter of the
     // domain in one step only happens after a blow-up.
     double extent = 1e300;

@@ -17,6 +17,12 @@
 // `lagged`: psi = the elastic energy of F_p(v) alone; plasticity is applied
 //   after the step by the return mapping (as in Ziran and HOT).
 //
+// BDF2 (ImplicitOptions::time_integrator "bdf2"): the particles carry the last step's velocity (v^{n-1})
+// and displacement rate u = (x^n - x^{n-1}) / dt, each with an APIC affine matrix, transferred to the
+// grid with the current step's weights; the potential is then BDF2's (IncrementalPotential::use_bdf2),
+// and G2P moves the particles and their F by the displacement rate while v_p, C_p come from the grid
+// velocity at the start-of-step positions. The first step (no history) is backward Euler.
+//
 // Boundary conditions are those of explicit MPM (DESIGN.md §4.1): the sticky
 // floor's nodes are fixed at zero velocity during the solve, and slip walls
 // act after it, removing the wall-ward normal velocity of the nodes within
@@ -173,6 +179,13 @@ public:
     /// were before the step) or a particle blows up after it.
     StepStats step(Particles<dim>& particles, double dt, long step_index) override;
 
+    /// The history resets with the particles (the next step is backward Euler's start-up).
+    void reset(const Particles<dim>& particles) override;
+    /// BDF2's history (empty before a BDF2 run's first step): 3 n matrices, the previous velocities'
+    /// affine parts, the displacement rates' affine parts, then (v^{n-1}_p, u_p) as the first two columns.
+    std::vector<Mat<dim>> checkpoint_state() const override;
+    void restore_checkpoint_state(std::vector<Mat<dim>> state) override;
+
     const ImplicitOptions& options() const { return options_; }
     const Grid<dim>& grid() const { return grid_; }
     IncrementalPotential<dim>& potential() { return potential_; }
@@ -187,6 +200,14 @@ private:
     IncrementalPotential<dim> potential_;
     ReferenceSolveWork<dim> work_;
     VecX v_;
+    // BDF2's history per particle (time_integrator "bdf2"; empty before the first step): the velocity
+    // and APIC matrix at the start of the last step (v^{n-1}), and that step's displacement rate
+    // u = (x^n - x^{n-1}) / dt with its affine part, each transferred to the grid like the velocity.
+    std::vector<Vec<dim>> previous_v_, rate_;
+    std::vector<Mat<dim>> previous_C_, rate_C_;
+    Grid<dim> history_grid_;  // the P2G of a history field
+    VecX history_u_, history_v_;
+    std::vector<Vec<dim>> start_x_;
 };
 
 }  // namespace pnet

@@ -19,7 +19,8 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
                                            const BoundaryConditions& bc) {
     grid_ = &grid;
     particles_ = &particles;
-    dt_ = dt;
+    dt_ = step_dt_ = dt;
+    bdf2_ = false;
     energy_seconds_ = multiply_seconds_ = 0.0;
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
 
@@ -102,6 +103,37 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
 }
 
 template <int dim>
+void IncrementalPotential<dim>::use_bdf2(const VecX& u, const VecX& v_previous, const Vec<dim>& gravity) {
+    const double beta = 2.0 / 3.0, dt = step_dt_;
+    offset_.resize(v_star_.size());
+    for (Eigen::Index i = 0; i < v_star_.size(); ++i) {
+        const double g = gravity[i % dim];
+        if (free_[i] > 0.0) v_star_[i] = (4.0 * (v_star_[i] - dt * g) - v_previous[i]) / 3.0 + beta * dt * g;
+        offset_[i] = free_[i] * 0.5 * u[i];
+    }
+    dt_ = beta * dt;
+    bdf2_ = true;
+}
+
+template <int dim>
+void IncrementalPotential<dim>::grid_field(const Grid<dim>& grid, VecX& out) const {
+    const std::ptrdiff_t dofs = static_cast<std::ptrdiff_t>(dof_node_.size());
+    out.resize(dim * dofs);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t k = 0; k < dofs; ++k) {
+        const typename Grid<dim>::Node& node = grid.node(dof_node_[k]);
+        out.template segment<dim>(dim * k) = node.mass > 0.0 ? Vec<dim>(node.momentum / node.mass) : Vec<dim>::Zero();
+    }
+}
+
+template <int dim>
+const VecX& IncrementalPotential<dim>::displacement_rate(const VecX& v) {
+    if (!bdf2_) return v;
+    rate_ = (dt_ / step_dt_) * (v + offset_);
+    return rate_;
+}
+
+template <int dim>
 void IncrementalPotential<dim>::deformation(const VecX& v, std::vector<Mat<dim>>& F) const {
     const Particles<dim>& particles = *particles_;
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
@@ -110,7 +142,9 @@ void IncrementalPotential<dim>::deformation(const VecX& v, std::vector<Mat<dim>>
     for (std::ptrdiff_t p = 0; p < n; ++p) {
         Mat<dim> G = Mat<dim>::Zero();
         for (int s = 0; s < kStencil; ++s) {
-            const Vec<dim> vi = v.template segment<dim>(dim * stencil_dof_[p * kStencil + s]);
+            const int k = stencil_dof_[p * kStencil + s];
+            Vec<dim> vi = v.template segment<dim>(dim * k);
+            if (bdf2_) vi += offset_.template segment<dim>(dim * k);
             G.noalias() += vi * stencil_grad_[p * kStencil + s].transpose();
         }
         F[p] = particles.F_elastic[p] + dt_ * (G * particles.F_elastic[p]);
@@ -312,8 +346,12 @@ void IncrementalPotential<dim>::particle_positions(const VecX& v, std::vector<Ve
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t p = 0; p < n; ++p) {
         Vec<dim> sum = Vec<dim>::Zero();
-        for (int s = 0; s < kStencil; ++s)
-            sum += stencil_weight_[p * kStencil + s] * v.template segment<dim>(dim * stencil_dof_[p * kStencil + s]);
+        for (int s = 0; s < kStencil; ++s) {
+            const int k = stencil_dof_[p * kStencil + s];
+            Vec<dim> vi = v.template segment<dim>(dim * k);
+            if (bdf2_ && !displacement) vi += offset_.template segment<dim>(dim * k);
+            sum += stencil_weight_[p * kStencil + s] * vi;
+        }
         X[p] = displacement ? Vec<dim>(dt_ * sum) : Vec<dim>(particles.x[p] + dt_ * sum);
     }
 }

@@ -43,6 +43,18 @@ public:
     /// Node::momentum (Grid::update_velocity()); both must outlive the step.
     void begin_step(const Grid<dim>& grid, const Particles<dim>& particles, double dt, const BoundaryConditions& bc);
 
+    /// BDF2 (ImplicitOptions::time_integrator), after begin_step(): `u` the last step's grid displacement
+    /// rate (x^n - x^{n-1}) / dt and `v_previous` v^{n-1}, on the unknowns (grid_field()). Then
+    ///   v* = (4 v^n - v^{n-1}) / 3 + beta dt g,  F_p(v) = (I + beta dt G_p(u / 2 + v)) F^E_p,  beta = 2/3,
+    /// on the free components (v^n = v*_BE - dt g; fixed ones keep their v* and move by beta dt v): the
+    /// same potential with the step beta dt about the displacement BDF2 extrapolates, dt u / 3.
+    void use_bdf2(const VecX& u, const VecX& v_previous, const Vec<dim>& gravity);
+    /// momentum / mass of `grid`'s nodes on the unknowns (0 on massless ones): a P2G'd history field.
+    void grid_field(const Grid<dim>& grid, VecX& out) const;
+    /// The grid's displacement rate over the step, (x^{n+1} - x^n) / dt on the nodes: v for backward
+    /// Euler, (u / 2 + v) beta for BDF2 (what moves the particles and their F).
+    const VecX& displacement_rate(const VecX& v);
+
     /// v* on the unknowns: the starting point of the solve.
     const VecX& v_star() const { return v_star_; }
     /// 1 / m_i on free components, 0 on fixed ones.
@@ -79,8 +91,8 @@ public:
     void hessian_block_diagonal(VecX& blocks) const override;
 
     /// The particles' end-of-step positions X_p(v) = x_p^n + dt sum_i w_ip v_i
-    /// (what G2P's advection gives; linear in v). With `displacement`, the
-    /// motion dt sum_i w_ip d_i of a change d instead (no x_p^n).
+    /// (what G2P's advection gives; linear in v; BDF2: the step and offset of use_bdf2()). With
+    /// `displacement`, the motion dt sum_i w_ip d_i of a change d instead (no x_p^n).
     void particle_positions(const VecX& v, std::vector<Vec<dim>>& X, bool displacement = false) const;
     /// Particle p's stencil: kStencil dofs and weights w_ip (at x_p^n).
     const int* stencil_dofs(std::size_t p) const { return &stencil_dof_[p * kStencil]; }
@@ -120,7 +132,11 @@ private:
     ParticleEnergy<dim>& energy_;
     const Grid<dim>* grid_ = nullptr;
     const Particles<dim>* particles_ = nullptr;
-    double dt_ = 0.0;
+    double dt_ = 0.0;       // the potential's step: dt (backward Euler), 2/3 dt (BDF2)
+    double step_dt_ = 0.0;  // the time step
+    bool bdf2_ = false;
+    VecX offset_;           // BDF2: u / 2 on the free components (F_p(v) about G_p(offset + v))
+    VecX rate_;             // displacement_rate()'s
 
     std::vector<int> node_dof_;                            // grid storage index -> dof (-1: not an unknown)
     std::vector<std::int64_t> dof_node_;                   // dof -> grid storage index

@@ -52,17 +52,18 @@ struct StencilNodes {
     }
 };
 
-/// P2G: bins the particles, then m_i = sum w_ip m_p and
-/// momentum_i = sum w_ip m_p (v_p + C_p (x_i - x_p)) + sum K_p grad w_ip,
-/// with K_p = force_matrix[p] (for explicit MPM -dt V0_p tau_p; null: none).
+/// P2G of any velocity-like field u_p with its APIC affine part A_p (the particles' own v_p, C_p, or
+/// BDF2's history): bins the particles, m_i = sum w_ip m_p, momentum_i = sum w_ip m_p (u_p + A_p (x_i -
+/// x_p)) + sum K_p grad w_ip.
 template <int dim>
-void particles_to_grid(Grid<dim>& grid, const Particles<dim>& particles, const std::vector<Mat<dim>>* force_matrix) {
+void field_to_grid(Grid<dim>& grid, const Particles<dim>& particles, const std::vector<Vec<dim>>& u,
+                   const std::vector<Mat<dim>>& A, const std::vector<Mat<dim>>* force_matrix) {
     grid.bin_and_clear(particles.x);
     grid.for_each_particle_coloured([&](int p) {
         const StencilNodes<dim> st(grid, particles.x[p]);
         const double m = particles.mass[p];
-        const Vec<dim> mv = m * particles.v[p];
-        const Mat<dim> mC = m * particles.C[p];
+        const Vec<dim> mv = m * u[p];
+        const Mat<dim> mC = m * A[p];
         const Mat<dim> K = force_matrix ? (*force_matrix)[p] : Mat<dim>::Zero();
         st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Vec<dim>& dpos) {
             typename Grid<dim>::Node& n = grid.node(node);
@@ -70,6 +71,14 @@ void particles_to_grid(Grid<dim>& grid, const Particles<dim>& particles, const s
             n.momentum += w * (mv + mC * dpos) + K * grad;
         });
     });
+}
+
+/// P2G: bins the particles, then m_i = sum w_ip m_p and
+/// momentum_i = sum w_ip m_p (v_p + C_p (x_i - x_p)) + sum K_p grad w_ip,
+/// with K_p = force_matrix[p] (for explicit MPM -dt V0_p tau_p; null: none).
+template <int dim>
+void particles_to_grid(Grid<dim>& grid, const Particles<dim>& particles, const std::vector<Mat<dim>>* force_matrix) {
+    field_to_grid(grid, particles, particles.v, particles.C, force_matrix);
 }
 
 /// G2P gather of particle p from grid velocities (Node::momentum after

@@ -186,7 +186,8 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     if (name != integrator_->name())
         throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " +
                                     integrator_->name());
-    if (state_size < 0 || state_size > header[1]) throw std::invalid_argument(path + ": corrupt checkpoint header");
+    // The integrator's state: explicit's n stresses, or the implicit BDF2 history's 3 n matrices.
+    if (state_size < 0 || state_size > 3 * header[1]) throw std::invalid_argument(path + ": corrupt checkpoint header");
     const std::size_t n = static_cast<std::size_t>(header[1]);
     if (n != particles_.size())
         throw std::invalid_argument(path + ": holds " + std::to_string(n) + " particles, the scene has " +

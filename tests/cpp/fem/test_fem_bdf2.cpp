@@ -11,7 +11,6 @@
 #include "pnet/energy/analytic_elastoplastic.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
-#include "pnet/mpm/implicit_integrator.hpp"
 
 namespace pnet {
 namespace {
@@ -134,23 +133,6 @@ TEST(FemBdf2, ConvergesAtSecondOrderWhereBackwardEulerIsFirstOrder) {
     EXPECT_LT(be_ratio, 2.6) << table.str();
     EXPECT_GT(be_ratio, 1.5) << table.str();
     EXPECT_LT(last_bdf2, last_be) << table.str();
-}
-
-TEST(FemBdf2, MpmRefusesBdf2NamingTheKey) {
-    MpmSystem<2> system;
-    system.dx = 0.1;
-    system.cells = {4, 4};
-    ImplicitOptions options;
-    options.time_integrator = "bdf2";
-    try {
-        ImplicitIntegrator<2> integrator(system, ImplicitMethod::Lagged, options,
-                                         std::make_unique<ElasticParticleEnergy<2>>(system.materials));
-        FAIL() << "no error";
-    } catch (const std::invalid_argument& e) {
-        EXPECT_NE(std::string(e.what()).find("integrator.time_integrator: \"bdf2\" is implemented for FEM"),
-                  std::string::npos)
-            << e.what();
-    }
 }
 
 }  // namespace

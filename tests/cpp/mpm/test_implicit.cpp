@@ -75,7 +75,7 @@ struct PotentialFixture {
     std::unique_ptr<IncrementalPotential<dim>> potential;
     VecX v;
 
-    PotentialFixture(const std::string& name, bool neural, double dt = 1e-3)
+    PotentialFixture(const std::string& name, bool neural, double dt = 1e-3, bool bdf2 = false)
         : scene(tiny_scene(name)), system(make_mpm_system<dim>(scene)), particles(sample_particles<dim>(scene)) {
         test::Random random(11);
         for (std::size_t p = 0; p < particles.size(); ++p) {
@@ -95,6 +95,14 @@ struct PotentialFixture {
         grid->update_velocity(dt, system.gravity, system.boundary);
         potential = std::make_unique<IncrementalPotential<dim>>(*energy);
         potential->begin_step(*grid, particles, dt, system.boundary);
+        if (bdf2) {  // BDF2's potential about random history fields (IncrementalPotential::use_bdf2)
+            VecX u(potential->size()), v_previous(potential->size());
+            for (Eigen::Index i = 0; i < u.size(); ++i) {
+                u[i] = random.uniform(-0.1, 0.1);
+                v_previous[i] = random.uniform(-0.5, 0.5);
+            }
+            potential->use_bdf2(u, v_previous, system.gravity);
+        }
         v = potential->v_star();
         for (Eigen::Index i = 0; i < v.size(); ++i)
             if (potential->residual_scale()[i] > 0.0) v[i] += random.uniform(-0.3, 0.3);
@@ -124,10 +132,12 @@ TYPED_TEST_SUITE(ImplicitTest, Dims);
 // vectors, for the elastic (lagged) and the neural (plasticitynet) energy.
 TYPED_TEST(ImplicitTest, GradientAndHessianMatchFiniteDifferences) {
     constexpr int dim = TypeParam::value;
-    for (const bool neural : {false, true}) {
+    for (const bool neural : {false, true})
+      for (const bool bdf2 : {false, true}) {
         for (const char* stem : {"sand_column", "snowball"}) {
-            SCOPED_TRACE(std::string(stem) + (neural ? " (plasticitynet energy)" : " (lagged, elastic energy)"));
-            PotentialFixture<dim> f(scene_name<dim>(stem), neural);
+            SCOPED_TRACE(std::string(stem) + (neural ? " (plasticitynet energy)" : " (lagged, elastic energy)") +
+                         (bdf2 ? ", BDF2" : ""));
+            PotentialFixture<dim> f(scene_name<dim>(stem), neural, 1e-3, bdf2);
             IncrementalPotential<dim>& E = *f.potential;
             E.set_project_psd(false);  // the exact Hessian (the random F^E has indefinite ones)
             const std::vector<Eigen::Index> free = f.free_components();
@@ -217,7 +227,7 @@ TYPED_TEST(ImplicitTest, GradientAndHessianMatchFiniteDifferences) {
                 }
             }
         }
-    }
+      }
 }
 
 // Fixed components (sticky floor, slip walls) stay at v*: zero gradient, and a
@@ -475,10 +485,11 @@ bool identical(const Particles<dim>& a, const Particles<dim>& b) {
 TYPED_TEST(ImplicitTest, OneAndTwoThreadsGiveIdenticalResults) {
     constexpr int dim = TypeParam::value;
     const int saved = omp_get_max_threads();
-    for (const char* integrator : {"plasticitynet", "lagged"}) {
-        SCOPED_TRACE(integrator);
+    for (const std::string variant : {"plasticitynet", "lagged", "plasticitynet bdf2"}) {
+        SCOPED_TRACE(variant);
         const Scene scene = tiny_scene(scene_name<dim>("sand_column"));
-        const IntegratorSettings settings = implicit_settings<dim>(integrator, scene, 0.3);
+        IntegratorSettings settings = implicit_settings<dim>(variant.substr(0, variant.find(' ')), scene, 0.3);
+        if (variant.find("bdf2") != std::string::npos) settings.implicit.time_integrator = "bdf2";
         omp_set_num_threads(1);
         Simulation<dim> one(scene, settings);
         const FrameStats stats = one.advance_frame();
@@ -494,16 +505,18 @@ TYPED_TEST(ImplicitTest, OneAndTwoThreadsGiveIdenticalResults) {
 TYPED_TEST(ImplicitTest, CheckpointResumeEqualsAnUninterruptedRun) {
     constexpr int dim = TypeParam::value;
     test::TempDir dir;
-    for (const char* integrator : {"plasticitynet", "lagged"}) {
-        SCOPED_TRACE(integrator);
+    for (const std::string variant : {"plasticitynet", "lagged", "lagged bdf2"}) {  // bdf2: the history resumes
+        SCOPED_TRACE(variant);
+        const std::string integrator = variant.substr(0, variant.find(' '));
         const Scene scene = tiny_scene(scene_name<dim>("sand_column"));
-        const IntegratorSettings settings = implicit_settings<dim>(integrator, scene, 0.3);
+        IntegratorSettings settings = implicit_settings<dim>(integrator, scene, 0.3);
+        if (variant == "lagged bdf2") settings.implicit.time_integrator = "bdf2";
         Simulation<dim> full(scene, settings);
         full.advance_frame();
         full.advance_frame();
         Simulation<dim> first(scene, settings);
         first.advance_frame();
-        const std::string path = dir.file(std::string(integrator) + ".bin");
+        const std::string path = dir.file(std::to_string(variant.size()) + integrator + ".bin");
         first.save_checkpoint(path);
         Simulation<dim> resumed(scene, settings);
         resumed.load_checkpoint(path);
@@ -755,6 +768,30 @@ TYPED_TEST(ImplicitTest, SlipWallsActTheSameInBothIntegrators) {
     // Measured: 2.5e-4 m (2D) and 2.2e-4 m (3D); with the whole normal component held fixed (the old
     // implicit walls) 1.9e-3 m and 7.3e-4 m.
     EXPECT_LT(worst, 4.5e-4) << "m: within 1.5% of a cell after 0.08 s";
+}
+
+// BDF2 (ImplicitOptions::time_integrator): the first step, without history, is backward Euler's bit for
+// bit; it leaves the history (3 n matrices of checkpoint state); the second step uses it.
+TYPED_TEST(ImplicitTest, Bdf2StartsWithABackwardEulerStepThenUsesItsHistory) {
+    constexpr int dim = TypeParam::value;
+    const Scene scene = tiny_scene(scene_name<dim>("sand_column"));  // on the floor: stresses, not free fall
+    const MpmSystem<dim> system = make_mpm_system<dim>(scene);
+    ImplicitOptions be, bdf2;
+    bdf2.time_integrator = "bdf2";
+    ImplicitIntegrator<dim> a(system, ImplicitMethod::Lagged, be, std::make_unique<ElasticParticleEnergy<dim>>(system.materials));
+    ImplicitIntegrator<dim> b(system, ImplicitMethod::Lagged, bdf2,
+                              std::make_unique<ElasticParticleEnergy<dim>>(system.materials));
+    Particles<dim> pa = sample_particles<dim>(scene), pb = pa;
+    a.step(pa, 1e-3, 0);
+    b.step(pb, 1e-3, 0);
+    EXPECT_TRUE(identical(pa, pb));
+    EXPECT_TRUE(a.checkpoint_state().empty());
+    EXPECT_EQ(b.checkpoint_state().size(), 3 * pb.size());
+    a.step(pa, 1e-3, 1);
+    b.step(pb, 1e-3, 1);
+    double differ = 0.0;
+    for (std::size_t p = 0; p < pa.size(); ++p) differ = std::max(differ, (pa.v[p] - pb.v[p]).norm());
+    EXPECT_GT(differ, 1e-6) << "m/s";
 }
 
 }  // namespace
