@@ -606,8 +606,9 @@ Scene load_scene(const std::string& path) {
     json j;
     try {
         j = json::parse(in);
-    } catch (const json::parse_error& e) {
-        // Drop nlohmann's "[json.exception.parse_error.101] " tag; keep "parse error at line L, column C: ...".
+    } catch (const json::exception& e) {
+        // A syntax error or a number out of a double's range. Drop nlohmann's "[json.exception.parse_error.101] "
+        // tag; keep "parse error at line L, column C: ..." or "number overflow parsing '...'".
         std::string what = e.what();
         const std::size_t tag_end = what.find("] ");
         if (what.rfind("[json.exception", 0) == 0 && tag_end != std::string::npos) what = what.substr(tag_end + 2);
