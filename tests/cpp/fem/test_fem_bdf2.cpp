@@ -10,7 +10,7 @@
 
 #include "pnet/energy/analytic_elastoplastic.hpp"
 #include "pnet/fem/fem_integrator.hpp"
-#include "pnet/fem/gmsh_mesher.hpp"
+#include "support/fem_systems.hpp"
 
 namespace pnet {
 namespace {
@@ -18,19 +18,7 @@ namespace {
 /// A 2 x 10 cm metal cantilever clamped at its base, pulled sideways by g = 10 m/s^2 from rest: it sways
 /// (first mode ~12 Hz) at strains of ~1%, well inside the elastic range (yield at 5%).
 FemSystem<2> swaying_bar() {
-    Shape2d box;
-    box.kind = Shape2d::Kind::Box;
-    box.min = Vec<2>(0.0, 0.0);
-    box.max = Vec<2>(0.02, 0.1);
-    box.element_size = 0.005;
-    FemSystem<2> system;
-    system.mesh = mesh_shape(box, "bar");
-    system.materials = {Material<2>(material_preset("metal"))};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.fixed_node.assign(system.mesh.nodes(), 0);
-    system.prescribed_velocity.assign(system.mesh.nodes(), Vec<2>::Zero());
-    for (std::size_t i = 0; i < system.mesh.nodes(); ++i)
-        if (system.mesh.x[i][1] < 1e-9) system.fixed_node[i] = 1;
+    FemSystem<2> system = test::clamped_bar();
     system.gravity = Vec<2>(10.0, 0.0);
     system.make_rest();
     return system;
