@@ -1,4 +1,4 @@
-// The analytic materials (DESIGN.md §3): elastoplastic stress Ptilde(F, h) and
+// The analytic materials (docs/physics.md): elastoplastic stress Ptilde(F, h) and
 // the return mapping, evaluated for batches of deformation gradients.
 #include <variant>
 

@@ -1,4 +1,4 @@
-// Accuracy metrics (DESIGN.md §6): IoU of grid mass fields, the B-spline
+// Accuracy metrics (docs/metrics.md): IoU of grid mass fields, the B-spline
 // rasterization behind it, and the frame-by-frame comparison of two runs.
 #include <filesystem>
 
@@ -60,7 +60,7 @@ void define_metrics(py::module_& m) {
         R"doc(IoU of two nodal mass fields of the same shape (e.g. Simulation.grid_mass()):
 a dict with soft = sum min(a, b) / sum max(a, b) (the project's accuracy metric),
 binary (occupied nodes, > 1e-3 of each field's maximum) and plasticinelab
-(DESIGN.md §6's formula, kept for reference). ValueError for negative or
+(PlasticineLab's formula, kept for reference; docs/metrics.md). ValueError for negative or
 non-finite values, an all-zero field, or different shapes.)doc");
 
     m.def(

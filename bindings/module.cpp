@@ -1,4 +1,4 @@
-// plasticitynet_sim: PlasticityNet's C++ simulator from Python (DESIGN.md §8).
+// plasticitynet_sim: PlasticityNet's C++ simulator from Python (docs/architecture.md).
 #include "common.hpp"
 
 PYBIND11_MODULE(plasticitynet_sim, m) {

@@ -1,4 +1,4 @@
-// Scenes (DESIGN.md §5): loaded from a file or built from a dict with the same
+// Scenes (docs/scenes.md): loaded from a file or built from a dict with the same
 // schema, validated by the C++ loader with the same messages.
 #include "common.hpp"
 #include "pnet/scene/scene.hpp"

@@ -17,6 +17,7 @@
 #include "pnet/sim/coupled_simulation.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
+#include "pnet/sim/run.hpp"
 
 namespace pnet::bindings {
 
@@ -25,70 +26,19 @@ namespace {
 /// Thrown from between two steps when Python has a pending signal (Ctrl-C).
 struct Interrupted {};
 
-/// Calls f(name, member pointer) for every StepStats field Python sees (one
-/// table for step() and step_stats()).
-template <typename F>
-void for_each_step_field(F&& f) {
-    f("dt", &StepStats::dt);
-    f("wall_s", &StepStats::wall_seconds);
-    f("p2g_s", &StepStats::p2g_seconds);
-    f("solve_s", &StepStats::grid_seconds);
-    f("g2p_s", &StepStats::g2p_seconds);
-    f("energy_s", &StepStats::energy_seconds);
-    f("cg_s", &StepStats::cg_seconds);
-    f("newton_iterations", &StepStats::newton_iterations);
-    f("cg_iterations", &StepStats::cg_iterations);
-    f("line_search_steps", &StepStats::line_search_steps);
-    f("fixed_point_iterations", &StepStats::fixed_point_iterations);
-    f("fixed_point_change", &StepStats::fixed_point_change);
-    f("reference_updates", &StepStats::reference_updates);
-    f("true_residual", &StepStats::true_residual);
-    f("initial_residual", &StepStats::initial_residual);
-    f("residual", &StepStats::residual);
-    f("energy", &StepStats::energy);
-    f("converged", &StepStats::converged);
-    f("line_search_failed", &StepStats::line_search_failed);
-    f("fixed_point_converged", &StepStats::fixed_point_converged);
-    f("clamped", &StepStats::clamped);
-    f("hardening_clamped", &StepStats::hardening_clamped);
-    f("max_grid_speed", &StepStats::max_grid_speed);
-    f("kinematic_stages", &StepStats::kinematic_stages);
-    f("ccd_queries", &StepStats::ccd_queries);
-    f("ccd_limited", &StepStats::ccd_limited);
-    f("broad_phase_s", &StepStats::broad_phase_seconds);
-    f("ccd_s", &StepStats::ccd_seconds);
-    f("contact_pairs", &StepStats::contact_pairs);
-    f("min_distance", &StepStats::min_distance);
-    f("substeps", &StepStats::substeps);
-}
-
 py::dict to_dict(const StepStats& s) {
     py::dict d;
-    for_each_step_field([&](const char* name, auto member) { d[name] = s.*member; });
+    for_each_step_field([&](const StepField& field, auto member) {
+        if (field.key) d[field.key] = s.*member;
+    });
     return d;
 }
 
 py::dict to_dict(const FrameStats& f) {
     py::dict d;
-    d["frame"] = f.frame;
-    d["time"] = f.time;
-    d["steps"] = f.steps;
-    d["dt_min"] = f.dt_min;
-    d["dt_max"] = f.dt_max;
-    d["wall_s"] = f.wall_seconds;
-    d["kinetic_energy"] = f.kinetic;
-    d["potential_energy"] = f.potential;
-    d["newton_iterations"] = f.newton_iterations;
-    d["cg_iterations"] = f.cg_iterations;
-    d["line_search_steps"] = f.line_search_steps;
-    d["fixed_point_iterations"] = f.fixed_point_iterations;
-    d["max_residual"] = f.max_residual;
-    d["converged"] = f.converged;
-    d["unconverged_steps"] = f.unconverged_steps;
-    d["clamped"] = f.clamped;
-    d["hardening_clamped"] = f.hardening_clamped;
-    d["contact_pairs"] = f.contact_pairs;
-    d["min_distance"] = f.min_distance;
+    for_each_frame_field([&](const FrameField& field, auto get) {
+        if (field.key) d[field.key] = get(f);
+    });
     return d;
 }
 
@@ -148,16 +98,7 @@ public:
         }
         load_scene_models(scene_, trust_models, settings);
         py::gil_scoped_release release;
-        if (scene_.has_meshes() && scene_.has_particles())
-            sim_ = std::make_unique<CoupledSimulation2d>(scene_, settings);
-        else if (scene_.has_meshes() && scene_.dim == 2)
-            sim_ = std::make_unique<FemSimulation<2>>(scene_, settings);
-        else if (scene_.has_meshes())
-            sim_ = std::make_unique<FemSimulation<3>>(scene_, settings);
-        else if (scene_.dim == 2)
-            sim_ = std::make_unique<Simulation<2>>(scene_, settings);
-        else
-            sim_ = std::make_unique<Simulation<3>>(scene_, settings);
+        sim_ = make_simulation(scene_, settings);
     }
 
     const Scene& scene() const { return scene_; }
@@ -237,8 +178,42 @@ public:
 
     py::dict step_stats() const {
         py::dict d;
-        for_each_step_field([&](const char* name, auto member) { d[name] = column(history_, member); });
+        for_each_step_field([&](const StepField& field, auto member) {
+            if (field.key) d[field.key] = column(history_, member);
+        });
         return d;
+    }
+
+    /// run_to_folder(): the run's folder as `pnet simulate` writes it. The steps it takes join the
+    /// step history.
+    void run(const py::object& out, const py::object& frames, int checkpoint_every, bool resume, bool overwrite,
+             bool vtu, const std::string& color) {
+        RunOptions o;
+        o.out = path_string(out);
+        o.frames = frames.is_none() ? -1 : py::cast<int>(frames);
+        if (!frames.is_none() && o.frames < 1) throw py::value_error("frames: expected at least 1");
+        if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected >= 0 (0: no checkpoints)");
+        o.checkpoint_every = checkpoint_every;
+        o.resume = resume;
+        o.overwrite = overwrite;
+        o.vtu = vtu;
+        o.color = color;
+        const IntegratorSettings settings = visit([](const auto& sim) { return sim.settings(); });
+        auto last_check = std::chrono::steady_clock::now();
+        o.after_step = [&] {  // as advance(): Ctrl-C between two steps, checked at most every 20 ms
+            const auto now = std::chrono::steady_clock::now();
+            if (now - last_check < std::chrono::milliseconds(20)) return;
+            last_check = now;
+            py::gil_scoped_acquire acquire;
+            if (PyErr_CheckSignals() != 0) throw Interrupted{};
+        };
+        if (resume) history_.clear();  // the state becomes the checkpoint's
+        try {
+            py::gil_scoped_release release;
+            run_to_folder(sim_, scene_, settings, o);
+        } catch (const Interrupted&) {
+            throw py::error_already_set();  // KeyboardInterrupt
+        }
     }
 
     void save_checkpoint(const py::object& path) const {
@@ -295,9 +270,7 @@ private:
     }
 
     Scene scene_;
-    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation<2>>,
-                 std::unique_ptr<FemSimulation<3>>, std::unique_ptr<CoupledSimulation2d>>
-        sim_;
+    AnySimulation sim_;
     std::vector<StepStats> history_;  // every step since construction or the last load_checkpoint()
 };
 
@@ -470,6 +443,17 @@ cg_s (seconds), newton_iterations, cg_iterations, line_search_steps,
 fixed_point_iterations, fixed_point_change, initial_residual and residual (m/s),
 energy (J), converged, line_search_failed, fixed_point_converged, clamped, hardening_clamped,
 max_grid_speed (m/s).)doc")
+        .def("run", &PySimulation::run, py::arg("out"), py::arg("frames") = py::none(),
+             py::arg("checkpoint_every") = 10, py::arg("resume") = false, py::arg("overwrite") = false,
+             py::arg("vtu") = false, py::arg("color") = "speed",
+             R"doc(Run to `frames` (default: the scene's frame count) writing the folder `out` exactly
+as `pnet simulate` does: frame_NNNNN.ply and .png (and .vtu with vtu=True), run.json,
+stats.csv, steps.csv and checkpoint.bin every checkpoint_every frames, with a progress
+line on stderr. A folder holding another run is refused (ValueError naming it) unless
+overwrite=True, which first removes that run's files; resume=True continues the run in
+`out` from its checkpoint (one written by pnet simulate or by run()). The steps taken are
+in steps.csv (step_stats() does not gather them). A failed step raises SimulationError
+naming the frames that are complete; Ctrl-C raises KeyboardInterrupt between two steps.)doc")
         .def("save_checkpoint", &PySimulation::save_checkpoint, py::arg("path"),
              "Write the whole state to a file atomically (what is there is replaced only when the write succeeds).")
         .def("load_checkpoint", &PySimulation::load_checkpoint, py::arg("path"),

@@ -100,7 +100,7 @@ plt.show()'''),
 NOTEBOOKS["fig05_accuracy"] = [
     new_markdown_cell("""# Accuracy against the explicit ground truth (paper Fig. 5)
 
-(a), (b): the Jaccard index (soft IoU of the B-spline mass fields on the MPM grid, DESIGN.md §6) of
+(a), (b): the Jaccard index (soft IoU of the B-spline mass fields on the MPM grid, docs/metrics.md) of
 each run against explicit MPM at dt = 1e-5 s, per frame, for the sand column and the snowball, beside
 the noise floor (explicit at 2e-5 s and at its CFL step). (c): the mean FEM nodal distance from the
 ground truth on the 2D metal frame, in % of the bounding-box diagonal. Regenerate:

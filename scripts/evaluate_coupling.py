@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Accuracy and speed of MPM-FEM coupling on sand_fem_coupling_2d (issue 18; DESIGN.md §4.4, §6).
+"""Accuracy and speed of MPM-FEM coupling on sand_fem_coupling_2d (issue 18; docs/methods.md, docs/metrics.md).
 
 Runs `pnet simulate scenes/sand_fem_coupling_2d.json` with
   explicit_1e-6        explicit coupling at 1e-6 s (the paper's step: the ground truth)

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Accuracy and speed of the FEM integrators on the metal frames (issue 15; DESIGN.md §5-6).
+"""Accuracy and speed of the FEM integrators on the metal frames (issue 15; docs/scenes.md, docs/metrics.md).
 
 For each scene it runs `pnet simulate` with
   gt                       explicit, dt = 1e-5 s (the ground truth)

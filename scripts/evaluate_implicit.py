@@ -285,7 +285,7 @@ def main():
                 soft = [r["soft_iou"] for r in rows]
                 binary = [r["binary_iou"] for r in rows]
                 coarse = [r["soft_iou_coarse"] for r in rows]
-                last = rows[-1]  # the deposit at the last common frame (DESIGN.md §6)
+                last = rows[-1]  # the deposit at the last common frame (docs/metrics.md)
                 row.update({"soft_iou_min": min(soft), "soft_iou_mean": sum(soft) / len(soft),
                             "binary_iou_min": min(binary), "binary_iou_mean": sum(binary) / len(binary),
                             "soft_iou_coarse_min": min(coarse), "soft_iou_coarse_mean": sum(coarse) / len(coarse),

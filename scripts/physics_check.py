@@ -89,7 +89,7 @@ def main():
                     or not (out / f"frame_{frames:05d}.ply").exists():
                 run([pnet, "simulate", scene_file, "--integrator", "explicit", "--dt", dt, "--frames", frames,
                      "--threads", args.threads, "--color", "hardening" if "snow" in scene else "speed",
-                     "--out", out])
+                     "--overwrite", "--out", out])
             with open(out / "stats.csv") as f:
                 stats = list(csv.DictReader(f))
             kinetic = np.array([float(r["kinetic_J"]) for r in stats])

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Sets up whatever is missing, then runs the default job: the canonical
-# sand_column_2d scene (DESIGN.md §5) simulated with the `plasticitynet`
+# sand_column_2d scene (docs/scenes.md) simulated with the `plasticitynet`
 # implicit integrator at dt = 1e-3 s (the scene's integrator block; the learned
 # sand energy models/sand_2d.pt). Writes per frame a PLY and a PNG, stats.csv,
 # steps.csv (Newton/CG/fixed-point figures per step) and run.json to
@@ -25,7 +25,10 @@ while (($#)); do
   esac
 done
 
-"$build_dir/cpp/pnet" simulate "$scene" --out "$out" "${args[@]+"${args[@]}"}"
+# The demo job replaces its own last run in $out (a resumed run, --resume, continues it instead).
+overwrite=(--overwrite)
+for a in "${args[@]+"${args[@]}"}"; do [[ "$a" == --resume ]] && overwrite=(); done
+"$build_dir/cpp/pnet" simulate "$scene" --out "$out" "${overwrite[@]+"${overwrite[@]}"}" "${args[@]+"${args[@]}"}"
 
 # The video: 50 frames per second = the scene's frame rate (frame_dt 0.02 s), real time
 # (setup.sh installs ffmpeg).

@@ -1,6 +1,6 @@
 #pragma once
 // `pnet compare DIR_A DIR_B [--out DIR] [--dx DX]`: per-frame grid-mass IoU of two simulation runs
-// (DESIGN.md §6, §8), written as iou.csv and iou.png.
+// (docs/metrics.md, docs/architecture.md), written as iou.csv and iou.png.
 namespace pnet::apps {
 
 /// argv[0] is "compare". Reads DIR_A/run.json and DIR_B/run.json (dim, domain and frame_dt must agree),

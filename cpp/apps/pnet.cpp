@@ -1,4 +1,4 @@
-// pnet: the PlasticityNet command-line program (DESIGN.md §8).
+// pnet: the PlasticityNet command-line program (docs/architecture.md).
 //
 //   pnet simulate SCENE.json --out DIR [...]   run a scene, write frames (PLY + PNG), stats.csv, checkpoints
 //   pnet compare DIR_A DIR_B [...]             per-frame soft and binary IoU of two runs (CSV + plot)

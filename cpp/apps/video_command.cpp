@@ -17,6 +17,8 @@
 #include <vector>
 
 #include "parse_number.hpp"
+#include "pnet/io/png.hpp"
+#include "pnet/io/run_folder.hpp"
 
 extern char** environ;
 
@@ -92,6 +94,27 @@ double run_frame_rate(const fs::path& dir) {
     return 50.0;
 }
 
+/// Refuses frames that the run recorded in dir/run.json did not write (a folder without a run id,
+/// e.g. pictures from elsewhere or a run from before run ids, is taken as it is).
+void check_one_run(const fs::path& dir, const std::map<long, fs::path>& frames) {
+    const std::string run_id = recorded_run_id(dir);
+    if (run_id.empty()) return;
+    for (const auto& [number, path] : frames) {
+        std::map<std::string, std::string> text;
+        try {
+            text = read_png_text(path.string());
+        } catch (const std::runtime_error& e) {
+            throw InputError(e.what());
+        }
+        const auto it = text.find(kPngRunIdKey);
+        const std::string got = it == text.end() ? "" : it->second;
+        if (got != run_id)
+            throw InputError(path.string() + ": not written by the run in " + (dir / "run.json").string() + " (" +
+                             (got.empty() ? std::string("no run id") : "run_id " + got) + ", run.json has " + run_id +
+                             "); the folder mixes runs: simulate again with --overwrite");
+    }
+}
+
 /// Runs argv (argv[0] looked up on PATH); returns its exit status, or -1 if it could not start.
 int run_process(const std::vector<std::string>& args) {
     std::vector<char*> argv;
@@ -125,6 +148,7 @@ int video_command(int argc, char** argv) {
                                  ".png is missing (frames must be numbered without gaps)");
             ++expected;
         }
+        check_one_run(o.dir, frames);
     } catch (const InputError& e) {
         std::fprintf(stderr, "pnet video: %s\n%s", e.what(), kUsage);
         return 2;

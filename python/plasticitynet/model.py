@@ -181,7 +181,7 @@ class LearnedEnergy:
     @property
     def hardening_range(self) -> tuple[float, float] | None:
         """The range of the network's hardening input in training (recipe.distribution.h_range; for
-        files that do not record it, DESIGN.md §3's: Cam-Clay [-0.5, 0] in 2D and [-1, 0] in 3D, von
+        files that do not record it, docs/physics.md's: Cam-Clay [-0.5, 0] in 2D and [-1, 0] in 3D, von
         Mises [0, 1]); None for a model without hardening input."""
         if not self.has_hardening:
             return None
@@ -193,7 +193,7 @@ class LearnedEnergy:
         return 0.0, 1.0
 
     def network_hardening(self, h: torch.Tensor) -> torch.Tensor:
-        """The network's input for hardening states h (DESIGN.md §3, as the C++ simulator): Cam-Clay
+        """The network's input for hardening states h (docs/physics.md, as the C++ simulator): Cam-Clay
         h = min(a, 0), von Mises h itself, clamped to hardening_range."""
         lo, hi = self.hardening_range
         if self.training_material.plasticity.name == "cam_clay":

@@ -2,7 +2,7 @@
 
     python -m plasticitynet.report [--out DIR] [--materials sand snow ...] [--dims 2 3]
 
-For every material of DESIGN.md §3 (sand, snow, metal, metal_nh) in 2D and 3D it prints a table of
+For every material of docs/physics.md (sand, snow, metal, metal_nh) in 2D and 3D it prints a table of
 the return mapping Z(Sigma, h) on named sample deformations (branch taken, projected singular
 values, hardening update, distance of the result to the yield surface) and writes a PNG of the
 elastic region in principal Kirchhoff-stress space, like the paper's figures 14-16: the projected

@@ -1,4 +1,4 @@
-"""Derivative checks of the elasticity models (STYLE.md §3): tau = d psi / d eps, P = d psi / dF and
+"""Derivative checks of the elasticity models (docs/architecture.md, testing): tau = d psi / d eps, P = d psi / dF and
 dP/dF = d P / dF, each against central finite differences with torch.autograd.gradcheck in float64.
 
 The analytic derivative is installed as the backward of a custom autograd Function whose forward is

@@ -238,6 +238,59 @@ def test_python_stepping_equals_pnet_simulate(tmp_path, name, integrator):
 # --- models ---------------------------------------------------------------------------------------
 
 
+def _ply_body(path: Path) -> bytes:
+    """A frame's data and header without the run id (two runs differ only there)."""
+    data = path.read_bytes()
+    return b"\n".join(line for line in data.split(b"\n") if not line.startswith(b"comment run_id "))
+
+
+@pytest.mark.parametrize("name", ["snowball_2d", "metal_frame_2d"])
+def test_run_writes_the_folder_pnet_simulate_writes(tmp_path, name):
+    """Simulation.run() is the driver behind pnet simulate: the same files, the same frames; pnet simulate
+    resumes a Python run; a folder holding another run is refused."""
+    if not PNET.exists():
+        pytest.fail(f"{PNET} is not built (run scripts/setup.sh)")
+    scene = TINY / f"{name}.json"
+    cli, py = tmp_path / "cli", tmp_path / "py"
+    r = subprocess.run([str(PNET), "simulate", str(scene), "--frames", "2", "--out", str(cli)], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    sim = pns.Simulation(scene)
+    sim.run(py, frames=1, checkpoint_every=1)
+    assert sim.frame == 1
+    r = subprocess.run([str(PNET), "simulate", str(scene), "--frames", "2", "--resume", "--out", str(py)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0 and "resumed at frame 1" in r.stderr, r.stderr
+    files = lambda d: sorted(p.name for p in d.iterdir() if p.name != "checkpoint.bin")  # py's checkpoints at 1
+    assert files(py) == files(cli)
+    for frame in sorted(cli.glob("frame_*.ply")):
+        assert _ply_body(py / frame.name) == _ply_body(frame), frame.name
+    strip_wall = lambda rows: [",".join(c for k, c in enumerate(r.split(",")) if k != 5) for r in rows]
+    assert strip_wall((py / "stats.csv").read_text().splitlines()) == \
+        strip_wall((cli / "stats.csv").read_text().splitlines())
+    assert (py / "steps.csv").read_text().splitlines()[0] == (cli / "steps.csv").read_text().splitlines()[0]
+    run_py, run_cli = (json.loads((d / "run.json").read_text()) for d in (py, cli))
+    assert run_py.keys() == run_cli.keys() and run_py["run_id"] != run_cli["run_id"]
+
+    with pytest.raises(ValueError, match="holds another run"):
+        pns.Simulation(scene).run(cli, frames=1)
+    pns.Simulation(scene).run(cli, frames=1, overwrite=True)
+    assert json.loads((cli / "run.json").read_text())["frames"] == 1 and not (cli / "frame_00002.ply").exists()
+    with pytest.raises(ValueError, match="give one"):
+        pns.Simulation(scene).run(cli, resume=True, overwrite=True)
+    with pytest.raises(ValueError, match="color"):
+        pns.Simulation(scene).run(tmp_path / "other", color="rainbow")
+
+
+def test_run_stops_on_a_failed_step_with_the_frames_before_it_complete(tmp_path):
+    scene = tiny_dict("snowball_2d")
+    scene["objects"][0]["velocity"] = [0, -30]
+    sim = pns.Simulation(scene, integrator="explicit", dt=0.01)  # far above the CFL step: blows up
+    with pytest.raises(pns.SimulationError, match="blew up(.|\n)*are complete"):
+        sim.run(tmp_path / "run", frames=6)
+    assert (tmp_path / "run" / "frame_00000.ply").exists() and (tmp_path / "run" / "stats.csv").exists()
+
+
 @pytest.mark.parametrize("model_name,dim,E", [("sand_2d", 2, 3.537e5), ("snow_2d", 2, 1.4e5), ("snow_3d", 3, None),
                                               ("metal_nh_2d", 2, 2e9)])
 def test_model_matches_torch(model_name, dim, E):
@@ -249,7 +302,7 @@ def test_model_matches_torch(model_name, dim, E):
     F0 = random_F(16, dim, seed=1)
     F = F0 + 0.05 * np.random.default_rng(2).standard_normal((16, dim, dim))
     # Hardening states inside and outside the trained range (snow: a > 0 and a below the range; metal:
-    # h > 1): both implementations feed the network the clamped h of DESIGN.md §3.
+    # h > 1): both implementations feed the network the clamped h of docs/physics.md.
     u = np.random.default_rng(3).random(16)
     h = 0.02 + 1.3 * u if model_name.startswith("metal") else -1.5 + 2.5 * u
     for w in (0.0, 1.0):

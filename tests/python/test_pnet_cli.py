@@ -31,6 +31,11 @@ def tiny_scene(name: str) -> dict:
     return scene
 
 
+def frame_data(path: Path) -> bytes:
+    """A frame file's bytes without the id of the run that wrote it (two runs differ there)."""
+    return re.sub(rb"comment run_id \w+\n", b"", path.read_bytes())
+
+
 def write_scene(tmp_path: Path, scene: dict, name="scene.json") -> Path:
     path = tmp_path / name
     path.write_text(json.dumps(scene, indent=1))
@@ -66,7 +71,7 @@ def test_resume_continues_bit_identically(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "resumed at frame 2" in r.stderr
     for frame in (3, 4):
-        assert (full / f"frame_{frame:05d}.ply").read_bytes() == (part / f"frame_{frame:05d}.ply").read_bytes()
+        assert frame_data(full / f"frame_{frame:05d}.ply") == frame_data(part / f"frame_{frame:05d}.ply")
     # stats.csv continues from the checkpoint: one row per frame, the same simulated quantities.
     strip_wall = lambda rows: [",".join(c for i, c in enumerate(r.split(",")) if i != 5) for r in rows]
     assert strip_wall((full / "stats.csv").read_text().splitlines()) == \
@@ -89,6 +94,85 @@ def test_resume_refuses_a_checkpoint_of_another_scene(tmp_path):
              "--out", out)
     assert r.returncode == 2
     assert "written for a different scene" in r.stderr
+
+
+def _frame_run_ids(out: Path) -> dict[str, str]:
+    """frame file -> the run id it carries (PLY `comment run_id`, PNG tEXt `pnet_run_id`; "" if none)."""
+    ids = {}
+    for path in sorted(out.glob("frame_*.ply")):
+        header = path.read_bytes().split(b"end_header")[0].decode()
+        m = re.search(r"^comment run_id (\S+)$", header, re.M)
+        ids[path.name] = m.group(1) if m else ""
+    for path in sorted(out.glob("frame_*.png")):
+        m = re.search(rb"tEXtpnet_run_id\x00([0-9a-f]+)", path.read_bytes())
+        ids[path.name] = m.group(1).decode() if m else ""
+    return ids
+
+
+def test_a_run_never_mixes_with_another(tmp_path):
+    """4 frames, then 2 frames into the same folder: refused, and nothing of the first run is touched;
+    with --overwrite the first run's files are removed first (only those), so the folder holds one run."""
+    scene, out = TINY / "sand_column_2d.json", tmp_path / "run"
+    assert pnet("simulate", scene, "--integrator", "explicit", "--frames", 4, "--out", out).returncode == 0
+    first = json.loads((out / "run.json").read_text())["run_id"]
+    assert set(_frame_run_ids(out).values()) == {first} and len(_frame_run_ids(out)) == 10
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    (out / "notes.txt").write_text("mine")
+
+    r = pnet("simulate", scene, "--integrator", "explicit", "--frames", 2, "--out", out)
+    assert r.returncode == 2
+    assert f"{out}: holds another run" in r.stderr and '"sand_column_2d_tiny"' in r.stderr, r.stderr
+    assert "4 frames" in r.stderr and "--overwrite" in r.stderr and "--resume" in r.stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.name != "notes.txt"} == before
+
+    r = pnet("simulate", scene, "--integrator", "explicit", "--frames", 2, "--overwrite", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "--overwrite: removed" in r.stderr
+    run = json.loads((out / "run.json").read_text())
+    assert run["frames"] == 2 and run["run_id"] != first
+    ids = _frame_run_ids(out)
+    assert sorted(ids) == sorted(f"frame_{f:05d}.{e}" for f in range(3) for e in ("ply", "png"))
+    assert set(ids.values()) == {run["run_id"]}
+    assert [int(r.split(",")[0]) for r in (out / "stats.csv").read_text().splitlines()[1:]] == [1, 2]
+    assert (out / "notes.txt").read_text() == "mine"
+    r = pnet("video", out)
+    assert r.returncode == 0 and "3 frames" in r.stdout, r.stderr
+
+    r = pnet("simulate", scene, "--integrator", "explicit", "--resume", "--overwrite", "--out", out)
+    assert r.returncode == 2 and "give one" in r.stderr
+
+
+def test_video_and_compare_refuse_frames_of_another_run(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    for out in (a, b):
+        assert pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "explicit", "--frames", 2,
+                    "--out", out).returncode == 0
+    for ext in ("png", "ply"):  # a frame of run a slipped into run b
+        (b / f"frame_00002.{ext}").write_bytes((a / f"frame_00002.{ext}").read_bytes())
+    run_a = json.loads((a / "run.json").read_text())["run_id"]
+
+    r = pnet("video", b)
+    assert r.returncode == 2, r.stderr
+    assert f"{b / 'frame_00002.png'}: not written by the run in {b / 'run.json'}" in r.stderr and run_a in r.stderr
+    assert not (b / "video.mp4").exists()
+    r = pnet("compare", a, b)
+    assert r.returncode == 2, r.stderr
+    assert f"{b / 'frame_00002.ply'}: not written by the run in" in r.stderr
+    assert not (b / "compare_a").exists()
+
+
+def test_resume_keeps_the_run_id_and_drops_later_frames(tmp_path):
+    scene, out = TINY / "sand_column_2d.json", tmp_path / "run"
+    assert pnet("simulate", scene, "--integrator", "explicit", "--frames", 1, "--checkpoint-every", 1,
+                "--out", out).returncode == 0
+    run_id = json.loads((out / "run.json").read_text())["run_id"]
+    (out / "frame_00007.ply").write_bytes((out / "frame_00001.ply").read_bytes())  # left by a longer attempt
+    r = pnet("simulate", scene, "--integrator", "explicit", "--frames", 2, "--resume", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((out / "run.json").read_text())["run_id"] == run_id
+    ids = _frame_run_ids(out)
+    assert sorted(ids) == sorted(f"frame_{f:05d}.{e}" for f in range(3) for e in ("ply", "png"))
+    assert set(ids.values()) == {run_id}
 
 
 def _malformed(scene: dict, case: str) -> tuple[dict, str]:
@@ -432,7 +516,7 @@ def test_model_option_replaces_the_scenes_models(tmp_path):
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "o" / "run.json").read_text())["models"] == [str(other)]
     # The frames differ: another energy moved the particles.
-    assert (tmp_path / "o" / "frame_00001.ply").read_bytes() != (tmp_path / "own" / "frame_00001.ply").read_bytes()
+    assert frame_data(tmp_path / "o" / "frame_00001.ply") != frame_data(tmp_path / "own" / "frame_00001.ply")
 
 
 @pytest.mark.parametrize(
@@ -554,4 +638,4 @@ def test_bdf2_runs_a_fem_scene_and_records_itself(tmp_path):
         assert r.returncode == 0, r.stderr
         run = json.loads((outs[name] / "run.json").read_text())
         assert run["solver"]["time_integrator"] == name, run["solver"]
-    assert (outs["bdf2"] / "frame_00002.ply").read_bytes() != (outs["backward_euler"] / "frame_00002.ply").read_bytes()
+    assert frame_data(outs["bdf2"] / "frame_00002.ply") != frame_data(outs["backward_euler"] / "frame_00002.ply")

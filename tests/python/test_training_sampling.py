@@ -1,4 +1,4 @@
-"""Training samples (F, F0, h) (paper sec. 5.1, DESIGN.md §3) and the stress targets built from them."""
+"""Training samples (F, F0, h) (paper sec. 5.1, docs/physics.md) and the stress targets built from them."""
 
 import math
 

@@ -1,6 +1,6 @@
 #pragma once
-// IPC's adaptive barrier stiffness kappa (Li et al. 2020, sec. 4.3; DESIGN.md
-// §4.3), for our velocity-form incremental potential. IPC's potential is
+// IPC's adaptive barrier stiffness kappa (Li et al. 2020, sec. 4.3;
+// docs/methods.md), for our velocity-form incremental potential. IPC's potential is
 // 1/2 (x - x~)^T M (x - x~) + h^2 Psi(x) + kappa_IPC B(x); ours is that divided
 // by dt^2, so kappa = kappa_IPC / dt^2.
 //

@@ -1,5 +1,5 @@
 #pragma once
-// The IPC log barrier on a squared distance s (Li et al. 2020; DESIGN.md §4.3):
+// The IPC log barrier on a squared distance s (Li et al. 2020; docs/methods.md):
 //   b(s) = -(s - s_hat)^2 ln(s / s_hat)  for 0 < s < s_hat,  0 for s >= s_hat,
 // s_hat = dhat^2. It is C2 at s_hat and grows without bound as s -> 0, so an
 // energy that contains it keeps every iterate intersection-free as long as

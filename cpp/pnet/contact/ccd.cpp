@@ -35,13 +35,4 @@ double point_edge_time_of_impact(const Vec<2>& p, const Vec<2>& a, const Vec<2>&
     return t;  // pathological slow approach: what was reached is safe
 }
 
-double point_plane_time_of_impact(const Vec<2>& x, const Vec<2>& dx, const Vec<2>& origin, const Vec<2>& normal,
-                                  double t_max, double eta) {
-    const double d = normal.dot(x - origin), rate = normal.dot(dx);
-    if (!(d > 0.0)) return 0.0;
-    if (rate >= 0.0) return kNoImpact;
-    const double t = d / -rate;
-    return t > t_max ? kNoImpact : eta * t;
-}
-
 }  // namespace pnet

@@ -1,5 +1,5 @@
 #pragma once
-// Continuous collision detection for the line search (DESIGN.md §4.3): the
+// Continuous collision detection for the line search (docs/methods.md): the
 // largest fraction t of a linear motion x0 -> x0 + dx that a pair can take
 // without touching.
 //
@@ -10,6 +10,7 @@
 // of impact, and a pair stepped to it keeps a positive distance.
 // Point-plane: closed form, scaled by eta.
 #include <limits>
+#include <type_traits>
 
 #include "pnet/math/types.hpp"
 
@@ -24,10 +25,21 @@ double point_edge_time_of_impact(const Vec<2>& p, const Vec<2>& a, const Vec<2>&
                                  const Vec<2>& da, const Vec<2>& db, double min_distance = 0.0, double t_max = 1.0,
                                  double eta = 0.9);
 
-/// Time of impact of point x moving by dx with the plane n.(y - origin) = 0 (n
-/// unit, the point on its positive side): eta times the exact time, or
-/// kNoImpact if it does not reach the plane before t_max.
-double point_plane_time_of_impact(const Vec<2>& x, const Vec<2>& dx, const Vec<2>& origin, const Vec<2>& normal,
-                                  double t_max = 1.0, double eta = 0.9);
+/// Time of impact of point x moving by dx with the plane (2D: line) n.(y - origin) = 0 (n unit,
+/// the point on its positive side): eta times the exact time, or kNoImpact if it does not reach
+/// the plane before t_max; 0 if it is not above the plane. In 2D and 3D.
+/// (The dimension is taken from x alone, so the other arguments may be Eigen expressions such as
+/// Vec<2>::Zero().)
+template <int dim>
+double point_plane_time_of_impact(const Vec<dim>& x, const std::enable_if_t<true, Vec<dim>>& dx,
+                                  const std::enable_if_t<true, Vec<dim>>& origin,
+                                  const std::enable_if_t<true, Vec<dim>>& normal, double t_max = 1.0,
+                                  double eta = 0.9) {
+    const double d = normal.dot(x - origin), rate = normal.dot(dx);
+    if (!(d > 0.0)) return 0.0;
+    if (rate >= 0.0) return kNoImpact;
+    const double t = d / -rate;
+    return t > t_max ? kNoImpact : eta * t;
+}
 
 }  // namespace pnet

@@ -76,13 +76,4 @@ double edge_edge_time_of_impact(const Vec<3>& a0, const Vec<3>& a1, const Vec<3>
         min_distance, t_max, eta);
 }
 
-double point_plane_time_of_impact(const Vec<3>& x, const Vec<3>& dx, const Vec<3>& origin, const Vec<3>& normal,
-                                  double t_max, double eta) {
-    const double d = normal.dot(x - origin), rate = normal.dot(dx);
-    if (!(d > 0.0)) return 0.0;
-    if (rate >= 0.0) return kNoImpact;
-    const double t = d / -rate;
-    return t > t_max ? kNoImpact : eta * t;
-}
-
 }  // namespace pnet

@@ -1,6 +1,6 @@
 #pragma once
 // Continuous collision detection of IPC's 3D contact primitives for the line
-// search (DESIGN.md §4.3): the largest fraction t of a linear motion
+// search (docs/methods.md): the largest fraction t of a linear motion
 // x0 -> x0 + dx that a pair can take without touching.
 //
 // Point-triangle and edge-edge: additive CCD (Li, Kaufman, Jiang 2021), as the 2D
@@ -14,8 +14,8 @@
 // result never exceeds the true time of impact and the pair moved to it keeps a
 // distance of at least xi + (1 - eta)(d0 - xi) > xi. A slow grazing approach
 // (over 100000 steps) stops at the safe time reached so far.
-// Point-plane: closed form, scaled by eta.
-#include "pnet/contact/ccd.hpp"  // kNoImpact
+// Point-plane: point_plane_time_of_impact (ccd.hpp), for both dimensions.
+#include "pnet/contact/ccd.hpp"  // kNoImpact, point_plane_time_of_impact
 #include "pnet/math/types.hpp"
 
 namespace pnet {
@@ -32,11 +32,5 @@ double point_triangle_time_of_impact(const Vec<3>& p, const Vec<3>& a, const Vec
 double edge_edge_time_of_impact(const Vec<3>& a0, const Vec<3>& a1, const Vec<3>& b0, const Vec<3>& b1,
                                 const Vec<3>& da0, const Vec<3>& da1, const Vec<3>& db0, const Vec<3>& db1,
                                 double min_distance = 0.0, double t_max = 1.0, double eta = 0.9);
-
-/// Time of impact of point x moving by dx with the plane n.(y - origin) = 0 (n
-/// unit, the point on its positive side): eta times the exact time, or kNoImpact
-/// if it does not reach the plane before t_max; 0 if it is not above the plane.
-double point_plane_time_of_impact(const Vec<3>& x, const Vec<3>& dx, const Vec<3>& origin, const Vec<3>& normal,
-                                  double t_max = 1.0, double eta = 0.9);
 
 }  // namespace pnet

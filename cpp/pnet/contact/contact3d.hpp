@@ -1,5 +1,5 @@
 #pragma once
-// IPC contact in 3D (DESIGN.md §4.3): the barrier B(x) = kappa sum_k m_k b(s_k(x))
+// IPC contact in 3D (docs/methods.md): the barrier B(x) = kappa sum_k m_k b(s_k(x))
 // over the pairs of a closed boundary surface closer than dhat:
 //   point-triangle  every boundary node against every boundary triangle it is not a corner of
 //                   (7 distance cases, distance3d.hpp), m = 1;

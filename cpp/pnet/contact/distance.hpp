@@ -1,6 +1,6 @@
 #pragma once
 // Squared distances of IPC's 2D contact primitives with their gradients and
-// Hessians (DESIGN.md §4.3): point-point, point-edge (three cases: the point is
+// Hessians (docs/methods.md): point-point, point-edge (three cases: the point is
 // closest to endpoint a, to endpoint b, or to the inside of the edge) and
 // point-plane. Derivatives are with respect to the stacked positions: (p, a)
 // for point-point, (p, a, b) for point-edge, p for point-plane.

@@ -1,6 +1,6 @@
 #pragma once
 // Squared distances of IPC's 3D contact primitives with their gradients and
-// Hessians (Li et al. 2020; DESIGN.md §4.3): point-triangle and edge-edge, each
+// Hessians (Li et al. 2020; docs/methods.md): point-triangle and edge-edge, each
 // piecewise over the feature pair that is closest, and IPC's mollifier of nearly
 // parallel edges.
 //

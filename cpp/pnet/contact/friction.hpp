@@ -1,5 +1,5 @@
 #pragma once
-// Lagged smoothed Coulomb friction of IPC (Li et al. 2020; DESIGN.md §4.3) in
+// Lagged smoothed Coulomb friction of IPC (Li et al. 2020; docs/methods.md) in
 // velocity form, in 2D and 3D: for every contact pair active at the start of
 // the step, its normal force lambda_k = kappa |b'(s)| 2 d, its tangent basis
 // T_k (dim x (dim - 1), orthonormal columns) and the weights of its relative

@@ -1,6 +1,6 @@
 #pragma once
 // A uniform grid over axis-aligned boxes: the broad phase of 3D contact
-// (DESIGN.md §4.3). Boxes (a primitive's, swept over its motion for CCD,
+// (docs/methods.md). Boxes (a primitive's, swept over its motion for CCD,
 // grown by a margin) are binned into every cell of side `cell` they overlap,
 // stored cell by cell (compressed rows: one counting pass, one fill pass, no
 // hashing, no sorting); a query box visits the cells it overlaps and returns

@@ -1,5 +1,5 @@
 #pragma once
-// IPC contact as an energy in the nodal positions (DESIGN.md §4.3):
+// IPC contact as an energy in the nodal positions (docs/methods.md):
 //   B(x) = kappa sum_k b(s_k(x)),   b the log barrier (barrier.hpp), s_k squared distances,
 // over the pairs of a 2D boundary: every boundary node against every boundary
 // edge it is not an endpoint of (contact between bodies and self-contact), and

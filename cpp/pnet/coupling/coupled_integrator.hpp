@@ -1,5 +1,5 @@
 #pragma once
-// Time integrators of MPM-FEM coupling (BFEMP; DESIGN.md §4.4), 2D: MPM
+// Time integrators of MPM-FEM coupling (BFEMP; docs/methods.md), 2D: MPM
 // particles (sand, snow: any MPM material) and elastic FEM bodies meeting
 // through the particle / mesh barrier (particle_contact.hpp).
 //

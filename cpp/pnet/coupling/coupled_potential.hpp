@@ -1,6 +1,6 @@
 #pragma once
 // The incremental potential of an MPM-FEM coupled step (BFEMP, Li, Fang, Li,
-// Jiang 2021; DESIGN.md §4.4), over v = [MPM grid velocities; FEM nodal
+// Jiang 2021; docs/methods.md), over v = [MPM grid velocities; FEM nodal
 // velocities] (m/s, both):
 //
 //   E(v) = E_mpm(v_g) + E_fem(v_f) + B(X(v_g), x(v_f)),

@@ -1,6 +1,6 @@
 #pragma once
 // The barrier between MPM particles and the boundary of FEM bodies (BFEMP, Li,
-// Fang, Li, Jiang 2021; DESIGN.md §4.4), in 2D: every particle (a point) against
+// Fang, Li, Jiang 2021; docs/methods.md), in 2D: every particle (a point) against
 // every boundary edge of the mesh,
 //   B(X, x) = kappa sum_{p, e: s < dhat^2} b(s(X_p, x_a, x_b)),
 // with b the IPC log barrier (contact/barrier.hpp) and s the squared point-edge

@@ -1,6 +1,6 @@
 #pragma once
 // The closed-form elastoplastic energy of StVK-Hencky elasticity with von
-// Mises plasticity (ECI: Li, Li, Jiang 2022; DESIGN.md §4.2), the `analytic`
+// Mises plasticity (ECI: Li, Li, Jiang 2022; docs/methods.md), the `analytic`
 // reference integrator of the metal scenes. With e = log Sigma, ehat = dev e,
 // k = lambda/2 + mu/d and h = tau_Y / (2 mu) the element's hardening state:
 //   psi = k tr(e)^2 + mu |ehat|^2               if |ehat| <= h (elastic),

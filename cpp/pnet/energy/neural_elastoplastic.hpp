@@ -1,13 +1,13 @@
 #pragma once
 // The PlasticityNet elastoplastic energy of one particle or element (paper
-// eqs. 8 and 11, DESIGN.md §3), evaluated in batches with the fused MLP kernel:
+// eqs. 8 and 11, docs/physics.md), evaluated in batches with the fused MLP kernel:
 //
 //   Psi(F; F0, h) = E [ N(F, F0, h) - c : F + w mu/2 ||F - F0||^2 ],
 //   c = grad_F N(F0, F0, h) - Ptilde(F0, h),
 //
 // so that grad_F Psi(F0) = E Ptilde(F0, h) exactly. N, Ptilde and mu are at
 // the training Young's modulus (1: the net is dimensionless) and E is the
-// scene's. The network's hardening input is the h of DESIGN.md §3 for the
+// scene's. The network's hardening input is the h of docs/physics.md for the
 // particle's state (Cam-Clay: min(a, 0)), clamped to the range the model was
 // trained on (ModelMetadata::network_hardening); Ptilde(F0, h) in c uses the
 // state itself, so grad Psi(F0) stays exact where the input was clamped. c is computed once per optimization

@@ -40,7 +40,7 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
             throw std::invalid_argument(context[k] + ": the plasticitynet integrator needs an energy model for "
                                                      "every object (none given)");
         const ModelFile& model = *models[k];
-        // A model is used only for the material it was trained for (DESIGN.md §4.1): the correction c
+        // A model is used only for the material it was trained for (docs/methods.md): the correction c
         // uses the model's return mapping, G2P the scene's, so any difference would mix two materials.
         const std::vector<MaterialDifference> differences =
             constitutive_differences(model.metadata.material, materials[k].description());

@@ -1,10 +1,10 @@
 #pragma once
 // The per-particle energy density of an implicit MPM step, the one face the
-// incremental potential (mpm/incremental_potential.hpp) sees (STYLE.md item 2):
+// incremental potential (mpm/incremental_potential.hpp) sees (docs/architecture.md):
 // it never knows whether the energy is learned or analytic.
 //
 //   ElasticParticleEnergy: psi(F) of each particle's elasticity model, the
-//     `lagged` baseline (plasticity applied after the step, DESIGN.md §4).
+//     `lagged` baseline (plasticity applied after the step, docs/methods.md).
 //   NeuralParticleEnergy:  the PlasticityNet energy Psi(F; F0, h) (paper eqs. 8
 //     and 11) of each object's model, the `plasticitynet` integrator.
 //

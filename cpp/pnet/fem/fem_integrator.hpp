@@ -1,5 +1,5 @@
 #pragma once
-// FEM time integrators (DESIGN.md §4.2) on a simplicial mesh with per-element
+// FEM time integrators (docs/methods.md) on a simplicial mesh with per-element
 // plasticity: the state is the nodal positions and velocities and, per
 // element, the inverse plastic deformation (F^P)^-1 and the hardening state.
 //
@@ -34,9 +34,10 @@
 #include "pnet/contact/ipc_contact.hpp"
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/fem_potential.hpp"
-#include "pnet/mpm/implicit_integrator.hpp"  // ImplicitOptions, StepStats, SimulationError
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
+#include "pnet/solver/implicit_options.hpp"
+#include "pnet/solver/step_stats.hpp"
 
 namespace pnet {
 

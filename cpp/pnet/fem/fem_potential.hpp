@@ -1,5 +1,5 @@
 #pragma once
-// The incremental potential of an implicit FEM step (DESIGN.md §4.2), over the
+// The incremental potential of an implicit FEM step (docs/methods.md), over the
 // nodal velocities v with x = x^n + dt v, so that FEM has the same unknowns
 // (velocities, m/s) and the same Newton loop as MPM:
 //

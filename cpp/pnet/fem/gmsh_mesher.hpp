@@ -1,5 +1,5 @@
 #pragma once
-// Meshes from gmsh (Debian libgmsh-dev; DESIGN.md §4.2): procedural 2D and 3D
+// Meshes from gmsh (Debian libgmsh-dev; docs/methods.md): procedural 2D and 3D
 // shapes meshed with linear triangles / tetrahedra of a target size, user mesh
 // files (.msh, any version gmsh reads) with triangles (2D) or tetrahedra (3D),
 // and closed surfaces (.obj, .stl) tetrahedralized.

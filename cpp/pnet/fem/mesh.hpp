@@ -1,5 +1,5 @@
 #pragma once
-// A simplicial FEM mesh (DESIGN.md §4.2): linear triangles in 2D, linear
+// A simplicial FEM mesh (docs/methods.md): linear triangles in 2D, linear
 // tetrahedra in 3D, with rest positions, and its boundary facets (edges in 2D,
 // triangles in 3D), which contact acts on (contact/).
 //

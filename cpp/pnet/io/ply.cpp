@@ -1,6 +1,7 @@
 #include "pnet/io/ply.hpp"
 
 #include <array>
+#include <cctype>
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
@@ -60,6 +61,15 @@ bool parse_count(const std::string& text, std::uint64_t& value) {
 
 // std::getline would read a whole binary file that has no '\n' into memory; this stops at
 // kMaxHeaderBytes in total. False at the end of the stream or past the limit.
+/// "comment run_id <id>\n", or "" without an id; an id must be one word of letters, digits, '-' or '_'.
+std::string run_id_comment(const std::string& path, const std::string& run_id) {
+    if (run_id.empty()) return "";
+    for (char ch : run_id)
+        if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '-' && ch != '_')
+            throw std::invalid_argument(path + ": run_id '" + run_id + "': expected letters, digits, '-' or '_'");
+    return "comment run_id " + run_id + "\n";
+}
+
 bool read_header_line(std::istream& in, std::string& line, std::size_t& header_bytes) {
     line.clear();
     for (int c; (c = in.get()) != std::char_traits<char>::eof();) {
@@ -95,7 +105,7 @@ void write_particles_ply(const std::string& path, const PlyParticles& p) {
            << "format binary_little_endian 1.0\n"
            << "comment plasticitynet particles\n"
            << "comment dim " << p.dim << "\n"
-           << "element vertex " << n << "\n";
+           << run_id_comment(path, p.run_id) << "element vertex " << n << "\n";
     for (const char* name : kProperties) header << "property double " << name << "\n";
     header << "end_header\n";
 
@@ -119,6 +129,7 @@ void write_particles_ply(const std::string& path, const PlyParticles& p) {
 }
 
 PlyParticles read_particles_ply(const std::string& path, int dim) {
+    std::string run_id;
     if (dim != 0 && dim != 2 && dim != 3) {
         throw std::invalid_argument(path + ": dim must be 0 (from the file), 2 or 3, got " + std::to_string(dim));
     }
@@ -153,6 +164,9 @@ PlyParticles read_particles_ply(const std::string& path, int dim) {
             if (w.size() >= 2 && w[1] == "dim") {
                 if (w.size() != 3 || (w[2] != "2" && w[2] != "3")) throw fail(where + "expected 'comment dim 2' or 3");
                 file_dim = w[2][0] - '0';
+            } else if (w.size() >= 2 && w[1] == "run_id") {
+                if (w.size() != 3) throw fail(where + "expected 'comment run_id <id>'");
+                run_id = w[2];
             }
         } else if (w[0] == "obj_info") {
             // free text, like comments
@@ -210,6 +224,7 @@ PlyParticles read_particles_ply(const std::string& path, int dim) {
     if (!in) throw fail("reading the vertex data failed");
 
     PlyParticles p;
+    p.run_id = run_id;
     p.dim = dim;
     const std::size_t d = std::size_t(dim);
     p.position.resize(n * d);
@@ -266,7 +281,7 @@ void write_mesh_ply(const std::string& path, const PlyMesh& m) {
                                         std::to_string(n) + " nodes)");
     std::ostringstream header;
     header << "ply\nformat binary_little_endian 1.0\ncomment plasticitynet mesh\ncomment dim " << d << "\n"
-           << "element vertex " << n << "\n";
+           << run_id_comment(path, m.run_id) << "element vertex " << n << "\n";
     for (const char* name : kMeshVertexProperties) header << "property double " << name << "\n";
     header << "element face " << f << "\nproperty list uchar int vertex_indices\nproperty double hardening\nend_header\n";
     std::string data(n * kMeshVertexBytes + f * kFaceBytes, '\0');
@@ -291,6 +306,7 @@ void write_mesh_ply(const std::string& path, const PlyMesh& m) {
 }
 
 PlyMesh read_mesh_ply(const std::string& path) {
+    std::string run_id;
     std::ifstream in(path, std::ios::binary);
     if (!in) throw std::runtime_error(path + ": cannot open for reading: " + std::strerror(errno));
     auto fail = [&](const std::string& problem) { return std::runtime_error(path + ": " + problem); };
@@ -311,6 +327,10 @@ PlyMesh read_mesh_ply(const std::string& path) {
                 if (w.size() != 3 || (w[2] != "2" && w[2] != "3"))
                     throw fail("header line " + std::to_string(line_number) + ": 'comment dim' must be 2 or 3");
                 dim = w[2][0] - '0';
+            } else if (w.size() >= 2 && w[1] == "run_id") {
+                if (w.size() != 3)
+                    throw fail("header line " + std::to_string(line_number) + ": expected 'comment run_id <id>'");
+                run_id = w[2];
             }
             continue;
         }
@@ -342,6 +362,7 @@ PlyMesh read_mesh_ply(const std::string& path) {
     in.read(&data[0], std::streamsize(available));
     if (!in) throw fail("reading the data failed");
     PlyMesh m;
+    m.run_id = run_id;
     m.dim = dim;
     const std::size_t d = static_cast<std::size_t>(dim);
     m.position.resize(d * n);

@@ -9,6 +9,7 @@
 //     format binary_little_endian 1.0
 //     comment plasticitynet particles
 //     comment dim 2
+//     comment run_id <id>       (optional: the pnet simulate run that wrote the frame)
 //     element vertex <n>
 //     property double x         position, m (z = 0 in 2D)
 //     property double y
@@ -40,6 +41,7 @@ struct PlyParticles {
     std::vector<double> velocity;   // n * dim, m/s
     std::vector<double> mass;       // n, kg
     std::vector<double> hardening;  // n
+    std::string run_id;             // the run that wrote the frame ("comment run_id"); "" if none
 
     std::size_t size() const { return mass.size(); }
 };
@@ -62,6 +64,7 @@ PlyParticles read_particles_ply(const std::string& path, int dim = 0);
 /// little-endian; Blender, ParaView and MeshLab open it as a surface):
 ///
 ///     ply / format binary_little_endian 1.0 / comment plasticitynet mesh / comment dim D
+///     [comment run_id <id>]
 ///     element vertex <n>    property double x y z vx vy vz   (2D: z = vz = 0)
 ///     element face <m>      property list uchar int vertex_indices
 ///                           property double hardening          (the element's state)
@@ -72,6 +75,7 @@ struct PlyMesh {
     std::vector<double> velocity;   // n * dim, m/s
     std::vector<int> triangles;     // m * 3 node indices
     std::vector<double> hardening;  // m
+    std::string run_id;             // as PlyParticles::run_id
 
     std::size_t nodes() const { return position.size() / dim; }
 };

@@ -1,6 +1,7 @@
 #include "pnet/io/png.hpp"
 
 #include <png.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -16,6 +17,53 @@
 namespace pnet {
 
 namespace {
+
+constexpr std::size_t kSignatureBytes = 8;
+constexpr std::size_t kIhdrChunkBytes = 4 + 4 + 13 + 4;  // length, type, data, CRC
+
+std::uint32_t big_endian_u32(const std::string& bytes, std::size_t at) {
+    std::uint32_t v = 0;
+    for (int k = 0; k < 4; ++k) v = (v << 8) | static_cast<unsigned char>(bytes[at + k]);
+    return v;
+}
+
+std::string big_endian_bytes(std::uint32_t v) {
+    return {char(v >> 24), char((v >> 16) & 0xff), char((v >> 8) & 0xff), char(v & 0xff)};
+}
+
+/// One PNG chunk: length, type, data, CRC-32 of type and data.
+std::string png_chunk(const std::string& type, const std::string& data) {
+    const std::string body = type + data;
+    const auto crc = std::uint32_t(crc32(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(body.data()),
+                                         static_cast<uInt>(body.size())));
+    return big_endian_bytes(std::uint32_t(data.size())) + body + big_endian_bytes(crc);
+}
+
+/// The tEXt chunks of a PNG's bytes before its first IDAT; `fail` makes the error to throw.
+template <class Fail>
+std::map<std::string, std::string> text_chunks(const std::string& bytes, const Fail& fail) {
+    std::map<std::string, std::string> text;
+    std::size_t at = kSignatureBytes;
+    while (true) {
+        if (bytes.size() - at < 12) throw fail("corrupt or truncated PNG (a chunk runs past the end)");
+        const std::uint32_t length = big_endian_u32(bytes, at);
+        if (length > bytes.size() - at - 12) throw fail("corrupt or truncated PNG (a chunk runs past the end)");
+        const std::string type = bytes.substr(at + 4, 4);
+        if (type == "IDAT" || type == "IEND") return text;
+        const std::string body = bytes.substr(at + 4, 4 + std::size_t(length));
+        const auto crc = std::uint32_t(crc32(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(body.data()),
+                                             static_cast<uInt>(body.size())));
+        if (crc != big_endian_u32(bytes, at + 8 + length))
+            throw fail("corrupt PNG (bad CRC in the " + type + " chunk)");
+        if (type == "tEXt") {
+            const std::string data = body.substr(4);
+            const std::size_t nul = data.find('\0');
+            if (nul == std::string::npos || nul == 0) throw fail("corrupt PNG (a tEXt chunk without a keyword)");
+            text[data.substr(0, nul)] = data.substr(nul + 1);
+        }
+        at += 12 + std::size_t(length);
+    }
+}
 
 // Far above any frame or plot, and low enough that 3 * w * h cannot overflow anywhere or make a
 // corrupt header allocate gigabytes.
@@ -98,6 +146,20 @@ void write_png(const std::string& path, const Image& img) {
     if (!png_image_write_to_memory(&png.image, bytes.data(), &size, 0, img.rgb.data(), 0, nullptr))
         throw std::runtime_error(path + ": libpng cannot encode the image: " + png.image.message);
     bytes.resize(size);
+    // tEXt chunks go right after IHDR (8 signature bytes + 25 bytes of IHDR chunk).
+    std::string text_chunks;
+    for (const auto& [keyword, text] : img.text) {
+        const bool printable = std::all_of(keyword.begin(), keyword.end(), [](char ch) {
+            const auto u = static_cast<unsigned char>(ch);
+            return (u >= 32 && u <= 126) || u >= 161;
+        });
+        if (keyword.empty() || keyword.size() > 79 || !printable || keyword.front() == ' ' || keyword.back() == ' ' ||
+            text.find('\0') != std::string::npos)
+            throw std::invalid_argument(path + ": PNG text keyword '" + keyword +
+                                        "': expected 1-79 printable characters and a text without NUL");
+        text_chunks += png_chunk("tEXt", keyword + '\0' + text);
+    }
+    bytes.insert(kSignatureBytes + kIhdrChunkBytes, text_chunks);
     write_text_atomically(path, bytes);
 }
 
@@ -134,6 +196,7 @@ Image read_png_rgb(const std::string& path) {
     auto fail = [&](const std::string& problem) { return std::runtime_error(path + ": " + problem); };
     if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0)
         throw fail("not a PNG file (bad signature)");
+    std::map<std::string, std::string> text = text_chunks(bytes, fail);
 
     // libpng's full reader, not png_image: that one skips the chunk CRCs of the image data.
     std::string error;
@@ -171,6 +234,7 @@ Image read_png_rgb(const std::string& path) {
     png_read_update_info(png, info);
 
     Image img{int(w), int(h)};
+    img.text = std::move(text);
     std::vector<png_bytep> rows(h);
     for (png_uint_32 y = 0; y < h; ++y) rows[y] = img.rgb.data() + std::size_t(y) * 3 * w;
     if (setjmp(png_jmpbuf(png))) {
@@ -181,6 +245,17 @@ Image read_png_rgb(const std::string& path) {
     png_read_end(png, nullptr);
     png_destroy_read_struct(&png, &info, nullptr);
     return img;
+}
+
+std::map<std::string, std::string> read_png_text(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw std::runtime_error(path + ": cannot open for reading: " + std::strerror(errno));
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) throw std::runtime_error(path + ": reading failed");
+    auto fail = [&](const std::string& problem) { return std::runtime_error(path + ": " + problem); };
+    if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0)
+        throw fail("not a PNG file (bad signature)");
+    return text_chunks(bytes, fail);
 }
 
 }  // namespace pnet

@@ -1,7 +1,7 @@
 #pragma once
 // Non-associative Cam-Clay plasticity for snow with the neo-Hookean snow
 // elasticity (Wolper et al. 2019, CD-MPM; paper appendix A.2.2, eq. 17-20;
-// DESIGN.md §3). Hardening state a = log of the plastic volume ratio (a < 0
+// docs/physics.md). Hardening state a = log of the plastic volume ratio (a < 0
 // hardens); the networks see h = min(a, 0).
 #include <string>
 

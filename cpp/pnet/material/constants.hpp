@@ -4,7 +4,7 @@
 namespace pnet {
 
 /// Singular values are clamped to at least this before any constitutive
-/// evaluation (DESIGN.md §3): eps = log(max(Sigma, kSigmaMin)). A material thus
+/// evaluation (docs/physics.md): eps = log(max(Sigma, kSigmaMin)). A material thus
 /// sees the clamped polar form F_c = U diag(max(Sigma, kSigmaMin)) V^T, which
 /// keeps log-strains finite for (near-)degenerate and inverted F.
 inline constexpr double kSigmaMin = 1e-4;

@@ -1,6 +1,6 @@
 #pragma once
 // Drucker-Prager plasticity for sand with StVK-Hencky elasticity (Klar et al.
-// 2016; paper appendix A.2.1, eq. 15-16; DESIGN.md §3). No hardening.
+// 2016; paper appendix A.2.1, eq. 15-16; docs/physics.md). No hardening.
 #include "pnet/material/elasticity.hpp"
 #include "pnet/material/return_branch.hpp"
 

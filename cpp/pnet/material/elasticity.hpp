@@ -4,7 +4,7 @@
 // With F = U diag(Sigma) V^T (polar SVD) and eps = log(Sigma) (Hencky strain),
 // each model gives an energy density psi(Sigma), the Kirchhoff stress
 // tau_i = d psi / d eps_i (so tau = U diag(tau) U^T) and the first Piola stress
-// P = tau F^{-T} = U diag(tau_i / Sigma_i) V^T. Formulas: DESIGN.md §3 and the
+// P = tau F^{-T} = U diag(tau_i / Sigma_i) V^T. Formulas: docs/physics.md and the
 // paper's eqs. 14 (StVK-Hencky), 17 (neo-Hookean, snow), 24 (neo-Hookean, metal).
 #include <functional>
 #include <string>

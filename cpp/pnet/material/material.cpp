@@ -69,13 +69,13 @@ void MaterialDescription::validate() const {
 MaterialDescription material_preset(const std::string& name) {
     MaterialDescription m;
     m.name = name;
-    if (name == "sand") {  // DESIGN.md §5, sand_column
+    if (name == "sand") {  // docs/scenes.md, sand_column
         m.density = 2200.0;
         m.elasticity = ElasticityModel::StvkHencky;
         m.elastic = {3.537e5, 0.3};
         m.plasticity = PlasticityModel::DruckerPrager;
         m.drucker_prager.friction_angle_deg = 30.0;
-    } else if (name == "snow") {  // DESIGN.md §5, snowball
+    } else if (name == "snow") {  // docs/scenes.md, snowball
         m.density = 400.0;
         m.initial_hardening = -0.1;
         m.elasticity = ElasticityModel::NeoHookeanSnow;

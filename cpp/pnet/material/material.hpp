@@ -1,7 +1,7 @@
 #pragma once
 // A material = an elasticity model + a plastic return mapping + its hardening
 // state, with the elastoplastic stress Ptilde(F, h) = tau(Z(F, h)) F^{-T}
-// (paper eq. 5-6; DESIGN.md §3).
+// (paper eq. 5-6; docs/physics.md).
 #include <string>
 #include <variant>
 #include <vector>
@@ -48,7 +48,7 @@ struct MaterialDifference {
 /// are not compared: a learned energy is scaled by E, and the others are state.
 std::vector<MaterialDifference> constitutive_differences(const MaterialDescription& a, const MaterialDescription& b);
 
-/// The materials of DESIGN.md §3: "sand", "snow", "metal", "metal_nh".
+/// The materials of docs/physics.md: "sand", "snow", "metal", "metal_nh".
 MaterialDescription material_preset(const std::string& name);
 std::vector<std::string> material_preset_names();
 

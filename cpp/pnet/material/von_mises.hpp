@@ -1,6 +1,6 @@
 #pragma once
 // von Mises plasticity with linear hardening for metal (paper appendix A.2.3
-// and A.2.4; DESIGN.md §3). Hardening state h = tau_Y / (2 mu) >= 0, updated by
+// and A.2.4; docs/physics.md). Hardening state h = tau_Y / (2 mu) >= 0, updated by
 // h += xi dgamma (eq. 23).
 //
 // The yield surface ||dev tau|| = 2 mu h is the same for every elasticity; the

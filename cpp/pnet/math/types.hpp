@@ -2,7 +2,7 @@
 // Small fixed-size linear-algebra types shared by the whole library.
 //
 // Flattening convention: a d x d matrix F is stored as the row-major vector
-// vec(F)_{i*d+j} = F_ij (the layout of the network inputs, DESIGN.md §3, and of
+// vec(F)_{i*d+j} = F_ij (the layout of the network inputs, docs/physics.md, and of
 // every fourth-order tensor such as dP/dF, whose entry ((i*d+j), (k*d+l)) is
 // dP_ij / dF_kl).
 #include <Eigen/Core>

@@ -1,5 +1,5 @@
 #pragma once
-// The shape of an MPM deposit (DESIGN.md §6): measures that a film one
+// The shape of an MPM deposit (docs/metrics.md): measures that a film one
 // particle thick barely moves, unlike the outermost particle (whose position
 // swings by a fifth between two valid explicit runs where these move by a few
 // percent).

@@ -1,5 +1,5 @@
 #pragma once
-// Grid-mass IoU of two MPM results at the same time (DESIGN.md §6, PlasticineLab style):
+// Grid-mass IoU of two MPM results at the same time (docs/metrics.md, PlasticineLab style):
 // rasterize each particle set's mass to the same grid with the quadratic B-spline, then
 // compare the two nodal mass fields.
 #include <array>
@@ -55,14 +55,14 @@ struct IouResult {
     double plasticinelab;  // sum(a b) / sum(a + b - a b) with a = A / max A, b = B / max B
 };
 
-/// IoU of two nodal mass fields A, B (DESIGN.md §6, with the project's choice
+/// IoU of two nodal mass fields A, B (docs/metrics.md, with the project's choice
 /// of soft IoU):
 ///   soft = sum_i min(A_i, B_i) / sum_i max(A_i, B_i)   (fuzzy-set Jaccard index
 ///     of the mass fields: intersection = min, union = max). It is 1 exactly when
 ///     A = B, drops as mass moves away, and needs no normalization: both runs
 ///     carry the same total mass, so the raw fields are compared.
 ///   binary = IoU of the occupied nodes (value > 1e-3 x the field's maximum).
-///   plasticinelab = the formula DESIGN.md §6 prints (PlasticineLab's iou_kernel):
+///   plasticinelab = the formula docs/metrics.md prints (PlasticineLab's iou_kernel):
 ///     normalize each field by its maximum to a, b in [0, 1], sum a b / sum (a + b - a b).
 ///     Kept for reference only: its self-IoU sum a^2 / sum (2a - a^2) is below 1
 ///     wherever a node is partly filled (the B-spline rim of a body, a thin

@@ -87,6 +87,10 @@ PlyParticles read_frame(const std::string& path, const RunInfo& run) {
     for (double m : p.mass) total += m;
     if (!(total > 0.0))
         throw RunInputError(path + ": no particle mass to compare (" + std::to_string(p.size()) + " particles)");
+    if (!run.run_id.empty() && p.run_id != run.run_id)
+        throw RunInputError(path + ": not written by the run in " + run.json_file + " (" +
+                            (p.run_id.empty() ? std::string("no run id") : "run_id " + p.run_id) + ", run.json has " +
+                            run.run_id + "); the folder mixes runs: simulate again with --overwrite");
     return p;
 }
 
@@ -143,6 +147,11 @@ RunInfo read_run_info(const std::string& dir) {
                                 j.at("view_max").dump() + " and " + j.at("view_min").dump());
     run.dx = positive_number(j, run.json_file, "dx");
     run.frame_dt = positive_number(j, run.json_file, "frame_dt");
+    if (j.contains("run_id")) {
+        if (!j.at("run_id").is_string())
+            throw RunInputError(run.json_file + ": run_id: expected a string, got " + j.at("run_id").dump());
+        run.run_id = j.at("run_id").get<std::string>();
+    }
 
     // frame_NNNNN.ply: at least 5 digits (%05d); temporary files of an atomic write (".tmp.<pid>") do not match.
     static const std::regex frame_name(R"(frame_(\d{5,9})\.ply)");

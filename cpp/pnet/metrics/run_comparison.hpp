@@ -1,5 +1,5 @@
 #pragma once
-// Per-frame grid-mass IoU of two `pnet simulate` runs (DESIGN.md §6, §8): what `pnet compare` computes,
+// Per-frame grid-mass IoU of two `pnet simulate` runs (docs/metrics.md): what `pnet compare` computes,
 // in the library so that the Python bindings can call it too.
 //
 // A run directory holds run.json and the frames frame_NNNNN.ply (io/ply.hpp), NNNNN the frame number in
@@ -36,6 +36,7 @@ struct RunInfo {
     double dx = 0.0;                                   // the simulation's grid spacing, m
     double frame_dt = 0.0;                             // time between frames, s
     std::map<int, std::string> frames;                 // frame number -> PLY path (dir/frame_NNNNN.ply)
+    std::string run_id;  // run.json's run_id: every frame must carry it; "" (runs before run ids): not checked
 };
 
 /// Reads dir/run.json and lists dir's frame files without opening them; temporary files of an interrupted
@@ -60,7 +61,7 @@ struct RunPair {
 RunPair pair_runs(const std::string& dir_a, const std::string& dir_b, double dx = 0.0);
 
 /// IoU of one pair of frames (see IouResult), the Jaccard index of the mass deposited at 4 dx, and
-/// the shape of each deposit (DESIGN.md §6).
+/// the shape of each deposit (docs/metrics.md).
 struct FrameIou {
     int frame = 0;
     double time = 0.0;  // frame frame_dt, s

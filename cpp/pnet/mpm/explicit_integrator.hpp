@@ -1,5 +1,5 @@
 #pragma once
-// The ground-truth integrator (DESIGN.md §4, paper sec. 3.1-3.2): symplectic
+// The ground-truth integrator (docs/methods.md, paper sec. 3.1-3.2): symplectic
 // Euler MPM with APIC transfers and the analytic return mappings.
 //
 //   P2G:   m_i = sum w_ip m_p,  m_i v_i = sum w_ip m_p (v_p + C_p (x_i - x_p)) - dt sum V0_p tau_p grad w_ip

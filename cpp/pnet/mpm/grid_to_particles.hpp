@@ -1,6 +1,6 @@
 #pragma once
 // G2P, return mapping and advection: the end of every MPM step, shared by the
-// explicit and the implicit integrators (DESIGN.md §4). From the grid
+// explicit and the implicit integrators (docs/methods.md). From the grid
 // velocities (Grid::Node::momentum after the update or solve):
 //   v_p = sum w_ip v_i,  C_p = 4/dx^2 sum w_ip v_i (x_i - x_p)^T,  grad v_p = sum v_i grad w_ip^T,
 //   F^E_p <- Z((I + dt grad v_p) F^E_p, h_p),  h_p updated,  x_p += dt v_p.

@@ -1,5 +1,5 @@
 #pragma once
-// The optimization time integrators of implicit MPM (DESIGN.md §4, paper sec.
+// The optimization time integrators of implicit MPM (docs/methods.md, paper sec.
 // 3.1 and 4.2). A step:
 //   P2G (mass, APIC momentum), v* = momentum / m + dt g with boundary values;
 //   minimize the incremental potential E(v) (incremental_potential.hpp) by
@@ -23,7 +23,7 @@
 // and G2P moves the particles and their F by the displacement rate while v_p, C_p come from the grid
 // velocity at the start-of-step positions. The first step (no history) is backward Euler.
 //
-// Boundary conditions are those of explicit MPM (DESIGN.md §4.1): the sticky
+// Boundary conditions are those of explicit MPM (docs/methods.md): the sticky
 // floor's nodes are fixed at zero velocity during the solve, and slip walls
 // act after it, removing the wall-ward normal velocity of the nodes within
 // Grid::kWallNodes of a wall, just as explicit MPM projects its updated grid
@@ -45,121 +45,12 @@
 #include "pnet/mpm/mpm_system.hpp"
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
+#include "pnet/solver/implicit_options.hpp"
 #include "pnet/solver/newton.hpp"
 
 namespace pnet {
 
 enum class ImplicitMethod { PlasticityNet, Lagged };
-
-/// Solver settings of the implicit integrators. In a scene they are keys of the
-/// "integrator" block (same names); the command line can override some.
-struct ImplicitOptions {
-    // m/s: the mass-weighted velocity residual sqrt(sum_i g_i^2 / H_ii / sum_i m_i) over the free
-    // components (NewtonOptions::residual_mass; E - min E ~ M r^2 / 2).
-    double newton_tolerance = 1e-3;
-    int max_newton_iterations = 50;
-    int max_cg_iterations = 500;
-    double cg_tolerance = 0.1;            // largest relative PCG residual (inexact Newton)
-    // plasticitynet: how the reference F0 follows F(v) (solver/fixed_point.hpp, docs/solver.md):
-    // "newton", F0 = F(v) at every Newton iterate, one solve converged on the true residual; or
-    // "fixed_point", the paper's eq. 10, a full solve per F0 (the keys fixed_point_* below).
-    std::string outer_iteration = "newton";
-    // The time discretization of the implicit step: "backward_euler" (first order) or "bdf2" (second
-    // order, FEM: x^{n+1} = x^ + beta dt v^{n+1}, v^{n+1} = v^ + beta dt a^{n+1} with beta = 2/3,
-    // x^ = (4 x^n - x^{n-1}) / 3, v^ = (4 v^n - v^{n-1}) / 3: the same incremental potential about x^ with
-    // the step beta dt; the first step, without history, is backward Euler).
-    std::string time_integrator = "backward_euler";
-    double fixed_point_tolerance = 1e-3;  // max_p ||F_p(v) - F0_p||_F (plasticitynet)
-    // Solves per step (plasticitynet): the fixed point on F0 is converged to
-    // fixed_point_tolerance, with this cap. On sand_column_2d at dt 1e-3 one
-    // solve (F0 = F(v*) only) left the deposit's spread 5.7% short of the
-    // explicit ground truth (outside the noise floor: explicit at 2e-5 +2.2%,
-    // at CFL +3.7%); converged it is +1.7%, at 3.6x the cost (about 3 solves
-    // per step; notebooks/results/implicit_eval).
-    int max_fixed_point_iterations = 8;
-    // Anderson acceleration of the fixed point over this many iterates (0: the
-    // plain iteration; solver/fixed_point.hpp).
-    int fixed_point_anderson = 0;
-    // The fixed point's solves after the first start from the Hessian the previous one prepared
-    // (a modified Newton start, ReferenceSolveOptions::keep_hessian): a gradient pass instead of a
-    // Hessian pass per solve. MPM and MPM-FEM coupling; FEM's direct solver ignores it. On
-    // sand_column_2d (10 frames, 1 thread) 89 -> 61 ms per step at the same Newton and CG counts; with
-    // the energy's reuse of set_reference's pass at F = F0, 51 ms (issue 19; fixed_point_anderson 3
-    // cut the solves on sand_column_2d but added 29% on snowball_2d, fixed_point_inexact saved nothing:
-    // the later solves already take one Newton step; notebooks/results/implicit_eval/solver_comparison.md).
-    bool fixed_point_keep_hessian = true;
-    // Inexact inner solves while F0 still moves: a later solve of the fixed point whose F0 moved by
-    // more than fixed_point_tolerance stops once its residual has fallen by this factor (0: exact
-    // solves; ReferenceSolveOptions::inexact_forcing). MPM and MPM-FEM coupling.
-    double fixed_point_inexact = 0.0;
-    double regularizer_weight = 1.0;  // w of eq. 11 (plasticitynet; 0: the ablation)
-    // plasticitynet: the Hessian of Newton's steps, "network" (Hess N + w mu, the paper's), "tangent"
-    // (the return mapping's consistent tangent + w mu) or "auto" (the tangent, with w = 0 for von
-    // Mises, and the network's under the fixed point;
-    // NeuralElastoplasticEnergy::Options::Hessian).
-    std::string hessian = "auto";
-    // FEM `analytic` only, a diagnostic: > 0 adds w mu/2 ||F - F0||^2 about a reference to the
-    // closed-form energy and solves with plasticitynet's predictor and outer iteration on F0, the
-    // learned energy's solve without its learning error (AnalyticElastoplasticEnergy).
-    double analytic_regularizer = 0.0;
-    // PCG preconditioner: "jacobi", "block_jacobi" (the d x d block of each
-    // node) or "ichol" (incomplete Cholesky of the assembled grid Hessian; MPM only). Jacobi is the default: block
-    // Jacobi saved 2-3% of the CG iterations on sand_column_2d and snowball_2d (measured), not its cost.
-    std::string preconditioner = "jacobi";
-    // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the preconditioner above)
-    // or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept while the
-    // active grid is the same).
-    std::string linear_solver = "pcg";
-    // Newton keeps the last Hessian while each iteration cuts the residual by
-    // this factor (NewtonOptions::lazy_hessian; 0: a fresh one every
-    // iteration). 0.5 halved the energy time on sand_column_2d and cut it by
-    // 40% on snowball_2d at dt 1e-3, with as many or fewer Newton iterations.
-    double lazy_hessian = 0.5;
-    // MPM-FEM coupling: the linear solve of the coupled Newton iterations, "block" (PCG with Jacobi
-    // on the grid and an exact Cholesky solve of the FEM block) or "cholesky" (CHOLMOD on the whole
-    // assembled Hessian); coupling/coupled_potential.hpp.
-    std::string coupled_solver = "block";
-    // A step whose solve ends unconverged (iteration cap or failed line search)
-    // is an error (SimulationError) instead of being counted and used.
-    bool fail_on_unconverged = false;
-    // FEM: the most extra solves per step that move kinematic nodes (the plate)
-    // to targets that contact's CCD kept them from at the start.
-    int max_kinematic_stages = 20;
-    // FEM with kinematic nodes: the start of a step when CCD holds v* back: "scaled" (v* as far as
-    // CCD allows, the kinematic nodes then led to their targets in stages) or "last_velocity" (the
-    // free nodes at their last velocities with the kinematic nodes on their targets, where that is
-    // intersection-free; else "scaled").
-    std::string kinematic_start = "scaled";
-    // FEM plasticitynet with the Newton outer iteration: first solve the step with the elastic
-    // energy and start from there (always done under the fixed point, whose first F0 must be near
-    // the solution).
-    bool fem_predictor = true;
-    // plasticitynet: after each step, the return mapping of a model that ships
-    // one (metal_nh_2d.pt: metal_nh_rm_2d.pt) instead of the material's exact
-    // one; false: the material library's (for the comparison of the two).
-    bool learned_return_map = true;
-
-    /// Reads the keys above from an integrator block (others are ignored: the
-    /// block also holds name, dt and cfl). Throws std::invalid_argument
-    /// "<context>: integrator.<key>: <problem>" for a wrong type or range.
-    static ImplicitOptions from_json(const nlohmann::json& block, const std::string& context);
-    /// The Newton loop's settings from these (tolerance, iteration caps, CG tolerance, lazy
-    /// Hessian); the caller adds its residual masses and linear solver.
-    NewtonOptions newton_options() const;
-    /// The step's solve settings from these: the fixed point on F0 when `fixed_point`, its cap,
-    /// tolerance, acceleration, Hessian reuse and inexact inner solves.
-    ReferenceSolveOptions reference_solve_options(bool fixed_point) const;
-    nlohmann::json to_json() const;
-    /// `hessian` as the learned energy's option.
-    template <int dim>
-    typename NeuralElastoplasticEnergy<dim>::Options::Hessian neural_hessian() const {
-        using Hessian = typename NeuralElastoplasticEnergy<dim>::Options::Hessian;
-        if (hessian == "tangent") return Hessian::Tangent;
-        // The paper's fixed point keeps the paper's Hessian: its solves about a fixed F0 need w mu.
-        if (hessian == "network" || outer_iteration == "fixed_point") return Hessian::Network;
-        return Hessian::Auto;
-    }
-};
 
 template <int dim>
 class ImplicitIntegrator final : public MpmIntegrator<dim> {

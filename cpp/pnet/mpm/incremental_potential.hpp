@@ -1,5 +1,5 @@
 #pragma once
-// The incremental potential of an implicit MPM step (DESIGN.md §4; Gast et al.
+// The incremental potential of an implicit MPM step (docs/methods.md; Gast et al.
 // 2015; paper sec. 3.1, 4.2), minimized over the grid velocities v:
 //
 //   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_p V0_p psi_p(F_p(v)),

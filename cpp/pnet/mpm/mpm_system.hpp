@@ -2,7 +2,7 @@
 // What stays fixed during an MPM run: the grid geometry, gravity, boundary
 // conditions and one material per scene object. Every integrator (explicit,
 // plasticitynet, lagged) works on the same system and particles, so results
-// differ only by the time integration (DESIGN.md §4).
+// differ only by the time integration (docs/methods.md).
 #include <array>
 #include <vector>
 

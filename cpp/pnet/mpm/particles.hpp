@@ -1,5 +1,5 @@
 #pragma once
-// MPM particle state (DESIGN.md §4), one array per field so that each
+// MPM particle state (docs/methods.md), one array per field so that each
 // transfer streams only the fields it needs.
 #include <cstddef>
 #include <vector>

@@ -170,7 +170,7 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
     const bool takes_hardening = meta.kind == ModelKind::ReturnMap || meta.has_hardening;
     if (takes_hardening) {
         if (meta.material.plasticity == PlasticityModel::CamClay) {
-            meta.hardening_min = d == 2 ? -0.5 : -1.0;  // DESIGN.md §3, for files that do not say
+            meta.hardening_min = d == 2 ? -0.5 : -1.0;  // docs/physics.md, for files that do not say
             meta.hardening_max = 0.0;
         } else {
             meta.hardening_min = 0.0;

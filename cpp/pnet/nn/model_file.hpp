@@ -2,7 +2,7 @@
 // PlasticityNet model files: the TorchScript archives written by
 // python/plasticitynet/training/export.py, with a JSON entry "metadata.json" in
 // `_extra_files` (format "plasticitynet-model", version 1). A file's forward(x)
-// is the raw MLP N(x); the consumer applies the energy of DESIGN.md §3 or the
+// is the raw MLP N(x); the consumer applies the energy of docs/physics.md or the
 // return-mapping clamp of eq. 12.
 //
 // TorchScript archives are code to LibTorch, so a file is read only if it is
@@ -71,8 +71,8 @@ struct ModelMetadata {
     EnergyForm energy_form = EnergyForm::Eq8;                          // energy
     /// The range of the network's hardening input h it was trained on
     /// (recipe.distribution.h_range; energies with hardening and return maps).
-    /// Models that do not record it get the training distribution of DESIGN.md
-    /// §3 for their plasticity and dimension.
+    /// Models that do not record it get the training distribution of docs/physics.md
+    /// for their plasticity and dimension.
     double hardening_min = 0.0, hardening_max = 0.0;
     double training_E = 1.0;            // Pa; the net is dimensionless, scaled by the scene's E
     MaterialDescription material;       // at the training E
@@ -92,7 +92,7 @@ struct ModelMetadata {
     int derivative_inputs() const { return kind == ModelKind::Energy ? dim * dim : 0; }
     bool learned_return_map() const { return !return_map_file.empty(); }
     /// The network's hardening input for the material's hardening state
-    /// (DESIGN.md §3): Cam-Clay h = min(a, 0), von Mises h = tau_Y / (2 mu)
+    /// (docs/physics.md): Cam-Clay h = min(a, 0), von Mises h = tau_Y / (2 mu)
     /// itself, clamped to [hardening_min, hardening_max]. *clamped (if given)
     /// is set when the clamp changed it.
     double network_hardening(double state, bool* clamped = nullptr) const;

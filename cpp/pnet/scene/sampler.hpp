@@ -1,5 +1,5 @@
 #pragma once
-// Initial MPM particles of a scene (DESIGN.md §4-§5): the same lattice sampling
+// Initial MPM particles of a scene (docs/methods.md, docs/scenes.md): the same lattice sampling
 // for every integrator, so that runs differ only by their time integration.
 #include "pnet/mpm/particles.hpp"
 #include "pnet/scene/scene.hpp"

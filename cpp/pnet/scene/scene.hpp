@@ -1,5 +1,5 @@
 #pragma once
-// The JSON scene format (DESIGN.md §5), loaded and validated. A scene is data:
+// The JSON scene format (docs/scenes.md), loaded and validated. A scene is data:
 // every error names the file, the JSON path and what was expected, e.g.
 //   "scenes/x.json: objects[0].radius: expected a positive number, got -1".
 //
@@ -30,7 +30,7 @@
 //     }]
 //   }
 //
-// FEM scenes (2D and 3D; DESIGN.md §4.2-4.3, §5) hold meshes instead of (and, with
+// FEM scenes (2D and 3D; docs/methods.md, docs/scenes.md) hold meshes instead of (and, with
 // coupling, beside) particle objects; "dx" and "objects" are then optional:
 //
 //     "meshes": [{
@@ -153,7 +153,7 @@ struct Scene {
 
     struct Boundary {
         bool slip_walls = true;      // "walls": "slip" | "none"
-        int sticky_floor_cells = 3;  // grid velocity zeroed within this many cells of the floor (DESIGN.md §4)
+        int sticky_floor_cells = 3;  // grid velocity zeroed within this many cells of the floor (docs/methods.md)
     } boundary;
 
     struct Integrator {

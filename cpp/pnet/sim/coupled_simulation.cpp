@@ -13,12 +13,13 @@
 #include "pnet/io/sha256.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/sampler.hpp"
+#include "pnet/sim/frame_loop.hpp"
 
 namespace pnet {
 
 namespace {
 
-constexpr double kKappaReferenceDt = 1e-3;  // s: the implicit MPM step of DESIGN.md §5
+constexpr double kKappaReferenceDt = 1e-3;  // s: the implicit MPM step of docs/scenes.md
 
 }  // namespace
 
@@ -107,56 +108,32 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
 }
 
 StepStats CoupledSimulation2d::step() {
-    const double frame_end = (frame_ + 1) * scene_.frame_dt;
-    double dt = dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl);
-    if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
+    const double dt = clip_to_frame(time_, dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl),
+                                    frame_, scene_.frame_dt);
     StepStats s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
     s.contact_pairs = coupling_->active(particles_.x, state_.x).size();
     s.min_distance = coupling_->min_distance(particles_.x, state_.x);
-    time_ += dt;
-    ++steps_;
-    if (time_ >= frame_end * (1.0 - 1e-12)) {
-        time_ = frame_end;
-        ++frame_;
-    }
+    count_step(dt, scene_.frame_dt, time_, frame_, steps_);
     return s;
 }
 
 FrameStats CoupledSimulation2d::advance_frame(const std::function<void()>& after_step) {
-    const auto start = std::chrono::steady_clock::now();
-    FrameStats stats;
-    const int target = frame_ + 1;
-    stats.dt_min = 1e300;
-    stats.min_distance = 1e300;
-    frame_steps_.clear();
-    while (frame_ < target) {
-        const StepStats s = step();
-        stats.add_step(s);
-        frame_steps_.push_back(s);
-        if (after_step) after_step();
-    }
-    const std::string inside = coupling_->first_penetration(particles_.x, state_.x);
-    if (!inside.empty()) throw SimulationError("frame " + std::to_string(frame_) + ": " + inside);
-    const std::string pair = fem_contact_->first_intersection(state_.x);
-    if (!pair.empty()) throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
-    stats.frame = frame_;
-    stats.time = time_;
-    for (std::size_t p = 0; p < particles_.size(); ++p) {
-        const double m = particles_.mass[p];
-        stats.kinetic += 0.5 * m * particles_.v[p].squaredNorm();
-        stats.potential -= m * mpm_.gravity.dot(particles_.x[p]);
-        for (int a = 0; a < 2; ++a) stats.momentum[a] += m * particles_.v[p][a];
-    }
-    const FemSystem<2>& s = fem_.system;
-    for (std::size_t i = 0; i < s.mesh.nodes(); ++i) {
-        const double m = s.rest.node_mass[i];
-        stats.kinetic += 0.5 * m * state_.v[i].squaredNorm();
-        stats.potential -= m * s.gravity.dot(state_.x[i]);
-        for (int a = 0; a < 2; ++a) stats.momentum[a] += m * state_.v[i][a];
-    }
-    stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return stats;
+    return advance_one_frame(
+        frame_, time_, frame_steps_, [&] { return step(); },
+        [&](FrameStats& stats) {
+            const std::string inside = coupling_->first_penetration(particles_.x, state_.x);
+            if (!inside.empty()) throw SimulationError("frame " + std::to_string(frame_) + ": " + inside);
+            const std::string pair = fem_contact_->first_intersection(state_.x);
+            if (!pair.empty())
+                throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
+            for (std::size_t p = 0; p < particles_.size(); ++p)
+                add_point_mass<2>(stats, particles_.mass[p], particles_.x[p], particles_.v[p], mpm_.gravity);
+            const FemSystem<2>& s = fem_.system;
+            for (std::size_t i = 0; i < s.mesh.nodes(); ++i)
+                add_point_mass<2>(stats, s.rest.node_mass[i], state_.x[i], state_.v[i], s.gravity);
+        },
+        after_step);
 }
 
 namespace {

@@ -1,5 +1,5 @@
 #pragma once
-// An MPM-FEM coupled run of a scene (BFEMP; DESIGN.md §4.4, §5): particle
+// An MPM-FEM coupled run of a scene (BFEMP; docs/methods.md, docs/scenes.md): particle
 // objects (MPM) and meshes (FEM, elastic) in one 2D scene, meeting through the
 // particle / mesh barrier. The particles use the grid, materials and boundary
 // conditions of an MPM run of the same objects (make_mpm_system,

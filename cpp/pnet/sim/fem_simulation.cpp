@@ -14,12 +14,13 @@
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/io/sha256.hpp"
+#include "pnet/sim/frame_loop.hpp"
 
 namespace pnet {
 
 namespace {
 
-constexpr double kKappaReferenceDt = 1e-2;  // s: the implicit FEM step of DESIGN.md §5
+constexpr double kKappaReferenceDt = 1e-2;  // s: the implicit FEM step of docs/scenes.md
 
 template <int dim>
 Mesh<dim> mesh_of(const Scene& scene, const SceneMesh& m) {
@@ -278,53 +279,31 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
 
 template <int dim>
 StepStats FemSimulation<dim>::step() {
-    const double frame_end = (frame_ + 1) * scene_.frame_dt;
-    double dt = dt_;
-    if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
+    const double dt = clip_to_frame(time_, dt_, frame_, scene_.frame_dt);
     contact_->reset_timing();
     StepStats s = implicit_ ? implicit_->step(state_, dt, steps_) : explicit_->step(state_, dt, steps_);
     s.broad_phase_seconds = contact_->timing().broad_phase_seconds;
     s.ccd_seconds = contact_->timing().ccd_seconds;
     s.contact_pairs = contact_->active_pairs(state_.x);
     s.min_distance = contact_->min_distance(state_.x);
-    time_ += dt;
-    ++steps_;
-    if (time_ >= frame_end * (1.0 - 1e-12)) {
-        time_ = frame_end;
-        ++frame_;
-    }
+    count_step(dt, scene_.frame_dt, time_, frame_, steps_);
     return s;
 }
 
 template <int dim>
 FrameStats FemSimulation<dim>::advance_frame(const std::function<void()>& after_step) {
-    const auto start = std::chrono::steady_clock::now();
-    FrameStats stats;
-    const int target = frame_ + 1;
-    stats.dt_min = 1e300;
-    stats.min_distance = 1e300;
-    frame_steps_.clear();
-    while (frame_ < target) {
-        const StepStats s = step();
-        stats.add_step(s);
-        frame_steps_.push_back(s);
-        if (after_step) after_step();
-    }
-    const std::string pair = find_intersection(built_, *contact_, state_.x);
-    if (!pair.empty())
-        throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
-    stats.frame = frame_;
-    stats.time = time_;
-    const FemSystem<dim>& s = built_.system;
-    for (std::size_t i = 0; i < s.mesh.nodes(); ++i) {
-        if (s.fixed_node[i]) continue;  // kinematic bodies carry no physical momentum here
-        const double m = s.rest.node_mass[i];
-        stats.kinetic += 0.5 * m * state_.v[i].squaredNorm();
-        stats.potential -= m * s.gravity.dot(state_.x[i]);
-        for (int a = 0; a < dim; ++a) stats.momentum[a] += m * state_.v[i][a];
-    }
-    stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return stats;
+    return advance_one_frame(
+        frame_, time_, frame_steps_, [&] { return step(); },
+        [&](FrameStats& stats) {
+            const std::string pair = find_intersection(built_, *contact_, state_.x);
+            if (!pair.empty())
+                throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
+            const FemSystem<dim>& s = built_.system;
+            for (std::size_t i = 0; i < s.mesh.nodes(); ++i)
+                if (!s.fixed_node[i])  // kinematic bodies carry no physical momentum here
+                    add_point_mass<dim>(stats, s.rest.node_mass[i], state_.x[i], state_.v[i], s.gravity);
+        },
+        after_step);
 }
 
 namespace {

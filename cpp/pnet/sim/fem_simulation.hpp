@@ -1,5 +1,5 @@
 #pragma once
-// A FEM run of a scene (DESIGN.md §4.2-4.3, §5; 2D and 3D): the meshes of the scene's
+// A FEM run of a scene (docs/methods.md, docs/scenes.md; 2D and 3D): the meshes of the scene's
 // "meshes" (gmsh shapes or .msh files) joined into one mesh, one material per
 // mesh, kinematic meshes (the plate) as prescribed-velocity nodes; IPC contact
 // over the joined boundary (bodies, self-contact, the ground) with lagged
@@ -21,7 +21,7 @@
 #include "pnet/contact/ipc_contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/scene/scene.hpp"
-#include "pnet/sim/mpm_simulation.hpp"  // IntegratorSettings, FrameStats
+#include "pnet/sim/run_stats.hpp"
 
 namespace pnet {
 

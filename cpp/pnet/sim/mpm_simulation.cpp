@@ -11,6 +11,7 @@
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/io/sha256.hpp"
 #include "pnet/scene/sampler.hpp"
+#include "pnet/sim/frame_loop.hpp"
 
 namespace pnet {
 
@@ -34,15 +35,6 @@ MpmSystem<dim> make_mpm_system(const Scene& scene) {
         s.materials.emplace_back(object.material);
         s.density.push_back(object.material.density);
     }
-    return s;
-}
-
-IntegratorSettings IntegratorSettings::from_scene(const Scene& scene) {
-    IntegratorSettings s;
-    s.name = scene.integrator.name;
-    s.dt = scene.integrator.dt;
-    s.cfl = scene.integrator.cfl;
-    s.implicit = ImplicitOptions::from_json(scene.integrator.options, scene.file);
     return s;
 }
 
@@ -91,43 +83,23 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
 
 template <int dim>
 StepStats Simulation<dim>::step() {
-    const double frame_end = (frame_ + 1) * scene_.frame_dt;
-    double dt = settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl);
-    // Land exactly on the frame (within round-off), never overshoot it.
-    if (time_ + dt > frame_end * (1.0 - 1e-12)) dt = frame_end - time_;
+    const double dt = clip_to_frame(
+        time_, settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl), frame_,
+        scene_.frame_dt);
     const StepStats s = integrator_->step(particles_, dt, steps_);
-    time_ += dt;
-    ++steps_;
-    if (time_ >= frame_end * (1.0 - 1e-12)) {
-        time_ = frame_end;
-        ++frame_;
-    }
+    count_step(dt, scene_.frame_dt, time_, frame_, steps_);
     return s;
 }
 
 template <int dim>
 FrameStats Simulation<dim>::advance_frame(const std::function<void()>& after_step) {
-    const auto start = std::chrono::steady_clock::now();
-    FrameStats stats;
-    const int target = frame_ + 1;
-    stats.dt_min = 1e300;
-    frame_steps_.clear();
-    while (frame_ < target) {
-        const StepStats s = step();
-        stats.add_step(s);
-        frame_steps_.push_back(s);
-        if (after_step) after_step();
-    }
-    stats.frame = frame_;
-    stats.time = time_;
-    for (std::size_t p = 0; p < particles_.size(); ++p) {
-        const double m = particles_.mass[p];
-        stats.kinetic += 0.5 * m * particles_.v[p].squaredNorm();
-        stats.potential -= m * system_.gravity.dot(particles_.x[p]);
-        for (int a = 0; a < dim; ++a) stats.momentum[a] += m * particles_.v[p][a];
-    }
-    stats.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    return stats;
+    return advance_one_frame(
+        frame_, time_, frame_steps_, [&] { return step(); },
+        [&](FrameStats& stats) {
+            for (std::size_t p = 0; p < particles_.size(); ++p)
+                add_point_mass<dim>(stats, particles_.mass[p], particles_.x[p], particles_.v[p], system_.gravity);
+        },
+        after_step);
 }
 
 namespace {

@@ -16,77 +16,13 @@
 #include "pnet/mpm/particles.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/scene.hpp"
+#include "pnet/sim/run_stats.hpp"
 
 namespace pnet {
 
 /// The MPM system of a scene (materials per object, grid, gravity, boundary).
 template <int dim>
 MpmSystem<dim> make_mpm_system(const Scene& scene);
-
-/// Which integrator a Simulation runs and how.
-struct IntegratorSettings {
-    std::string name = "explicit";  // "explicit" | "plasticitynet" | "lagged" | "analytic" (FEM)
-    double dt = 0.0;                // s; 0: the CFL step before every step
-    double cfl = 0.5;
-    ImplicitOptions implicit;       // plasticitynet, lagged
-    /// Energy model of each scene object, or of each mesh in a FEM scene
-    /// (plasticitynet needs one for every object and deformable mesh; the
-    /// others ignore them). Loading a model file needs LibTorch
-    /// (load_model_file in pnet_torch), so the caller does it.
-    std::vector<std::shared_ptr<const ModelFile>> models;
-
-    /// The scene's "integrator" block: name, dt, cfl and the implicit options
-    /// (std::invalid_argument naming the file and key on a bad value). Models
-    /// are not loaded.
-    static IntegratorSettings from_scene(const Scene& scene);
-};
-
-struct FrameStats {
-    int frame = 0;        // frame reached
-    double time = 0.0;    // s
-    long steps = 0;       // steps in this frame
-    double dt_min = 0.0, dt_max = 0.0;
-    std::size_t clamped = 0;
-    double wall_seconds = 0.0;
-    double kinetic = 0.0, potential = 0.0;  // J
-    double momentum[3] = {0.0, 0.0, 0.0};   // kg m/s
-    // Implicit integrators: totals over the frame's steps, the largest final
-    // Newton residual (m/s), and whether every solve converged.
-    long newton_iterations = 0, cg_iterations = 0, line_search_steps = 0, fixed_point_iterations = 0;
-    double max_residual = 0.0;
-    bool converged = true;
-    long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
-    long fixed_point_capped_steps = 0;   // plasticitynet: steps whose fixed point on F0 stopped above its tolerance
-    std::size_t hardening_clamped = 0;   // most particles with a clamped hardening input in one step
-    // FEM contact: the most contact pairs closer than dhat at the end of a step, the smallest pair
-    // distance at the end of any step (m), and CCD queries / those that shortened a step.
-    std::size_t contact_pairs = 0;
-    double min_distance = 0.0;
-    long ccd_queries = 0, ccd_limited = 0;
-
-    /// Adds one step of the frame: counts sum, extremes (dt, residual, clamped hardening, contact
-    /// pairs, smallest distance) are kept, failures stick. dt_min and min_distance start where the
-    /// caller set them (1e300 to take the frame's smallest).
-    void add_step(const StepStats& s) {
-        ++steps;
-        clamped += s.clamped;
-        dt_min = std::min(dt_min, s.dt);
-        dt_max = std::max(dt_max, s.dt);
-        newton_iterations += s.newton_iterations;
-        cg_iterations += s.cg_iterations;
-        line_search_steps += s.line_search_steps;
-        fixed_point_iterations += s.fixed_point_iterations;
-        max_residual = std::max(max_residual, s.residual);
-        converged = converged && s.converged;
-        unconverged_steps += !s.converged;
-        fixed_point_capped_steps += !s.fixed_point_converged;
-        hardening_clamped = std::max(hardening_clamped, s.hardening_clamped);
-        contact_pairs = std::max(contact_pairs, s.contact_pairs);
-        min_distance = std::min(min_distance, s.min_distance);
-        ccd_queries += s.ccd_queries;
-        ccd_limited += s.ccd_limited;
-    }
-};
 
 template <int dim>
 class Simulation {

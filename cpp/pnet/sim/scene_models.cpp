@@ -11,7 +11,7 @@ IntegratorSettings integrator_settings(const Scene& scene, const std::string& in
     if (!integrator.empty() && integrator != scene.integrator.name) {
         // The scene's dt belongs to the scene's integrator.
         settings.name = integrator;
-        // DESIGN.md §5: implicit MPM at 1e-3 s, implicit FEM at 1e-2 s (the paper's).
+        // docs/scenes.md: implicit MPM at 1e-3 s, implicit FEM at 1e-2 s (the paper's).
         settings.dt = integrator == "explicit" ? 0.0 : scene.has_meshes() ? 1e-2 : 1e-3;
     }
     if (scene.has_meshes()) {

@@ -13,7 +13,7 @@ namespace pnet {
 
 /// The scene's integrator settings; when `integrator` is not empty and differs
 /// from the scene's, that integrator with its own default step (explicit: the
-/// CFL step; plasticitynet and lagged: 1e-3 s, DESIGN.md §5), keeping the
+/// CFL step; plasticitynet and lagged: 1e-3 s, docs/scenes.md), keeping the
 /// scene's implicit options. Throws std::invalid_argument for an unknown
 /// integrator name or a bad option in the scene.
 IntegratorSettings integrator_settings(const Scene& scene, const std::string& integrator = "");

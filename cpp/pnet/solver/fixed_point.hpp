@@ -1,6 +1,6 @@
 #pragma once
-// The solve of one implicit step with a reference deformation (DESIGN.md
-// §4.1-4.2, paper eq. 10, docs/solver.md), shared by MPM, FEM and coupling around the one Newton
+// The solve of one implicit step with a reference deformation (paper eq. 10,
+// docs/solver.md), shared by MPM, FEM and coupling around the one Newton
 // loop. The learned energy is exact (in slope) only at F = F0, so the step is converged when v is
 // the root of the true residual R(v) = grad E(v; F0 = F(v)): inertia, the exact elastoplastic stress
 // Ptilde(F(v), h^n) and contact, in Newton's units (m/s, mass-weighted).

@@ -1,7 +1,7 @@
 #pragma once
 // Newton's method with a PSD Hessian, matrix-free PCG and backtracking line
 // search on E: the one optimization loop of every implicit integrator
-// (DESIGN.md §4; Gast et al. 2015, Li et al. 2020). Per iteration:
+// (docs/methods.md; Gast et al. 2015, Li et al. 2020). Per iteration:
 //   g = grad E(x); stop if the residual (below) <= tolerance;
 //   H d = -g by PCG (Jacobi, block Jacobi, or the objective's own preconditioner) to the relative tolerance
 //   min(cg_tolerance, sqrt(|g| / |g0|)) (inexact Newton: loose far from the solution, tighter as it converges); alpha =

@@ -1,6 +1,6 @@
 #pragma once
-// The one face every energy shows the optimization integrators (STYLE.md
-// item 2, DESIGN.md §4): an objective E(x) on a flat vector of unknowns with
+// The one face every energy shows the optimization integrators
+// (docs/architecture.md): an objective E(x) on a flat vector of unknowns with
 // value, gradient and the product of a positive semi-definite approximation
 // of its Hessian with a vector. Newton (newton.hpp) only ever sees this
 // interface, so the MPM incremental potential, FEM and coupling share it.

@@ -1,5 +1,5 @@
 """Constitutive models of PlasticityNet: polar SVD, elasticity, plastic return mappings and the
-`Material` that combines them (DESIGN.md §3; the material spec fixes every formula)."""
+`Material` that combines them (docs/physics.md; the material spec fixes every formula)."""
 
 from .branches import (
     APEX,

@@ -1,5 +1,5 @@
 """Non-associative Cam-Clay return mapping for snow with the snow neo-Hookean elasticity
-(Wolper et al. 2019, CD-MPM; paper appendix A.2.2, eqs. 17-20; DESIGN.md §3).
+(Wolper et al. 2019, CD-MPM; paper appendix A.2.2, eqs. 17-20; docs/physics.md).
 
 Hardening state h = a, the log of the plastic volume ratio (a < 0 hardens). With J = prod(Sigma_c),
 b = Sigma_c^2, compression-positive pressure p = -K/2 (J^2 - 1), p0 = K sinh(xi max(-a, 0)),

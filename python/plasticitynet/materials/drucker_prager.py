@@ -1,5 +1,5 @@
 """Drucker-Prager return mapping for sand with StVK-Hencky elasticity (Klar et al. 2016;
-paper appendix A.2.1, eqs. 15-16; DESIGN.md §3). No hardening: h is passed through."""
+paper appendix A.2.1, eqs. 15-16; docs/physics.md). No hardening: h is passed through."""
 
 from __future__ import annotations
 

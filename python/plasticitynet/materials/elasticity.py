@@ -1,4 +1,4 @@
-"""Isotropic hyperelastic models in diagonal (principal) space (DESIGN.md §3; paper eqs. 14, 17, 24).
+"""Isotropic hyperelastic models in diagonal (principal) space (docs/physics.md; paper eqs. 14, 17, 24).
 
 With F = U diag(Sigma) V^T (polar SVD), Sigma_c = max(Sigma, SIGMA_MIN) and the Hencky strain
 eps = log(Sigma_c), each model gives psi(Sigma), the Kirchhoff stress tau_i = d psi / d eps_i and

@@ -1,6 +1,6 @@
 """A material = an elasticity model + a plastic return mapping + its hardening state, with the
 elastoplastic stress Ptilde(F, h) = tau(Z(F, h)) F^{-T} = U diag(tau_i(Z) / Sigma_c_i) V^T
-(paper eqs. 5-6; DESIGN.md §3), built from the JSON/dict material description of the spec.
+(paper eqs. 5-6; docs/physics.md), built from the JSON/dict material description of the spec.
 
 All F-space methods accept one (d, d) matrix or a (B, d, d) batch, float32 or float64, and return
 results of the same batching; the hardening argument is a scalar or a (B,) tensor (None: the
@@ -35,7 +35,7 @@ PLASTICITY_MODELS = {
     "von_mises": (VonMises, VonMisesParams),
 }
 
-#: The materials of DESIGN.md §3 (E in Pa, density in kg/m^3).
+#: The materials of docs/physics.md (E in Pa, density in kg/m^3).
 PRESETS = {
     "sand": {
         "name": "sand", "density": 2200.0, "initial_hardening": 0.0,
@@ -172,7 +172,7 @@ class Material:
 
     @classmethod
     def preset(cls, name: str, dim: int) -> "Material":
-        """One of the materials of DESIGN.md §3: "sand", "snow", "metal", "metal_nh"."""
+        """One of the materials of docs/physics.md: "sand", "snow", "metal", "metal_nh"."""
         if name not in PRESETS:
             raise ValueError(f"preset = {name!r}: unknown material preset (expected one of {', '.join(PRESETS)})")
         return cls.from_dict(copy.deepcopy(PRESETS[name]), dim)

@@ -26,7 +26,7 @@ def _require(field: str, value: float, ok: bool, expected: str) -> None:
 
 
 def friction_alpha(friction_angle_deg: float) -> float:
-    """alpha = sqrt(2/3) * 2 sin(phi) / (3 - sin(phi)) (Klar et al. 2016; DESIGN.md §3)."""
+    """alpha = sqrt(2/3) * 2 sin(phi) / (3 - sin(phi)) (Klar et al. 2016; docs/physics.md)."""
     s = math.sin(friction_angle_deg * math.pi / 180.0)
     return math.sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s)
 

@@ -1,4 +1,4 @@
-"""Polar singular value decomposition and the singular-value clamp (DESIGN.md §3, material spec).
+"""Polar singular value decomposition and the singular-value clamp (docs/physics.md, material spec).
 
 F = U diag(Sigma) V^T with U, V proper rotations (det = +1) and
 Sigma_0 >= Sigma_1 >= ... >= |Sigma_{d-1}|. An inverted F (det F < 0) is marked by a

@@ -1,4 +1,4 @@
-"""von Mises return mapping for metal (paper appendix A.2.3 and eq. 24; DESIGN.md §3).
+"""von Mises return mapping for metal (paper appendix A.2.3 and eq. 24; docs/physics.md).
 
 State h = tau_Y / (2 mu) >= 0 (dimensionless yield stress). With eps = log(Sigma_c),
 L = ||dev(eps)|| and n = dev(eps) / L, plastic flow follows the volume-preserving path

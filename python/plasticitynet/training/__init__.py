@@ -1,4 +1,4 @@
-"""Training half of PlasticityNet (paper sec. 4, 4.3, 5.1, appendix A; DESIGN.md §3):
+"""Training half of PlasticityNet (paper sec. 4, 4.3, 5.1, appendix A; docs/physics.md):
 
 - sampling:        seeded (F, F0, h) batches ("paper" and "near" sampling), return-map states
 - nets:            the MLPs of Table 2 (SiLU) and the energy input layout [vec F, vec F0, h]

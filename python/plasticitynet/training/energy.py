@@ -1,4 +1,4 @@
-"""The PlasticityNet energy (paper eqs. 8, 9, 11; DESIGN.md §3) around an MLP N(x), x = [vec F, vec F0, h]:
+"""The PlasticityNet energy (paper eqs. 8, 9, 11; docs/physics.md) around an MLP N(x), x = [vec F, vec F0, h]:
 
     Psi(F, F0, h) = N(F, F0, h) - c : F + w mu/2 ||F - F0||^2,
     c = grad_F N(F0, F0, h) - Ptilde(F0, h),                                            (eq. 8, 11)

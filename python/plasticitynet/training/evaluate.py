@@ -1,4 +1,4 @@
-"""Accuracy of a trained model on held-out samples (DESIGN.md §6; issue 3 item 5).
+"""Accuracy of a trained model on held-out samples (docs/metrics.md; issue 3 item 5).
 
     python -m plasticitynet.evaluate MODEL [--samples N] [--seed S] [--json]
 

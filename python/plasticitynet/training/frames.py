@@ -1,4 +1,4 @@
-"""The principal frame of F0: the network input of the frame-indifferent energy (DESIGN.md §3).
+"""The principal frame of F0: the network input of the frame-indifferent energy (docs/physics.md).
 
 An isotropic material's Psi(F, F0, h) does not change when both deformations are rotated on the left
 (Q F, Q F0) or on the right (F R, F0 R). With the polar SVD F0 = U diag(Sigma0) V^T, the pair is

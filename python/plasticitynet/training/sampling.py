@@ -1,12 +1,12 @@
 """Training and evaluation samples (F, F0, h) of PlasticityNet (paper sec. 5.1, appendix A.2;
-DESIGN.md §3).
+docs/physics.md).
 
 "paper" sampling (sec. 5.1), with Haar-random rotations R1..R4:
     F0 = R1 diag(e^eps) R2,   F = R3 diag(e^(eps + deps)) R4,
     eps ~ U[-1, 1]^d,  deps ~ U[-r, r]^d  (r = 0.1 sand and metal, 0.2 snow).
 F shares only its singular values' neighbourhood with F0; as matrices they are far apart.
 
-"near" sampling (DESIGN.md §3, beyond the paper): F close to F0 as a matrix, the regime the
+"near" sampling (docs/physics.md, beyond the paper): F close to F0 as a matrix, the regime the
 simulator visits (within a step F differs from F0 by dt grad v):
     F0 = R1 diag(e^eps) R2,   F = R1 Qa diag(e^(eps + deps)) Qb R2,
 with Qa, Qb small random rotations of angle <= 0.1 rad.
@@ -44,7 +44,7 @@ STREAMS = {"train": 0, "eval": 1, "test": 2, "hessian": 3}
 
 #: Log-singular values eps ~ U[-EPS_RANGE, EPS_RANGE]^d (sec. 5.1).
 EPS_RANGE = 1.0
-#: Largest rotation angle (rad) of Qa, Qb in "near" sampling (DESIGN.md §3).
+#: Largest rotation angle (rad) of Qa, Qb in "near" sampling (docs/physics.md).
 NEAR_MAX_ANGLE = 0.1
 
 

@@ -301,6 +301,31 @@ TEST(CompareCommand, UnreadableFrame) {
     EXPECT_NE(r.err.find(frame_path(b, 1) + ": "), std::string::npos) << r.err;
 }
 
+TEST(CompareCommand, FramesFromAnotherRunAreRefused) {
+    TempDir tmp;
+    const std::string a = make_run(tmp, "a", 2, {0, 1});
+    const std::string b = tmp.file("b");
+    fs::create_directories(b);
+    std::string json = run_json(2);
+    json.insert(1, "\"run_id\": \"00000000000000bb\", ");
+    write_file((fs::path(b) / "run.json").string(), json);
+    PlyParticles frame = block(2, 0.3, 0.5);
+    frame.run_id = "00000000000000bb";
+    write_particles_ply(frame_path(b, 0), frame);
+    frame.run_id = "00000000000000cc";  // left behind by an earlier run
+    write_particles_ply(frame_path(b, 1), frame);
+    Result r = compare({a, b});
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.err.find(frame_path(b, 1) + ": not written by the run in"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("00000000000000cc"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(fs::path(b) / "compare_a")) << "no partial result";
+
+    frame.run_id = "00000000000000bb";  // all frames from the run: compared
+    write_particles_ply(frame_path(b, 1), frame);
+    r = compare({a, b});
+    EXPECT_EQ(r.code, 0) << r.err;
+}
+
 TEST(CompareCommand, UsageErrors) {
     TempDir tmp;
     const std::string a = make_run(tmp, "a", 2, {0});

@@ -1,4 +1,4 @@
-// MPM-FEM coupling (DESIGN.md §4.4): the particle / mesh barrier's derivatives
+// MPM-FEM coupling (docs/methods.md): the particle / mesh barrier's derivatives
 // and CCD, the coupled incremental potential's gradient and Hessian with
 // respect to grid and FEM velocities (finite differences), Newton on it, and
 // the coupled simulation on the tiny scene: every integrator that needs no
@@ -62,7 +62,7 @@ TEST(ParticleContact2d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCa
     const std::vector<std::array<int, 2>> edges = {{0, 1}};
     const ParticleContact2d contact(edges, 0.1, 1e3);
     test::FdStats stats;
-    for (const Vec<2> p : {Vec<2>(0.4, 0.05), Vec<2>(-0.03, 0.04), Vec<2>(1.05, 0.02), Vec<2>(0.7, -0.06)}) {
+    for (const Vec<2>& p : {Vec<2>(0.4, 0.05), Vec<2>(-0.03, 0.04), Vec<2>(1.05, 0.02), Vec<2>(0.7, -0.06)}) {
         SCOPED_TRACE(p.transpose());
         Eigen::VectorXd q(6);
         q << p, 0.0, 0.0, 1.0, 0.0;

@@ -304,7 +304,7 @@ TEST(NeuralElastoplasticEnergy, RejectsBadConfiguration) {
 }
 
 // The network's hardening input is h = min(a, 0) for Cam-Clay (paper A.2.2,
-// DESIGN.md §3), clamped to the range the model was trained on (snow_2d:
+// docs/physics.md), clamped to the range the model was trained on (snow_2d:
 // [-0.5, 0]); Ptilde(F0, a) in c keeps the state itself, so grad Psi(F0) stays
 // exactly E Ptilde(F0, a). A raw state a > 0 (28-35% of a snowball's particles
 // after impact) or a < -0.5 would be an input the network never saw.

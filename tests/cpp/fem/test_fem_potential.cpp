@@ -1,4 +1,4 @@
-// The FEM incremental potential (DESIGN.md §4.2): its gradient and assembled
+// The FEM incremental potential (docs/methods.md): its gradient and assembled
 // Hessian against finite differences (elements with a plastic part F^P),
 // Newton with the CHOLMOD direct solve against PCG, and a physical check: a bar
 // hanging under its own weight settles at the analytic elongation.

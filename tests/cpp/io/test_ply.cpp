@@ -217,6 +217,34 @@ TEST(Ply, WriterChecksSizes) {
 
 // write_file_atomically is what makes every frame and image writer safe; tested here, beside its
 // main user.
+TEST(Ply, RunIdRoundTripsInParticleAndMeshFrames) {
+    TempDir dir;
+    PlyParticles p = random_particles(2, 5, 11u);
+    write_particles_ply(dir.file("untagged.ply"), p);
+    EXPECT_EQ(read_particles_ply(dir.file("untagged.ply")).run_id, "");
+    p.run_id = "9f3e0c21aa7d4b10";
+    write_particles_ply(dir.file("tagged.ply"), p);
+    const PlyParticles q = read_particles_ply(dir.file("tagged.ply"), 2);
+    EXPECT_EQ(q.run_id, p.run_id);
+    expect_bit_equal(q.position, p.position, "position");
+    EXPECT_NE(read_file(dir.file("tagged.ply")).find("comment run_id 9f3e0c21aa7d4b10\n"), std::string::npos);
+
+    PlyMesh m;
+    m.dim = 2;
+    m.position = {0, 0, 1, 0, 0, 1};
+    m.velocity = {0, 0, 0, 0, 0, 0};
+    m.triangles = {0, 1, 2};
+    m.hardening = {0.05};
+    m.run_id = "run-2";
+    write_mesh_ply(dir.file("mesh.ply"), m);
+    EXPECT_EQ(read_mesh_ply(dir.file("mesh.ply")).run_id, "run-2");
+
+    p.run_id = "two words";  // one header word only
+    expect_error<std::invalid_argument>([&] { write_particles_ply(dir.file("bad.ply"), p); }, dir.file("bad.ply"),
+                                        "run_id");
+    EXPECT_FALSE(fs::exists(dir.file("bad.ply")));
+}
+
 TEST(AtomicFile, ReplacesTheFileAndLeavesNoTemporary) {
     TempDir dir;
     const std::string path = dir.file("out.txt");

@@ -189,5 +189,46 @@ TEST(Png, WriterRejectsBadImages) {
     EXPECT_FALSE(fs::exists(path));
 }
 
+TEST(Png, TextChunksRoundTrip) {
+    TempDir dir;
+    const std::string path = dir.file("tagged.png");
+    Image img = random_image(7, 5, 3);
+    img.text["pnet_run_id"] = "0123abcd";
+    img.text["Comment"] = "two words";
+    write_png(path, img);
+    const Image back = read_png_rgb(path);
+    EXPECT_EQ(back.rgb, img.rgb);
+    EXPECT_EQ(back.text, img.text);
+    EXPECT_EQ(read_png_text(path), img.text);
+    // libpng (the reference decoder) sees the chunks too, with their CRCs valid.
+    const std::string bytes = read_file(path);
+    EXPECT_NE(bytes.find("tEXtpnet_run_id"), std::string::npos);
+
+    const std::string plain = dir.file("plain.png");
+    write_png(plain, random_image(3, 3, 4));
+    EXPECT_TRUE(read_png_text(plain).empty());
+}
+
+TEST(Png, BadTextIsRejected) {
+    TempDir dir;
+    const std::string path = dir.file("bad.png");
+    Image img = random_image(4, 4, 5);
+    img.text[""] = "no keyword";
+    expect_error<std::invalid_argument>([&] { write_png(path, img); }, path, "keyword");
+    img.text.clear();
+    img.text[std::string(80, 'k')] = "too long a keyword";
+    expect_error<std::invalid_argument>([&] { write_png(path, img); }, path, "keyword");
+    EXPECT_FALSE(fs::exists(path));
+
+    img.text.clear();
+    img.text["pnet_run_id"] = "abc";
+    write_png(path, img);
+    std::string bytes = read_file(path);
+    bytes[bytes.find("tEXt") + 6] ^= 0x20;  // a flipped bit in the chunk's data: its CRC no longer matches
+    write_file(path, bytes);
+    expect_error<std::runtime_error>([&] { read_png_text(path); }, path, "CRC");
+    expect_error<std::runtime_error>([&] { read_png_rgb(path); }, path, "CRC");
+}
+
 }  // namespace
 }  // namespace pnet

@@ -199,7 +199,9 @@ void check_reported_strain(const std::string& preset) {
         reported += Z.strain_known;
     }
     // Drucker-Prager forms log(Sigma) itself and hands it on (explicit MPM's stress uses it).
-    if (preset == "sand") EXPECT_EQ(reported, 2000);
+    if (preset == "sand") {
+        EXPECT_EQ(reported, 2000);
+    }
 }
 
 TEST(ReturnMapping, ReportedHenckyStrainIsTheLogOfTheProjection) {

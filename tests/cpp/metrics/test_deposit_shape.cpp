@@ -1,4 +1,4 @@
-// The deposit shape of DESIGN.md §6: spread about the centre of mass and the
+// The deposit shape of docs/metrics.md: spread about the centre of mass and the
 // 90th mass percentile of the height, on particle sets with known answers.
 #include <gtest/gtest.h>
 

@@ -751,7 +751,7 @@ TYPED_TEST(ImplicitTest, LaggedAgreesWithExplicitOnAnElasticBlockAtSmallDt) {
     EXPECT_LT(worst, 4.5e-4) << "m: within 1.5% of a cell after 0.08 s";
 }
 
-// Slip walls act the same in both integrators (DESIGN.md §4.1): only the
+// Slip walls act the same in both integrators (docs/methods.md): only the
 // wall-ward normal velocity is removed. Holding the whole normal component
 // fixed in the implicit solve (as before) ignores the elastic forces of every
 // node within 3 cells of the wall.

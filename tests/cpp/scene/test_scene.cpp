@@ -1,4 +1,4 @@
-// Scene files (DESIGN.md §5) load, sample the expected particles and round-trip;
+// Scene files (docs/scenes.md) load, sample the expected particles and round-trip;
 // every malformed input is rejected with "<file>: <json path>: <problem>".
 #include <gtest/gtest.h>
 
@@ -143,7 +143,7 @@ void check_sampling(const fs::path& file, const Scene& scene) {
             if (particles.object[p] == static_cast<int>(k)) mass += particles.mass[p];
         const double exact = object.material.density * shape_volume(dim, object);  // kg
         // The lattice approximates the shape to within about a lattice spacing at its surface: 2% at the canonical
-        // resolution of DESIGN.md §5 (sand_column_2d is the worst, 1.8% heavy: the cells of its outermost particles
+        // resolution of docs/scenes.md (sand_column_2d is the worst, 1.8% heavy: the cells of its outermost particles
         // reach 0.4 lattice spacings beyond x = 0.45 and 0.55). The tiny variants resolve a 0.1 m shape with 6-13
         // points across, so 10% there (5-8% measured); their exact counts above are the real test.
         const double tolerance = is_tiny(file) ? 0.1 : 0.02;
@@ -220,7 +220,7 @@ TEST(SceneFiles, MaterialsAreTheDesignPresetsAndModelsExist) {
         }
         for (const SceneMesh& mesh : scene.meshes) {
             if (mesh.kinematic) continue;
-            // An elastic body without a model beside particles (the coupling's disk, DESIGN.md §5) is described in
+            // An elastic body without a model beside particles (the coupling's disk, docs/scenes.md) is described in
             // the scene itself; every other mesh uses a preset and its model.
             if (scene.has_particles() && mesh.model.empty() && mesh.material.plasticity == PlasticityModel::None)
                 continue;
@@ -233,7 +233,7 @@ TEST(SceneFiles, MaterialsAreTheDesignPresetsAndModelsExist) {
             EXPECT_TRUE(fs::exists(mesh.model)) << mesh.model;
         }
         if (scene.integrator.name != "explicit") {
-            // DESIGN.md §5: implicit MPM at 1e-3 s, implicit FEM at the paper's 1e-2 s.
+            // docs/scenes.md: implicit MPM at 1e-3 s, implicit FEM at the paper's 1e-2 s.
             // (MPM-FEM coupling: the particles' 1e-3 s.)
             EXPECT_EQ(scene.integrator.dt, scene.has_meshes() && !scene.has_particles() ? 1e-2 : 1e-3) << file;
         }
@@ -270,7 +270,8 @@ TEST(SceneFiles, StiffVariantsDifferFromTheirScenesOnlyInYoungsModulus) {
 TEST(SceneFiles, TinyVariantsMatchTheirFullScenes) {
     int pairs = 0;
     for (const fs::path& file : scene_files()) {
-        // Every scene runs in the test suite at tiny size (STYLE.md item 5), so each one needs a tiny variant.
+        // Every scene runs in the test suite at tiny size (docs/architecture.md, testing), so each one needs a
+        // tiny variant.
         if (!is_tiny(file)) {
             EXPECT_TRUE(fs::exists(file.parent_path() / "tiny" / file.filename())) << file << " has no tiny variant";
             continue;

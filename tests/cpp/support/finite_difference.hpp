@@ -1,5 +1,5 @@
 #pragma once
-// The one finite-difference harness of the C++ tests (STYLE.md item 3).
+// The one finite-difference harness of the C++ tests (docs/architecture.md, testing).
 //
 // A derivative is compared entry by entry with central differences and passes
 // when |analytic - numeric| <= tol * max(|analytic|, |numeric|, scale). The

@@ -1,0 +1,65 @@
+#pragma once
+// One run of a scene into a folder, whatever the method (docs/architecture.md): the frame loop, the
+// frames (PLY, PNG, optionally VTU), run.json, stats.csv and steps.csv (sim/run_output.hpp),
+// checkpoints and resume, the progress line and the closing summary. `pnet simulate` and
+// plasticitynet_sim's Simulation.run() both call run_to_folder(), so a Python run writes the same
+// folder as the command line and either can resume the other's run.
+//
+// make_simulation() is the one place that decides the method from the scene: particles and
+// meshes -> MPM-FEM coupling (2D), meshes -> FEM, particles -> MPM.
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+#include <variant>
+
+#include "pnet/scene/scene.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
+#include "pnet/sim/fem_simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
+#include "pnet/sim/run_stats.hpp"
+
+namespace pnet {
+
+/// A simulation of any method and dimension.
+using AnySimulation =
+    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation<2>>,
+                 std::unique_ptr<FemSimulation<3>>, std::unique_ptr<CoupledSimulation2d>>;
+
+/// The simulation the scene calls for, set up with `settings` (models loaded by the caller).
+AnySimulation make_simulation(const Scene& scene, const IntegratorSettings& settings);
+
+/// fn(simulation) on the one `sim` holds.
+template <typename Fn>
+decltype(auto) visit_simulation(AnySimulation& sim, Fn&& fn) {
+    return std::visit([&](auto& p) -> decltype(auto) { return fn(*p); }, sim);
+}
+template <typename Fn>
+decltype(auto) visit_simulation(const AnySimulation& sim, Fn&& fn) {
+    return std::visit([&](const auto& p) -> decltype(auto) { return fn(std::as_const(*p)); }, sim);
+}
+
+/// Where and how a run writes.
+struct RunOptions {
+    std::string out;              // the run's folder (io/run_folder.hpp: one run per folder)
+    int frames = -1;              // the frame to reach; <= 0: the scene's frame count
+    int checkpoint_every = 10;    // frames between checkpoints (0: none)
+    bool resume = false;          // continue the run in `out` from its checkpoint
+    bool overwrite = false;       // replace the run in `out` (its files only) instead of refusing
+    bool vtu = false;             // also frame_NNNNN.vtu (ParaView) for particles and 2D meshes
+    std::string color = "speed";  // what the pictures colour: "speed" or "hardening"
+    // Called after every step (e.g. Python's check for Ctrl-C); an exception it throws stops the
+    // run between two steps, with every frame written so far complete.
+    std::function<void()> after_step;
+};
+
+/// Advances `sim` (at its first frame, or at its checkpoint with options.resume) to options.frames,
+/// writing every frame, the tables, run.json and the checkpoints into options.out, with a progress
+/// line on stderr and a summary on stdout. A step that fails throws SimulationError, its message
+/// ending with the frames that are complete (the tables are written up to them first). Throws
+/// RunFolderError if options.out holds another run (without overwrite), and std::invalid_argument
+/// for a bad option or a missing or mismatched checkpoint.
+void run_to_folder(AnySimulation& sim, const Scene& scene, const IntegratorSettings& settings,
+                   const RunOptions& options);
+
+}  // namespace pnet

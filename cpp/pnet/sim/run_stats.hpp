@@ -1,0 +1,128 @@
+#pragma once
+// What a run of a scene is set up with and what each frame did, for every method (MPM, FEM,
+// coupling): the integrator settings, and the frame statistics a run writes to stats.csv and
+// Python reads as a dict, declared once with their column names (for_each_frame_field).
+#include <algorithm>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "pnet/nn/model_file.hpp"
+#include "pnet/scene/scene.hpp"
+#include "pnet/solver/implicit_options.hpp"
+#include "pnet/solver/step_stats.hpp"
+
+namespace pnet {
+
+/// Which integrator a Simulation runs and how.
+struct IntegratorSettings {
+    std::string name = "explicit";  // "explicit" | "plasticitynet" | "lagged" | "analytic" (FEM)
+    double dt = 0.0;                // s; 0: the CFL step before every step
+    double cfl = 0.5;
+    ImplicitOptions implicit;       // plasticitynet, lagged
+    /// Energy model of each scene object, or of each mesh in a FEM scene
+    /// (plasticitynet needs one for every object and deformable mesh; the
+    /// others ignore them). Loading a model file needs LibTorch
+    /// (load_model_file in pnet_torch), so the caller does it.
+    std::vector<std::shared_ptr<const ModelFile>> models;
+
+    /// The scene's "integrator" block: name, dt, cfl and the implicit options
+    /// (std::invalid_argument naming the file and key on a bad value). Models
+    /// are not loaded.
+    static IntegratorSettings from_scene(const Scene& scene);
+};
+
+struct FrameStats {
+    int frame = 0;        // frame reached
+    double time = 0.0;    // s
+    long steps = 0;       // steps in this frame
+    double dt_min = 0.0, dt_max = 0.0;
+    std::size_t clamped = 0;
+    double wall_seconds = 0.0;
+    double kinetic = 0.0, potential = 0.0;  // J
+    double momentum[3] = {0.0, 0.0, 0.0};   // kg m/s
+    // Implicit integrators: totals over the frame's steps, the largest final
+    // Newton residual (m/s), and whether every solve converged.
+    long newton_iterations = 0, cg_iterations = 0, line_search_steps = 0, fixed_point_iterations = 0;
+    double max_residual = 0.0;
+    bool converged = true;
+    long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
+    long fixed_point_capped_steps = 0;   // plasticitynet: steps whose fixed point on F0 stopped above its tolerance
+    std::size_t hardening_clamped = 0;   // most particles with a clamped hardening input in one step
+    // FEM contact: the most contact pairs closer than dhat at the end of a step, the smallest pair
+    // distance at the end of any step (m), and CCD queries / those that shortened a step.
+    std::size_t contact_pairs = 0;
+    double min_distance = 0.0;
+    long ccd_queries = 0, ccd_limited = 0;
+
+    /// Adds one step of the frame: counts sum, extremes (dt, residual, clamped hardening, contact
+    /// pairs, smallest distance) are kept, failures stick. dt_min and min_distance start where the
+    /// caller set them (1e300 to take the frame's smallest).
+    void add_step(const StepStats& s) {
+        ++steps;
+        clamped += s.clamped;
+        dt_min = std::min(dt_min, s.dt);
+        dt_max = std::max(dt_max, s.dt);
+        newton_iterations += s.newton_iterations;
+        cg_iterations += s.cg_iterations;
+        line_search_steps += s.line_search_steps;
+        fixed_point_iterations += s.fixed_point_iterations;
+        max_residual = std::max(max_residual, s.residual);
+        converged = converged && s.converged;
+        unconverged_steps += !s.converged;
+        fixed_point_capped_steps += !s.fixed_point_converged;
+        hardening_clamped = std::max(hardening_clamped, s.hardening_clamped);
+        contact_pairs = std::max(contact_pairs, s.contact_pairs);
+        min_distance = std::min(min_distance, s.min_distance);
+        ccd_queries += s.ccd_queries;
+        ccd_limited += s.ccd_limited;
+    }
+};
+
+/// How one FrameStats value is shown: its stats.csv column (nullptr: not in the file), its key in
+/// Python's frame dicts (nullptr: not shown there), the printf format of its CSV value, and which
+/// runs have the column (FEM and coupled runs only; 3D runs only).
+struct FrameField {
+    const char* column;
+    const char* key;
+    const char* format;
+    bool fem = false;
+    bool three_d = false;
+};
+
+/// Calls f(FrameField, getter) for every frame statistic, in stats.csv's column order: the one list
+/// behind stats.csv (sim/run_output.hpp) and Python's frame statistics (bindings).
+template <typename F>
+void for_each_frame_field(F&& f) {
+    f(FrameField{"frame", "frame", "%d"}, [](const FrameStats& s) { return s.frame; });
+    f(FrameField{"time_s", "time", "%.6f"}, [](const FrameStats& s) { return s.time; });
+    f(FrameField{"steps", "steps", "%ld"}, [](const FrameStats& s) { return s.steps; });
+    f(FrameField{"dt_min_s", "dt_min", "%.6g"}, [](const FrameStats& s) { return s.dt_min; });
+    f(FrameField{"dt_max_s", "dt_max", "%.6g"}, [](const FrameStats& s) { return s.dt_max; });
+    f(FrameField{"wall_s", "wall_s", "%.4f"}, [](const FrameStats& s) { return s.wall_seconds; });
+    f(FrameField{"clamped", "clamped", "%zu"}, [](const FrameStats& s) { return s.clamped; });
+    f(FrameField{"kinetic_J", "kinetic_energy", "%.9g"}, [](const FrameStats& s) { return s.kinetic; });
+    f(FrameField{"potential_J", "potential_energy", "%.9g"}, [](const FrameStats& s) { return s.potential; });
+    f(FrameField{"momentum_x", nullptr, "%.9g"}, [](const FrameStats& s) { return s.momentum[0]; });
+    f(FrameField{"momentum_y", nullptr, "%.9g"}, [](const FrameStats& s) { return s.momentum[1]; });
+    f(FrameField{"momentum_z", nullptr, "%.9g", false, true}, [](const FrameStats& s) { return s.momentum[2]; });
+    f(FrameField{"newton_iterations", "newton_iterations", "%ld"},
+      [](const FrameStats& s) { return s.newton_iterations; });
+    f(FrameField{"cg_iterations", "cg_iterations", "%ld"}, [](const FrameStats& s) { return s.cg_iterations; });
+    f(FrameField{"line_search_steps", "line_search_steps", "%ld"},
+      [](const FrameStats& s) { return s.line_search_steps; });
+    f(FrameField{"fixed_point_iterations", "fixed_point_iterations", "%ld"},
+      [](const FrameStats& s) { return s.fixed_point_iterations; });
+    f(FrameField{"max_residual_m_per_s", "max_residual", "%.6g"}, [](const FrameStats& s) { return s.max_residual; });
+    f(FrameField{"converged", "converged", "%d"}, [](const FrameStats& s) { return s.converged; });
+    f(FrameField{"unconverged_steps", "unconverged_steps", "%ld"},
+      [](const FrameStats& s) { return s.unconverged_steps; });
+    f(FrameField{"hardening_clamped", "hardening_clamped", "%zu"},
+      [](const FrameStats& s) { return s.hardening_clamped; });
+    f(FrameField{"contact_pairs", "contact_pairs", "%zu", true}, [](const FrameStats& s) { return s.contact_pairs; });
+    f(FrameField{"min_distance_m", "min_distance", "%.6g", true}, [](const FrameStats& s) { return s.min_distance; });
+    f(FrameField{"ccd_queries", nullptr, "%ld", true}, [](const FrameStats& s) { return s.ccd_queries; });
+    f(FrameField{"ccd_limited", nullptr, "%ld", true}, [](const FrameStats& s) { return s.ccd_limited; });
+}
+
+}  // namespace pnet

@@ -1,0 +1,102 @@
+#include <gtest/gtest.h>
+
+#include <set>
+#include <stdexcept>
+#include <string>
+
+#include "pnet/sim/run_output.hpp"
+
+namespace pnet {
+namespace {
+
+std::size_t cells(const std::string& line) {
+    std::size_t n = 1;
+    for (char c : line) n += c == ',';
+    return n;
+}
+
+// The tables' columns as the evaluation scripts, notebooks and users' tools read them: a change here
+// is a change of the output format.
+TEST(RunOutput, HeadersAreTheDocumentedColumns) {
+    EXPECT_EQ(stats_csv_header({2, false}),
+              "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
+              "newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,max_residual_m_per_s,"
+              "converged,unconverged_steps,hardening_clamped\n");
+    EXPECT_EQ(stats_csv_header({3, true}),
+              "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
+              "momentum_z,newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
+              "max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,contact_pairs,min_distance_m,"
+              "ccd_queries,ccd_limited\n");
+    EXPECT_EQ(steps_csv_header({2, false}),
+              "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
+              "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
+              "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged,"
+              "reference_updates,true_residual_m_per_s\n");
+    EXPECT_EQ(steps_csv_header({2, true}),
+              steps_csv_header({2, false}).substr(0, steps_csv_header({2, false}).size() - 1) +
+                  ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,"
+                  "substeps,broad_phase_s,ccd_s\n");
+}
+
+TEST(RunOutput, RowsMatchTheirHeaders) {
+    FrameStats f;
+    f.frame = 3;
+    f.time = 0.06;
+    f.steps = 20;
+    f.wall_seconds = 1.23456;
+    f.kinetic = 1.0 / 3.0;
+    f.momentum[2] = -2.5;
+    f.converged = false;
+    f.contact_pairs = 7;
+    StepStats s;
+    s.dt = 1e-3;
+    s.energy = 1.0 / 3.0;
+    s.converged = false;
+    s.kinematic_reached = false;
+    s.contact_pairs = 4;
+    for (int dim : {2, 3})
+        for (bool fem : {false, true}) {
+            const RunColumns columns{dim, fem};
+            EXPECT_EQ(cells(stats_csv_row(f, columns)), cells(stats_csv_header(columns))) << dim << fem;
+            EXPECT_EQ(cells(steps_csv_row(3, 41, 0.061, s, columns)), cells(steps_csv_header(columns))) << dim << fem;
+        }
+    const RunColumns fem3{3, true};
+    const std::string stats = stats_csv_header(fem3) + stats_csv_row(f, fem3);
+    EXPECT_EQ(csv_column(stats, "frame"), std::vector<std::string>{"3"});
+    EXPECT_EQ(csv_column(stats, "time_s"), std::vector<std::string>{"0.060000"});
+    EXPECT_EQ(csv_column(stats, "wall_s"), std::vector<std::string>{"1.2346"});
+    EXPECT_EQ(csv_column(stats, "kinetic_J"), std::vector<std::string>{"0.333333333"});
+    EXPECT_EQ(csv_column(stats, "momentum_z"), std::vector<std::string>{"-2.5"});
+    EXPECT_EQ(csv_column(stats, "converged"), std::vector<std::string>{"0"});
+    EXPECT_EQ(csv_column(stats, "contact_pairs"), std::vector<std::string>{"7"});
+    const std::string steps = steps_csv_header(fem3) + steps_csv_row(3, 41, 0.061, s, fem3);
+    EXPECT_EQ(csv_column(steps, "step"), std::vector<std::string>{"41"});
+    EXPECT_EQ(csv_column(steps, "time_s"), std::vector<std::string>{"0.061"});
+    EXPECT_EQ(csv_column(steps, "dt_s"), std::vector<std::string>{"0.001"});
+    EXPECT_EQ(csv_column(steps, "energy_J"), std::vector<std::string>{"0.333333333333"});
+    EXPECT_EQ(csv_column(steps, "kinematic_reached"), std::vector<std::string>{"0"});
+
+    EXPECT_THROW(csv_column(stats, "no_such_column"), std::invalid_argument);
+    EXPECT_THROW(csv_column("a,b\n1\n", "b"), std::invalid_argument);
+}
+
+TEST(RunOutput, EveryStatisticHasOneNameInEachOutput) {
+    std::set<std::string> columns, keys;
+    std::size_t fields = 0;
+    for_each_step_field([&](const StepField& field, auto) {
+        ++fields;
+        EXPECT_TRUE(field.column || field.key) << "a statistic shown nowhere";
+        if (field.column) EXPECT_TRUE(columns.insert(field.column).second) << field.column;
+        if (field.key) EXPECT_TRUE(keys.insert(field.key).second) << field.key;
+    });
+    EXPECT_EQ(keys.size(), fields) << "every step statistic reaches Python";
+    columns.clear();
+    keys.clear();
+    for_each_frame_field([&](const FrameField& field, auto) {
+        if (field.column) EXPECT_TRUE(columns.insert(field.column).second) << field.column;
+        if (field.key) EXPECT_TRUE(keys.insert(field.key).second) << field.key;
+    });
+}
+
+}  // namespace
+}  // namespace pnet

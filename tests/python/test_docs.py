@@ -1,0 +1,55 @@
+"""The documentation lives in the repository: every docs/ page a source file, script, scene or page cites
+exists, and nothing cites a file outside the repository (a clone has no ../shared)."""
+
+import re
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# Text that users and developers read: sources, scripts, scenes, tests, pages.
+SUFFIXES = {".cpp", ".hpp", ".py", ".md", ".json", ".sh", ".txt", ".cmake"}
+OUTSIDE = re.compile(r"DESIGN\.md|STYLE\.md|\.\./shared/")
+CITED_PAGE = re.compile(r"docs/([A-Za-z0-9_\-]+\.md)")
+
+
+def tracked_text_files():
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    for name in out.splitlines():
+        path = ROOT / name
+        # Results are records of past runs (their commands and notes), not documentation.
+        if name.startswith("notebooks/results/") or path.suffix not in SUFFIXES or not path.is_file():
+            continue
+        yield name, path.read_text(encoding="utf-8", errors="replace")
+
+
+def test_no_file_cites_a_document_outside_the_repository():
+    offenders = [
+        f"{name}:{text[: m.start()].count(chr(10)) + 1}: {m.group(0)}"
+        for name, text in tracked_text_files()
+        if name != "tests/python/test_docs.py"
+        for m in OUTSIDE.finditer(text)
+    ]
+    assert not offenders, "cite docs/ instead:\n" + "\n".join(offenders)
+
+
+def test_every_cited_docs_page_exists():
+    pages = {p.name for p in (ROOT / "docs").glob("*.md")}
+    missing = sorted(
+        {
+            f"{name}: docs/{m.group(1)}"
+            for name, text in tracked_text_files()
+            for m in CITED_PAGE.finditer(text)
+            if m.group(1) not in pages
+        }
+    )
+    assert not missing, "cited pages that do not exist:\n" + "\n".join(missing)
+
+
+def test_the_readme_layout_names_every_top_level_folder():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    layout = readme[readme.index("## Layout") :]
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    folders = {name.split("/")[0] for name in out.splitlines() if "/" in name}
+    unnamed = sorted(f for f in folders if not re.search(rf"(^|\s|`){re.escape(f)}/", layout))
+    assert not unnamed, f"README's layout does not name: {unnamed}"
