@@ -186,16 +186,22 @@ void record_error(png_structp png, png_const_charp message) {
 
 void ignore_warning(png_structp, png_const_charp) {}
 
+/// The whole file, checked to start with the PNG signature.
+std::string read_png_bytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw std::runtime_error(path + ": cannot open for reading: " + std::strerror(errno));
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) throw std::runtime_error(path + ": reading failed");
+    if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0)
+        throw std::runtime_error(path + ": not a PNG file (bad signature)");
+    return bytes;
+}
+
 }  // namespace
 
 Image read_png_rgb(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw std::runtime_error(path + ": cannot open for reading: " + std::strerror(errno));
-    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) throw std::runtime_error(path + ": reading failed");
+    const std::string bytes = read_png_bytes(path);
     auto fail = [&](const std::string& problem) { return std::runtime_error(path + ": " + problem); };
-    if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0)
-        throw fail("not a PNG file (bad signature)");
     std::map<std::string, std::string> text = text_chunks(bytes, fail);
 
     // libpng's full reader, not png_image: that one skips the chunk CRCs of the image data.
@@ -248,14 +254,9 @@ Image read_png_rgb(const std::string& path) {
 }
 
 std::map<std::string, std::string> read_png_text(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw std::runtime_error(path + ": cannot open for reading: " + std::strerror(errno));
-    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) throw std::runtime_error(path + ": reading failed");
-    auto fail = [&](const std::string& problem) { return std::runtime_error(path + ": " + problem); };
-    if (bytes.size() < 8 || png_sig_cmp(reinterpret_cast<png_const_bytep>(bytes.data()), 0, 8) != 0)
-        throw fail("not a PNG file (bad signature)");
-    return text_chunks(bytes, fail);
+    return text_chunks(read_png_bytes(path), [&](const std::string& problem) {
+        return std::runtime_error(path + ": " + problem);
+    });
 }
 
 }  // namespace pnet

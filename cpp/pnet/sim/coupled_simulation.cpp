@@ -1,8 +1,6 @@
 #include "pnet/sim/coupled_simulation.hpp"
 
-#include <chrono>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -10,10 +8,8 @@
 #include "pnet/energy/neural_elastoplastic.hpp"
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
-#include "pnet/io/sha256.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/sampler.hpp"
-#include "pnet/sim/frame_loop.hpp"
 
 namespace pnet {
 
@@ -24,15 +20,10 @@ constexpr double kKappaReferenceDt = 1e-3;  // s: the implicit MPM step of docs/
 }  // namespace
 
 CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSettings& settings)
-    : scene_(scene),
-      scene_digest_(sha256_hex(scene_to_json(scene).dump())),
+    : SimulationBase(scene, settings),
       mpm_(make_mpm_system<2>(scene)),
       particles_(sample_particles<2>(scene)),
-      fem_(make_fem_system<2>(scene)),
-      settings_(settings) {
-    if (!std::isfinite(settings.dt) || settings.dt < 0.0)
-        throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
-    if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
+      fem_(make_fem_system<2>(scene)) {
     const FemSystem<2>& s = fem_.system;
     for (char fixed : s.fixed_node)
         if (fixed) throw SceneError(scene.file + ": meshes: kinematic meshes are not supported beside particles");
@@ -108,19 +99,18 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
 }
 
 StepStats CoupledSimulation2d::step() {
-    const double dt = clip_to_frame(time_, dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl),
-                                    frame_, scene_.frame_dt);
+    const double dt = clip_to_frame(dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl));
     StepStats s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
     s.contact_pairs = coupling_->active(particles_.x, state_.x).size();
     s.min_distance = coupling_->min_distance(particles_.x, state_.x);
-    count_step(dt, scene_.frame_dt, time_, frame_, steps_);
+    count_step(dt);
     return s;
 }
 
 FrameStats CoupledSimulation2d::advance_frame(const std::function<void()>& after_step) {
     return advance_one_frame(
-        frame_, time_, frame_steps_, [&] { return step(); },
+        [&] { return step(); },
         [&](FrameStats& stats) {
             const std::string inside = coupling_->first_penetration(particles_.x, state_.x);
             if (!inside.empty()) throw SimulationError("frame " + std::to_string(frame_) + ": " + inside);
@@ -139,26 +129,17 @@ FrameStats CoupledSimulation2d::advance_frame(const std::function<void()>& after
 namespace {
 
 constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'P', 'L', '1'};
-constexpr std::size_t kNameBytes = 16;
 
 }  // namespace
 
 void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
     write_sealed_checkpoint(path, [&](std::ostream& out) {
-        out.write(kMagic, sizeof kMagic);
         const std::vector<Mat<2>> stress = explicit_ ? explicit_->mpm().checkpoint_state() : std::vector<Mat<2>>{};
-        const std::int64_t header[6] = {static_cast<std::int64_t>(particles_.size()),
-                                        static_cast<std::int64_t>(state_.x.size()),
-                                        static_cast<std::int64_t>(state_.hardening.size()),
-                                        static_cast<std::int64_t>(stress.size()),
-                                        frame_,
-                                        steps_};
-        out.write(reinterpret_cast<const char*>(header), sizeof header);
-        out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
-        out.write(scene_digest_.data(), 64);
-        std::string name = settings_.name;
-        name.resize(kNameBytes, '\0');
-        out.write(name.data(), kNameBytes);
+        write_checkpoint_preamble(out, kMagic,
+                                  {static_cast<std::int64_t>(particles_.size()), static_cast<std::int64_t>(state_.x.size()),
+                                   static_cast<std::int64_t>(state_.hardening.size()),
+                                   static_cast<std::int64_t>(stress.size()), frame_, steps_},
+                                  settings_.name);
         write_array(out, particles_.x);
         write_array(out, particles_.v);
         write_array(out, particles_.C);
@@ -174,22 +155,9 @@ void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
 
 void CoupledSimulation2d::load_checkpoint(const std::string& path) {
     std::istringstream in = read_sealed_checkpoint(path);
-    char magic[8];
-    std::int64_t header[6];
-    double time;
-    std::string digest(64, '\0'), name(kNameBytes, '\0');
-    in.read(magic, sizeof magic);
-    in.read(reinterpret_cast<char*>(header), sizeof header);
-    in.read(reinterpret_cast<char*>(&time), sizeof time);
-    in.read(digest.data(), 64);
-    in.read(name.data(), kNameBytes);
-    if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
-        throw std::invalid_argument(path + ": not a PlasticityNet MPM-FEM coupling checkpoint");
-    if (digest != scene_digest_)
-        throw std::invalid_argument(path + ": written for a different scene (or a changed scene file)");
-    name.resize(name.find('\0') == std::string::npos ? name.size() : name.find('\0'));
-    if (name != settings_.name)
-        throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " + settings_.name);
+    std::vector<std::int64_t> header(6);
+    double time = 0.0;
+    read_checkpoint_preamble(in, path, {kMagic}, "MPM-FEM coupling", header, time, settings_.name);
     const std::size_t n = particles_.size();
     const std::int64_t stress_expected = explicit_ ? static_cast<std::int64_t>(n) : 0;
     if (header[0] != static_cast<std::int64_t>(n) || header[1] != static_cast<std::int64_t>(state_.x.size()) ||
@@ -213,12 +181,10 @@ void CoupledSimulation2d::load_checkpoint(const std::string& path) {
     read_array(in, s.hardening, state_.hardening.size(), path);
     in.peek();
     if (!in.eof()) throw std::invalid_argument(path + ": longer than its header says (corrupt checkpoint)");
+    restore_clock(path, header[4], header[5], time);
     particles_ = p;
     state_ = std::move(s);
     if (explicit_) explicit_->mpm().restore_checkpoint_state(std::move(stress));
-    frame_ = static_cast<int>(header[4]);
-    steps_ = header[5];
-    time_ = time;
 }
 
 }  // namespace pnet

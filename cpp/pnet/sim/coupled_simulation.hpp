@@ -17,10 +17,11 @@
 #include "pnet/coupling/particle_contact.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
+#include "pnet/sim/simulation_base.hpp"
 
 namespace pnet {
 
-class CoupledSimulation2d {
+class CoupledSimulation2d : public SimulationBase {
 public:
     static constexpr int kDim = 2;
 
@@ -40,13 +41,7 @@ public:
     const FemSceneSystem<2>& scene_system() const { return fem_; }
     const Mesh<2>& mesh() const { return fem_.system.mesh; }
     const ParticleContact2d& coupling() const { return *coupling_; }
-    const Scene& scene() const { return scene_; }
-    int frame() const { return frame_; }
-    double time() const { return time_; }
-    long total_steps() const { return steps_; }
     double step_size() const { return dt_; }
-    const IntegratorSettings& settings() const { return settings_; }
-    const std::vector<StepStats>& last_frame_steps() const { return frame_steps_; }
 
     /// Particles inside a mesh or on its boundary now (must be 0).
     std::size_t penetrations() const { return coupling_->penetrations(particles_.x, state_.x); }
@@ -57,22 +52,15 @@ public:
     void load_checkpoint(const std::string& path);
 
 private:
-    Scene scene_;
-    std::string scene_digest_;
     MpmSystem<2> mpm_;
     Particles<2> particles_;
     FemSceneSystem<2> fem_;
     FemState<2> state_;
-    IntegratorSettings settings_;
     std::unique_ptr<ContactPotential<2>> fem_contact_;
     std::unique_ptr<ParticleContact2d> coupling_;
     std::unique_ptr<CoupledImplicitIntegrator2d> implicit_;
     std::unique_ptr<CoupledExplicitIntegrator2d> explicit_;
-    std::vector<StepStats> frame_steps_;
     double dt_ = 0.0;
-    int frame_ = 0;
-    long steps_ = 0;
-    double time_ = 0.0;
 };
 
 }  // namespace pnet

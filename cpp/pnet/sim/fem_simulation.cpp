@@ -1,9 +1,7 @@
 #include "pnet/sim/fem_simulation.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -13,8 +11,6 @@
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
-#include "pnet/io/sha256.hpp"
-#include "pnet/sim/frame_loop.hpp"
 
 namespace pnet {
 
@@ -206,12 +202,7 @@ FemSceneSystem<dim> make_fem_system(const Scene& scene) {
 
 template <int dim>
 FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& settings)
-    : scene_(scene),
-      scene_digest_(sha256_hex(scene_to_json(scene).dump())),
-      built_(make_fem_system<dim>(scene)),
-      settings_(settings) {
-    if (!std::isfinite(settings.dt) || settings.dt < 0.0) throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
-    if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
+    : SimulationBase(scene, settings), built_(make_fem_system<dim>(scene)) {
     const FemSystem<dim>& s = built_.system;
     contact_ = make_contact<dim>(scene, built_);
     friction_ = std::make_unique<Friction<dim>>(scene.contact.friction, scene.contact.friction_eps_v);
@@ -279,21 +270,21 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
 
 template <int dim>
 StepStats FemSimulation<dim>::step() {
-    const double dt = clip_to_frame(time_, dt_, frame_, scene_.frame_dt);
+    const double dt = clip_to_frame(dt_);
     contact_->reset_timing();
     StepStats s = implicit_ ? implicit_->step(state_, dt, steps_) : explicit_->step(state_, dt, steps_);
     s.broad_phase_seconds = contact_->timing().broad_phase_seconds;
     s.ccd_seconds = contact_->timing().ccd_seconds;
     s.contact_pairs = contact_->active_pairs(state_.x);
     s.min_distance = contact_->min_distance(state_.x);
-    count_step(dt, scene_.frame_dt, time_, frame_, steps_);
+    count_step(dt);
     return s;
 }
 
 template <int dim>
 FrameStats FemSimulation<dim>::advance_frame(const std::function<void()>& after_step) {
     return advance_one_frame(
-        frame_, time_, frame_steps_, [&] { return step(); },
+        [&] { return step(); },
         [&](FrameStats& stats) {
             const std::string pair = find_intersection(built_, *contact_, state_.x);
             if (!pair.empty())
@@ -312,22 +303,16 @@ namespace {
 // version 1 files (no history) still load.
 constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'F', 'E', 'M', '2'};
 constexpr char kMagicVersion1[8] = {'P', 'N', 'E', 'T', 'F', 'E', 'M', '1'};
-constexpr std::size_t kNameBytes = 16;
 
 }  // namespace
 
 template <int dim>
 void FemSimulation<dim>::save_checkpoint(const std::string& path) const {
     write_sealed_checkpoint(path, [&](std::ostream& out) {
-        out.write(kMagic, sizeof kMagic);
-        const std::int64_t header[5] = {kDim, static_cast<std::int64_t>(state_.x.size()),
-                                        static_cast<std::int64_t>(state_.hardening.size()), frame_, steps_};
-        out.write(reinterpret_cast<const char*>(header), sizeof header);
-        out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
-        out.write(scene_digest_.data(), 64);
-        std::string name = settings_.name;
-        name.resize(kNameBytes, '\0');
-        out.write(name.data(), kNameBytes);
+        write_checkpoint_preamble(out, kMagic,
+                                  {kDim, static_cast<std::int64_t>(state_.x.size()),
+                                   static_cast<std::int64_t>(state_.hardening.size()), frame_, steps_},
+                                  settings_.name);
         write_array(out, state_.x);
         write_array(out, state_.v);
         write_array(out, state_.plastic_inverse);
@@ -344,24 +329,11 @@ void FemSimulation<dim>::save_checkpoint(const std::string& path) const {
 template <int dim>
 void FemSimulation<dim>::load_checkpoint(const std::string& path) {
     std::istringstream in = read_sealed_checkpoint(path);
-    char magic[8];
-    std::int64_t header[5];
-    double time;
-    std::string digest(64, '\0'), name(kNameBytes, '\0');
-    in.read(magic, sizeof magic);
-    in.read(reinterpret_cast<char*>(header), sizeof header);
-    in.read(reinterpret_cast<char*>(&time), sizeof time);
-    in.read(digest.data(), 64);
-    in.read(name.data(), kNameBytes);
-    const bool version1 = in && std::memcmp(magic, kMagicVersion1, sizeof kMagic) == 0;
-    if (!in || (!version1 && std::memcmp(magic, kMagic, sizeof kMagic) != 0))
-        throw std::invalid_argument(path + ": not a PlasticityNet FEM checkpoint");
+    std::vector<std::int64_t> header(5);
+    double time = 0.0;
+    const bool version1 =
+        read_checkpoint_preamble(in, path, {kMagic, kMagicVersion1}, "FEM", header, time, settings_.name) == 1;
     if (header[0] != kDim) throw std::invalid_argument(path + ": a " + std::to_string(header[0]) + "D checkpoint");
-    if (digest != scene_digest_)
-        throw std::invalid_argument(path + ": written for a different scene (or a changed scene file)");
-    name.resize(name.find('\0') == std::string::npos ? name.size() : name.find('\0'));
-    if (name != settings_.name)
-        throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " + settings_.name);
     if (header[1] != static_cast<std::int64_t>(state_.x.size()) ||
         header[2] != static_cast<std::int64_t>(state_.hardening.size()) || header[3] < 0 || header[4] < 0)
         throw std::invalid_argument(path + ": holds " + std::to_string(header[1]) + " nodes and " +
@@ -392,12 +364,8 @@ void FemSimulation<dim>::load_checkpoint(const std::string& path) {
         if (!std::isfinite(s.hardening[e]) || !s.plastic_inverse[e].allFinite())
             throw std::invalid_argument(path + ": element " + std::to_string(e) +
                                         "'s plastic state is not finite (corrupt checkpoint state)");
-    if (!std::isfinite(time) || time < 0.0)
-        throw std::invalid_argument(path + ": corrupt checkpoint header (time)");
+    restore_clock(path, header[3], header[4], time);
     state_ = std::move(s);
-    frame_ = static_cast<int>(header[3]);
-    steps_ = header[4];
-    time_ = time;
 }
 
 template struct FemSceneSystem<2>;

@@ -22,6 +22,7 @@
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/run_stats.hpp"
+#include "pnet/sim/simulation_base.hpp"
 
 namespace pnet {
 
@@ -47,7 +48,7 @@ template <int dim>
 FemSceneSystem<dim> make_fem_system(const Scene& scene);
 
 template <int dim>
-class FemSimulation {
+class FemSimulation : public SimulationBase {
 public:
     static constexpr int kDim = dim;
 
@@ -69,34 +70,21 @@ public:
     const FemSystem<dim>& system() const { return built_.system; }
     const Mesh<dim>& mesh() const { return built_.system.mesh; }
     const ContactPotential<dim>& contact() const { return *contact_; }
-    const Scene& scene() const { return scene_; }
-    int frame() const { return frame_; }
-    double time() const { return time_; }
-    long total_steps() const { return steps_; }
     /// The step the integrator takes (explicit with dt = 0: the CFL step), s.
     double step_size() const { return dt_; }
-    const IntegratorSettings& settings() const { return settings_; }
-    const std::vector<StepStats>& last_frame_steps() const { return frame_steps_; }
 
     /// As Simulation: atomic, refuses another scene, integrator or mesh size.
     void save_checkpoint(const std::string& path) const;
     void load_checkpoint(const std::string& path);
 
 private:
-    Scene scene_;
-    std::string scene_digest_;
     FemSceneSystem<dim> built_;
-    IntegratorSettings settings_;
     FemState<dim> state_;
     std::unique_ptr<ContactPotential<dim>> contact_;
     std::unique_ptr<Friction<dim>> friction_;
     std::unique_ptr<FemImplicitIntegrator<dim>> implicit_;
     std::unique_ptr<FemExplicitIntegrator<dim>> explicit_;
-    std::vector<StepStats> frame_steps_;
     double dt_ = 0.0;
-    int frame_ = 0;
-    long steps_ = 0;
-    double time_ = 0.0;
 };
 
 }  // namespace pnet

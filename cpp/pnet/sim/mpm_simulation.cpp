@@ -1,17 +1,12 @@
 #include "pnet/sim/mpm_simulation.hpp"
 
-#include <chrono>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <limits>
 
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
-#include "pnet/io/sha256.hpp"
 #include "pnet/scene/sampler.hpp"
-#include "pnet/sim/frame_loop.hpp"
 
 namespace pnet {
 
@@ -49,11 +44,7 @@ Simulation<dim>::Simulation(const Scene& scene, double dt, double cfl)
 
 template <int dim>
 Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settings)
-    : scene_(scene), scene_digest_(sha256_hex(scene_to_json(scene).dump())), system_(make_mpm_system<dim>(scene)),
-      particles_(sample_particles<dim>(scene)), settings_(settings) {
-    if (!(settings.dt >= 0.0) || !std::isfinite(settings.dt))
-        throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
-    if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
+    : SimulationBase(scene, settings), system_(make_mpm_system<dim>(scene)), particles_(sample_particles<dim>(scene)) {
     if (settings.name == "explicit") {
         integrator_ = std::make_unique<ExplicitIntegrator<dim>>(system_);
     } else if (settings.name == "lagged") {
@@ -83,18 +74,17 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
 
 template <int dim>
 StepStats Simulation<dim>::step() {
-    const double dt = clip_to_frame(
-        time_, settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl), frame_,
-        scene_.frame_dt);
+    const double dt =
+        clip_to_frame(settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl));
     const StepStats s = integrator_->step(particles_, dt, steps_);
-    count_step(dt, scene_.frame_dt, time_, frame_, steps_);
+    count_step(dt);
     return s;
 }
 
 template <int dim>
 FrameStats Simulation<dim>::advance_frame(const std::function<void()>& after_step) {
     return advance_one_frame(
-        frame_, time_, frame_steps_, [&] { return step(); },
+        [&] { return step(); },
         [&](FrameStats& stats) {
             for (std::size_t p = 0; p < particles_.size(); ++p)
                 add_point_mass<dim>(stats, particles_.mass[p], particles_.x[p], particles_.v[p], system_.gravity);
@@ -105,21 +95,14 @@ FrameStats Simulation<dim>::advance_frame(const std::function<void()>& after_ste
 namespace {
 
 constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'K', 'P', '2'};
-constexpr std::size_t kNameBytes = 16;  // integrator name, zero-padded
 
 }  // namespace
 
 template <int dim>
 void Simulation<dim>::save_checkpoint(const std::string& path) const {
     write_sealed_checkpoint(path, [&](std::ostream& out) {
-        out.write(kMagic, sizeof kMagic);
-        const std::int64_t header[4] = {dim, static_cast<std::int64_t>(particles_.size()), frame_, steps_};
-        out.write(reinterpret_cast<const char*>(header), sizeof header);
-        out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
-        out.write(scene_digest_.data(), 64);
-        std::string name = integrator_->name();
-        name.resize(kNameBytes, '\0');
-        out.write(name.data(), kNameBytes);
+        write_checkpoint_preamble(out, kMagic, {dim, static_cast<std::int64_t>(particles_.size()), frame_, steps_},
+                                  integrator_->name());
         const std::vector<Mat<dim>> state = integrator_->checkpoint_state();
         const std::int64_t state_size = static_cast<std::int64_t>(state.size());
         out.write(reinterpret_cast<const char*>(&state_size), sizeof state_size);
@@ -138,26 +121,13 @@ void Simulation<dim>::save_checkpoint(const std::string& path) const {
 template <int dim>
 void Simulation<dim>::load_checkpoint(const std::string& path) {
     std::istringstream in = read_sealed_checkpoint(path);
-    char magic[8];
-    std::int64_t header[4];
-    double time;
-    std::string digest(64, '\0'), name(kNameBytes, '\0');
+    std::vector<std::int64_t> header(4);
+    double time = 0.0;
+    read_checkpoint_preamble(in, path, {kMagic}, "", header, time, integrator_->name());
     std::int64_t state_size = 0;
-    in.read(magic, sizeof magic);
-    in.read(reinterpret_cast<char*>(header), sizeof header);
-    in.read(reinterpret_cast<char*>(&time), sizeof time);
-    in.read(digest.data(), 64);
-    in.read(name.data(), kNameBytes);
     in.read(reinterpret_cast<char*>(&state_size), sizeof state_size);
-    if (!in || std::memcmp(magic, kMagic, sizeof kMagic) != 0)
-        throw std::invalid_argument(path + ": not a PlasticityNet checkpoint");
+    if (!in) throw std::invalid_argument(path + ": not a PlasticityNet checkpoint");
     if (header[0] != dim) throw std::invalid_argument(path + ": a " + std::to_string(header[0]) + "D checkpoint");
-    if (digest != scene_digest_)
-        throw std::invalid_argument(path + ": written for a different scene (or a changed scene file)");
-    name.resize(name.find('\0') == std::string::npos ? name.size() : name.find('\0'));
-    if (name != integrator_->name())
-        throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " +
-                                    integrator_->name());
     // The integrator's state: explicit's n stresses, or the implicit BDF2 history's 3 n matrices.
     if (state_size < 0 || state_size > 3 * header[1]) throw std::invalid_argument(path + ": corrupt checkpoint header");
     const std::size_t n = static_cast<std::size_t>(header[1]);
@@ -195,13 +165,9 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     }
     for (const Mat<dim>& m : state)
         if (!m.allFinite()) throw std::invalid_argument(path + ": the integrator's state is not finite (corrupt checkpoint)");
-    if (header[2] < 0 || header[2] > std::numeric_limits<int>::max() || header[3] < 0 || !std::isfinite(time) || time < 0.0)
-        throw std::invalid_argument(path + ": corrupt checkpoint header (frame, step count or time)");
+    restore_clock(path, header[2], header[3], time);
     particles_ = p;  // copy assignment keeps each array's storage (Python views of it stay valid)
     integrator_->restore_checkpoint_state(std::move(state));
-    frame_ = static_cast<int>(header[2]);
-    steps_ = header[3];
-    time_ = time;
 }
 
 template MpmSystem<2> make_mpm_system<2>(const Scene&);

@@ -17,6 +17,7 @@
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/run_stats.hpp"
+#include "pnet/sim/simulation_base.hpp"
 
 namespace pnet {
 
@@ -25,7 +26,7 @@ template <int dim>
 MpmSystem<dim> make_mpm_system(const Scene& scene);
 
 template <int dim>
-class Simulation {
+class Simulation : public SimulationBase {
 public:
     static constexpr int kDim = dim;
 
@@ -51,12 +52,6 @@ public:
     /// simulation (load_checkpoint copies into it), so views of it stay valid.
     const Particles<dim>& particles() const { return particles_; }
     const MpmSystem<dim>& system() const { return system_; }
-    int frame() const { return frame_; }
-    double time() const { return time_; }
-    long total_steps() const { return steps_; }
-    const IntegratorSettings& settings() const { return settings_; }
-    /// Per-step statistics of the last advance_frame(), in step order.
-    const std::vector<StepStats>& last_frame_steps() const { return frame_steps_; }
 
     /// Writes the whole state atomically; load_checkpoint() refuses a file of
     /// another scene (sha of its JSON), integrator, dimension or particle count
@@ -65,16 +60,9 @@ public:
     void load_checkpoint(const std::string& path);
 
 private:
-    Scene scene_;
-    std::string scene_digest_;
     MpmSystem<dim> system_;
     Particles<dim> particles_;
-    IntegratorSettings settings_;
     std::unique_ptr<MpmIntegrator<dim>> integrator_;
-    std::vector<StepStats> frame_steps_;
-    int frame_ = 0;
-    long steps_ = 0;
-    double time_ = 0.0;
 };
 
 }  // namespace pnet

@@ -19,11 +19,7 @@
 namespace pnet {
 namespace {
 
-using test::expect_error;
-using test::TempDir;
-using test::read_file;
-using test::write_file;
-
+using namespace test;  // TempDir, read_file, write_file, expect_error
 namespace fs = std::filesystem;
 
 std::string run_json(int dim, const std::string& domain_max = "", double frame_dt = 0.02) {

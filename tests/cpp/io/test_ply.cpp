@@ -20,11 +20,7 @@
 namespace pnet {
 namespace {
 
-using test::expect_error;
-using test::TempDir;
-using test::read_file;
-using test::write_file;
-
+using namespace test;  // TempDir, read_file, write_file, expect_error
 namespace fs = std::filesystem;
 
 /// n particles with seeded random fields, plus values that a lossy or text encoding would alter

@@ -21,11 +21,7 @@
 namespace pnet {
 namespace {
 
-using test::expect_error;
-using test::TempDir;
-using test::read_file;
-using test::write_file;
-
+using namespace test;  // TempDir, read_file, write_file, expect_error
 namespace fs = std::filesystem;
 
 std::uint32_t be32(const std::string& s, std::size_t at) {

@@ -12,9 +12,7 @@
 namespace pnet {
 namespace {
 
-using test::TempDir;
-using test::write_file;
-
+using namespace test;  // TempDir, write_file
 namespace fs = std::filesystem;
 
 std::set<std::string> names(const std::vector<fs::path>& paths) {

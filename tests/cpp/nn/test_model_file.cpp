@@ -19,11 +19,7 @@
 namespace pnet {
 namespace {
 
-using test::expect_error;
-using test::TempDir;
-using test::read_file;
-using test::write_file;
-
+using namespace test;  // TempDir, read_file, write_file, expect_error
 namespace fs = std::filesystem;
 
 const std::string kModels = PNET_MODELS_DIR;
@@ -76,7 +72,9 @@ void expect_energy_matches_libtorch(const std::string& path, const ModelFile& mo
     network.set_reference(F0.data(), h.data(), rows);
     std::vector<double> v(rows), g(rows * m), H(rows * m * m), rv(rows), rg(rows * m), rH(rows * m * m);
     network.evaluate(F.data(), FusedMlp::Order::Hessian, v.data(), g.data(), H.data());
-    const TorchAutograd reference = TorchAutograd::from_file(path, LoadOptions{true});
+    LoadOptions trusted;
+    trusted.trusted = true;
+    const TorchAutograd reference = TorchAutograd::from_file(path, trusted);
     ASSERT_EQ(reference.input_width(), in);
     reference.evaluate(x.data(), rows, m, FusedMlp::Order::Hessian, rv.data(), rg.data(), rH.data());
     expect_rows_close(v, rv, rows, 1, 1e-10, "value");

@@ -86,15 +86,23 @@ TEST(RunOutput, EveryStatisticHasOneNameInEachOutput) {
     for_each_step_field([&](const StepField& field, auto) {
         ++fields;
         EXPECT_TRUE(field.column || field.key) << "a statistic shown nowhere";
-        if (field.column) EXPECT_TRUE(columns.insert(field.column).second) << field.column;
-        if (field.key) EXPECT_TRUE(keys.insert(field.key).second) << field.key;
+        if (field.column) {
+            EXPECT_TRUE(columns.insert(field.column).second) << field.column;
+        }
+        if (field.key) {
+            EXPECT_TRUE(keys.insert(field.key).second) << field.key;
+        }
     });
     EXPECT_EQ(keys.size(), fields) << "every step statistic reaches Python";
     columns.clear();
     keys.clear();
     for_each_frame_field([&](const FrameField& field, auto) {
-        if (field.column) EXPECT_TRUE(columns.insert(field.column).second) << field.column;
-        if (field.key) EXPECT_TRUE(keys.insert(field.key).second) << field.key;
+        if (field.column) {
+            EXPECT_TRUE(columns.insert(field.column).second) << field.column;
+        }
+        if (field.key) {
+            EXPECT_TRUE(keys.insert(field.key).second) << field.key;
+        }
     });
 }
 

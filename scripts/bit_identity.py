@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""Do two builds of `pnet` simulate the same? For a refactor that must not change a result.
+
+    scripts/bit_identity.py OLD_PNET NEW_PNET [--scenes scenes/tiny/*.json] [--frames 2] [--work DIR]
+
+Runs every scene with both binaries (the scene's own integrator, one thread) and compares, frame by
+frame, the PLY files' data (the run id a newer build writes into the header aside), and stats.csv and
+steps.csv without their wall-clock columns. Prints one line per scene and exits 1 if any differs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+TIMING = re.compile(r"(^|_)(wall|p2g|solve|g2p|energy|cg|broad_phase|ccd)_s$")
+
+
+def frame_data(path: Path) -> bytes:
+    return re.sub(rb"comment run_id \w+\n", b"", path.read_bytes())
+
+
+def table(path: Path) -> list[dict]:
+    rows = list(csv.DictReader(io.StringIO(path.read_text())))
+    return [{k: v for k, v in r.items() if not TIMING.search(k)} for r in rows]
+
+
+def run(pnet: Path, scene: Path, frames: int, out: Path) -> None:
+    command = [str(pnet), "simulate", str(scene), "--frames", str(frames), "--threads", "1", "--out", str(out)]
+    result = subprocess.run(command, capture_output=True, text=True)
+    if result.returncode != 0:
+        sys.exit(f"{' '.join(command)} failed ({result.returncode}):\n{result.stderr}")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("old", type=Path)
+    parser.add_argument("new", type=Path)
+    parser.add_argument("--scenes", type=Path, nargs="+", default=sorted((ROOT / "scenes" / "tiny").glob("*.json")))
+    parser.add_argument("--frames", type=int, default=2)
+    parser.add_argument("--work", type=Path, default=Path("/tmp/pnet_bit_identity"))
+    args = parser.parse_args()
+    differing = 0
+    for scene in args.scenes:
+        old, new = args.work / "old" / scene.stem, args.work / "new" / scene.stem
+        for pnet, out in ((args.old, old), (args.new, new)):
+            subprocess.run(["rm", "-rf", str(out)], check=True)
+            run(pnet, scene, args.frames, out)
+        frames = sorted(p.name for p in old.glob("frame_*.ply"))
+        problems = []
+        if frames != sorted(p.name for p in new.glob("frame_*.ply")):
+            problems.append("different frame files")
+        problems += [f"{name} differs" for name in frames if (new / name).exists()
+                     and frame_data(old / name) != frame_data(new / name)]
+        for name in ("stats.csv", "steps.csv"):
+            if table(old / name) != table(new / name):
+                problems.append(f"{name} differs")
+        print(f"{scene.stem:28s} {len(frames)} frames  " + ("identical" if not problems else "; ".join(problems)))
+        differing += bool(problems)
+    print(f"{len(args.scenes) - differing} of {len(args.scenes)} scenes bit-identical")
+    return 1 if differing else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
