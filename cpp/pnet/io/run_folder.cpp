@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <random>
 
 namespace pnet {
@@ -27,18 +28,25 @@ bool is_compare_folder(const fs::directory_entry& entry) {
     return true;
 }
 
-/// "scene 'x', integrator y, N frames" from dir/run.json, or what is wrong with it.
-std::string describe_recorded_run(const fs::path& dir) {
+/// dir/run.json as a JSON object; nullopt if it is missing or not a JSON object.
+std::optional<nlohmann::json> read_run_json(const fs::path& dir) {
     std::ifstream in(dir / "run.json");
-    if (!in) return "no run.json";
+    if (!in) return std::nullopt;
     try {
-        const nlohmann::json j = nlohmann::json::parse(in);
-        auto field = [&](const char* key) { return j.contains(key) ? j.at(key).dump() : std::string("?"); };
-        return "run.json: scene " + field("name") + ", integrator " + field("integrator") + ", " + field("frames") +
-               " frames";
+        nlohmann::json j = nlohmann::json::parse(in);
+        if (j.is_object()) return j;
     } catch (const nlohmann::json::exception&) {
-        return "run.json unreadable";
     }
+    return std::nullopt;
+}
+
+/// "run.json: scene "x", integrator "y", N frames", or that there is no readable run.json.
+std::string describe_recorded_run(const fs::path& dir) {
+    const std::optional<nlohmann::json> j = read_run_json(dir);
+    if (!j) return "no readable run.json";
+    auto field = [&](const char* key) { return j->contains(key) ? j->at(key).dump() : std::string("?"); };
+    return "run.json: scene " + field("name") + ", integrator " + field("integrator") + ", " + field("frames") +
+           " frames";
 }
 
 }  // namespace
@@ -110,14 +118,8 @@ std::size_t remove_frames_after(const fs::path& dir, int last) {
 }
 
 std::string recorded_run_id(const fs::path& dir) {
-    std::ifstream in(dir / "run.json");
-    if (!in) return "";
-    try {
-        const nlohmann::json j = nlohmann::json::parse(in);
-        return j.contains("run_id") && j.at("run_id").is_string() ? j.at("run_id").get<std::string>() : "";
-    } catch (const nlohmann::json::exception&) {
-        return "";
-    }
+    const std::optional<nlohmann::json> j = read_run_json(dir);
+    return j && j->contains("run_id") && j->at("run_id").is_string() ? j->at("run_id").get<std::string>() : "";
 }
 
 }  // namespace pnet
