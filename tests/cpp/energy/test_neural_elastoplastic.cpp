@@ -234,13 +234,17 @@ TEST(NeuralElastoplasticEnergy, RejectedEnergyForms) {
         else
             EXPECT_GT(F0_error, 1e-4 * scale);
         // The *_identity forms have zero stress at F = I whatever F0.
-        if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) EXPECT_LE(I_stress, 1e-10 * E);
+        if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {
+            EXPECT_LE(I_stress, 1e-10 * E);
+        }
         // The global forms do not depend on F0 (at w = 0); the local ones do.
         if (form == EnergyForm::GlobalIdentity || form == EnergyForm::Global)
             EXPECT_LE(F0_dependence, 1e-10 * scale);
         else
             EXPECT_GT(F0_dependence, 1e-4 * scale);
-        if (form == EnergyForm::Global) EXPECT_EQ(energy.correction(0), Mat<2>::Zero());
+        if (form == EnergyForm::Global) {
+            EXPECT_EQ(energy.correction(0), Mat<2>::Zero());
+        }
     }
 }
 
