@@ -1,5 +1,5 @@
 """The documentation lives in the repository: every docs/ page a source file, script, scene or page cites
-exists, and nothing cites a file outside the repository (a clone has no ../shared)."""
+exists, and nothing cites a design file kept outside the repository (a clone has only what is tracked)."""
 
 import re
 import subprocess
