@@ -48,7 +48,8 @@ constexpr bool is_fem = std::is_same_v<std::decay_t<Sim>, FemSimulation<2>> ||
                         std::is_same_v<std::decay_t<Sim>, FemSimulation<3>>;
 /// Particles and meshes (MPM-FEM coupling).
 template <typename Sim>
-constexpr bool is_coupled = std::is_same_v<std::decay_t<Sim>, CoupledSimulation2d>;
+constexpr bool is_coupled = std::is_same_v<std::decay_t<Sim>, CoupledSimulation<2>> ||
+                            std::is_same_v<std::decay_t<Sim>, CoupledSimulation<3>>;
 
 [[noreturn]] void no_particles() {
     throw py::value_error("a FEM scene (meshes) has no particles: see nodes, node_velocities, elements");
@@ -108,7 +109,8 @@ public:
         if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(std::as_const(**s));
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation2d>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
         return fn(std::as_const(*std::get<std::unique_ptr<Simulation<3>>>(sim_)));
     }
     template <typename Fn>
@@ -116,7 +118,8 @@ public:
         if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(**s);
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(**s);
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation2d>>(&sim_)) return fn(**s);
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<2>>>(&sim_)) return fn(**s);
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<3>>>(&sim_)) return fn(**s);
         return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
     }
     /// fn(the simulation with meshes: FEM 2D or 3D, or MPM-FEM coupling); ValueError for an MPM scene.
@@ -124,7 +127,8 @@ public:
     decltype(auto) visit_fem(Fn&& fn) const {
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
         if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation2d>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
+        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
         throw py::value_error("an MPM scene (particles) has no mesh: see positions, velocities");
     }
 

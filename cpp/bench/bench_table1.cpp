@@ -3,7 +3,8 @@
 // 1e-5 s (the paper's ground-truth step) and at its CFL step, on the same
 // scene, in one run. Rows: sand_column_2d, snowball_2d (MPM), metal_frame_2d
 // ("Von-Mises metal") and metal_nh_frame_2d ("Neo-hookean metal", with the
-// learned return mapping), and with --3d the 3D MPM scenes and metal_frame_3d.
+// learned return mapping), and with --3d the 3D MPM scenes, metal_frame_3d and
+// sand_fem_coupling_3d (the coupling in 3D: a stiff sphere onto a sand bed).
 // FEM rows also give the share of the step time spent in contact's broad phase
 // and CCD (measured by the 3D contact). The "MPM-FEM coupling" row
 // (sand_fem_coupling_2d) compares plasticitynet at 1e-3 with explicit coupling
@@ -136,7 +137,7 @@ Row fixed_point_row(const pnet::Scene& scene, pnet::IntegratorSettings settings,
 /// The explicit step the rows of a scene are compared with: the paper's 1e-5 s; 1e-6 s where the CFL
 /// step is near or below 1e-5 s (the coupling's stiff disk, the stiff variants).
 double reference_step(const std::string& name) {
-    return name == "sand_fem_coupling_2d" || name.rfind("stiff/", 0) == 0 ? 1e-6 : 1e-5;
+    return name.rfind("sand_fem_coupling_", 0) == 0 || name.rfind("stiff/", 0) == 0 ? 1e-6 : 1e-5;
 }
 
 template <int dim>
@@ -207,8 +208,9 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with
 
 /// The MPM-FEM coupling row: plasticitynet (the sand's learned energy) at the scene's step against
 /// explicit coupling at 1e-6 s and at its CFL step.
+template <int dim>
 std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool with_lagged, bool with_fixed_point) {
-    using Sim = pnet::CoupledSimulation2d;
+    using Sim = pnet::CoupledSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
     auto with = [&](const char* name, double dt) {
@@ -300,7 +302,7 @@ int main(int argc, char** argv) {
     if (stiff) names.insert(names.end(), {"stiff/sand_column_2d", "stiff/snowball_2d"});
     if (fem) names.insert(names.end(), {"metal_frame_2d", "metal_nh_frame_2d", "sand_fem_coupling_2d"});
     if (three_d) names.insert(names.end(), {"sand_column_3d", "snowball_3d"});
-    if (three_d && fem) names.push_back("metal_frame_3d");
+    if (three_d && fem) names.insert(names.end(), {"metal_frame_3d", "sand_fem_coupling_3d"});
 
     std::printf(
         "Table 1: seconds per frame (0.02 s) over frames 0-%d from the initial state (the metal frames: "
@@ -322,7 +324,8 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "%s:\n", name.c_str());
             if (scene.has_meshes() && scene.has_particles()) {
                 scene_frames = coupling_frames;
-                rows = bench_coupled_scene(scene, scene_frames, with_lagged, with_fixed_point);
+                rows = scene.dim == 2 ? bench_coupled_scene<2>(scene, scene_frames, with_lagged, with_fixed_point)
+                                      : bench_coupled_scene<3>(scene, scene_frames, with_lagged, with_fixed_point);
             } else if (scene.has_meshes()) {
                 scene_frames = fem_frames > 0 ? fem_frames : scene.frames;
                 rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, with_lagged, with_fixed_point,

@@ -54,16 +54,10 @@ void Friction<dim>::add_gradient(const Eigen::VectorXd& v, double scale, Eigen::
 template <int dim>
 void Friction<dim>::add_hessian(const Eigen::VectorXd& v, double scale,
                                 std::vector<Eigen::Triplet<double>>& triplets) const {
-    using Inner = Eigen::Matrix<double, dim - 1, dim - 1>;
     for (const Pair& p : pairs_) {
         const Slip u = slip(p, v);
-        const double x = u.norm(), c = scale * mu_ * p.normal_force;
-        Inner inner = friction_f1_over_x(x, eps_v_) * Inner::Identity();
-        if (x > 0.0) {
-            const Slip n = u / x;
-            inner += (friction_f1_derivative(x, eps_v_) - friction_f1_over_x(x, eps_v_)) * n * n.transpose();
-        }
-        const Mat<dim> H = c * p.tangent * inner * p.tangent.transpose();
+        const double c = scale * mu_ * p.normal_force;
+        const Mat<dim> H = c * p.tangent * friction_slip_hessian<dim - 1>(u, eps_v_) * p.tangent.transpose();
         if (H.cwiseAbs().maxCoeff() == 0.0) continue;
         for (int a = 0; a < p.count; ++a)
             for (int b = 0; b < p.count; ++b) {

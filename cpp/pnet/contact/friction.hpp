@@ -27,6 +27,19 @@ double friction_f1_derivative(double x, double eps);
 /// f1(x) / x, continuous at 0 (2 / eps).
 double friction_f1_over_x(double x, double eps);
 
+/// The Hessian of f0(|u|) in the slip u (n = dim - 1 components):
+///   f1'(|u|) u u^T / |u|^2 + f1(|u|) / |u| (I - u u^T / |u|^2),   (2 / eps) I at u = 0.
+template <int n>
+Eigen::Matrix<double, n, n> friction_slip_hessian(const Eigen::Matrix<double, n, 1>& u, double eps) {
+    const double x = u.norm();
+    Eigen::Matrix<double, n, n> inner = friction_f1_over_x(x, eps) * Eigen::Matrix<double, n, n>::Identity();
+    if (x > 0.0) {
+        const Eigen::Matrix<double, n, 1> direction = u / x;
+        inner += (friction_f1_derivative(x, eps) - friction_f1_over_x(x, eps)) * direction * direction.transpose();
+    }
+    return inner;
+}
+
 template <int dim>
 class Friction {
 public:

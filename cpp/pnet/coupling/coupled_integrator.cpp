@@ -19,18 +19,23 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 
 }  // namespace
 
-CoupledImplicitIntegrator2d::CoupledImplicitIntegrator2d(const MpmSystem<2>& mpm, const FemSystem<2>& fem,
-                                                         ImplicitMethod method, const ImplicitOptions& options,
-                                                         std::unique_ptr<ParticleEnergy<2>> mpm_energy,
-                                                         std::vector<const LearnedReturnMap<2>*> return_maps,
-                                                         const ContactPotential<2>* fem_contact,
-                                                         const ParticleContact2d& contact)
+template <int dim>
+CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
+                                                          ImplicitMethod method, const ImplicitOptions& options,
+                                                          std::unique_ptr<ParticleEnergy<dim>> mpm_energy,
+                                                          std::vector<const LearnedReturnMap<dim>*> return_maps,
+                                                          const ContactPotential<dim>* fem_contact,
+                                                          const ParticleContact<dim>& contact, CouplingFriction friction)
     : mpm_system_(mpm),
       fem_system_(fem),
       method_(method),
       options_(options),
       mpm_energy_(std::move(mpm_energy)),
       return_maps_(std::move(return_maps)),
+      fem_contact_(fem_contact),
+      contact_(contact),
+      friction_(friction),
+      mesh_friction_(friction.mu, friction.eps_v),
       grid_(mpm.origin, mpm.dx, mpm.cells),
       mpm_(*mpm_energy_),
       fem_energy_(fem.materials),
@@ -40,17 +45,20 @@ CoupledImplicitIntegrator2d::CoupledImplicitIntegrator2d(const MpmSystem<2>& mpm
         throw std::invalid_argument("integrator.time_integrator: \"" + options_.time_integrator +
                                     "\" is implemented for MPM and FEM scenes; MPM-FEM coupling steps are backward Euler");
     if (!return_maps_.empty() && return_maps_.size() != mpm.materials.size())
-        throw std::invalid_argument("CoupledImplicitIntegrator2d: one return map (or null) per object is needed");
+        throw std::invalid_argument("CoupledImplicitIntegrator: one return map (or null) per object is needed");
     fem_.set_contact(fem_contact);
+    if (friction_.mu > 0.0 && fem_contact) fem_.set_friction(&mesh_friction_);
 }
 
-StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>& state, double dt, long step_index) {
+template <int dim>
+StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
+                                               long step_index) {
     const auto start = std::chrono::steady_clock::now();
     StepStats stats;
     stats.dt = dt;
     const std::string context = "step " + std::to_string(step_index);
 
-    particles_to_grid<2>(grid_, particles, nullptr);
+    particles_to_grid<dim>(grid_, particles, nullptr);
     const auto after_p2g = std::chrono::steady_clock::now();
     BoundaryConditions solve_boundary = mpm_system_.boundary;
     solve_boundary.slip_walls = false;  // slip walls act after the solve, as in ImplicitIntegrator
@@ -58,18 +66,22 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     mpm_.begin_step(grid_, particles, dt, solve_boundary);
 
     const std::size_t nodes = fem_system_.mesh.nodes();
-    VecX v_star_fem(2 * nodes);
-    for (std::size_t i = 0; i < nodes; ++i) v_star_fem.segment<2>(2 * i) = state.v[i] + dt * fem_system_.gravity;
+    VecX v_star_fem(dim * nodes);
+    for (std::size_t i = 0; i < nodes; ++i) v_star_fem.template segment<dim>(dim * i) = state.v[i] + dt * fem_system_.gravity;
     fem_.begin_step(state.x, v_star_fem, dt, state.plastic_inverse, {});
     fem_.set_material_state(fem_system_.element_object, state.hardening);
     fem_.set_reference({});  // elastic: no reference
     coupled_.begin_step();
+    if (friction_.mu > 0.0) {  // lagged at the start of the step
+        coupled_.set_friction(contact_.lagged_pairs(particles.x, state.x), friction_.mu, friction_.eps_v);
+        if (fem_contact_) mesh_friction_.lag(*fem_contact_, state.x);
+    }
 
     NewtonOptions newton = options_.newton_options();
     newton.residual_mass = coupled_.residual_mass();
     const bool cholesky = options_.coupled_solver == "cholesky";
-    coupled_.set_linear_solve(cholesky ? CoupledPotential2d::LinearSolve::Assembled
-                                       : CoupledPotential2d::LinearSolve::BlockPreconditioned);
+    coupled_.set_linear_solve(cholesky ? CoupledPotential<dim>::LinearSolve::Assembled
+                                       : CoupledPotential<dim>::LinearSolve::BlockPreconditioned);
     newton.linear_solver = cholesky ? NewtonOptions::LinearSolver::Cholesky : NewtonOptions::LinearSolver::Pcg;
 
     // An intersection-free start: v* as far as CCD allows from the start positions (v = 0). The
@@ -83,7 +95,7 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     ReferenceSolveStats s;
     try {
-        s = solve_with_reference<2>(coupled_, v_, newton, solve, context, work_, [&] {
+        s = solve_with_reference<dim>(coupled_, v_, newton, solve, context, work_, [&] {
             stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped());
         });
     } catch (const NewtonError& e) {
@@ -101,22 +113,23 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     mpm_.write_velocity(v_.head(ng), grid_);
     grid_.project_velocity(mpm_system_.boundary);
     double max_speed = 0.0;
-    for (Eigen::Index k = 0; k < v_.size() / 2; ++k) max_speed = std::max(max_speed, v_.segment<2>(2 * k).norm());
+    for (Eigen::Index k = 0; k < v_.size() / dim; ++k)
+        max_speed = std::max(max_speed, v_.template segment<dim>(dim * k).norm());
     stats.max_grid_speed = max_speed;
-    auto return_map = [&](std::ptrdiff_t p, const Vec<2>& Sigma, double hardening) {
+    auto return_map = [&](std::ptrdiff_t p, const Vec<dim>& Sigma, double hardening) {
         const int object = particles.object[p];
         if (!return_maps_.empty() && return_maps_[object]) return return_maps_[object]->return_map(Sigma, hardening);
         return mpm_system_.materials[object].return_map(Sigma, hardening);
     };
     grid_to_particles(grid_, particles, dt, return_map,
-                      [](std::ptrdiff_t, const PolarSVD<2>&, const ReturnResult<2>&) {});
+                      [](std::ptrdiff_t, const PolarSVD<dim>&, const ReturnResult<dim>&) {});
     double extent = 1e300;
-    for (int a = 0; a < 2; ++a) extent = std::min(extent, mpm_system_.cells[a] * mpm_system_.dx);
+    for (int a = 0; a < dim; ++a) extent = std::min(extent, mpm_system_.cells[a] * mpm_system_.dx);
     stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
 
     // FEM: positions and the return mapping (identity for elastic bodies).
     for (std::size_t i = 0; i < nodes; ++i) {
-        state.v[i] = v_.segment<2>(ng + 2 * i);
+        state.v[i] = v_.template segment<dim>(ng + dim * i);
         state.x[i] += dt * state.v[i];
         if (!state.x[i].allFinite())
             throw SimulationError(context + ": node " + std::to_string(i) + " has a non-finite position");
@@ -131,26 +144,76 @@ StepStats CoupledImplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     return stats;
 }
 
-CoupledExplicitIntegrator2d::CoupledExplicitIntegrator2d(const MpmSystem<2>& mpm, const FemSystem<2>& fem,
-                                                         const ContactPotential<2>* fem_contact,
-                                                         const ParticleContact2d& contact)
-    : mpm_system_(mpm), mpm_(mpm), fem_(fem, fem_contact), contact_(contact) {}
+template <int dim>
+CoupledExplicitIntegrator<dim>::CoupledExplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
+                                                          const ContactPotential<dim>* fem_contact,
+                                                          const ParticleContact<dim>& contact, CouplingFriction friction)
+    : mpm_system_(mpm),
+      fem_system_(fem),
+      mpm_(mpm),
+      fem_(fem, fem_contact),
+      contact_(contact),
+      friction_(friction),
+      mesh_friction_(friction.mu, friction.eps_v) {
+    if (friction_.mu > 0.0 && fem_contact) fem_.set_friction(&mesh_friction_, fem_contact);
+}
 
-double CoupledExplicitIntegrator2d::cfl_time_step(const Particles<2>& particles, double cfl) const {
+template <int dim>
+double CoupledExplicitIntegrator<dim>::cfl_time_step(const Particles<dim>& particles, double cfl) const {
     return std::min(pnet::cfl_time_step(mpm_system_, particles, cfl), fem_.cfl_time_step(cfl));
 }
 
-StepStats CoupledExplicitIntegrator2d::step(Particles<2>& particles, FemState<2>& state, double dt, long step_index) {
+template <int dim>
+void CoupledExplicitIntegrator<dim>::apply_friction(Grid<dim>& grid, const Particles<dim>& particles,
+                                                    FemState<dim>& state, double h) const {
+    const std::vector<double>& node_mass = fem_system_.rest.node_mass;
+    for (const ParticleFrictionPair<dim>& f : friction_pairs_) {
+        // The particle's velocity from its stencil and 1 / m_eff, then the facet point's.
+        const StencilNodes<dim> st(grid, particles.x[f.particle]);
+        Vec<dim> relative = Vec<dim>::Zero();
+        double inverse_mass = 0.0;
+        st.for_each([&](std::int64_t node, double w, const Vec<dim>&, const Vec<dim>&) {
+            const typename Grid<dim>::Node& n = grid.node(node);
+            if (!(n.mass > 0.0)) return;
+            relative += w * n.momentum;
+            inverse_mass += w * w / n.mass;
+        });
+        const auto& facet = contact_.facets()[f.facet];
+        for (int j = 0; j < dim; ++j) {
+            relative -= f.weight[j] * state.v[facet[j]];
+            if (node_mass[facet[j]] > 0.0) inverse_mass += f.weight[j] * f.weight[j] / node_mass[facet[j]];
+        }
+        const Eigen::Matrix<double, dim - 1, 1> u = f.tangent.transpose() * relative;
+        const double speed = u.norm();
+        if (speed == 0.0 || !(inverse_mass > 0.0)) continue;
+        const double impulse = std::min(friction_.mu * f.normal_force * h, speed / inverse_mass);
+        const Vec<dim> J = -impulse * (f.tangent * (u / speed));  // on the particle; -J on the facet
+        st.for_each([&](std::int64_t node, double w, const Vec<dim>&, const Vec<dim>&) {
+            typename Grid<dim>::Node& n = grid.node(node);
+            if (!(n.mass > 0.0)) return;
+            n.momentum += (w / n.mass) * J;
+            int coord[dim];
+            grid.coordinates(node, coord);
+            grid.apply_boundary(coord, n.momentum, mpm_system_.boundary);
+        });
+        for (int j = 0; j < dim; ++j)
+            if (node_mass[facet[j]] > 0.0) state.v[facet[j]] -= (f.weight[j] / node_mass[facet[j]]) * J;
+    }
+}
+
+template <int dim>
+StepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
+                                               long step_index) {
     const auto start = std::chrono::steady_clock::now();
     const std::string context = "step " + std::to_string(step_index);
     // The barrier's forces at the start of the step.
     contact_.gradient(particles.x, state.x, pairs_, gradients_);
+    if (friction_.mu > 0.0) friction_pairs_ = contact_.lagged_pairs(particles.x, state.x);
     const std::size_t nodes = state.x.size();
-    node_force_.assign(nodes, Vec<2>::Zero());
+    node_force_.assign(nodes, Vec<dim>::Zero());
     for (std::size_t k = 0; k < pairs_.size(); ++k) {
-        const auto& edge = contact_.edges()[pairs_[k].edge];
-        node_force_[edge[0]] -= gradients_[k].segment<2>(2);
-        node_force_[edge[1]] -= gradients_[k].segment<2>(4);
+        const auto& facet = contact_.facets()[pairs_[k].facet];
+        for (int j = 0; j < dim; ++j) node_force_[facet[j]] -= gradients_[k].template segment<dim>(dim * (j + 1));
     }
     x_start_ = state.x;
     fem_.set_external_force(&node_force_);
@@ -158,24 +221,25 @@ StepStats CoupledExplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     dx_.resize(nodes);
     for (std::size_t i = 0; i < nodes; ++i) dx_[i] = state.x[i] - x_start_[i];
 
-    mpm_.set_grid_hook([&](Grid<2>& grid, double h) {
+    mpm_.set_grid_hook([&](Grid<dim>& grid, double h) {
         // Barrier impulses on the particles' stencil nodes, then their boundary conditions again.
         for (std::size_t k = 0; k < pairs_.size(); ++k) {
-            const Vec<2> f = -gradients_[k].head<2>();
-            const StencilNodes<2> st(grid, particles.x[pairs_[k].particle]);
-            st.for_each([&](std::int64_t node, double w, const Vec<2>&, const Vec<2>&) {
-                Grid<2>::Node& n = grid.node(node);
+            const Vec<dim> f = -gradients_[k].template head<dim>();
+            const StencilNodes<dim> st(grid, particles.x[pairs_[k].particle]);
+            st.for_each([&](std::int64_t node, double w, const Vec<dim>&, const Vec<dim>&) {
+                typename Grid<dim>::Node& n = grid.node(node);
                 if (!(n.mass > 0.0)) return;
                 n.momentum += (h * w / n.mass) * f;
-                int coord[2];
+                int coord[dim];
                 grid.coordinates(node, coord);
                 grid.apply_boundary(coord, n.momentum, mpm_system_.boundary);
             });
         }
+        if (!friction_pairs_.empty()) apply_friction(grid, particles, state, h);
         // CCD of this step's motion: the particles near the mesh, moved by their grid velocities.
         double max_speed = 0.0;
         for (std::size_t i = 0; i < nodes; ++i) max_speed = std::max(max_speed, dx_[i].norm());
-        Vec<2> lo = Vec<2>::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+        Vec<dim> lo = Vec<dim>::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
         for (std::size_t i = 0; i < nodes; ++i) {
             lo = lo.cwiseMin(x_start_[i]).cwiseMin(state.x[i]);
             hi = hi.cwiseMax(x_start_[i]).cwiseMax(state.x[i]);
@@ -184,15 +248,16 @@ StepStats CoupledExplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
         near_dX_.clear();
         double grid_speed = 0.0;
         for (int block : grid.active_blocks())
-            for (int k = 0; k < Grid<2>::kBlockNodes; ++k)
-                grid_speed = std::max(
-                    grid_speed, grid.node(static_cast<std::int64_t>(block) * Grid<2>::kBlockNodes + k).momentum.norm());
+            for (int k = 0; k < Grid<dim>::kBlockNodes; ++k)
+                grid_speed = std::max(grid_speed,
+                                      grid.node(static_cast<std::int64_t>(block) * Grid<dim>::kBlockNodes + k)
+                                          .momentum.norm());
         const double margin = h * grid_speed + contact_.dhat();
         for (std::size_t p = 0; p < particles.size(); ++p) {
-            const Vec<2>& X = particles.x[p];
+            const Vec<dim>& X = particles.x[p];
             if ((X.array() < lo.array() - margin).any() || (X.array() > hi.array() + margin).any()) continue;
-            Vec<2> v;
-            Mat<2> C, G;
+            Vec<dim> v;
+            Mat<dim> C, G;
             gather_velocity(grid, X, v, C, G);
             near_X_.push_back(X);
             near_dX_.push_back(h * v);
@@ -209,5 +274,10 @@ StepStats CoupledExplicitIntegrator2d::step(Particles<2>& particles, FemState<2>
     stats.wall_seconds = seconds_since(start);
     return stats;
 }
+
+template class CoupledImplicitIntegrator<2>;
+template class CoupledImplicitIntegrator<3>;
+template class CoupledExplicitIntegrator<2>;
+template class CoupledExplicitIntegrator<3>;
 
 }  // namespace pnet

@@ -1,7 +1,9 @@
 #pragma once
-// Time integrators of MPM-FEM coupling (BFEMP; docs/methods.md), 2D: MPM
+// Time integrators of MPM-FEM coupling (BFEMP; docs/methods.md), 2D and 3D: MPM
 // particles (sand, snow: any MPM material) and elastic FEM bodies meeting
-// through the particle / mesh barrier (particle_contact.hpp).
+// through the particle / mesh barrier (particle_contact.hpp) and its lagged
+// friction (Coulomb coefficient mu: the scene's contact.friction, which also
+// holds between the meshes and the ground).
 //
 // Implicit (`plasticitynet`, `lagged` for the particles): one step is
 //   P2G, v*_grid (sticky floor fixed; slip walls after the solve, as MPM);
@@ -14,13 +16,18 @@
 //   the barrier saw), x_fem += dt v_fem, the FEM return mapping.
 // Explicit (the ground truth): symplectic Euler of both with the same
 // barrier as a force, -dB/dX_p on each particle (spread to its stencil nodes
-// with w_ip after the grid update) and -dB/dx_a on the FEM nodes; the step's
+// with w_ip after the grid update) and -dB/dx_a on the FEM nodes; friction as
+// Coulomb impulses on the same lagged pairs after the grid update (pair by pair,
+// each at most mu lambda h and at most what stops the pair's slip: the particle's
+// grid velocity against the facet's point, through the effective mass
+// 1 / (sum_i w_ip^2 / m_i + sum_j c_j^2 / m_j)), as the FEM contact's; the step's
 // motion (particles by their grid velocities, nodes by theirs) is checked by
 // CCD, and a step that would let a particle cross the mesh is an error
 // (SimulationError: the step is too large for the barrier).
 #include <memory>
 #include <vector>
 
+#include "pnet/contact/friction.hpp"
 #include "pnet/coupling/coupled_potential.hpp"
 #include "pnet/coupling/particle_contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
@@ -30,59 +37,85 @@
 
 namespace pnet {
 
-class CoupledImplicitIntegrator2d {
+/// Coulomb friction of every contact pair of a coupled scene: coefficient mu >= 0 (0: none) and
+/// the slip velocity eps_v > 0 (m/s) below which the implicit integrators smooth it.
+struct CouplingFriction {
+    double mu = 0.0;
+    double eps_v = 1e-4;
+};
+
+template <int dim>
+class CoupledImplicitIntegrator {
 public:
     /// mpm_energy: the particles' energy (NeuralParticleEnergy for plasticitynet,
     /// ElasticParticleEnergy for lagged); return_maps as ImplicitIntegrator's; fem_contact: the
     /// meshes' own contact (ground, between meshes), may be null.
-    CoupledImplicitIntegrator2d(const MpmSystem<2>& mpm, const FemSystem<2>& fem, ImplicitMethod method,
-                                const ImplicitOptions& options, std::unique_ptr<ParticleEnergy<2>> mpm_energy,
-                                std::vector<const LearnedReturnMap<2>*> return_maps,
-                                const ContactPotential<2>* fem_contact, const ParticleContact2d& contact);
+    CoupledImplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem, ImplicitMethod method,
+                              const ImplicitOptions& options, std::unique_ptr<ParticleEnergy<dim>> mpm_energy,
+                              std::vector<const LearnedReturnMap<dim>*> return_maps,
+                              const ContactPotential<dim>* fem_contact, const ParticleContact<dim>& contact,
+                              CouplingFriction friction = {});
 
     /// Throws SimulationError naming the step on a failed solve or a blow-up.
-    StepStats step(Particles<2>& particles, FemState<2>& state, double dt, long step_index);
+    StepStats step(Particles<dim>& particles, FemState<dim>& state, double dt, long step_index);
 
-    CoupledPotential2d& potential() { return coupled_; }
-    const Grid<2>& grid() const { return grid_; }
+    CoupledPotential<dim>& potential() { return coupled_; }
+    const Grid<dim>& grid() const { return grid_; }
 
 private:
-    const MpmSystem<2>& mpm_system_;
-    const FemSystem<2>& fem_system_;
+    const MpmSystem<dim>& mpm_system_;
+    const FemSystem<dim>& fem_system_;
     ImplicitMethod method_;
     ImplicitOptions options_;
-    std::unique_ptr<ParticleEnergy<2>> mpm_energy_;
-    std::vector<const LearnedReturnMap<2>*> return_maps_;
-    Grid<2> grid_;
-    IncrementalPotential<2> mpm_;
-    ElasticParticleEnergy<2> fem_energy_;
-    FemPotential<2> fem_;
-    CoupledPotential2d coupled_;
-    ReferenceSolveWork<2> work_;
+    std::unique_ptr<ParticleEnergy<dim>> mpm_energy_;
+    std::vector<const LearnedReturnMap<dim>*> return_maps_;
+    const ContactPotential<dim>* fem_contact_;
+    const ParticleContact<dim>& contact_;
+    CouplingFriction friction_;
+    Friction<dim> mesh_friction_;  // the meshes' own pairs (ground, between meshes)
+    Grid<dim> grid_;
+    IncrementalPotential<dim> mpm_;
+    ElasticParticleEnergy<dim> fem_energy_;
+    FemPotential<dim> fem_;
+    CoupledPotential<dim> coupled_;
+    ReferenceSolveWork<dim> work_;
     VecX v_;
 };
 
-class CoupledExplicitIntegrator2d {
+template <int dim>
+class CoupledExplicitIntegrator {
 public:
-    CoupledExplicitIntegrator2d(const MpmSystem<2>& mpm, const FemSystem<2>& fem,
-                                const ContactPotential<2>* fem_contact, const ParticleContact2d& contact);
+    CoupledExplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
+                              const ContactPotential<dim>* fem_contact, const ParticleContact<dim>& contact,
+                              CouplingFriction friction = {});
 
     /// One symplectic Euler step of both (the FEM part in as many substeps as its elements need).
-    StepStats step(Particles<2>& particles, FemState<2>& state, double dt, long step_index);
+    StepStats step(Particles<dim>& particles, FemState<dim>& state, double dt, long step_index);
 
     /// The MPM part's cached stresses (checkpoints: bit-identical resume).
-    ExplicitIntegrator<2>& mpm() { return mpm_; }
+    ExplicitIntegrator<dim>& mpm() { return mpm_; }
     /// The largest stable step: the MPM CFL step and the FEM elements' (cfl 0.5 each).
-    double cfl_time_step(const Particles<2>& particles, double cfl) const;
+    double cfl_time_step(const Particles<dim>& particles, double cfl) const;
 
 private:
-    const MpmSystem<2>& mpm_system_;
-    ExplicitIntegrator<2> mpm_;
-    FemExplicitIntegrator<2> fem_;
-    const ParticleContact2d& contact_;
-    std::vector<ParticleContact2d::Pair> pairs_;
-    std::vector<Vec6> gradients_;
-    std::vector<Vec<2>> node_force_, x_start_, dx_, near_X_, near_dX_;
+    /// Coulomb impulses of the lagged particle-mesh pairs on the grid velocities and the FEM
+    /// nodes' velocities over a step h.
+    void apply_friction(Grid<dim>& grid, const Particles<dim>& particles, FemState<dim>& state, double h) const;
+
+    const MpmSystem<dim>& mpm_system_;
+    const FemSystem<dim>& fem_system_;
+    ExplicitIntegrator<dim> mpm_;
+    FemExplicitIntegrator<dim> fem_;
+    const ParticleContact<dim>& contact_;
+    CouplingFriction friction_;
+    Friction<dim> mesh_friction_;
+    std::vector<typename ParticleContact<dim>::Pair> pairs_;
+    std::vector<typename ParticleContact<dim>::Gradient> gradients_;
+    std::vector<ParticleFrictionPair<dim>> friction_pairs_;
+    std::vector<Vec<dim>> node_force_, x_start_, dx_, near_X_, near_dX_;
 };
+
+using CoupledImplicitIntegrator2d = CoupledImplicitIntegrator<2>;
+using CoupledExplicitIntegrator2d = CoupledExplicitIntegrator<2>;
 
 }  // namespace pnet

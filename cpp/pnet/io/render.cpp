@@ -656,10 +656,74 @@ Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>
     return with_legend(img, options, s);
 }
 
+namespace {
+
+/// Throws std::invalid_argument (naming `who`) for a surface whose sizes do not match.
+void check_surface(const SurfaceMesh& surface, const char* who) {
+    const std::size_t n = surface.position.size() / 3, m = surface.triangles.size() / 3;
+    if (surface.position.size() % 3 != 0) throw std::invalid_argument(std::string(who) + ": surface positions are not n x 3");
+    if (surface.triangles.size() % 3 != 0)
+        throw std::invalid_argument(std::string(who) + ": triangles is not a multiple of 3");
+    if (!surface.value.empty() && surface.value.size() != m)
+        throw std::invalid_argument(std::string(who) + ": " + std::to_string(surface.value.size()) + " values for " +
+                                    std::to_string(m) + " triangles");
+    for (int t : surface.triangles)
+        if (t < 0 || static_cast<std::size_t>(t) >= n)
+            throw std::invalid_argument(std::string(who) + ": triangle node " + std::to_string(t) + " out of range");
+}
+
+/// Flat-shaded triangles (node positions in pixels, x right, y down, z the view depth) into img
+/// and its depth buffer (depth interpolated in screen space: the view is orthographic), Lambert
+/// with ambient light, darkened with depth (fog from depth_min over depth_range), both sides lit,
+/// with thin dark edges; s: pixels per metre.
+void rasterize_triangles(Image& img, std::vector<double>& depth, const std::vector<Eigen::Vector3d>& screen,
+                         const std::vector<int>& triangles, const std::vector<double>& value,
+                         const ParticleRenderOptions& options, double depth_min, double depth_range, double s) {
+    using V3 = Eigen::Vector3d;
+    const V3 light = V3(-0.4, 0.7, -0.6).normalized();  // towards the light, in screen axes (x right, y up, z away)
+    const std::size_t m = triangles.size() / 3;
+    for (std::size_t k = 0; k < m; ++k) {
+        const V3 &a = screen[triangles[3 * k]], &b = screen[triangles[3 * k + 1]], &c = screen[triangles[3 * k + 2]];
+        if (!(a.allFinite() && b.allFinite() && c.allFinite())) continue;
+        const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+        if (area == 0.0) continue;  // seen edge-on
+        // The face normal in screen axes (y flipped back to up).
+        const V3 e1(b.x() - a.x(), -(b.y() - a.y()), (b.z() - a.z()) * s), e2(c.x() - a.x(), -(c.y() - a.y()), (c.z() - a.z()) * s);
+        const V3 normal = e1.cross(e2).normalized();
+        const double diffuse = std::abs(normal.dot(light));
+        const double fog = std::clamp(((a.z() + b.z() + c.z()) / 3.0 - depth_min) / depth_range, 0.0, 1.0);
+        const Rgb colour = scaled(particle_colour(value, k, options), (0.35 + 0.65 * diffuse) * (1.0 - 0.35 * fog));
+        const int x0 = std::max(0, int(std::floor(std::min({a.x(), b.x(), c.x()}))));
+        const int x1 = std::min(img.width - 1, int(std::ceil(std::max({a.x(), b.x(), c.x()}))));
+        const int y0 = std::max(0, int(std::floor(std::min({a.y(), b.y(), c.y()}))));
+        const int y1 = std::min(img.height - 1, int(std::ceil(std::max({a.y(), b.y(), c.y()}))));
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+                const double px = x + 0.5, py = y + 0.5;
+                const double wa = ((b.x() - px) * (c.y() - py) - (b.y() - py) * (c.x() - px)) / area;
+                const double wb = ((c.x() - px) * (a.y() - py) - (c.y() - py) * (a.x() - px)) / area;
+                const double wc = 1.0 - wa - wb;
+                if (wa < 0.0 || wb < 0.0 || wc < 0.0) continue;
+                const double z = wa * a.z() + wb * b.z() + wc * c.z();
+                double& zbuf = depth[std::size_t(y) * std::size_t(img.width) + std::size_t(x)];
+                if (z >= zbuf) continue;
+                zbuf = z;
+                // Thin dark edges: pixels within about one pixel of the triangle's border.
+                const double edge = std::min({wa * std::abs(area) / (b - c).head<2>().norm(),
+                                              wb * std::abs(area) / (c - a).head<2>().norm(),
+                                              wc * std::abs(area) / (a - b).head<2>().norm()});
+                img.set(x, y, edge < 0.6 ? scaled(colour, 0.55) : colour);
+            }
+    }
+}
+
+}  // namespace
+
 Image render_particles_3d(const std::vector<double>& position, const std::vector<double>& value,
-                          const ParticleRenderOptions& options) {
+                          const ParticleRenderOptions& options, const SurfaceMesh* surface) {
     constexpr const char* who = "render_particles_3d";
     check_particle_input(position, value, 3, options, who);
+    if (surface) check_surface(*surface, who);
     const std::size_t n = position.size() / 3;
     using V3 = Eigen::Vector3d;
     const V3 lo(options.domain_min[0], options.domain_min[1], options.domain_min[2]);
@@ -735,6 +799,15 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
                               std::numeric_limits<double>::infinity());
     const double radius_world = radius / s;
     const double depth_range = std::max(vhi.z() - vlo.z(), 1e-300);
+    if (surface) {  // opaque: drawn first, into the depth buffer the particles are tested against
+        std::vector<V3> screen(surface->position.size() / 3);
+        for (std::size_t i = 0; i < screen.size(); ++i) {
+            const V3 q = view(V3(surface->position[3 * i], surface->position[3 * i + 1], surface->position[3 * i + 2]));
+            const Eigen::Vector2d px = to_px(q);
+            screen[i] = V3(px.x(), px.y(), q.z());
+        }
+        rasterize_triangles(img, depth, screen, surface->triangles, surface->value, options, vlo.z(), depth_range, s);
+    }
     const V3 light = V3(-0.4, 0.7, -0.6).normalized();  // towards the light: upper left, camera side
     for (const Splat& splat : splats) {
         const Eigen::Vector2d& c = splat.centre;
@@ -770,14 +843,8 @@ Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>
                      const std::vector<double>& value, const ParticleRenderOptions& options) {
     constexpr const char* who = "render_mesh_3d";
     check_particle_input(position, {}, 3, options, who);
-    const std::size_t n = position.size() / 3, m = triangles.size() / 3;
-    if (triangles.size() % 3 != 0) throw std::invalid_argument(std::string(who) + ": triangles is not a multiple of 3");
-    if (!value.empty() && value.size() != m)
-        throw std::invalid_argument(std::string(who) + ": " + std::to_string(value.size()) + " values for " +
-                                    std::to_string(m) + " triangles");
-    for (int t : triangles)
-        if (t < 0 || static_cast<std::size_t>(t) >= n)
-            throw std::invalid_argument(std::string(who) + ": triangle node " + std::to_string(t) + " out of range");
+    const std::size_t n = position.size() / 3;
+    check_surface({position, triangles, value}, who);
     using V3 = Eigen::Vector3d;
     const V3 lo(options.domain_min[0], options.domain_min[1], options.domain_min[2]);
     const V3 hi(options.domain_max[0], options.domain_max[1], options.domain_max[2]);
@@ -821,41 +888,8 @@ Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>
     // Flat-shaded triangles into a depth buffer (depth interpolated in screen space: the view is
     // orthographic), Lambert with ambient light, darkened with depth; both sides lit.
     std::vector<double> depth(std::size_t(img.width) * std::size_t(img.height), std::numeric_limits<double>::infinity());
-    const V3 light = V3(-0.4, 0.7, -0.6).normalized();  // towards the light, in screen axes (x right, y up, z away)
     const double depth_range = std::max(vhi.z() - vlo.z(), 1e-300);
-    for (std::size_t k = 0; k < m; ++k) {
-        const V3 &a = screen[triangles[3 * k]], &b = screen[triangles[3 * k + 1]], &c = screen[triangles[3 * k + 2]];
-        if (!(a.allFinite() && b.allFinite() && c.allFinite())) continue;
-        const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
-        if (area == 0.0) continue;  // seen edge-on
-        // The face normal in screen axes (y flipped back to up).
-        const V3 e1(b.x() - a.x(), -(b.y() - a.y()), (b.z() - a.z()) * s), e2(c.x() - a.x(), -(c.y() - a.y()), (c.z() - a.z()) * s);
-        const V3 normal = e1.cross(e2).normalized();
-        const double diffuse = std::abs(normal.dot(light));
-        const double fog = std::clamp(((a.z() + b.z() + c.z()) / 3.0 - vlo.z()) / depth_range, 0.0, 1.0);
-        const Rgb colour = scaled(particle_colour(value, k, options), (0.35 + 0.65 * diffuse) * (1.0 - 0.35 * fog));
-        const int x0 = std::max(0, int(std::floor(std::min({a.x(), b.x(), c.x()}))));
-        const int x1 = std::min(img.width - 1, int(std::ceil(std::max({a.x(), b.x(), c.x()}))));
-        const int y0 = std::max(0, int(std::floor(std::min({a.y(), b.y(), c.y()}))));
-        const int y1 = std::min(img.height - 1, int(std::ceil(std::max({a.y(), b.y(), c.y()}))));
-        for (int y = y0; y <= y1; ++y)
-            for (int x = x0; x <= x1; ++x) {
-                const double px = x + 0.5, py = y + 0.5;
-                const double wa = ((b.x() - px) * (c.y() - py) - (b.y() - py) * (c.x() - px)) / area;
-                const double wb = ((c.x() - px) * (a.y() - py) - (c.y() - py) * (a.x() - px)) / area;
-                const double wc = 1.0 - wa - wb;
-                if (wa < 0.0 || wb < 0.0 || wc < 0.0) continue;
-                const double z = wa * a.z() + wb * b.z() + wc * c.z();
-                double& zbuf = depth[std::size_t(y) * std::size_t(img.width) + std::size_t(x)];
-                if (z >= zbuf) continue;
-                zbuf = z;
-                // Thin dark edges: pixels within about one pixel of the triangle's border.
-                const double edge = std::min({wa * std::abs(area) / (b - c).head<2>().norm(),
-                                              wb * std::abs(area) / (c - a).head<2>().norm(),
-                                              wc * std::abs(area) / (a - b).head<2>().norm()});
-                img.set(x, y, edge < 0.6 ? scaled(colour, 0.55) : colour);
-            }
-    }
+    rasterize_triangles(img, depth, screen, triangles, value, options, vlo.z(), depth_range, s);
     draw_box(true);
     draw_caption(img, options, margin);
     return with_legend(img, options, s);  // orthographic: s pixels per metre in the picture plane

@@ -65,13 +65,24 @@ inline constexpr int kLegendHeight = 26;
 Image render_particles_2d(const std::vector<double>& position, const std::vector<double>& value,
                           const ParticleRenderOptions& options);
 
+/// A triangle surface in 3D (position n x 3, triangles m x 3 node indices, value per triangle
+/// or empty for one colour), copied by value (small: a body's boundary).
+struct SurfaceMesh {
+    std::vector<double> position;
+    std::vector<int> triangles;
+    std::vector<double> value;
+};
+
 /// 3D particles (position n x 3, y up) in an orthographic view from direction (1, 0.8, 1.5)
 /// towards the domain centre: the domain box as a grey wireframe, each particle a sphere
 /// impostor (per-pixel depth against a depth buffer, so that overlapping particles intersect
 /// correctly) drawn far to near, Lambert-shaded and darkened with depth, coloured by viridis of
-/// value[i]. Same options and errors as render_particles_2d().
+/// value[i]. With a surface (MPM-FEM coupling: a mesh's boundary), its opaque triangles are
+/// drawn as render_mesh_3d() does into the same depth buffer, so that each hides what lies
+/// behind it. Same options and errors as render_particles_2d() (and render_mesh_3d() for the
+/// surface).
 Image render_particles_3d(const std::vector<double>& position, const std::vector<double>& value,
-                          const ParticleRenderOptions& options);
+                          const ParticleRenderOptions& options, const SurfaceMesh* surface = nullptr);
 
 /// A 2D triangle mesh (position n x 2, triangles m x 3 node indices) as filled triangles,
 /// triangle k coloured by viridis of value[k] (may be empty: one colour), with thin dark edges,

@@ -577,7 +577,6 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
         if (std::all_of(scene.meshes.begin(), scene.meshes.end(), [](const SceneMesh& m) { return m.kinematic; }))
             r.fail("meshes", "every mesh is kinematic: at least one must be a deformable body with a material");
         if (!scene.objects.empty()) {
-            if (scene.dim != 2) r.fail("meshes", "particles and meshes in one scene (MPM-FEM coupling) are 2D only");
             for (std::size_t k = 0; k < scene.meshes.size(); ++k)
                 if (scene.meshes[k].kinematic)
                     r.fail(index_path("meshes", k) + ".kinematic",

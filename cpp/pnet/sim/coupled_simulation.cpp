@@ -19,23 +19,19 @@ constexpr double kKappaReferenceDt = 1e-3;  // s: the implicit MPM step of docs/
 
 }  // namespace
 
-CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSettings& settings)
+template <int dim>
+CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSettings& settings)
     : SimulationBase(scene, settings),
-      mpm_(make_mpm_system<2>(scene)),
-      particles_(sample_particles<2>(scene)),
-      fem_(make_fem_system<2>(scene)) {
-    const FemSystem<2>& s = fem_.system;
+      mpm_(make_mpm_system<dim>(scene)),
+      particles_(sample_particles<dim>(scene)),
+      fem_(make_fem_system<dim>(scene)) {
+    const FemSystem<dim>& s = fem_.system;
     for (char fixed : s.fixed_node)
         if (fixed) throw SceneError(scene.file + ": meshes: kinematic meshes are not supported beside particles");
 
     // The meshes' own contact (ground, between meshes), as a FEM run has it.
-    auto contact = std::make_unique<Contact2d>(s.mesh.boundary, fem_.dhat, fem_.kappa);
-    if (scene.contact.ground_height) {
-        HalfSpace2d ground;
-        ground.origin[1] = *scene.contact.ground_height;
-        contact->add_half_space(ground);
-    }
-    fem_contact_ = std::move(contact);
+    fem_contact_ = make_fem_contact<dim>(scene, fem_);
+    const CouplingFriction friction{scene.contact.friction, scene.contact.friction_eps_v};
 
     // The particle / mesh barrier: dhat at most half a cell; kappa IPC's lower bound for the
     // average particle mass at the implicit MPM step, unless the scene gives them.
@@ -46,22 +42,22 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
         for (double m : particles_.mass) mass += m;
         const double diagonal = (scene.domain_max - scene.domain_min).norm();
         kappa = initial_barrier_stiffness(diagonal, dhat, mass / particles_.size(), kKappaReferenceDt,
-                                          Eigen::VectorXd::Zero(2), Eigen::VectorXd::Zero(2))
+                                          Eigen::VectorXd::Zero(dim), Eigen::VectorXd::Zero(dim))
                     .kappa;
     }
-    coupling_ = std::make_unique<ParticleContact2d>(s.mesh.boundary, dhat, kappa);
+    coupling_ = std::make_unique<ParticleContact<dim>>(s.mesh.boundary, dhat, kappa);
     const std::string inside = coupling_->first_penetration(particles_.x, s.mesh.x);
     if (!inside.empty())
         throw SceneError(scene.file + ": objects and meshes overlap at the start: " + inside +
                          " (particles are numbered in object order)");
 
-    state_ = FemState<2>::at_rest(s);
+    state_ = FemState<dim>::at_rest(s);
     for (std::size_t k = 0; k < scene.meshes.size(); ++k)
         for (int i = fem_.first_node[k]; i < fem_.first_node[k + 1]; ++i)
-            state_.v[i] = Vec<2>(scene.meshes[k].velocity[0], scene.meshes[k].velocity[1]);
+            state_.v[i] = scene.meshes[k].velocity.template head<dim>();
 
     if (settings.name == "explicit") {
-        explicit_ = std::make_unique<CoupledExplicitIntegrator2d>(mpm_, s, fem_contact_.get(), *coupling_);
+        explicit_ = std::make_unique<CoupledExplicitIntegrator<dim>>(mpm_, s, fem_contact_.get(), *coupling_, friction);
         explicit_->mpm().reset(particles_);
         dt_ = settings.dt;
     } else {
@@ -69,11 +65,11 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
             throw std::invalid_argument("dt must be > 0 for the implicit integrator " + settings.name +
                                         " (the CFL step is explicit's)");
         dt_ = settings.dt;
-        std::unique_ptr<ParticleEnergy<2>> energy;
-        std::vector<const LearnedReturnMap<2>*> return_maps;
+        std::unique_ptr<ParticleEnergy<dim>> energy;
+        std::vector<const LearnedReturnMap<dim>*> return_maps;
         ImplicitMethod method = ImplicitMethod::Lagged;
         if (settings.name == "lagged") {
-            energy = std::make_unique<ElasticParticleEnergy<2>>(mpm_.materials);
+            energy = std::make_unique<ElasticParticleEnergy<dim>>(mpm_.materials);
         } else if (settings.name == "plasticitynet") {
             method = ImplicitMethod::PlasticityNet;
             std::vector<std::shared_ptr<const ModelFile>> models = settings.models;
@@ -81,9 +77,9 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
             std::vector<std::string> context;
             for (const SceneObject& object : scene.objects)
                 context.push_back(scene.file + ": " + object.json_path + ".model");
-            auto neural = std::make_unique<NeuralParticleEnergy<2>>(models, mpm_.materials, context,
-                                                                    settings.implicit.regularizer_weight,
-                                                 settings.implicit.neural_hessian<2>());
+            auto neural = std::make_unique<NeuralParticleEnergy<dim>>(models, mpm_.materials, context,
+                                                                      settings.implicit.regularizer_weight,
+                                                                      settings.implicit.template neural_hessian<dim>());
             for (std::size_t k = 0; k < scene.objects.size(); ++k)
                 return_maps.push_back(
                     settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);
@@ -92,13 +88,14 @@ CoupledSimulation2d::CoupledSimulation2d(const Scene& scene, const IntegratorSet
             throw std::invalid_argument("unknown integrator \"" + settings.name +
                                         "\" (expected explicit, plasticitynet or lagged for particles with meshes)");
         }
-        implicit_ =
-            std::make_unique<CoupledImplicitIntegrator2d>(mpm_, s, method, settings.implicit, std::move(energy),
-                                                          std::move(return_maps), fem_contact_.get(), *coupling_);
+        implicit_ = std::make_unique<CoupledImplicitIntegrator<dim>>(mpm_, s, method, settings.implicit,
+                                                                     std::move(energy), std::move(return_maps),
+                                                                     fem_contact_.get(), *coupling_, friction);
     }
 }
 
-StepStats CoupledSimulation2d::step() {
+template <int dim>
+StepStats CoupledSimulation<dim>::step() {
     const double dt = clip_to_frame(dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl));
     StepStats s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
@@ -108,7 +105,8 @@ StepStats CoupledSimulation2d::step() {
     return s;
 }
 
-FrameStats CoupledSimulation2d::advance_frame(const std::function<void()>& after_step) {
+template <int dim>
+FrameStats CoupledSimulation<dim>::advance_frame(const std::function<void()>& after_step) {
     return advance_one_frame(
         [&] { return step(); },
         [&](FrameStats& stats) {
@@ -118,10 +116,10 @@ FrameStats CoupledSimulation2d::advance_frame(const std::function<void()>& after
             if (!pair.empty())
                 throw SimulationError("frame " + std::to_string(frame_) + ": the meshes intersect: " + pair);
             for (std::size_t p = 0; p < particles_.size(); ++p)
-                add_point_mass<2>(stats, particles_.mass[p], particles_.x[p], particles_.v[p], mpm_.gravity);
-            const FemSystem<2>& s = fem_.system;
+                add_point_mass<dim>(stats, particles_.mass[p], particles_.x[p], particles_.v[p], mpm_.gravity);
+            const FemSystem<dim>& s = fem_.system;
             for (std::size_t i = 0; i < s.mesh.nodes(); ++i)
-                add_point_mass<2>(stats, s.rest.node_mass[i], state_.x[i], state_.v[i], s.gravity);
+                add_point_mass<dim>(stats, s.rest.node_mass[i], state_.x[i], state_.v[i], s.gravity);
         },
         after_step);
 }
@@ -132,9 +130,10 @@ constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'P', 'L', '1'};
 
 }  // namespace
 
-void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
+template <int dim>
+void CoupledSimulation<dim>::save_checkpoint(const std::string& path) const {
     write_sealed_checkpoint(path, [&](std::ostream& out) {
-        const std::vector<Mat<2>> stress = explicit_ ? explicit_->mpm().checkpoint_state() : std::vector<Mat<2>>{};
+        const std::vector<Mat<dim>> stress = explicit_ ? explicit_->mpm().checkpoint_state() : std::vector<Mat<dim>>{};
         write_checkpoint_preamble(out, kMagic,
                                   {static_cast<std::int64_t>(particles_.size()), static_cast<std::int64_t>(state_.x.size()),
                                    static_cast<std::int64_t>(state_.hardening.size()),
@@ -153,7 +152,8 @@ void CoupledSimulation2d::save_checkpoint(const std::string& path) const {
     });
 }
 
-void CoupledSimulation2d::load_checkpoint(const std::string& path) {
+template <int dim>
+void CoupledSimulation<dim>::load_checkpoint(const std::string& path) {
     std::istringstream in = read_sealed_checkpoint(path);
     std::vector<std::int64_t> header(6);
     double time = 0.0;
@@ -166,15 +166,15 @@ void CoupledSimulation2d::load_checkpoint(const std::string& path) {
         throw std::invalid_argument(path + ": holds " + std::to_string(header[0]) + " particles and " +
                                     std::to_string(header[1]) + " nodes, the scene has " + std::to_string(n) + " and " +
                                     std::to_string(state_.x.size()) + " (or a corrupt header)");
-    Particles<2> p = particles_;
+    Particles<dim> p = particles_;
     read_array(in, p.x, n, path);
     read_array(in, p.v, n, path);
     read_array(in, p.C, n, path);
     read_array(in, p.F_elastic, n, path);
     read_array(in, p.hardening, n, path);
-    std::vector<Mat<2>> stress;
+    std::vector<Mat<dim>> stress;
     read_array(in, stress, static_cast<std::size_t>(header[3]), path);
-    FemState<2> s;
+    FemState<dim> s;
     read_array(in, s.x, state_.x.size(), path);
     read_array(in, s.v, state_.v.size(), path);
     read_array(in, s.plastic_inverse, state_.plastic_inverse.size(), path);
@@ -186,5 +186,8 @@ void CoupledSimulation2d::load_checkpoint(const std::string& path) {
     state_ = std::move(s);
     if (explicit_) explicit_->mpm().restore_checkpoint_state(std::move(stress));
 }
+
+template class CoupledSimulation<2>;
+template class CoupledSimulation<3>;
 
 }  // namespace pnet

@@ -1,7 +1,7 @@
 #pragma once
 // An MPM-FEM coupled run of a scene (BFEMP; docs/methods.md, docs/scenes.md): particle
-// objects (MPM) and meshes (FEM, elastic) in one 2D scene, meeting through the
-// particle / mesh barrier. The particles use the grid, materials and boundary
+// objects (MPM) and meshes (FEM, elastic) in one 2D or 3D scene, meeting through the
+// particle / mesh barrier and its friction (the scene's contact.friction). The particles use the grid, materials and boundary
 // conditions of an MPM run of the same objects (make_mpm_system,
 // sample_particles), the meshes those of a FEM run (make_fem_system, with its
 // own contact: ground, between meshes). Integrators: explicit (the ground
@@ -21,13 +21,14 @@
 
 namespace pnet {
 
-class CoupledSimulation2d : public SimulationBase {
+template <int dim>
+class CoupledSimulation : public SimulationBase {
 public:
-    static constexpr int kDim = 2;
+    static constexpr int kDim = dim;
 
     /// Throws std::invalid_argument for an unknown integrator, a bad dt or missing models
     /// (as Simulation), SceneError for a start state with a particle inside or on a mesh.
-    CoupledSimulation2d(const Scene& scene, const IntegratorSettings& settings);
+    CoupledSimulation(const Scene& scene, const IntegratorSettings& settings);
 
     /// One step (explicit with dt = 0: the smaller of the MPM CFL step and the FEM elements'),
     /// shortened to land on the end of the frame.
@@ -35,12 +36,12 @@ public:
     /// Advances to the end of the next frame, then tests for particles inside a mesh.
     FrameStats advance_frame(const std::function<void()>& after_step = {});
 
-    const Particles<2>& particles() const { return particles_; }
-    const MpmSystem<2>& system() const { return mpm_; }
-    const FemState<2>& state() const { return state_; }
-    const FemSceneSystem<2>& scene_system() const { return fem_; }
-    const Mesh<2>& mesh() const { return fem_.system.mesh; }
-    const ParticleContact2d& coupling() const { return *coupling_; }
+    const Particles<dim>& particles() const { return particles_; }
+    const MpmSystem<dim>& system() const { return mpm_; }
+    const FemState<dim>& state() const { return state_; }
+    const FemSceneSystem<dim>& scene_system() const { return fem_; }
+    const Mesh<dim>& mesh() const { return fem_.system.mesh; }
+    const ParticleContact<dim>& coupling() const { return *coupling_; }
     double step_size() const { return dt_; }
 
     /// Particles inside a mesh or on its boundary now (must be 0).
@@ -52,15 +53,18 @@ public:
     void load_checkpoint(const std::string& path);
 
 private:
-    MpmSystem<2> mpm_;
-    Particles<2> particles_;
-    FemSceneSystem<2> fem_;
-    FemState<2> state_;
-    std::unique_ptr<ContactPotential<2>> fem_contact_;
-    std::unique_ptr<ParticleContact2d> coupling_;
-    std::unique_ptr<CoupledImplicitIntegrator2d> implicit_;
-    std::unique_ptr<CoupledExplicitIntegrator2d> explicit_;
+    MpmSystem<dim> mpm_;
+    Particles<dim> particles_;
+    FemSceneSystem<dim> fem_;
+    FemState<dim> state_;
+    std::unique_ptr<ContactPotential<dim>> fem_contact_;
+    std::unique_ptr<ParticleContact<dim>> coupling_;
+    std::unique_ptr<CoupledImplicitIntegrator<dim>> implicit_;
+    std::unique_ptr<CoupledExplicitIntegrator<dim>> explicit_;
     double dt_ = 0.0;
 };
+
+using CoupledSimulation2d = CoupledSimulation<2>;
+using CoupledSimulation3d = CoupledSimulation<3>;
 
 }  // namespace pnet

@@ -124,7 +124,14 @@ std::string find_intersection(const FemSceneSystem<dim>& s, const ContactPotenti
 }
 
 template <int dim>
-std::unique_ptr<ContactPotential<dim>> make_contact(const Scene& scene, const FemSceneSystem<dim>& s) {
+Vec<dim> to_vec(const Eigen::VectorXd& v) {
+    return Vec<dim>(v.head<dim>());
+}
+
+}  // namespace
+
+template <int dim>
+std::unique_ptr<ContactPotential<dim>> make_fem_contact(const Scene& scene, const FemSceneSystem<dim>& s) {
     HalfSpace<dim> ground;
     if (scene.contact.ground_height) ground.origin[1] = *scene.contact.ground_height;
     if constexpr (dim == 2) {
@@ -138,12 +145,8 @@ std::unique_ptr<ContactPotential<dim>> make_contact(const Scene& scene, const Fe
     }
 }
 
-template <int dim>
-Vec<dim> to_vec(const Eigen::VectorXd& v) {
-    return Vec<dim>(v.head<dim>());
-}
-
-}  // namespace
+template std::unique_ptr<ContactPotential<2>> make_fem_contact<2>(const Scene&, const FemSceneSystem<2>&);
+template std::unique_ptr<ContactPotential<3>> make_fem_contact<3>(const Scene&, const FemSceneSystem<3>&);
 
 template <int dim>
 int FemSceneSystem<dim>::mesh_of_node(int node) const {
@@ -192,7 +195,7 @@ FemSceneSystem<dim> make_fem_system(const Scene& scene) {
                                                              Eigen::VectorXd::Zero(dim));
         out.kappa = scene.contact.kappa_scale * k.kappa;
     }
-    const std::unique_ptr<ContactPotential<dim>> contact = make_contact<dim>(scene, out);
+    const std::unique_ptr<ContactPotential<dim>> contact = make_fem_contact<dim>(scene, out);
     const std::string pair = find_intersection(out, *contact, s.mesh.x);
     if (!pair.empty())
         throw SceneError(scene.file + ": meshes: the start state intersects or touches: " + pair +
@@ -204,7 +207,7 @@ template <int dim>
 FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& settings)
     : SimulationBase(scene, settings), built_(make_fem_system<dim>(scene)) {
     const FemSystem<dim>& s = built_.system;
-    contact_ = make_contact<dim>(scene, built_);
+    contact_ = make_fem_contact<dim>(scene, built_);
     friction_ = std::make_unique<Friction<dim>>(scene.contact.friction, scene.contact.friction_eps_v);
     const bool frictional = scene.contact.friction > 0.0;
 

@@ -47,6 +47,11 @@ struct FemSceneSystem {
 template <int dim>
 FemSceneSystem<dim> make_fem_system(const Scene& scene);
 
+/// The meshes' IPC contact (Contact2d / Contact3d: between meshes, self-contact, and the ground
+/// half-space when the scene has contact.ground_height) with the system's dhat and kappa.
+template <int dim>
+std::unique_ptr<ContactPotential<dim>> make_fem_contact(const Scene& scene, const FemSceneSystem<dim>& s);
+
 template <int dim>
 class FemSimulation : public SimulationBase {
 public:

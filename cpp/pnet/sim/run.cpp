@@ -187,11 +187,9 @@ std::vector<int> boundary_owner(const Mesh<3>& mesh) {
     return out;
 }
 
-/// A 3D FEM frame: every node with the boundary triangles (PLY), the whole tetrahedral
-/// mesh (VTU, for ParaView), and a shaded render of the surface (PNG).
-void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Output& o, const fs::path& out) {
-    const FemState<3>& state = sim.state();
-    const Mesh<3>& mesh = sim.mesh();
+/// A 3D mesh's frame: every node with the boundary triangles (the PLY), each triangle coloured by
+/// its element's speed or hardening.
+PlyMesh mesh_frame_3d(const FemState<3>& state, const Mesh<3>& mesh, const Output& o, std::vector<double>& colour) {
     const std::vector<int> owner = boundary_owner(mesh);
     PlyMesh ply;
     ply.run_id = o.run_id;
@@ -201,7 +199,7 @@ void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Output& 
             ply.position.push_back(state.x[i][a]);
             ply.velocity.push_back(state.v[i][a]);
         }
-    std::vector<double> colour(mesh.boundary.size());
+    colour.resize(mesh.boundary.size());
     for (std::size_t f = 0; f < mesh.boundary.size(); ++f) {
         const int e = owner[f];
         for (int a = 0; a < 3; ++a) ply.triangles.push_back(mesh.boundary[f][a]);
@@ -210,36 +208,67 @@ void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Output& 
         for (int a = 0; a < 4; ++a) v += state.v[mesh.elements[e][a]] / 4.0;
         colour[f] = o.color == "speed" ? v.norm() : state.hardening[e];
     }
-    write_mesh_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
+    return ply;
+}
+
+PlyMesh mesh_frame(const FemState<2>& state, const Mesh<2>& mesh, const Output& o, std::vector<double>& colour) {
+    return mesh_frame_2d(state, mesh, o, colour);
+}
+PlyMesh mesh_frame(const FemState<3>& state, const Mesh<3>& mesh, const Output& o, std::vector<double>& colour) {
+    return mesh_frame_3d(state, mesh, o, colour);
+}
+
+/// The whole tetrahedral mesh as VTU (ParaView): node velocities, element hardening.
+void write_mesh_vtu(const fs::path& path, const FemState<3>& state, const Mesh<3>& mesh, const PlyMesh& ply) {
     VtuMesh vtu;
     vtu.dim = 3;
     vtu.position = ply.position;
     for (const auto& el : mesh.elements) vtu.cells.insert(vtu.cells.end(), el.begin(), el.end());
     vtu.point_data.push_back({"velocity", 3, ply.velocity});
     vtu.cell_data.push_back({"hardening", 1, state.hardening});
-    write_vtu((out / frame_name(sim.frame(), "vtu")).string(), vtu);
+    write_vtu(path.string(), vtu);
+}
+
+/// A 3D FEM frame: every node with the boundary triangles (PLY), the whole tetrahedral
+/// mesh (VTU, for ParaView), and a shaded render of the surface (PNG).
+void write_frame(const FemSimulation<3>& sim, const Scene& scene, const Output& o, const fs::path& out) {
+    std::vector<double> colour;
+    const PlyMesh ply = mesh_frame_3d(sim.state(), sim.mesh(), o, colour);
+    write_mesh_ply((out / frame_name(sim.frame(), "ply")).string(), ply);
+    write_mesh_vtu(out / frame_name(sim.frame(), "vtu"), sim.state(), sim.mesh(), ply);
     const ParticleRenderOptions r = mesh_render_options(scene, sim.time(), 3, o, colour);
     write_frame_png(out / frame_name(sim.frame(), "png"), render_mesh_3d(ply.position, ply.triangles, colour, r), o);
 }
 
 /// Particles and a mesh (MPM-FEM coupling): the particles as frame_N.ply, the mesh as
-/// frame_N_mesh.ply, and one PNG with the mesh drawn over the particles.
-void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Output& o, const fs::path& out) {
+/// frame_N_mesh.ply (3D: its surface), and one PNG with the mesh drawn over the particles (3D:
+/// the surface and the particles in one depth buffer).
+template <int dim>
+void write_frame(const CoupledSimulation<dim>& sim, const Scene& scene, const Output& o, const fs::path& out) {
     std::vector<double> colour;
     const PlyParticles particles = write_particles(sim.particles(), sim.frame(), o, out, colour);
     if (o.vtu) write_particles_vtu(out / frame_name(sim.frame(), "vtu"), particles);
     std::vector<double> mesh_colour;
-    const PlyMesh ply = mesh_frame_2d(sim.state(), sim.mesh(), o, mesh_colour);
+    const PlyMesh ply = mesh_frame(sim.state(), sim.mesh(), o, mesh_colour);
     char mesh_name[64];
     std::snprintf(mesh_name, sizeof mesh_name, "frame_%05d_mesh.ply", sim.frame());
     write_mesh_ply((out / mesh_name).string(), ply);
     if (o.vtu) {
         std::snprintf(mesh_name, sizeof mesh_name, "frame_%05d_mesh.vtu", sim.frame());
-        write_mesh_vtu(out / mesh_name, ply);
+        if constexpr (dim == 2)
+            write_mesh_vtu(out / mesh_name, ply);
+        else
+            write_mesh_vtu(out / mesh_name, sim.state(), sim.mesh(), ply);
     }
-    const ParticleRenderOptions r = particle_render_options(scene, sim.time(), 2, o, colour);
-    Image image = render_particles_2d(particles.position, colour, r);
+    const ParticleRenderOptions r = particle_render_options(scene, sim.time(), dim, o, colour);
     if (o.color == "hardening") mesh_colour.clear();  // the mesh has no hardening: one colour
+    if constexpr (dim == 3) {
+        const SurfaceMesh surface{ply.position, ply.triangles, mesh_colour};
+        write_frame_png(out / frame_name(sim.frame(), "png"), render_particles_3d(particles.position, colour, r, &surface),
+                        o);
+        return;
+    }
+    Image image = render_particles_2d(particles.position, colour, r);
     const Image drawn = render_mesh_2d(ply.position, ply.triangles, mesh_colour, r);
     // The same frame and scale when both renders have the same margin (the particle disks are
     // small): the mesh's pixels are copied over the particles.
@@ -253,7 +282,7 @@ void write_frame(const CoupledSimulation2d& sim, const Scene& scene, const Outpu
 }
 
 template <class Sim>
-constexpr bool is_coupled = std::is_same_v<Sim, CoupledSimulation2d>;
+constexpr bool is_coupled = std::is_same_v<Sim, CoupledSimulation<2>> || std::is_same_v<Sim, CoupledSimulation<3>>;
 /// Runs with contact statistics (FEM meshes, alone or beside particles).
 template <class Sim>
 constexpr bool is_fem =
@@ -453,8 +482,10 @@ void run(Sim& sim, const Scene& scene, Output o, const IntegratorSettings& setti
 }  // namespace
 
 AnySimulation make_simulation(const Scene& scene, const IntegratorSettings& settings) {
-    // The scene loader has refused particles beside meshes in 3D.
-    if (scene.has_meshes() && scene.has_particles()) return std::make_unique<CoupledSimulation2d>(scene, settings);
+    if (scene.has_meshes() && scene.has_particles()) {
+        if (scene.dim == 2) return std::make_unique<CoupledSimulation<2>>(scene, settings);
+        return std::make_unique<CoupledSimulation<3>>(scene, settings);
+    }
     if (scene.has_meshes()) {
         if (scene.dim == 2) return std::make_unique<FemSimulation<2>>(scene, settings);
         return std::make_unique<FemSimulation<3>>(scene, settings);

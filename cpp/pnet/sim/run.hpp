@@ -6,7 +6,7 @@
 // folder as the command line and either can resume the other's run.
 //
 // make_simulation() is the one place that decides the method from the scene: particles and
-// meshes -> MPM-FEM coupling (2D), meshes -> FEM, particles -> MPM.
+// meshes -> MPM-FEM coupling, meshes -> FEM, particles -> MPM; each in 2D or 3D.
 #include <functional>
 #include <memory>
 #include <string>
@@ -24,7 +24,8 @@ namespace pnet {
 /// A simulation of any method and dimension.
 using AnySimulation =
     std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation<2>>,
-                 std::unique_ptr<FemSimulation<3>>, std::unique_ptr<CoupledSimulation2d>>;
+                 std::unique_ptr<FemSimulation<3>>, std::unique_ptr<CoupledSimulation<2>>,
+                 std::unique_ptr<CoupledSimulation<3>>>;
 
 /// The simulation the scene calls for, set up with `settings` (models loaded by the caller).
 AnySimulation make_simulation(const Scene& scene, const IntegratorSettings& settings);
