@@ -1,0 +1,319 @@
+// MPM-FEM coupling in 3D and particle-mesh friction (docs/methods.md): the point-triangle
+// barrier's derivatives, CCD and the winding-number inside test; the coupled incremental
+// potential with lagged friction against finite differences in 2D and 3D (the matrix-free
+// product against the assembled Hessian); friction that drags the sand under a sliding block,
+// implicit and explicit; the 3D tiny scene without penetration, with 1 and 2 threads identical
+// and a checkpoint that resumes bit-identically.
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cstring>
+#include <nlohmann/json.hpp>
+
+#include "pnet/coupling/coupled_potential.hpp"
+#include "pnet/energy/particle_energy.hpp"
+#include "pnet/mpm/transfer.hpp"
+#include "pnet/scene/sampler.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
+#include "support/finite_difference.hpp"
+#include "support/random.hpp"
+#include "support/temp_dir.hpp"
+
+namespace pnet {
+namespace {
+
+const char* const kTiny2d = PNET_SCENES_DIR "/tiny/sand_fem_coupling_2d.json";
+const char* const kTiny3d = PNET_SCENES_DIR "/tiny/sand_fem_coupling_3d.json";
+
+IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
+    IntegratorSettings s = IntegratorSettings::from_scene(scene);
+    s.name = integrator;
+    s.dt = dt;
+    return s;
+}
+
+template <typename T>
+bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
+}
+
+template <int dim>
+void expect_identical(const CoupledSimulation<dim>& a, const CoupledSimulation<dim>& b) {
+    EXPECT_TRUE(same_bytes(a.particles().x, b.particles().x));
+    EXPECT_TRUE(same_bytes(a.particles().v, b.particles().v));
+    EXPECT_TRUE(same_bytes(a.particles().F_elastic, b.particles().F_elastic));
+    EXPECT_TRUE(same_bytes(a.state().x, b.state().x));
+    EXPECT_TRUE(same_bytes(a.state().v, b.state().v));
+}
+
+/// A tiny scene with its mesh's centre at height y (m), velocity v and friction mu.
+Scene edited(const char* file, double y, const std::vector<double>& velocity, double mu) {
+    nlohmann::json j = scene_to_json(load_scene(file));
+    j["meshes"][0]["center"][1] = y;
+    j["meshes"][0]["velocity"] = velocity;
+    j["contact"]["friction"] = mu;
+    return scene_from_json(j, "edited.json", "");
+}
+
+TEST(ParticleContact3d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
+    // One triangle in the plane y = 0; particles above its interior, an edge and a corner.
+    const std::vector<std::array<int, 3>> triangles = {{0, 1, 2}};
+    const ParticleContact3d contact(triangles, 0.1, 1e3);
+    test::FdStats stats;
+    for (const Vec<3>& p : {Vec<3>(0.2, 0.05, 0.2), Vec<3>(0.5, 0.04, -0.03), Vec<3>(-0.02, 0.06, -0.03),
+                            Vec<3>(0.55, 0.03, 0.55), Vec<3>(0.3, -0.07, 0.1)}) {
+        SCOPED_TRACE(p.transpose());
+        Eigen::VectorXd q(12);
+        q << p, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0;
+        auto unpack = [](const Eigen::VectorXd& y, std::vector<Vec<3>>& X, std::vector<Vec<3>>& x) {
+            X = {y.segment<3>(0)};
+            x = {y.segment<3>(3), y.segment<3>(6), y.segment<3>(9)};
+        };
+        std::vector<Vec<3>> X, x;
+        unpack(q, X, x);
+        std::vector<ParticleContact3d::Pair> pairs;
+        std::vector<Vec12> gradients;
+        std::vector<Mat12> hessians;
+        contact.gradient(X, x, pairs, gradients);
+        ASSERT_EQ(pairs.size(), 1u);
+        auto energy = [&](const Eigen::VectorXd& y) {
+            std::vector<Vec<3>> Xy, xy;
+            unpack(y, Xy, xy);
+            return contact.value(Xy, xy);
+        };
+        EXPECT_TRUE(test::check_gradient(energy, gradients[0], q, stats, 1e-7, 1e-5,
+                                         1e-4 * gradients[0].cwiseAbs().maxCoeff()));
+        contact.hessians(X, x, false, pairs, hessians);
+        auto gradient = [&](const Eigen::VectorXd& y) {
+            std::vector<Vec<3>> Xy, xy;
+            unpack(y, Xy, xy);
+            std::vector<ParticleContact3d::Pair> py;
+            std::vector<Vec12> gy;
+            contact.gradient(Xy, xy, py, gy);
+            return Eigen::VectorXd(gy.at(0));
+        };
+        EXPECT_TRUE(test::check_jacobian(gradient, hessians[0], q, stats, 1e-7, 1e-4,
+                                         1e-4 * hessians[0].cwiseAbs().maxCoeff()));
+        // The lagged friction pair: the closest point's weights, a tangent basis orthogonal to the
+        // normal, a positive normal force.
+        const auto lagged = contact.lagged_pairs(X, x);
+        ASSERT_EQ(lagged.size(), 1u);
+        const Vec<3> closest = lagged[0].weight[0] * x[0] + lagged[0].weight[1] * x[1] + lagged[0].weight[2] * x[2];
+        EXPECT_NEAR((X[0] - closest).norm(), std::sqrt(PointFacet<3>::distance_sq(X[0], x, triangles[0])), 1e-14);
+        EXPECT_LT((lagged[0].tangent.transpose() * (X[0] - closest)).norm(), 1e-14);
+        EXPECT_NEAR((lagged[0].tangent.transpose() * lagged[0].tangent - Eigen::Matrix2d::Identity()).norm(), 0.0, 1e-14);
+        EXPECT_GT(lagged[0].normal_force, 0.0);
+    }
+    EXPECT_EQ(stats.checks, 5 * (12 + 144));
+}
+
+TEST(ParticleContact3d, CcdStopsAParticleBeforeATriangleAndTheWindingNumberFindsInsidePoints) {
+    // A closed tetrahedron, outward oriented.
+    const std::vector<Vec<3>> x = {Vec<3>(0, 0, 0), Vec<3>(1, 0, 0), Vec<3>(0, 1, 0), Vec<3>(0, 0, 1)};
+    const std::vector<std::array<int, 3>> triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    const ParticleContact3d contact(triangles, 0.01, 1.0);
+    const std::vector<Vec<3>> outside = {Vec<3>(0.2, -0.2, 0.2)}, inside = {Vec<3>(0.1, 0.1, 0.1)};
+    const std::vector<Vec<3>> still(4, Vec<3>::Zero());
+    // Moving up by 0.4 crosses the face y = 0 at t = 0.5: CCD stops short of it.
+    const double t = contact.max_step(outside, {Vec<3>(0, 0.4, 0)}, x, still);
+    EXPECT_GT(t, 0.0);
+    EXPECT_LT(t, 0.5);
+    EXPECT_EQ(contact.max_step(outside, {Vec<3>(0, 0.1, 0)}, x, still), 1.0);
+    EXPECT_EQ(contact.first_penetration(outside, x), "");
+    EXPECT_EQ(contact.penetrations(inside, x), 1u);
+    EXPECT_NE(contact.first_penetration(inside, x).find("particle 0 inside the mesh"), std::string::npos);
+    // Reversed orientation: still inside; a point on a face is reported on it.
+    std::vector<std::array<int, 3>> reversed = triangles;
+    for (auto& f : reversed) std::swap(f[1], f[2]);
+    EXPECT_EQ(ParticleContact3d(reversed, 0.01, 1.0).penetrations(inside, x), 1u);
+    EXPECT_NE(contact.first_penetration({Vec<3>(0.2, 0.0, 0.2)}, x).find("particle 0 on triangle 0-1-3"),
+              std::string::npos);
+}
+
+/// The parts of a coupled implicit step with the mesh within dhat of the bed, lagged (elastic)
+/// energies, and lagged friction mu (smoothed below eps_v m/s).
+template <int dim>
+struct Fixture {
+    Scene scene;
+    MpmSystem<dim> mpm = make_mpm_system<dim>(scene);
+    Particles<dim> particles = sample_particles<dim>(scene);
+    FemSceneSystem<dim> fem = make_fem_system<dim>(scene);
+    FemState<dim> state = FemState<dim>::at_rest(fem.system);
+    Grid<dim> grid{mpm.origin, mpm.dx, mpm.cells};
+    ElasticParticleEnergy<dim> mpm_energy{mpm.materials};
+    ElasticParticleEnergy<dim> fem_energy{fem.system.materials};
+    IncrementalPotential<dim> mpm_potential{mpm_energy};
+    FemPotential<dim> fem_potential{fem.system.mesh, fem.system.rest, fem_energy};
+    ParticleContact<dim> contact{fem.system.mesh.boundary, 0.5 * scene.dx, 1e6};
+    CoupledPotential<dim> coupled{mpm_potential, fem_potential, contact};
+    double dt = 1e-3;
+
+    Fixture(Scene s, double mu, double eps_v) : scene(std::move(s)) {
+        particles_to_grid<dim>(grid, particles, nullptr);
+        BoundaryConditions bc = mpm.boundary;
+        bc.slip_walls = false;
+        grid.update_velocity(dt, mpm.gravity, bc);
+        mpm_potential.begin_step(grid, particles, dt, bc);
+        mpm_potential.set_reference(particles.F_elastic);
+        const std::size_t n = fem.system.mesh.nodes();
+        VecX v_star(dim * n);
+        for (std::size_t i = 0; i < n; ++i) v_star.template segment<dim>(dim * i) = dt * mpm.gravity;
+        fem_potential.begin_step(state.x, v_star, dt, state.plastic_inverse, {});
+        fem_potential.set_material_state(fem.system.element_object, state.hardening);
+        fem_potential.set_reference({});
+        coupled.begin_step();
+        coupled.set_friction(contact.lagged_pairs(particles.x, state.x), mu, eps_v);
+    }
+};
+
+/// tolerance: of the Hessian's columns, relative to each column's largest entry (the stiff
+/// mesh's elements make the differences' truncation error larger in 3D).
+template <int dim>
+void check_coupled_derivatives(Fixture<dim>& f, double tolerance) {
+    f.mpm_potential.set_project_psd(false);
+    f.fem_potential.set_project_psd(false);
+    f.coupled.set_project_psd(false);
+    ASSERT_GT(f.coupled.friction_pairs(), 0u) << "the mesh should be within dhat of the bed";
+    test::Random rng(11);
+    VecX v = f.coupled.v_star();
+    for (Eigen::Index i = 0; i < v.size(); ++i)
+        v[i] += 0.05 * rng.uniform(-1.0, 1.0) * (f.coupled.residual_mass()[i] > 0.0);
+    ASSERT_GT(f.coupled.friction_value(v), 0.0);
+    VecX g;
+    using Solve = typename CoupledPotential<dim>::LinearSolve;
+    f.coupled.set_linear_solve(Solve::Assembled);
+    f.coupled.value_gradient_hessian(v, g);
+    const Eigen::MatrixXd H = Eigen::MatrixXd(*f.coupled.hessian_matrix());
+    {  // the matrix-free product applies the same H, friction included
+        f.coupled.set_linear_solve(Solve::BlockPreconditioned);
+        VecX g2;
+        f.coupled.value_gradient_hessian(v, g2);
+        for (int trial = 0; trial < 3; ++trial) {
+            VecX d(v.size()), Hd;
+            for (Eigen::Index i = 0; i < d.size(); ++i) d[i] = rng.uniform(-1.0, 1.0);
+            f.coupled.hessian_multiply(d, Hd);
+            EXPECT_LT((Hd - H * d).norm(), 1e-12 * (H * d).norm()) << "trial " << trial;
+        }
+        VecX diagonal;
+        f.coupled.hessian_diagonal(diagonal);
+        EXPECT_LT((diagonal - H.diagonal()).norm(), 1e-12 * H.diagonal().norm());
+        f.coupled.set_linear_solve(Solve::Assembled);
+        f.coupled.value_gradient_hessian(v, g2);
+    }
+    const double energy = f.coupled.value(v);
+    test::FdStats stats;
+    std::vector<Eigen::Index> columns;  // the coupled components and a sample of the others
+    for (Eigen::Index i = 0; i < v.size(); ++i)
+        if (f.coupled.residual_mass()[i] > 0.0 && (i % 11 == 0 || std::abs(g[i]) > 0.0)) columns.push_back(i);
+    for (Eigen::Index k : columns) {
+        Eigen::VectorXd t0(1);
+        t0[0] = v[k];
+        auto along = [&](const Eigen::VectorXd& t) {
+            VecX y = v, gy;
+            y[k] = t[0];
+            f.coupled.value_gradient(y, gy);
+            return gy;
+        };
+        // The round-off of a central difference of the gradient is ~ eps |g| / step = 1e-10 |g|: an
+        // error that size is noise, so the denominator is at least that over the tolerance.
+        const double scale = std::max(1e-4 * H.col(k).cwiseAbs().maxCoeff(), 5e-7 * g.cwiseAbs().maxCoeff());
+        ASSERT_TRUE(test::check_jacobian(along, H.col(k), t0, stats, 1e-6, tolerance, scale))
+            << "column " << k << " (largest entry " << H.col(k).cwiseAbs().maxCoeff() << ", |g|_inf " << g.cwiseAbs().maxCoeff() << ")";
+        auto along_value = [&](const Eigen::VectorXd& t) {
+            VecX y = v;
+            y[k] = t[0];
+            return f.coupled.value(y);
+        };
+        // Likewise for the energy: round-off ~ eps |E| / step.
+        ASSERT_TRUE(test::check_gradient(along_value, Eigen::VectorXd::Constant(1, g[k]), t0, stats, 1e-6, 1e-4,
+                                         std::max(1e-8, 1e-6 * std::abs(energy))))
+            << "component " << k;
+    }
+    EXPECT_GT(stats.checks, 1000);
+    std::printf("coupled potential with friction, %dD: %zu friction pairs, %d finite-difference comparisons "
+                "(largest relative error %.2e)\n",
+                dim, f.coupled.friction_pairs(), stats.checks, stats.max_error);
+}
+
+TEST(CoupledPotential, WithFrictionMatchesFiniteDifferencesIn2d) {
+    // The disk 3 mm above the bed's top row (0.0977 m), within dhat; eps_v larger than the
+    // perturbation so that the smoothed (curved) part of friction is exercised.
+    Fixture<2> f(edited(kTiny2d, 0.09765625 + 0.05 + 0.003, {0.0, 0.0}, 0.5), 0.5, 0.2);
+    check_coupled_derivatives(f, 2e-4);
+}
+
+TEST(CoupledPotential, WithFrictionMatchesFiniteDifferencesIn3d) {
+    // The sphere ~1.5 cm above the bed's top row (0.297 m), within dhat = 3.1 cm.
+    Fixture<3> f(edited(kTiny3d, 0.296875 + 0.1 + 0.015, {0.0, 0.0, 0.0}, 0.5), 0.5, 0.2);
+    check_coupled_derivatives(f, 1e-3);
+}
+
+/// A block resting on the tiny 2D bed, sliding along +x at 1 m/s, after one frame: its mean
+/// horizontal velocity and the sand's horizontal momentum.
+std::pair<double, double> slide(const std::string& integrator, double dt, double mu) {
+    nlohmann::json j = scene_to_json(load_scene(kTiny2d));
+    const double dhat = 0.5 * j["dx"].get<double>(), top = 0.09765625 + 0.96 * dhat;
+    j["meshes"][0] = {{"shape", "box"},       {"min", {0.4, top}},  {"max", {0.5, top + 0.02}},
+                      {"element_size", 0.01}, {"material", j["meshes"][0]["material"]}, {"velocity", {1.0, 0.0}}};
+    j["contact"]["friction"] = mu;
+    const Scene scene = scene_from_json(j, "slide.json", "");
+    CoupledSimulation<2> sim(scene, settings_for(scene, integrator, dt));
+    sim.advance_frame();
+    EXPECT_EQ(sim.penetrations(), 0u);
+    double vx = 0.0, momentum = 0.0;
+    for (const Vec<2>& v : sim.state().v) vx += v[0] / sim.state().v.size();
+    for (std::size_t p = 0; p < sim.particles().size(); ++p) momentum += sim.particles().mass[p] * sim.particles().v[p][0];
+    return {vx, momentum};
+}
+
+TEST(CoupledSimulation, FrictionDragsTheSandUnderASlidingBlockAndSlowsIt) {
+    for (const auto& [integrator, dt] :
+         std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"explicit", 1e-5}}) {
+        SCOPED_TRACE(integrator);
+        const auto [vx_free, momentum_free] = slide(integrator, dt, 0.0);
+        const auto [vx_rough, momentum_rough] = slide(integrator, dt, 0.5);
+        std::printf("%s: block vx %.4f m/s frictionless, %.4f with mu 0.5; sand x-momentum %.3g, %.3g kg m/s\n",
+                    integrator.c_str(), vx_free, vx_rough, momentum_free, momentum_rough);
+        EXPECT_LT(vx_rough, vx_free - 0.02);
+        EXPECT_GT(momentum_rough, momentum_free + 1e-3);
+    }
+}
+
+TEST(CoupledSimulation3d, TinySceneRunsWithoutPenetrationAndIsThreadAndResumeIndependent) {
+    const Scene scene = load_scene(kTiny3d);
+    for (const auto& [integrator, dt] :
+         std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"explicit", 1e-4}}) {
+        SCOPED_TRACE(integrator);
+        const IntegratorSettings settings = settings_for(scene, integrator, dt);
+        const int threads = omp_get_max_threads();
+        std::vector<std::unique_ptr<CoupledSimulation<3>>> runs;
+        std::size_t most_pairs = 0;
+        for (int t : {1, 2}) {
+            omp_set_num_threads(t);
+            runs.push_back(std::make_unique<CoupledSimulation<3>>(scene, settings));
+            for (int frame = 0; frame < 2; ++frame) {
+                const FrameStats f = runs.back()->advance_frame();  // throws if a particle is inside
+                most_pairs = std::max(most_pairs, f.contact_pairs);
+                EXPECT_EQ(runs.back()->penetrations(), 0u);
+                EXPECT_TRUE(f.converged);
+            }
+        }
+        omp_set_num_threads(threads);
+        EXPECT_GT(most_pairs, 0u) << "the sphere should have reached the bed";
+        expect_identical(*runs[0], *runs[1]);
+        double lowest = 1e300;
+        for (const Vec<3>& x : runs[0]->state().x) lowest = std::min(lowest, x[1]);
+        EXPECT_GT(lowest, 3 * scene.dx) << "the bed should have stopped the sphere";
+
+        test::TempDir dir;
+        CoupledSimulation<3> first(scene, settings), resumed(scene, settings);
+        first.advance_frame();
+        first.save_checkpoint(dir.file("state.bin"));
+        resumed.load_checkpoint(dir.file("state.bin"));
+        resumed.advance_frame();
+        expect_identical(resumed, *runs[1]);
+    }
+}
+
+}  // namespace
+}  // namespace pnet
