@@ -198,6 +198,19 @@ int CoupledPotential<dim>::pair_nodes(const Pair& pair, Eigen::Index* index, dou
 }
 
 template <int dim>
+template <typename F>
+void CoupledPotential<dim>::for_each_pair_hessian(F&& f) const {
+    Eigen::Index index[kPairNodes<dim>];
+    double weight[kPairNodes<dim>];
+    int slot[kPairNodes<dim>];
+    for (const PairTerms* terms : {&barrier_, &friction_})
+        for (std::size_t k = 0; k < terms->hessians.size(); ++k) {
+            const int count = pair_nodes(terms->pairs[k], index, weight, slot);
+            f(terms->hessians[k], terms->hessian_scale, count, index, weight, slot);
+        }
+}
+
+template <int dim>
 void CoupledPotential<dim>::prepare(const VecX& v) {
     positions(v, X_, x_);
     contact_.hessians(X_, x_, project_psd_, barrier_.pairs, barrier_.hessians);
@@ -217,24 +230,19 @@ void CoupledPotential<dim>::assemble() {
     const SparseMatrix& Hf = *fem_.hessian_matrix();
     for (Eigen::Index c = 0; c < Hf.outerSize(); ++c)
         for (SparseMatrix::InnerIterator it(Hf, c); it; ++it) triplets_.emplace_back(ng + it.row(), ng + c, it.value());
-    Eigen::Index index[kPairNodes<dim>];
-    double weight[kPairNodes<dim>];
-    int slot[kPairNodes<dim>];
-    for (const PairTerms* terms : {&barrier_, &friction_})
-        for (std::size_t k = 0; k < terms->hessians.size(); ++k) {
-            const int count = pair_nodes(terms->pairs[k], index, weight, slot);
-            const Hessian& H = terms->hessians[k];
-            for (int i = 0; i < count; ++i)
-                for (int j = 0; j < count; ++j) {
-                    const double scale = terms->hessian_scale * weight[i] * weight[j];
-                    for (int a = 0; a < dim; ++a)
-                        for (int b = 0; b < dim; ++b) {
-                            const Eigen::Index row = index[i] + a, col = index[j] + b;
-                            if (residual_mass_[row] > 0.0 && residual_mass_[col] > 0.0)
-                                triplets_.emplace_back(row, col, scale * H(dim * slot[i] + a, dim * slot[j] + b));
-                        }
-                }
-        }
+    for_each_pair_hessian([&](const Hessian& H, double hessian_scale, int count, const Eigen::Index* index,
+                              const double* weight, const int* slot) {
+        for (int i = 0; i < count; ++i)
+            for (int j = 0; j < count; ++j) {
+                const double scale = hessian_scale * weight[i] * weight[j];
+                for (int a = 0; a < dim; ++a)
+                    for (int b = 0; b < dim; ++b) {
+                        const Eigen::Index row = index[i] + a, col = index[j] + b;
+                        if (residual_mass_[row] > 0.0 && residual_mass_[col] > 0.0)
+                            triplets_.emplace_back(row, col, scale * H(dim * slot[i] + a, dim * slot[j] + b));
+                    }
+            }
+    });
     hessian_.resize(n, n);
     hessian_.setFromTriplets(triplets_.begin(), triplets_.end());  // duplicates summed in triplet order
     diagonal_ = hessian_.diagonal();
@@ -248,34 +256,27 @@ void CoupledPotential<dim>::prepare_blocks() {
     mpm_.hessian_diagonal(grid_diagonal);
     const SparseMatrix& Hf = *fem_.hessian_matrix();
     triplets_.clear();  // the pairs' FEM terms, added to Hf below
-    Eigen::Index index[kPairNodes<dim>];
-    double weight[kPairNodes<dim>];
-    int slot[kPairNodes<dim>];
-    for (const PairTerms* terms : {&barrier_, &friction_}) {
-        const double scale = terms->hessian_scale;
-        for (std::size_t k = 0; k < terms->hessians.size(); ++k) {
-            const int count = pair_nodes(terms->pairs[k], index, weight, slot);
-            const Hessian& H = terms->hessians[k];
-            for (int i = 0; i < count; ++i) {
-                if (index[i] < ng) {
-                    for (int a = 0; a < dim; ++a)
-                        if (residual_mass_[index[i] + a] > 0.0)
-                            grid_diagonal[index[i] + a] +=
-                                scale * weight[i] * weight[i] * H(dim * slot[i] + a, dim * slot[i] + a);
-                    continue;
-                }
-                for (int j = 0; j < count; ++j) {
-                    if (index[j] < ng) continue;
-                    for (int a = 0; a < dim; ++a)
-                        for (int b = 0; b < dim; ++b) {
-                            const Eigen::Index row = index[i] + a, col = index[j] + b;
-                            if (residual_mass_[row] > 0.0 && residual_mass_[col] > 0.0)
-                                triplets_.emplace_back(row - ng, col - ng, scale * H(dim * slot[i] + a, dim * slot[j] + b));
-                        }
-                }
+    for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
+                              const double* weight, const int* slot) {
+        for (int i = 0; i < count; ++i) {
+            if (index[i] < ng) {
+                for (int a = 0; a < dim; ++a)
+                    if (residual_mass_[index[i] + a] > 0.0)
+                        grid_diagonal[index[i] + a] +=
+                            scale * weight[i] * weight[i] * H(dim * slot[i] + a, dim * slot[i] + a);
+                continue;
+            }
+            for (int j = 0; j < count; ++j) {
+                if (index[j] < ng) continue;
+                for (int a = 0; a < dim; ++a)
+                    for (int b = 0; b < dim; ++b) {
+                        const Eigen::Index row = index[i] + a, col = index[j] + b;
+                        if (residual_mass_[row] > 0.0 && residual_mass_[col] > 0.0)
+                            triplets_.emplace_back(row - ng, col - ng, scale * H(dim * slot[i] + a, dim * slot[j] + b));
+                    }
             }
         }
-    }
+    });
     if (triplets_.empty()) {
         fem_block_ = Hf;
     } else {
@@ -324,22 +325,18 @@ void CoupledPotential<dim>::hessian_multiply(const VecX& d, VecX& out) const {
     mpm_.hessian_multiply(work_in_, work_out_);
     out.head(ng) = work_out_;
     out.tail(nf).noalias() = *fem_.hessian_matrix() * d.tail(nf);
-    Eigen::Index index[kPairNodes<dim>];
-    double weight[kPairNodes<dim>];
-    int slot[kPairNodes<dim>];
-    for (const PairTerms* terms : {&barrier_, &friction_})
-        for (std::size_t k = 0; k < terms->hessians.size(); ++k) {
-            const int count = pair_nodes(terms->pairs[k], index, weight, slot);
-            // u = J d (the pair's positions' motion per dt), y = H u, out += J^T y scale.
-            Gradient u = Gradient::Zero();
-            for (int i = 0; i < count; ++i)
-                for (int a = 0; a < dim; ++a)
-                    if (residual_mass_[index[i] + a] > 0.0) u[dim * slot[i] + a] += weight[i] * d[index[i] + a];
-            const Gradient y = terms->hessian_scale * (terms->hessians[k] * u);
-            for (int i = 0; i < count; ++i)
-                for (int a = 0; a < dim; ++a)
-                    if (residual_mass_[index[i] + a] > 0.0) out[index[i] + a] += weight[i] * y[dim * slot[i] + a];
-        }
+    for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
+                              const double* weight, const int* slot) {
+        // u = J d (the pair's positions' motion per dt), y = H u, out += J^T y scale.
+        Gradient u = Gradient::Zero();
+        for (int i = 0; i < count; ++i)
+            for (int a = 0; a < dim; ++a)
+                if (residual_mass_[index[i] + a] > 0.0) u[dim * slot[i] + a] += weight[i] * d[index[i] + a];
+        const Gradient y = scale * (H * u);
+        for (int i = 0; i < count; ++i)
+            for (int a = 0; a < dim; ++a)
+                if (residual_mass_[index[i] + a] > 0.0) out[index[i] + a] += weight[i] * y[dim * slot[i] + a];
+    });
 }
 
 template <int dim>

@@ -134,6 +134,10 @@ private:
     /// The pair's unknown components: the particle's stencil (weight w_ip, slot 0 of its stacked
     /// Hessian) and the facet's nodes (weight 1, slots 1 .. dim); returns how many.
     int pair_nodes(const Pair& pair, Eigen::Index* index, double* weight, int* slot) const;
+    /// f(H, scale, count, index, weight, slot) for every barrier pair, then every friction pair:
+    /// its stacked Hessian, the factor of its Hessian in v and its unknown components (pair_nodes()).
+    template <typename F>
+    void for_each_pair_hessian(F&& f) const;
 
     IncrementalPotential<dim>& mpm_;
     FemPotential<dim>& fem_;

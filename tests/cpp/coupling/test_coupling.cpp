@@ -1,5 +1,5 @@
-// MPM-FEM coupling (docs/methods.md): the particle / mesh barrier's derivatives
-// and CCD, the coupled incremental potential's gradient and Hessian with
+// MPM-FEM coupling (docs/methods.md): the particle / mesh barrier's CCD (its derivatives:
+// test_coupling_3d_friction.cpp), the coupled incremental potential's gradient and Hessian with
 // respect to grid and FEM velocities (finite differences), Newton on it, and
 // the coupled simulation on the tiny scene: every integrator that needs no
 // network (plasticitynet: tests/python/test_pnet_fem_cli.py), no particle ever
@@ -8,7 +8,6 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
-#include <cstring>
 #include <nlohmann/json.hpp>
 
 #include "pnet/coupling/coupled_potential.hpp"
@@ -17,6 +16,7 @@
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
 #include "pnet/solver/newton.hpp"
+#include "support/coupled_runs.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 #include "support/temp_dir.hpp"
@@ -26,25 +26,8 @@ namespace {
 
 const char* const kTiny = PNET_SCENES_DIR "/tiny/sand_fem_coupling_2d.json";
 
-IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
-    IntegratorSettings s = IntegratorSettings::from_scene(scene);
-    s.name = integrator;
-    s.dt = dt;
-    return s;
-}
-
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
-
-void expect_identical(const CoupledSimulation2d& a, const CoupledSimulation2d& b) {
-    EXPECT_TRUE(same_bytes(a.particles().x, b.particles().x));
-    EXPECT_TRUE(same_bytes(a.particles().v, b.particles().v));
-    EXPECT_TRUE(same_bytes(a.particles().F_elastic, b.particles().F_elastic));
-    EXPECT_TRUE(same_bytes(a.state().x, b.state().x));
-    EXPECT_TRUE(same_bytes(a.state().v, b.state().v));
-}
+using test::expect_identical;
+using test::settings_for;
 
 /// The tiny scene with the disk's centre moved to y (m) and its velocity set.
 Scene tiny_with_disk_at(double y, double vy) {
@@ -56,48 +39,6 @@ Scene tiny_with_disk_at(double y, double vy) {
 
 // The top particle row of the tiny bed (lattice spacing dx / 2 = 1/128 m, bed to 0.1 m).
 constexpr double kBedTop = 0.09765625;
-
-TEST(ParticleContact2d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
-    // One edge from (0, 0) to (1, 0); particles above its interior and beyond either end.
-    const std::vector<std::array<int, 2>> edges = {{0, 1}};
-    const ParticleContact2d contact(edges, 0.1, 1e3);
-    test::FdStats stats;
-    for (const Vec<2>& p : {Vec<2>(0.4, 0.05), Vec<2>(-0.03, 0.04), Vec<2>(1.05, 0.02), Vec<2>(0.7, -0.06)}) {
-        SCOPED_TRACE(p.transpose());
-        Eigen::VectorXd q(6);
-        q << p, 0.0, 0.0, 1.0, 0.0;
-        auto unpack = [](const Eigen::VectorXd& y, std::vector<Vec<2>>& X, std::vector<Vec<2>>& x) {
-            X = {y.segment<2>(0)};
-            x = {y.segment<2>(2), y.segment<2>(4)};
-        };
-        std::vector<Vec<2>> X, x;
-        unpack(q, X, x);
-        std::vector<ParticleContact2d::Pair> pairs;
-        std::vector<Vec6> gradients;
-        std::vector<Mat6> hessians;
-        contact.gradient(X, x, pairs, gradients);
-        ASSERT_EQ(pairs.size(), 1u);
-        auto energy = [&](const Eigen::VectorXd& y) {
-            std::vector<Vec<2>> Xy, xy;
-            unpack(y, Xy, xy);
-            return contact.value(Xy, xy);
-        };
-        const double g_scale = 1e-4 * gradients[0].cwiseAbs().maxCoeff();
-        EXPECT_TRUE(test::check_gradient(energy, gradients[0], q, stats, 1e-7, 1e-5, g_scale));
-        contact.hessians(X, x, false, pairs, hessians);
-        auto gradient = [&](const Eigen::VectorXd& y) {
-            std::vector<Vec<2>> Xy, xy;
-            unpack(y, Xy, xy);
-            std::vector<ParticleContact2d::Pair> py;
-            std::vector<Vec6> gy;
-            contact.gradient(Xy, xy, py, gy);
-            return Eigen::VectorXd(gy.at(0));
-        };
-        EXPECT_TRUE(test::check_jacobian(gradient, hessians[0], q, stats, 1e-7, 1e-4,
-                                         1e-4 * hessians[0].cwiseAbs().maxCoeff()));
-    }
-    EXPECT_EQ(stats.checks, 4 * (6 + 36));
-}
 
 TEST(ParticleContact2d, CcdStopsAParticleBeforeTheEdgeAndPenetrationIsDetected) {
     const std::vector<std::array<int, 2>> edges = {{0, 1}, {1, 2}, {2, 0}};  // a triangle, counter-clockwise
@@ -114,37 +55,9 @@ TEST(ParticleContact2d, CcdStopsAParticleBeforeTheEdgeAndPenetrationIsDetected) 
 }
 
 /// The parts of a coupled implicit step on the tiny scene with the disk just above the bed
-/// (within dhat of the top row), lagged (elastic) energies.
-struct CoupledFixture {
-    Scene scene = tiny_with_disk_at(kBedTop + 0.05 + 0.003, 0.0);
-    MpmSystem<2> mpm = make_mpm_system<2>(scene);
-    Particles<2> particles = sample_particles<2>(scene);
-    FemSceneSystem<2> fem = make_fem_system<2>(scene);
-    FemState<2> state = FemState<2>::at_rest(fem.system);
-    Grid<2> grid{mpm.origin, mpm.dx, mpm.cells};
-    ElasticParticleEnergy<2> mpm_energy{mpm.materials};
-    ElasticParticleEnergy<2> fem_energy{fem.system.materials};
-    IncrementalPotential<2> mpm_potential{mpm_energy};
-    FemPotential<2> fem_potential{fem.system.mesh, fem.system.rest, fem_energy};
-    ParticleContact2d contact{fem.system.mesh.boundary, 0.5 * scene.dx, 1e6};
-    CoupledPotential2d coupled{mpm_potential, fem_potential, contact};
-    double dt = 1e-3;
-
-    CoupledFixture() {
-        particles_to_grid<2>(grid, particles, nullptr);
-        BoundaryConditions bc = mpm.boundary;
-        bc.slip_walls = false;
-        grid.update_velocity(dt, mpm.gravity, bc);
-        mpm_potential.begin_step(grid, particles, dt, bc);
-        mpm_potential.set_reference(particles.F_elastic);
-        const std::size_t n = fem.system.mesh.nodes();
-        VecX v_star(2 * n);
-        for (std::size_t i = 0; i < n; ++i) v_star.segment<2>(2 * i) = dt * mpm.gravity;
-        fem_potential.begin_step(state.x, v_star, dt, state.plastic_inverse, {});
-        fem_potential.set_material_state(fem.system.element_object, state.hardening);
-        fem_potential.set_reference({});
-        coupled.begin_step();
-    }
+/// (within dhat of the top row), lagged (elastic) energies, no friction.
+struct CoupledFixture : test::CoupledFixture<2> {
+    CoupledFixture() : test::CoupledFixture<2>(tiny_with_disk_at(kBedTop + 0.05 + 0.003, 0.0)) {}
 };
 
 TEST(CoupledPotential, GradientAndHessianWithRespectToGridAndFemVelocitiesMatchFiniteDifferences) {

@@ -1,5 +1,5 @@
-// MPM-FEM coupling in 3D and particle-mesh friction (docs/methods.md): the point-triangle
-// barrier's derivatives, CCD and the winding-number inside test; the coupled incremental
+// MPM-FEM coupling in 3D and particle-mesh friction (docs/methods.md): the point-edge and
+// point-triangle barriers' derivatives and lagged friction pairs, CCD and the winding-number inside test; the coupled incremental
 // potential with lagged friction against finite differences in 2D and 3D (the matrix-free
 // product against the assembled Hessian); friction that drags the sand under a sliding block,
 // implicit and explicit; the 3D tiny scene without penetration, with 1 and 2 threads identical
@@ -7,14 +7,10 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
-#include <cstring>
 #include <nlohmann/json.hpp>
 
-#include "pnet/coupling/coupled_potential.hpp"
-#include "pnet/energy/particle_energy.hpp"
-#include "pnet/mpm/transfer.hpp"
-#include "pnet/scene/sampler.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
+#include "support/coupled_runs.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 #include "support/temp_dir.hpp"
@@ -25,26 +21,8 @@ namespace {
 const char* const kTiny2d = PNET_SCENES_DIR "/tiny/sand_fem_coupling_2d.json";
 const char* const kTiny3d = PNET_SCENES_DIR "/tiny/sand_fem_coupling_3d.json";
 
-IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
-    IntegratorSettings s = IntegratorSettings::from_scene(scene);
-    s.name = integrator;
-    s.dt = dt;
-    return s;
-}
-
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
-
-template <int dim>
-void expect_identical(const CoupledSimulation<dim>& a, const CoupledSimulation<dim>& b) {
-    EXPECT_TRUE(same_bytes(a.particles().x, b.particles().x));
-    EXPECT_TRUE(same_bytes(a.particles().v, b.particles().v));
-    EXPECT_TRUE(same_bytes(a.particles().F_elastic, b.particles().F_elastic));
-    EXPECT_TRUE(same_bytes(a.state().x, b.state().x));
-    EXPECT_TRUE(same_bytes(a.state().v, b.state().v));
-}
+using test::expect_identical;
+using test::settings_for;
 
 /// A tiny scene with its mesh's centre at height y (m), velocity v and friction mu.
 Scene edited(const char* file, double y, const std::vector<double>& velocity, double mu) {
@@ -55,55 +33,74 @@ Scene edited(const char* file, double y, const std::vector<double>& velocity, do
     return scene_from_json(j, "edited.json", "");
 }
 
+/// The barrier of particle p against one facet (corners: its nodes' positions) against finite
+/// differences, and its lagged friction pair: the closest point's weights, a tangent basis
+/// orthogonal to the normal, a positive normal force.
+template <int dim>
+void check_barrier(const ParticleContact<dim>& contact, const Vec<dim>& p, const std::vector<Vec<dim>>& corners,
+                   test::FdStats& stats) {
+    SCOPED_TRACE(p.transpose());
+    constexpr int n = dim * (dim + 1);
+    Eigen::VectorXd q(n);
+    q.template head<dim>() = p;
+    for (int j = 0; j < dim; ++j) q.template segment<dim>(dim * (j + 1)) = corners[j];
+    auto unpack = [](const Eigen::VectorXd& y, std::vector<Vec<dim>>& X, std::vector<Vec<dim>>& x) {
+        X = {y.template head<dim>()};
+        x.clear();
+        for (int j = 0; j < dim; ++j) x.push_back(y.template segment<dim>(dim * (j + 1)));
+    };
+    std::vector<Vec<dim>> X, x;
+    unpack(q, X, x);
+    std::vector<typename ParticleContact<dim>::Pair> pairs;
+    std::vector<typename ParticleContact<dim>::Gradient> gradients;
+    std::vector<typename ParticleContact<dim>::Hessian> hessians;
+    contact.gradient(X, x, pairs, gradients);
+    ASSERT_EQ(pairs.size(), 1u);
+    auto energy = [&](const Eigen::VectorXd& y) {
+        std::vector<Vec<dim>> Xy, xy;
+        unpack(y, Xy, xy);
+        return contact.value(Xy, xy);
+    };
+    EXPECT_TRUE(test::check_gradient(energy, gradients[0], q, stats, 1e-7, 1e-5,
+                                     1e-4 * gradients[0].cwiseAbs().maxCoeff()));
+    contact.hessians(X, x, false, pairs, hessians);
+    auto gradient = [&](const Eigen::VectorXd& y) {
+        std::vector<Vec<dim>> Xy, xy;
+        unpack(y, Xy, xy);
+        std::vector<typename ParticleContact<dim>::Pair> py;
+        std::vector<typename ParticleContact<dim>::Gradient> gy;
+        contact.gradient(Xy, xy, py, gy);
+        return Eigen::VectorXd(gy.at(0));
+    };
+    EXPECT_TRUE(test::check_jacobian(gradient, hessians[0], q, stats, 1e-7, 1e-4,
+                                     1e-4 * hessians[0].cwiseAbs().maxCoeff()));
+    const auto lagged = contact.lagged_pairs(X, x);
+    ASSERT_EQ(lagged.size(), 1u);
+    Vec<dim> closest = Vec<dim>::Zero();
+    for (int j = 0; j < dim; ++j) closest += lagged[0].weight[j] * x[j];
+    EXPECT_NEAR((X[0] - closest).norm(), std::sqrt(PointFacet<dim>::distance_sq(X[0], x, contact.facets()[0])), 1e-14);
+    EXPECT_LT((lagged[0].tangent.transpose() * (X[0] - closest)).norm(), 1e-14);
+    EXPECT_LT((lagged[0].tangent.transpose() * lagged[0].tangent -
+               Eigen::Matrix<double, dim - 1, dim - 1>::Identity()).norm(), 1e-14);
+    EXPECT_GT(lagged[0].normal_force, 0.0);
+}
+
+TEST(ParticleContact2d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
+    // One edge from (0, 0) to (1, 0); particles above its interior and beyond either end.
+    const ParticleContact2d contact({{0, 1}}, 0.1, 1e3);
+    test::FdStats stats;
+    for (const Vec<2>& p : {Vec<2>(0.4, 0.05), Vec<2>(-0.03, 0.04), Vec<2>(1.05, 0.02), Vec<2>(0.7, -0.06)})
+        check_barrier<2>(contact, p, {Vec<2>(0, 0), Vec<2>(1, 0)}, stats);
+    EXPECT_EQ(stats.checks, 4 * (6 + 36));
+}
+
 TEST(ParticleContact3d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
     // One triangle in the plane y = 0; particles above its interior, an edge and a corner.
-    const std::vector<std::array<int, 3>> triangles = {{0, 1, 2}};
-    const ParticleContact3d contact(triangles, 0.1, 1e3);
+    const ParticleContact3d contact({{0, 1, 2}}, 0.1, 1e3);
     test::FdStats stats;
     for (const Vec<3>& p : {Vec<3>(0.2, 0.05, 0.2), Vec<3>(0.5, 0.04, -0.03), Vec<3>(-0.02, 0.06, -0.03),
-                            Vec<3>(0.55, 0.03, 0.55), Vec<3>(0.3, -0.07, 0.1)}) {
-        SCOPED_TRACE(p.transpose());
-        Eigen::VectorXd q(12);
-        q << p, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0;
-        auto unpack = [](const Eigen::VectorXd& y, std::vector<Vec<3>>& X, std::vector<Vec<3>>& x) {
-            X = {y.segment<3>(0)};
-            x = {y.segment<3>(3), y.segment<3>(6), y.segment<3>(9)};
-        };
-        std::vector<Vec<3>> X, x;
-        unpack(q, X, x);
-        std::vector<ParticleContact3d::Pair> pairs;
-        std::vector<Vec12> gradients;
-        std::vector<Mat12> hessians;
-        contact.gradient(X, x, pairs, gradients);
-        ASSERT_EQ(pairs.size(), 1u);
-        auto energy = [&](const Eigen::VectorXd& y) {
-            std::vector<Vec<3>> Xy, xy;
-            unpack(y, Xy, xy);
-            return contact.value(Xy, xy);
-        };
-        EXPECT_TRUE(test::check_gradient(energy, gradients[0], q, stats, 1e-7, 1e-5,
-                                         1e-4 * gradients[0].cwiseAbs().maxCoeff()));
-        contact.hessians(X, x, false, pairs, hessians);
-        auto gradient = [&](const Eigen::VectorXd& y) {
-            std::vector<Vec<3>> Xy, xy;
-            unpack(y, Xy, xy);
-            std::vector<ParticleContact3d::Pair> py;
-            std::vector<Vec12> gy;
-            contact.gradient(Xy, xy, py, gy);
-            return Eigen::VectorXd(gy.at(0));
-        };
-        EXPECT_TRUE(test::check_jacobian(gradient, hessians[0], q, stats, 1e-7, 1e-4,
-                                         1e-4 * hessians[0].cwiseAbs().maxCoeff()));
-        // The lagged friction pair: the closest point's weights, a tangent basis orthogonal to the
-        // normal, a positive normal force.
-        const auto lagged = contact.lagged_pairs(X, x);
-        ASSERT_EQ(lagged.size(), 1u);
-        const Vec<3> closest = lagged[0].weight[0] * x[0] + lagged[0].weight[1] * x[1] + lagged[0].weight[2] * x[2];
-        EXPECT_NEAR((X[0] - closest).norm(), std::sqrt(PointFacet<3>::distance_sq(X[0], x, triangles[0])), 1e-14);
-        EXPECT_LT((lagged[0].tangent.transpose() * (X[0] - closest)).norm(), 1e-14);
-        EXPECT_NEAR((lagged[0].tangent.transpose() * lagged[0].tangent - Eigen::Matrix2d::Identity()).norm(), 0.0, 1e-14);
-        EXPECT_GT(lagged[0].normal_force, 0.0);
-    }
+                            Vec<3>(0.55, 0.03, 0.55), Vec<3>(0.3, -0.07, 0.1)})
+        check_barrier<3>(contact, p, {Vec<3>(0, 0, 0), Vec<3>(1, 0, 0), Vec<3>(0, 0, 1)}, stats);
     EXPECT_EQ(stats.checks, 5 * (12 + 144));
 }
 
@@ -130,46 +127,12 @@ TEST(ParticleContact3d, CcdStopsAParticleBeforeATriangleAndTheWindingNumberFinds
               std::string::npos);
 }
 
-/// The parts of a coupled implicit step with the mesh within dhat of the bed, lagged (elastic)
-/// energies, and lagged friction mu (smoothed below eps_v m/s).
-template <int dim>
-struct Fixture {
-    Scene scene;
-    MpmSystem<dim> mpm = make_mpm_system<dim>(scene);
-    Particles<dim> particles = sample_particles<dim>(scene);
-    FemSceneSystem<dim> fem = make_fem_system<dim>(scene);
-    FemState<dim> state = FemState<dim>::at_rest(fem.system);
-    Grid<dim> grid{mpm.origin, mpm.dx, mpm.cells};
-    ElasticParticleEnergy<dim> mpm_energy{mpm.materials};
-    ElasticParticleEnergy<dim> fem_energy{fem.system.materials};
-    IncrementalPotential<dim> mpm_potential{mpm_energy};
-    FemPotential<dim> fem_potential{fem.system.mesh, fem.system.rest, fem_energy};
-    ParticleContact<dim> contact{fem.system.mesh.boundary, 0.5 * scene.dx, 1e6};
-    CoupledPotential<dim> coupled{mpm_potential, fem_potential, contact};
-    double dt = 1e-3;
-
-    Fixture(Scene s, double mu, double eps_v) : scene(std::move(s)) {
-        particles_to_grid<dim>(grid, particles, nullptr);
-        BoundaryConditions bc = mpm.boundary;
-        bc.slip_walls = false;
-        grid.update_velocity(dt, mpm.gravity, bc);
-        mpm_potential.begin_step(grid, particles, dt, bc);
-        mpm_potential.set_reference(particles.F_elastic);
-        const std::size_t n = fem.system.mesh.nodes();
-        VecX v_star(dim * n);
-        for (std::size_t i = 0; i < n; ++i) v_star.template segment<dim>(dim * i) = dt * mpm.gravity;
-        fem_potential.begin_step(state.x, v_star, dt, state.plastic_inverse, {});
-        fem_potential.set_material_state(fem.system.element_object, state.hardening);
-        fem_potential.set_reference({});
-        coupled.begin_step();
-        coupled.set_friction(contact.lagged_pairs(particles.x, state.x), mu, eps_v);
-    }
-};
+using test::CoupledFixture;
 
 /// tolerance: of the Hessian's columns, relative to each column's largest entry (the stiff
 /// mesh's elements make the differences' truncation error larger in 3D).
 template <int dim>
-void check_coupled_derivatives(Fixture<dim>& f, double tolerance) {
+void check_coupled_derivatives(CoupledFixture<dim>& f, double tolerance) {
     f.mpm_potential.set_project_psd(false);
     f.fem_potential.set_project_psd(false);
     f.coupled.set_project_psd(false);
@@ -238,13 +201,13 @@ void check_coupled_derivatives(Fixture<dim>& f, double tolerance) {
 TEST(CoupledPotential, WithFrictionMatchesFiniteDifferencesIn2d) {
     // The disk 3 mm above the bed's top row (0.0977 m), within dhat; eps_v larger than the
     // perturbation so that the smoothed (curved) part of friction is exercised.
-    Fixture<2> f(edited(kTiny2d, 0.09765625 + 0.05 + 0.003, {0.0, 0.0}, 0.5), 0.5, 0.2);
+    CoupledFixture<2> f(edited(kTiny2d, 0.09765625 + 0.05 + 0.003, {0.0, 0.0}, 0.5), 0.5, 0.2);
     check_coupled_derivatives(f, 2e-4);
 }
 
 TEST(CoupledPotential, WithFrictionMatchesFiniteDifferencesIn3d) {
     // The sphere ~1.5 cm above the bed's top row (0.297 m), within dhat = 3.1 cm.
-    Fixture<3> f(edited(kTiny3d, 0.296875 + 0.1 + 0.015, {0.0, 0.0, 0.0}, 0.5), 0.5, 0.2);
+    CoupledFixture<3> f(edited(kTiny3d, 0.296875 + 0.1 + 0.015, {0.0, 0.0, 0.0}, 0.5), 0.5, 0.2);
     check_coupled_derivatives(f, 1e-3);
 }
 

@@ -1,0 +1,77 @@
+#pragma once
+// Helpers of the MPM-FEM coupling tests: a scene's integrator settings with another integrator
+// and step, a bit-for-bit comparison of two coupled runs' states, and the parts of one coupled
+// implicit step set up by hand.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "pnet/coupling/coupled_potential.hpp"
+#include "pnet/energy/particle_energy.hpp"
+#include "pnet/mpm/transfer.hpp"
+#include "pnet/scene/sampler.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
+
+namespace pnet::test {
+
+inline IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
+    IntegratorSettings s = IntegratorSettings::from_scene(scene);
+    s.name = integrator;
+    s.dt = dt;
+    return s;
+}
+
+template <typename T>
+bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
+}
+
+/// The particles' positions, velocities and elastic F and the mesh's positions and velocities are identical.
+template <int dim>
+void expect_identical(const CoupledSimulation<dim>& a, const CoupledSimulation<dim>& b) {
+    EXPECT_TRUE(same_bytes(a.particles().x, b.particles().x));
+    EXPECT_TRUE(same_bytes(a.particles().v, b.particles().v));
+    EXPECT_TRUE(same_bytes(a.particles().F_elastic, b.particles().F_elastic));
+    EXPECT_TRUE(same_bytes(a.state().x, b.state().x));
+    EXPECT_TRUE(same_bytes(a.state().v, b.state().v));
+}
+
+/// The parts of a coupled implicit step with the mesh within dhat of the bed, lagged (elastic)
+/// energies, and lagged friction mu (smoothed below eps_v m/s).
+template <int dim>
+struct CoupledFixture {
+    Scene scene;
+    MpmSystem<dim> mpm = make_mpm_system<dim>(scene);
+    Particles<dim> particles = sample_particles<dim>(scene);
+    FemSceneSystem<dim> fem = make_fem_system<dim>(scene);
+    FemState<dim> state = FemState<dim>::at_rest(fem.system);
+    Grid<dim> grid{mpm.origin, mpm.dx, mpm.cells};
+    ElasticParticleEnergy<dim> mpm_energy{mpm.materials};
+    ElasticParticleEnergy<dim> fem_energy{fem.system.materials};
+    IncrementalPotential<dim> mpm_potential{mpm_energy};
+    FemPotential<dim> fem_potential{fem.system.mesh, fem.system.rest, fem_energy};
+    ParticleContact<dim> contact{fem.system.mesh.boundary, 0.5 * scene.dx, 1e6};
+    CoupledPotential<dim> coupled{mpm_potential, fem_potential, contact};
+    double dt = 1e-3;
+
+    CoupledFixture(Scene s, double mu = 0.0, double eps_v = 1e-4) : scene(std::move(s)) {
+        particles_to_grid<dim>(grid, particles, nullptr);
+        BoundaryConditions bc = mpm.boundary;
+        bc.slip_walls = false;
+        grid.update_velocity(dt, mpm.gravity, bc);
+        mpm_potential.begin_step(grid, particles, dt, bc);
+        mpm_potential.set_reference(particles.F_elastic);
+        const std::size_t n = fem.system.mesh.nodes();
+        VecX v_star(dim * n);
+        for (std::size_t i = 0; i < n; ++i) v_star.template segment<dim>(dim * i) = dt * mpm.gravity;
+        fem_potential.begin_step(state.x, v_star, dt, state.plastic_inverse, {});
+        fem_potential.set_material_state(fem.system.element_object, state.hardening);
+        fem_potential.set_reference({});
+        coupled.begin_step();
+        coupled.set_friction(contact.lagged_pairs(particles.x, state.x), mu, eps_v);
+    }
+};
+
+}  // namespace pnet::test
