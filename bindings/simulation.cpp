@@ -106,21 +106,11 @@ public:
     int dim() const { return scene_.dim; }
     template <typename Fn>
     decltype(auto) visit(Fn&& fn) const {
-        if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
-        return fn(std::as_const(*std::get<std::unique_ptr<Simulation<3>>>(sim_)));
+        return visit_simulation(sim_, std::forward<Fn>(fn));
     }
     template <typename Fn>
     decltype(auto) visit(Fn&& fn) {
-        if (auto* s = std::get_if<std::unique_ptr<Simulation<2>>>(&sim_)) return fn(**s);
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(**s);
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(**s);
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<2>>>(&sim_)) return fn(**s);
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<3>>>(&sim_)) return fn(**s);
-        return fn(*std::get<std::unique_ptr<Simulation<3>>>(sim_));
+        return visit_simulation(sim_, std::forward<Fn>(fn));
     }
     /// fn(the simulation with meshes: FEM 2D or 3D, or MPM-FEM coupling); ValueError for an MPM scene.
     template <typename Fn>

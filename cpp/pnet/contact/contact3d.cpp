@@ -1,5 +1,7 @@
 #include "pnet/contact/contact3d.hpp"
 
+#include "pnet/math/clock.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cstring>
@@ -18,9 +20,6 @@ namespace pnet {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 double orient3d(const Vec<3>& a, const Vec<3>& b, const Vec<3>& c, const Vec<3>& d) {
     return (b - a).cross(c - a).dot(d - a);

@@ -1,5 +1,7 @@
 #include "pnet/coupling/coupled_integrator.hpp"
 
+#include "pnet/math/clock.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -10,14 +12,6 @@
 #include "pnet/solver/newton.hpp"
 
 namespace pnet {
-
-namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
 
 template <int dim>
 CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,

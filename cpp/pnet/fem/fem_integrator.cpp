@@ -1,5 +1,7 @@
 #include "pnet/fem/fem_integrator.hpp"
 
+#include "pnet/math/clock.hpp"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -7,14 +9,6 @@
 #include <stdexcept>
 
 namespace pnet {
-
-namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
 
 template <int dim>
 void FemSystem<dim>::make_rest() {

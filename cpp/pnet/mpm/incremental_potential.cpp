@@ -1,18 +1,12 @@
 #include "pnet/mpm/incremental_potential.hpp"
 
+#include "pnet/math/clock.hpp"
+
 #include <chrono>
 
 #include "pnet/mpm/transfer.hpp"
 
 namespace pnet {
-
-namespace {
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-}  // namespace
 
 template <int dim>
 void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particles<dim>& particles, double dt,
