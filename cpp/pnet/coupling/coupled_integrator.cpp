@@ -131,10 +131,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     fem_return_mapping(fem_system_, state);
 
     const auto end = std::chrono::steady_clock::now();
-    stats.p2g_seconds = std::chrono::duration<double>(after_p2g - start).count();
-    stats.grid_seconds = std::chrono::duration<double>(after_solve - after_p2g).count();
-    stats.g2p_seconds = std::chrono::duration<double>(end - after_solve).count();
-    stats.wall_seconds = std::chrono::duration<double>(end - start).count();
+    record_phases(stats, start, after_p2g, after_solve, end);
     return stats;
 }
 

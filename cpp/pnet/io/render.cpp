@@ -658,6 +658,52 @@ Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>
 
 namespace {
 
+/// The orthographic camera of the 3D renders: looking along `forward` from direction
+/// (1, 0.8, 1.5) towards the domain's centre, y up on screen; the domain box's corners in view
+/// coordinates (screen u, screen v, depth: larger is farther) and their bounds.
+struct Camera3d {
+    using V3 = Eigen::Vector3d;
+    V3 centre, forward, right, up, lo, hi;
+    std::array<V3, 8> corners;
+
+    explicit Camera3d(const ParticleRenderOptions& options) {
+        const V3 dlo(options.domain_min[0], options.domain_min[1], options.domain_min[2]);
+        const V3 dhi(options.domain_max[0], options.domain_max[1], options.domain_max[2]);
+        centre = 0.5 * (dlo + dhi);
+        forward = -V3(1.0, 0.8, 1.5).normalized();
+        right = forward.cross(V3::UnitY()).normalized();
+        up = right.cross(forward);
+        for (int c = 0; c < 8; ++c)
+            corners[std::size_t(c)] =
+                view(V3(c & 1 ? dhi.x() : dlo.x(), c & 2 ? dhi.y() : dlo.y(), c & 4 ? dhi.z() : dlo.z()));
+        lo = hi = corners[0];
+        for (const V3& c : corners) {
+            lo = lo.cwiseMin(c);
+            hi = hi.cwiseMax(c);
+        }
+    }
+    V3 view(const V3& p) const {
+        const V3 d = p - centre;
+        return V3(d.dot(right), d.dot(up), d.dot(forward));
+    }
+    /// The domain box's edges in grey at s pixels per metre inside margin: those meeting at the
+    /// nearest corner (front, drawn faintly after the contents) or the others (before them).
+    void draw_box(Image& img, int margin, double s, bool front) const {
+        const int nearest =
+            int(std::min_element(corners.begin(), corners.end(), [](const V3& a, const V3& b) { return a.z() < b.z(); }) -
+                corners.begin());
+        const Rect whole{0, 0, img.width - 1, img.height - 1};
+        auto px = [&](const V3& q) { return Eigen::Vector2d(margin + (q.x() - lo.x()) * s, margin + (hi.y() - q.y()) * s); };
+        for (int a = 0; a < 8; ++a)
+            for (int bit = 1; bit < 8; bit <<= 1) {
+                const int b = a | bit;
+                if (b == a || (a == nearest || b == nearest) != front) continue;
+                const Eigen::Vector2d pa = px(corners[std::size_t(a)]), pb = px(corners[std::size_t(b)]);
+                draw_segment(img, pa.x(), pa.y(), pb.x(), pb.y(), 1.0, {150, 150, 150}, whole, front ? 0.5 : 1.0);
+            }
+    }
+};
+
 /// Throws std::invalid_argument (naming `who`) for a surface whose sizes do not match.
 void check_surface(const SurfaceMesh& surface, const char* who) {
     const std::size_t n = surface.position.size() / 3, m = surface.triangles.size() / 3;
@@ -726,28 +772,9 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
     if (surface) check_surface(*surface, who);
     const std::size_t n = position.size() / 3;
     using V3 = Eigen::Vector3d;
-    const V3 lo(options.domain_min[0], options.domain_min[1], options.domain_min[2]);
-    const V3 hi(options.domain_max[0], options.domain_max[1], options.domain_max[2]);
-    const V3 centre = 0.5 * (lo + hi);
-
-    // Camera frame: looking along `forward` from direction (1, 0.8, 1.5), y up on screen.
-    const V3 forward = -V3(1.0, 0.8, 1.5).normalized();
-    const V3 right = forward.cross(V3::UnitY()).normalized();
-    const V3 up = right.cross(forward);
-    auto view = [&](const V3& p) {
-        const V3 d = p - centre;
-        return V3(d.dot(right), d.dot(up), d.dot(forward));  // screen u, screen v, depth (larger = farther)
-    };
-
-    std::array<V3, 8> corners;
-    for (int c = 0; c < 8; ++c) {
-        corners[std::size_t(c)] = view(V3(c & 1 ? hi.x() : lo.x(), c & 2 ? hi.y() : lo.y(), c & 4 ? hi.z() : lo.z()));
-    }
-    V3 vlo = corners[0], vhi = corners[0];
-    for (const V3& c : corners) {
-        vlo = vlo.cwiseMin(c);
-        vhi = vhi.cwiseMax(c);
-    }
+    const Camera3d camera(options);
+    auto view = [&](const V3& p) { return camera.view(p); };
+    const V3 &vlo = camera.lo, &vhi = camera.hi;
 
     const double radius = disk_radius(position, 3, options, (options.width_px - 8) / (vhi.x() - vlo.x()));
     const int margin = std::max(4, int(std::ceil(radius)) + 2);
@@ -757,23 +784,9 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
     auto to_px = [&](const V3& q) {
         return Eigen::Vector2d(margin + (q.x() - vlo.x()) * s, margin + (vhi.y() - q.y()) * s);
     };
-    const Rect whole{0, 0, img.width - 1, img.height - 1};
-
     // Box edges: those meeting at the nearest corner pass in front of the particles and are drawn
     // after them, faintly; the others before them.
-    const int nearest_corner =
-        int(std::min_element(corners.begin(), corners.end(), [](const V3& a, const V3& b) { return a.z() < b.z(); }) -
-            corners.begin());
-    auto draw_edges = [&](bool front) {
-        for (int a = 0; a < 8; ++a)
-            for (int bit = 1; bit < 8; bit <<= 1) {
-                const int b = a | bit;
-                if (b == a) continue;
-                if ((a == nearest_corner || b == nearest_corner) != front) continue;
-                const Eigen::Vector2d pa = to_px(corners[std::size_t(a)]), pb = to_px(corners[std::size_t(b)]);
-                draw_segment(img, pa.x(), pa.y(), pb.x(), pb.y(), 1.0, {150, 150, 150}, whole, front ? 0.5 : 1.0);
-            }
-    };
+    auto draw_edges = [&](bool front) { camera.draw_box(img, margin, s, front); };
     draw_edges(false);
 
     // Each particle's projection and colour, gathered once so that the far-to-near pass streams
@@ -846,42 +859,14 @@ Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>
     const std::size_t n = position.size() / 3;
     check_surface({position, triangles, value}, who);
     using V3 = Eigen::Vector3d;
-    const V3 lo(options.domain_min[0], options.domain_min[1], options.domain_min[2]);
-    const V3 hi(options.domain_max[0], options.domain_max[1], options.domain_max[2]);
-    const V3 centre = 0.5 * (lo + hi);
-    // The camera of render_particles_3d: from direction (1, 0.8, 1.5), y up on screen.
-    const V3 forward = -V3(1.0, 0.8, 1.5).normalized();
-    const V3 right = forward.cross(V3::UnitY()).normalized();
-    const V3 up = right.cross(forward);
-    auto view = [&](const V3& p) {
-        const V3 d = p - centre;
-        return V3(d.dot(right), d.dot(up), d.dot(forward));
-    };
-    std::array<V3, 8> corners;
-    for (int c = 0; c < 8; ++c)
-        corners[std::size_t(c)] = view(V3(c & 1 ? hi.x() : lo.x(), c & 2 ? hi.y() : lo.y(), c & 4 ? hi.z() : lo.z()));
-    V3 vlo = corners[0], vhi = corners[0];
-    for (const V3& c : corners) {
-        vlo = vlo.cwiseMin(c);
-        vhi = vhi.cwiseMax(c);
-    }
+    const Camera3d camera(options);  // the camera of render_particles_3d
+    auto view = [&](const V3& p) { return camera.view(p); };
+    const V3 &vlo = camera.lo, &vhi = camera.hi;
     const int margin = 4;
     const double s = (options.width_px - 2 * margin) / (vhi.x() - vlo.x());
     Image img(options.width_px, image_height((vhi.y() - vlo.y()) * s, margin, who), {255, 255, 255});
     auto to_px = [&](const V3& q) { return V3(margin + (q.x() - vlo.x()) * s, margin + (vhi.y() - q.y()) * s, q.z()); };
-    const Rect whole{0, 0, img.width - 1, img.height - 1};
-    const int nearest_corner =
-        int(std::min_element(corners.begin(), corners.end(), [](const V3& a, const V3& b) { return a.z() < b.z(); }) -
-            corners.begin());
-    auto draw_box = [&](bool front) {
-        for (int a = 0; a < 8; ++a)
-            for (int bit = 1; bit < 8; bit <<= 1) {
-                const int b = a | bit;
-                if (b == a || (a == nearest_corner || b == nearest_corner) != front) continue;
-                const V3 pa = to_px(corners[std::size_t(a)]), pb = to_px(corners[std::size_t(b)]);
-                draw_segment(img, pa.x(), pa.y(), pb.x(), pb.y(), 1.0, {150, 150, 150}, whole, front ? 0.5 : 1.0);
-            }
-    };
+    auto draw_box = [&](bool front) { camera.draw_box(img, margin, s, front); };
     draw_box(false);
     std::vector<V3> screen(n);
     for (std::size_t i = 0; i < n; ++i) screen[i] = to_px(view(V3(position[3 * i], position[3 * i + 1], position[3 * i + 2])));

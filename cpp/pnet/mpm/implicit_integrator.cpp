@@ -152,10 +152,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
 
     const auto end = std::chrono::steady_clock::now();
-    stats.p2g_seconds = std::chrono::duration<double>(after_p2g - start).count();
-    stats.grid_seconds = std::chrono::duration<double>(after_solve - after_p2g).count();
-    stats.g2p_seconds = std::chrono::duration<double>(end - after_solve).count();
-    stats.wall_seconds = std::chrono::duration<double>(end - start).count();
+    record_phases(stats, start, after_p2g, after_solve, end);
     return stats;
 }
 

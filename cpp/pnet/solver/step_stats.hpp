@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <stdexcept>
 
+#include "pnet/math/clock.hpp"
 #include "pnet/solver/fixed_point.hpp"
 
 namespace pnet {
@@ -111,6 +112,16 @@ inline void record_solve(const ReferenceSolveStats& s, StepStats& stats) {
     stats.converged = s.converged;
     stats.line_search_failed = s.line_search_failed;
     stats.fixed_point_converged = s.fixed_point_converged;
+}
+
+/// The seconds of an MPM step's phases from its time points: P2G (start to after_p2g), the grid
+/// update or solve (to after_grid), G2P (to end) and the whole step.
+inline void record_phases(StepStats& stats, Clock::time_point start, Clock::time_point after_p2g,
+                          Clock::time_point after_grid, Clock::time_point end) {
+    stats.p2g_seconds = std::chrono::duration<double>(after_p2g - start).count();
+    stats.grid_seconds = std::chrono::duration<double>(after_grid - after_p2g).count();
+    stats.g2p_seconds = std::chrono::duration<double>(end - after_grid).count();
+    stats.wall_seconds = std::chrono::duration<double>(end - start).count();
 }
 
 /// A NaN, a blow-up or a failed solve: names the step (and the particle or
