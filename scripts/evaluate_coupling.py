@@ -1,23 +1,27 @@
 #!/usr/bin/python3
-"""Accuracy and speed of MPM-FEM coupling on sand_fem_coupling_2d (issue 18; docs/methods.md, docs/metrics.md).
+"""Accuracy and speed of MPM-FEM coupling on sand_fem_coupling_2d or _3d (issues 18, 33; docs/methods.md,
+docs/metrics.md).
 
-Runs `pnet simulate scenes/sand_fem_coupling_2d.json` with
-  explicit_1e-6        explicit coupling at 1e-6 s (the paper's step: the ground truth)
+Runs `pnet simulate scenes/sand_fem_coupling_2d.json` (or --scene sand_fem_coupling_3d) with
+  explicit_1e-6        explicit coupling at 1e-6 s (the paper's step: the ground truth; in 3D
+                       explicit_1e-5, the sphere's 2 cm elements being stable at 1e-5 s)
   explicit_cfl         explicit coupling at its CFL step (the stiff disk's elements: the noise floor)
   plasticitynet_1e-3   the sand's learned energy, one optimization with the disk (the paper)
   lagged_1e-3          the sand's elastic energy in the solve, Drucker-Prager after it (the baseline)
 and compares every frame with the ground truth:
   sand      Jaccard index of the particles' mass fields at the grid's dx and at 4 dx (`pnet compare`)
   disk      mean and max nodal distance, m and % of the disk's size (its bounding-box diagonal at rest)
-  contact   particles inside the disk (crossing number against its boundary edges): must be 0
+  contact   particles inside the disk (crossing number against its boundary edges; in 3D the
+            winding number of its boundary triangles): must be 0
 and reports seconds per frame from each run's stats.csv (timings for ratios: bench_table1).
 
-Outputs (under --results, default notebooks/results/coupling_eval): summary.md, summary.csv,
+Outputs (under --results, default notebooks/results/coupling_eval, coupling_eval_3d in 3D): summary.md, summary.csv,
 per_frame.csv (every run and frame), iou_<run>.png (pnet compare's curves), <run>_final.png.
-Runs stay in --work (default out/coupling) and are reused when complete (--force re-runs them); a
+Runs stay in --work (default out/coupling, out/coupling_3d in 3D) and are reused when complete (--force re-runs them); a
 run that is still going (or stopped early) is evaluated over the frames it has.
 
-    /usr/bin/python3 scripts/evaluate_coupling.py [--runs ...] [--frames N] [--threads 1] [--force]
+    /usr/bin/python3 scripts/evaluate_coupling.py [--scene sand_fem_coupling_3d] [--runs ...] [--frames N]
+        [--threads 1] [--force]
 """
 import argparse
 import csv
@@ -34,14 +38,27 @@ sys.path.insert(0, str(ROOT / "python"))
 from plasticitynet.mesh_ply import read_mesh_ply  # noqa: E402
 
 PNET = ROOT / "build" / "cpp" / "pnet"
-SCENE = ROOT / "scenes" / "sand_fem_coupling_2d.json"
-GT = "explicit_1e-6"
+SCENE = ROOT / "scenes" / "sand_fem_coupling_2d.json"  # --scene
+GT = "explicit_1e-6"  # explicit_1e-5 in 3D
 RUNS = {  # name: (integrator, dt)
     "explicit_1e-6": ("explicit", 1e-6),
     "explicit_cfl": ("explicit", 0.0),
     "plasticitynet_1e-3": ("plasticitynet", 1e-3),
     "lagged_1e-3": ("lagged", 1e-3),
 }
+RUN_NAMES = ["ground_truth", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3"]
+
+
+def use_scene(name: str) -> None:
+    """Points SCENE, GT and RUNS at scenes/<name>.json: the 3D scene's ground truth is explicit at 1e-5 s."""
+    global SCENE, GT
+    SCENE = ROOT / "scenes" / f"{name}.json"
+    if not SCENE.exists():
+        sys.exit(f"{SCENE}: no such scene")
+    if json.loads(SCENE.read_text())["dim"] == 3:
+        del RUNS["explicit_1e-6"]
+        GT = "explicit_1e-5"
+        RUNS[GT] = ("explicit", 1e-5)
 
 
 def frames_of(run: Path) -> list:
@@ -74,7 +91,7 @@ def read_particle_positions(path: Path) -> np.ndarray:
     count = next(int(line.split()[2]) for line in header if line.startswith("element vertex"))
     properties = [line.split()[-1] for line in header if line.startswith("property")]
     record = np.frombuffer(data, dtype=np.dtype([(p, "<f8") for p in properties]), count=count, offset=end)
-    return np.stack([record["x"], record["y"]], axis=1)
+    return np.stack([record[axis] for axis in ("x", "y", "z") if axis in record.dtype.names], axis=1)
 
 
 def boundary_edges(triangles: np.ndarray) -> np.ndarray:
@@ -99,6 +116,23 @@ def inside_count(points: np.ndarray, nodes: np.ndarray, edges: np.ndarray) -> in
     return int(np.sum(crossings % 2 == 1))
 
 
+def inside_count_3d(points: np.ndarray, nodes: np.ndarray, triangles: np.ndarray) -> int:
+    """Points inside the closed surface `triangles`: generalized winding number (solid angles / 4 pi) above 1/2."""
+    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
+    near = points[np.all((points >= lo) & (points <= hi), axis=1)]
+    if len(near) == 0:
+        return 0
+    a = nodes[triangles[:, 0]][None] - near[:, None]
+    b = nodes[triangles[:, 1]][None] - near[:, None]
+    c = nodes[triangles[:, 2]][None] - near[:, None]
+    la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
+    numerator = np.einsum("pti,pti->pt", a, np.cross(b, c))
+    denominator = (la * lb * lc + np.einsum("pti,pti->pt", a, b) * lc + np.einsum("pti,pti->pt", a, c) * lb
+                   + np.einsum("pti,pti->pt", b, c) * la)
+    winding = np.abs(np.sum(2.0 * np.arctan2(numerator, denominator), axis=1)) / (4.0 * np.pi)
+    return int(np.sum(winding > 0.5))
+
+
 def compare_sand(run: Path, gt: Path, out: Path) -> dict:
     """Per-frame Jaccard at dx and 4 dx from `pnet compare` (frame: (J, J_4dx))."""
     out.mkdir(parents=True, exist_ok=True)
@@ -116,23 +150,36 @@ def seconds_per_frame(run: Path) -> float:
 
 
 def main() -> int:
+    global PNET
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--runs", nargs="+", default=list(RUNS), choices=list(RUNS))
+    parser.add_argument("--scene", default="sand_fem_coupling_2d", help="sand_fem_coupling_2d or sand_fem_coupling_3d")
+    parser.add_argument("--runs", nargs="+", choices=RUN_NAMES, help="ground_truth (explicit_1e-6, 3D: explicit_1e-5), "
+                        "explicit_cfl, plasticitynet_1e-3, lagged_1e-3 (default: all)")
     parser.add_argument("--frames", type=int, default=0, help="frames (0: the scene's)")
     parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--work", type=Path, default=ROOT / "out" / "coupling")
-    parser.add_argument("--results", type=Path, default=ROOT / "notebooks" / "results" / "coupling_eval")
+    parser.add_argument("--work", type=Path, help="default out/coupling (3D: out/coupling_3d)")
+    parser.add_argument("--results", type=Path,
+                        help="default notebooks/results/coupling_eval (3D: notebooks/results/coupling_eval_3d)")
     parser.add_argument("--force", action="store_true")
+    parser.add_argument("--pnet", type=Path, default=PNET, help="the pnet binary (default: the build's; a copy lets "
+                        "the build change while the runs go on)")
     args = parser.parse_args()
+    PNET = args.pnet
     if not PNET.exists():
         sys.exit(f"{PNET} not found: build first (./scripts/setup.sh)")
+    use_scene(args.scene)
+    dim = json.loads(SCENE.read_text())["dim"]
+    suffix = "_3d" if dim == 3 else ""
+    args.work = args.work or ROOT / "out" / f"coupling{suffix}"
+    args.results = args.results or ROOT / "notebooks" / "results" / f"coupling_eval{suffix}"
+    names = [GT if name == "ground_truth" else name for name in (args.runs or RUN_NAMES)]
     frames = args.frames or json.loads(SCENE.read_text())["frames"]
-    runs = {name: simulate(name, frames, args.threads, args.work, args.force) for name in args.runs}
+    runs = {name: simulate(name, frames, args.threads, args.work, args.force) for name in names}
     gt = runs.get(GT, args.work / GT)
     gt_frames = set(frames_of(gt))
     rest = read_mesh_ply(gt / "frame_00000_mesh.ply")
     size = float(np.linalg.norm(rest.position.max(axis=0) - rest.position.min(axis=0)))
-    edges = boundary_edges(rest.triangles)
+    edges = boundary_edges(rest.triangles) if dim == 2 else rest.triangles  # a 3D mesh PLY holds its surface
     args.results.mkdir(parents=True, exist_ok=True)
     per_frame, summary = [], []
     for name, run in runs.items():
@@ -148,7 +195,8 @@ def main() -> int:
         for f in common:
             mesh = read_mesh_ply(run / f"frame_{f:05d}_mesh.ply")
             particles = read_particle_positions(run / f"frame_{f:05d}.ply")
-            penetrations = inside_count(particles, mesh.position, edges)
+            penetrations = (inside_count(particles, mesh.position, edges) if dim == 2
+                            else inside_count_3d(particles, mesh.position, edges))
             worst_penetrations = max(worst_penetrations, penetrations)
             d = np.linalg.norm(mesh.position - read_mesh_ply(gt / f"frame_{f:05d}_mesh.ply").position, axis=1)
             j, j4 = sand.get(f, (1.0, 1.0))
@@ -175,8 +223,8 @@ def main() -> int:
         w = csv.DictWriter(f, fieldnames=list(summary[0]))
         w.writeheader()
         w.writerows(summary)
-    lines = [f"# sand_fem_coupling_2d against explicit coupling at 1e-6 s ({GT})", "",
-             f"Disk size (bounding-box diagonal at rest): {size:.4f} m. Frames compared: those of each run that the "
+    lines = [f"# {args.scene} against explicit coupling at {RUNS[GT][1]:g} s ({GT})", "",
+             f"The body (disk, 3D: sphere) size (bounding-box diagonal at rest): {size:.4f} m. Frames compared: those of each run that the "
              "ground truth has. Seconds per frame: each run's own stats.csv (the runs may have shared the machine; "
              "speed ratios: bench_table1).", "",
              "| run | dt (s) | frames | s/frame | sand J min / mean | sand J(4dx) min / mean | disk mean error last / "
