@@ -3,7 +3,7 @@
 //   b(s) = -(s - s_hat)^2 ln(s / s_hat)  for 0 < s < s_hat,  0 for s >= s_hat,
 // s_hat = dhat^2. It is C2 at s_hat and grows without bound as s -> 0, so an
 // energy that contains it keeps every iterate intersection-free as long as
-// the line search never crosses s = 0 (CCD, ccd.hpp).
+// the line search never crosses s = 0 (CCD, ccd/).
 #include <cmath>
 #include <limits>
 

@@ -15,7 +15,7 @@
 
 #include <Eigen/SparseCore>
 
-#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/contact/collisions/contact_potential.hpp"
 #include "pnet/math/types.hpp"
 
 namespace pnet {

@@ -24,7 +24,7 @@
 #include <vector>
 
 #include "pnet/contact/barrier.hpp"
-#include "pnet/contact/point_facet.hpp"
+#include "pnet/contact/collisions/point_facet.hpp"
 #include "pnet/math/types.hpp"
 
 namespace pnet {

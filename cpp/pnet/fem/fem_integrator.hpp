@@ -31,7 +31,7 @@
 #include <memory>
 #include <vector>
 
-#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/contact/collisions/contact2d.hpp"
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/nn/learned_return_map.hpp"

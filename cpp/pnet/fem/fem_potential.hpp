@@ -13,7 +13,7 @@
 // `plasticitynet`, with P = dpsi/dF^E and H = d2psi/dF^E2 (PSD). Then
 //   dE/dv_a = m_a (v_a - v*_a) + dt sum_e V0_e P_e gt_ea,
 //   d2E/dv_a dv_b = m_a delta_ab I + dt^2 sum_e V0_e B_eab,  (B_eab)_ik = sum_jl gt_ea[j] H_e(ij, kl) gt_eb[l].
-// B is the contact potential (IPC barrier, contact/ipc_contact.hpp; none if not
+// B is the contact potential (IPC barrier, contact/collisions/contact_potential.hpp; none if not
 // set): its gradient enters as dt dB/dx, its Hessian as dt^2 d2B/dx2, and
 // max_step() is its CCD filter on the motion x -> x + dt d.
 // The Hessian is assembled as a sparse matrix (hessian_matrix()) for a direct
@@ -27,7 +27,7 @@
 #include <vector>
 
 #include "pnet/contact/friction.hpp"
-#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/contact/collisions/contact_potential.hpp"
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/mesh.hpp"
 #include "pnet/solver/fixed_point.hpp"

@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "pnet/contact/adaptive_stiffness.hpp"
+#include "pnet/contact/collisions/contact2d.hpp"
 #include "pnet/energy/analytic_elastoplastic.hpp"
 #include "pnet/energy/neural_elastoplastic.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"

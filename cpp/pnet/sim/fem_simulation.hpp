@@ -17,8 +17,8 @@
 #include <vector>
 
 #include "pnet/contact/friction.hpp"
-#include "pnet/contact/contact3d.hpp"
-#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/contact/collisions/contact3d.hpp"
+#include "pnet/contact/collisions/contact2d.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/run_stats.hpp"

@@ -13,8 +13,8 @@
 #include <cstdio>
 #include <functional>
 
-#include "pnet/contact/ccd3d.hpp"
-#include "pnet/contact/distance3d.hpp"
+#include "pnet/contact/ccd/point_triangle_edge_edge.hpp"
+#include "pnet/contact/distance/point_triangle_edge_edge.hpp"
 #include "support/random.hpp"
 
 namespace pnet {

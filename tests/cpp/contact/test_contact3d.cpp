@@ -11,9 +11,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include "pnet/contact/contact3d.hpp"
+#include "pnet/contact/collisions/contact3d.hpp"
 #include "pnet/contact/friction.hpp"
-#include "pnet/contact/hash_grid.hpp"
+#include "pnet/contact/broad_phase/hash_grid.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "support/finite_difference.hpp"

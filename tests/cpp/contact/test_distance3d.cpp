@@ -14,7 +14,7 @@
 #include <cmath>
 #include <functional>
 
-#include "pnet/contact/distance3d.hpp"
+#include "pnet/contact/distance/point_triangle_edge_edge.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 

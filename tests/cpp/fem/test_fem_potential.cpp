@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "pnet/contact/collisions/contact2d.hpp"
 #include "pnet/contact/friction.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"

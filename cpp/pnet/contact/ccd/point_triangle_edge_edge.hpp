@@ -15,7 +15,7 @@
 // distance of at least xi + (1 - eta)(d0 - xi) > xi. A slow grazing approach
 // (over 100000 steps) stops at the safe time reached so far.
 // Point-plane: point_plane_time_of_impact (ccd.hpp), for both dimensions.
-#include "pnet/contact/ccd.hpp"  // kNoImpact, point_plane_time_of_impact
+#include "pnet/contact/ccd/point_edge.hpp"  // kNoImpact, point_plane_time_of_impact
 #include "pnet/math/types.hpp"
 
 namespace pnet {

@@ -7,15 +7,15 @@
 // weights (lagged friction) and whether a point lies inside a closed boundary. Code written
 // once over PointFacet<dim> (the particle / mesh barrier of MPM-FEM coupling,
 // coupling/particle_contact.hpp) runs in both dimensions; each member forwards to the
-// primitive's own file (distance.hpp, distance3d.hpp, ccd.hpp, ccd3d.hpp, closest_point.hpp).
+// primitive's own file (distance/, ccd/).
 #include <array>
 #include <vector>
 
-#include "pnet/contact/ccd.hpp"
-#include "pnet/contact/ccd3d.hpp"
-#include "pnet/contact/closest_point.hpp"
-#include "pnet/contact/distance.hpp"
-#include "pnet/contact/distance3d.hpp"
+#include "pnet/contact/ccd/point_edge.hpp"
+#include "pnet/contact/ccd/point_triangle_edge_edge.hpp"
+#include "pnet/contact/distance/closest_point.hpp"
+#include "pnet/contact/distance/point_edge.hpp"
+#include "pnet/contact/distance/point_triangle_edge_edge.hpp"
 #include "pnet/math/types.hpp"
 
 namespace pnet {

@@ -1,4 +1,4 @@
-#include "pnet/contact/hash_grid.hpp"
+#include "pnet/contact/broad_phase/hash_grid.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "pnet/contact/distance3d.hpp"
+#include "pnet/contact/distance/point_triangle_edge_edge.hpp"
 
 #include <Eigen/Geometry>  // cross()
 #include <array>

@@ -1,4 +1,4 @@
-#include "pnet/contact/point_facet.hpp"
+#include "pnet/contact/collisions/point_facet.hpp"
 
 #include <cmath>
 

@@ -1,4 +1,4 @@
-#include "pnet/contact/distance.hpp"
+#include "pnet/contact/distance/point_edge.hpp"
 
 namespace pnet {
 

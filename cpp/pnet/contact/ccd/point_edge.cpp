@@ -1,9 +1,9 @@
-#include "pnet/contact/ccd.hpp"
+#include "pnet/contact/ccd/point_edge.hpp"
 
 #include <algorithm>
 #include <cmath>
 
-#include "pnet/contact/distance.hpp"
+#include "pnet/contact/distance/point_edge.hpp"
 
 namespace pnet {
 

@@ -1,4 +1,4 @@
-#include "pnet/contact/contact3d.hpp"
+#include "pnet/contact/collisions/contact3d.hpp"
 
 #include "pnet/math/clock.hpp"
 
@@ -10,10 +10,10 @@
 #include <map>
 #include <stdexcept>
 
-#include "pnet/contact/ccd.hpp"
-#include "pnet/contact/ccd3d.hpp"
-#include "pnet/contact/closest_point.hpp"
-#include "pnet/contact/distance3d.hpp"
+#include "pnet/contact/ccd/point_edge.hpp"
+#include "pnet/contact/ccd/point_triangle_edge_edge.hpp"
+#include "pnet/contact/distance/closest_point.hpp"
+#include "pnet/contact/distance/point_triangle_edge_edge.hpp"
 #include "pnet/math/psd.hpp"
 
 namespace pnet {

@@ -1,4 +1,4 @@
-#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/contact/collisions/contact2d.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,8 +6,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "pnet/contact/ccd.hpp"
-#include "pnet/contact/distance.hpp"
+#include "pnet/contact/ccd/point_edge.hpp"
+#include "pnet/contact/distance/point_edge.hpp"
 #include "pnet/math/psd.hpp"
 
 namespace pnet {

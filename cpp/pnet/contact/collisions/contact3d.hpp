@@ -2,7 +2,7 @@
 // IPC contact in 3D (docs/methods.md): the barrier B(x) = kappa sum_k m_k b(s_k(x))
 // over the pairs of a closed boundary surface closer than dhat:
 //   point-triangle  every boundary node against every boundary triangle it is not a corner of
-//                   (7 distance cases, distance3d.hpp), m = 1;
+//                   (7 distance cases, distance/point_triangle_edge_edge.hpp), m = 1;
 //   edge-edge       every two boundary edges without a common node (9 cases), m IPC's
 //                   mollifier of |e_a x e_b|^2 below 1e-3 |e_a|^2 |e_b|^2 (rest lengths), which
 //                   keeps the energy C1 where nearly parallel edges change case;
@@ -10,9 +10,9 @@
 // As in IPC, a node near a shared edge or corner of several triangles meets each of them: the
 // duplicate pairs only scale the barrier there, and every one is an exact barrier.
 // Each pair's Hessian (12 x 12) is projected to PSD before assembly; max_step() is the CCD
-// filter (additive CCD, ccd3d.hpp) of the line search.
+// filter (additive CCD, ccd/point_triangle_edge_edge.hpp) of the line search.
 //
-// Broad phase: uniform hash grids (hash_grid.hpp) of the triangles' and the edges' boxes
+// Broad phase: uniform hash grids (broad_phase/hash_grid.hpp) of the triangles' and the edges' boxes
 // grown by 3 dhat give a list of candidate pairs (a Verlet list), reused until some node has
 // moved dhat: the active pairs and the CCD pairs (swept boxes overlapping) are filtered from
 // it; a motion too long for it gets its own swept broad phase. The pairs are visited in a
@@ -23,8 +23,8 @@
 #include <vector>
 
 #include "pnet/contact/barrier.hpp"
-#include "pnet/contact/hash_grid.hpp"
-#include "pnet/contact/ipc_contact.hpp"
+#include "pnet/contact/broad_phase/hash_grid.hpp"
+#include "pnet/contact/collisions/contact_potential.hpp"
 
 namespace pnet {
 

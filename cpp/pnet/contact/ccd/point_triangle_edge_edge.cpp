@@ -1,10 +1,10 @@
-#include "pnet/contact/ccd3d.hpp"
+#include "pnet/contact/ccd/point_triangle_edge_edge.hpp"
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 
-#include "pnet/contact/distance3d.hpp"
+#include "pnet/contact/distance/point_triangle_edge_edge.hpp"
 
 namespace pnet {
 
