@@ -98,8 +98,7 @@ double CoupledPotential<dim>::value(const VecX& v) {
     split(v);
     const double e = mpm_.value(vg_) + fem_.value(vf_);
     positions(v, X_, x_);
-    const double b = contact_.value(X_, x_);
-    return friction_pairs_.empty() ? e + b : e + b + friction_value(v);
+    return e + contact_.value(X_, x_) + friction_value(v);  // friction_value: 0 without friction
 }
 
 template <int dim>

@@ -705,15 +705,15 @@ struct Camera3d {
 };
 
 /// Throws std::invalid_argument (naming `who`) for a surface whose sizes do not match.
-void check_surface(const SurfaceMesh& surface, const char* who) {
-    const std::size_t n = surface.position.size() / 3, m = surface.triangles.size() / 3;
-    if (surface.position.size() % 3 != 0) throw std::invalid_argument(std::string(who) + ": surface positions are not n x 3");
-    if (surface.triangles.size() % 3 != 0)
-        throw std::invalid_argument(std::string(who) + ": triangles is not a multiple of 3");
-    if (!surface.value.empty() && surface.value.size() != m)
-        throw std::invalid_argument(std::string(who) + ": " + std::to_string(surface.value.size()) + " values for " +
+void check_surface(const std::vector<double>& position, const std::vector<int>& triangles,
+                   const std::vector<double>& value, const char* who) {
+    const std::size_t n = position.size() / 3, m = triangles.size() / 3;
+    if (position.size() % 3 != 0) throw std::invalid_argument(std::string(who) + ": surface positions are not n x 3");
+    if (triangles.size() % 3 != 0) throw std::invalid_argument(std::string(who) + ": triangles is not a multiple of 3");
+    if (!value.empty() && value.size() != m)
+        throw std::invalid_argument(std::string(who) + ": " + std::to_string(value.size()) + " values for " +
                                     std::to_string(m) + " triangles");
-    for (int t : surface.triangles)
+    for (int t : triangles)
         if (t < 0 || static_cast<std::size_t>(t) >= n)
             throw std::invalid_argument(std::string(who) + ": triangle node " + std::to_string(t) + " out of range");
 }
@@ -769,7 +769,7 @@ Image render_particles_3d(const std::vector<double>& position, const std::vector
                           const ParticleRenderOptions& options, const SurfaceMesh* surface) {
     constexpr const char* who = "render_particles_3d";
     check_particle_input(position, value, 3, options, who);
-    if (surface) check_surface(*surface, who);
+    if (surface) check_surface(surface->position, surface->triangles, surface->value, who);
     const std::size_t n = position.size() / 3;
     using V3 = Eigen::Vector3d;
     const Camera3d camera(options);
@@ -857,7 +857,7 @@ Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>
     constexpr const char* who = "render_mesh_3d";
     check_particle_input(position, {}, 3, options, who);
     const std::size_t n = position.size() / 3;
-    check_surface({position, triangles, value}, who);
+    check_surface(position, triangles, value, who);
     using V3 = Eigen::Vector3d;
     const Camera3d camera(options);  // the camera of render_particles_3d
     auto view = [&](const V3& p) { return camera.view(p); };

@@ -266,19 +266,19 @@ void write_frame(const CoupledSimulation<dim>& sim, const Scene& scene, const Ou
         const SurfaceMesh surface{ply.position, ply.triangles, mesh_colour};
         write_frame_png(out / frame_name(sim.frame(), "png"), render_particles_3d(particles.position, colour, r, &surface),
                         o);
-        return;
+    } else {
+        Image image = render_particles_2d(particles.position, colour, r);
+        const Image drawn = render_mesh_2d(ply.position, ply.triangles, mesh_colour, r);
+        // The same frame and scale when both renders have the same margin (the particle disks are
+        // small): the mesh's pixels are copied over the particles.
+        if (drawn.width == image.width && drawn.height == image.height)
+            for (int y = 0; y < image.height; ++y)
+                for (int x = 0; x < image.width; ++x) {
+                    const Rgb c = drawn.get(x, y);
+                    if (!(c.r == 255 && c.g == 255 && c.b == 255)) image.set(x, y, c);
+                }
+        write_frame_png(out / frame_name(sim.frame(), "png"), image, o);
     }
-    Image image = render_particles_2d(particles.position, colour, r);
-    const Image drawn = render_mesh_2d(ply.position, ply.triangles, mesh_colour, r);
-    // The same frame and scale when both renders have the same margin (the particle disks are
-    // small): the mesh's pixels are copied over the particles.
-    if (drawn.width == image.width && drawn.height == image.height)
-        for (int y = 0; y < image.height; ++y)
-            for (int x = 0; x < image.width; ++x) {
-                const Rgb c = drawn.get(x, y);
-                if (!(c.r == 255 && c.g == 255 && c.b == 255)) image.set(x, y, c);
-            }
-    write_frame_png(out / frame_name(sim.frame(), "png"), image, o);
 }
 
 template <class Sim>

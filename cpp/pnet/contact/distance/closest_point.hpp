@@ -12,23 +12,9 @@
 
 namespace pnet {
 
+// Inline: they sit in the contact loops (the same code as when they were local there).
+
 /// Weights (of a, b) of the point of segment ab closest to p; a zero-length segment gives a.
-template <int dim>
-std::array<double, 2> closest_on_segment(const Vec<dim>& p, const Vec<dim>& a, const Vec<dim>& b);
-
-/// Barycentric weights (of a, b, c) of the point of triangle abc closest to p, by the
-/// Voronoi regions of its corners and edges.
-Vec<3> closest_on_triangle(const Vec<3>& p, const Vec<3>& a, const Vec<3>& b, const Vec<3>& c);
-
-/// Parameters (s on a0a1, t on b0b1) of the closest points of two segments.
-std::pair<double, double> closest_on_segments(const Vec<3>& a0, const Vec<3>& a1, const Vec<3>& b0, const Vec<3>& b1);
-
-/// dim - 1 unit vectors orthogonal to the unit vector n and to each other (the columns):
-/// in 2D n turned by +90 degrees; in 3D two vectors built on the axis least aligned with n.
-template <int dim>
-Eigen::Matrix<double, dim, dim - 1> tangent_basis(const Vec<dim>& n);
-
-// Definitions inline: they sit in the contact loops (the same code as when they were local there).
 template <int dim>
 std::array<double, 2> closest_on_segment(const Vec<dim>& p, const Vec<dim>& a, const Vec<dim>& b) {
     const Vec<dim> e = b - a;
@@ -38,7 +24,8 @@ std::array<double, 2> closest_on_segment(const Vec<dim>& p, const Vec<dim>& a, c
     return {1.0 - t, t};
 }
 
-
+/// Barycentric weights (of a, b, c) of the point of triangle abc closest to p, by the
+/// Voronoi regions of its corners and edges.
 inline Vec<3> closest_on_triangle(const Vec<3>& p, const Vec<3>& a, const Vec<3>& b, const Vec<3>& c) {
     const Vec<3> ab = b - a, ac = c - a, ap = p - a;
     const double d1 = ab.dot(ap), d2 = ac.dot(ap);
@@ -68,6 +55,7 @@ inline Vec<3> closest_on_triangle(const Vec<3>& p, const Vec<3>& a, const Vec<3>
     return Vec<3>(va / sum, vb / sum, vc / sum);
 }
 
+/// Parameters (s on a0a1, t on b0b1) of the closest points of two segments.
 inline std::pair<double, double> closest_on_segments(const Vec<3>& a0, const Vec<3>& a1, const Vec<3>& b0, const Vec<3>& b1) {
     const Vec<3> d1 = a1 - a0, d2 = b1 - b0, r = a0 - b0;
     const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r), c = d1.dot(r), b = d1.dot(d2);
@@ -83,6 +71,11 @@ inline std::pair<double, double> closest_on_segments(const Vec<3>& a0, const Vec
     }
     return {s, t};
 }
+
+/// dim - 1 unit vectors orthogonal to the unit vector n and to each other (the columns):
+/// in 2D n turned by +90 degrees; in 3D two vectors built on the axis least aligned with n.
+template <int dim>
+Eigen::Matrix<double, dim, dim - 1> tangent_basis(const Vec<dim>& n);
 
 template <>
 inline Eigen::Matrix<double, 2, 1> tangent_basis<2>(const Vec<2>& n) {
