@@ -8,7 +8,9 @@ import copy
 import json
 import os
 import re
+import struct
 import subprocess
+import zlib
 from pathlib import Path
 
 import pytest
@@ -104,9 +106,37 @@ def _frame_run_ids(out: Path) -> dict[str, str]:
         m = re.search(r"^comment run_id (\S+)$", header, re.M)
         ids[path.name] = m.group(1) if m else ""
     for path in sorted(out.glob("frame_*.png")):
-        m = re.search(rb"tEXtpnet_run_id\x00([0-9a-f]+)", path.read_bytes())
-        ids[path.name] = m.group(1).decode() if m else ""
+        ids[path.name] = png_text(path.read_bytes()).get("pnet_run_id", "")
     return ids
+
+
+def png_text(data: bytes) -> dict[str, str]:
+    """The tEXt chunks of a PNG, read chunk by chunk (length, type, data, CRC), so that a CRC byte
+    that happens to be printable is never taken as part of the text."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG"
+    text, at = {}, 8
+    while at + 8 <= len(data):
+        length, kind = struct.unpack(">I", data[at:at + 4])[0], data[at + 4:at + 8]
+        body = data[at + 8:at + 8 + length]
+        if kind == b"tEXt":
+            key, _, value = body.partition(b"\x00")
+            text[key.decode("latin-1")] = value.decode("latin-1")
+        if kind == b"IEND":
+            break
+        at += 12 + length
+    return text
+
+
+def test_png_text_stops_at_the_chunk_end():
+    """A tEXt chunk whose CRC begins with an ASCII hex digit (run id 0...06 gives CRC byte '9'):
+    a pattern match would read the digit as part of the id; the chunk reader must not."""
+    def chunk(kind, body):
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+    run_id = "0000000000000006"
+    text_chunk = chunk(b"tEXt", b"pnet_run_id\x00" + run_id.encode())
+    assert text_chunk[-4:-3] in b"0123456789abcdef"
+    png = b"\x89PNG\r\n\x1a\n" + text_chunk + chunk(b"IEND", b"")
+    assert png_text(png) == {"pnet_run_id": run_id}
 
 
 def test_a_run_never_mixes_with_another(tmp_path):
