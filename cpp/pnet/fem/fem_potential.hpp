@@ -1,36 +1,36 @@
 #pragma once
 // The incremental potential of an implicit FEM step (docs/methods.md), over the
 // nodal velocities v with x = x^n + dt v, so that FEM has the same unknowns
-// (velocities, m/s) and the same Newton loop as MPM:
+// (velocities, m/s) and the same Newton loop as MPM: a Problem (solver/problem.hpp)
+// of up to four forms,
 //
-//   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_e V0_e psi_e(F^E_e(v)) + B(x(v)),
+//   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_e V0_e psi_e(F^E_e(v)) + B(x(v)) + dt D(v),
+//          (InertiaForm)              (ElementEnergyForm)        (BarrierForm) (FrictionForm)
 //   F^E_e(v) = F_e(x) (F^P_e)^-1 = sum_a x_a gt_ea^T,   gt_ea = (F^P_e)^-T g_ea,
 //
 // g_ea the rest gradients of element e's linear shape functions (g_a = row a-1
 // of D_m^-1 for a >= 1, g_0 = -sum_a g_a; F_e(x) = D_s(x) D_m^-1 = sum_a x_a
-// g_ea^T). psi_e is a ParticleEnergy (an element is a material point with a
-// rest volume): elastic for `lagged`, the PlasticityNet energy for
-// `plasticitynet`, with P = dpsi/dF^E and H = d2psi/dF^E2 (PSD). Then
-//   dE/dv_a = m_a (v_a - v*_a) + dt sum_e V0_e P_e gt_ea,
-//   d2E/dv_a dv_b = m_a delta_ab I + dt^2 sum_e V0_e B_eab,  (B_eab)_ik = sum_jl gt_ea[j] H_e(ij, kl) gt_eb[l].
-// B is the contact potential (IPC barrier, contact/collisions/contact_potential.hpp; none if not
-// set): its gradient enters as dt dB/dx, its Hessian as dt^2 d2B/dx2, and
-// max_step() is its CCD filter on the motion x -> x + dt d.
-// The Hessian is assembled as a sparse matrix (hessian_matrix()) for a direct
-// solve by CHOLMOD; fixed components (Dirichlet nodes: targets reached by
-// v = v*) keep only their mass on the diagonal. The mass and element part has
-// the mesh's pattern, built once: each Hessian pass refills its values through
-// a map from element entries to value slots, and contact and friction (whose
-// pattern changes with the active pairs) are added as a second matrix. Sums
-// run in element order, so results do not depend on the thread count.
+// g_ea^T). B is the IPC contact potential (contact/collisions/contact_potential.hpp;
+// none if not set), D lagged friction (none if not set). The Hessian is assembled
+// as a sparse matrix (hessian_matrix()) for a direct solve by CHOLMOD: the mass
+// and element part has the mesh's pattern, built once and refilled through a map
+// from entries to value slots at each Hessian pass; contact and friction (whose
+// pattern changes with the active pairs) are added as a second matrix. Fixed
+// components (Dirichlet nodes: targets reached by v = v*) keep only their mass on
+// the diagonal. Sums run in element order, so results do not depend on the thread count.
 #include <Eigen/SparseCore>
 #include <vector>
 
-#include "pnet/contact/friction.hpp"
-#include "pnet/contact/collisions/contact_potential.hpp"
+#include <memory>
+
+#include "pnet/contact/barrier_form.hpp"
+#include "pnet/contact/friction_form.hpp"
 #include "pnet/energy/particle_energy.hpp"
+#include "pnet/fem/element_energy_form.hpp"
 #include "pnet/fem/mesh.hpp"
-#include "pnet/solver/fixed_point.hpp"
+#include "pnet/solver/form_sum.hpp"
+#include "pnet/solver/inertia_form.hpp"
+#include "pnet/solver/problem.hpp"
 
 namespace pnet {
 
@@ -52,13 +52,11 @@ Mat<dim> deformation_gradient(const Mesh<dim>& mesh, const ElementRest<dim>& res
                               std::size_t e);
 
 template <int dim>
-class FemPotential final : public ReferencedObjective<dim> {
+class FemPotential final : public Problem<dim> {
 public:
-    static constexpr int kElementNodes = dim + 1;
-    static constexpr int kM = dim * dim;
-
-    FemPotential(const Mesh<dim>& mesh, const ElementRest<dim>& rest, ParticleEnergy<dim>& energy)
-        : mesh_(mesh), rest_(rest), energy_(energy) {}
+    FemPotential(const Mesh<dim>& mesh, const ElementRest<dim>& rest, ParticleEnergy<dim>& energy);
+    FemPotential(const FemPotential&) = delete;
+    FemPotential& operator=(const FemPotential&) = delete;
 
     /// Sets up one step: positions x^n, v* (= v^n + dt g on free nodes, the
     /// prescribed velocity on fixed ones), per element (F^P)^-1, and which
@@ -74,11 +72,10 @@ public:
     void soften_fixed(double weight);
     void harden_fixed();
 
-    /// The contact potential (not owned; null: no contact).
-    void set_contact(const ContactPotential<dim>* contact) { contact_ = contact; }
-
-    /// Lagged friction (not owned; null: none): dt D(v) is added to E.
-    void set_friction(const Friction<dim>* friction) { friction_ = friction; }
+    /// The contact potential (not owned; null: no contact): the barrier form B(x(v)).
+    void set_contact(const ContactPotential<dim>* contact);
+    /// Lagged friction (not owned; null: none): the form dt D(v).
+    void set_friction(const Friction<dim>* friction);
 
     /// x(v) = x^n + dt v.
     void positions(const VecX& v, std::vector<Vec<dim>>& x) const;
@@ -91,70 +88,47 @@ public:
     }
 
     /// F^E_e(v) of every element.
-    void deformation(const VecX& v, std::vector<Mat<dim>>& FE) const override;
+    void deformation(const VecX& v, std::vector<Mat<dim>>& FE) const override { elements_.deformation(v, FE); }
     /// The energy's reference (plasticitynet: F0 per element; ignored by the
     /// elastic and analytic energies, which only record the material state).
     void set_reference(const std::vector<Mat<dim>>& F0) override;
-    bool set_damping(double lambda) override { return energy_.set_damping(lambda); }
+    bool set_damping(double lambda) override { return elements_.energy().set_damping(lambda); }
 
-    const VecX& v_star() const { return v_star_; }
+    const VecX& v_star() const { return inertia_.target(); }
     /// m_i on free components, 0 on fixed ones (NewtonOptions::residual_mass).
     const VecX& residual_mass() const { return residual_mass_; }
 
-    // Objective
-    Eigen::Index size() const override { return v_star_.size(); }
-    double value(const VecX& v) override;
-    double value_gradient(const VecX& v, VecX& gradient) override;
-    void prepare_hessian(const VecX& v) override;
-    double value_gradient_hessian(const VecX& v, VecX& gradient) override;
-    void hessian_multiply(const VecX& d, VecX& out) const override;
-    void hessian_diagonal(VecX& diagonal) const override;
-    int hessian_block_size() const override { return dim; }
-    void hessian_block_diagonal(VecX& blocks) const override;
-    const SparseMatrix* hessian_matrix() const override { return &hessian(); }
-    double max_step(const VecX& v, const VecX& d) override;
+    const Mesh<dim>& mesh() const { return mesh_; }
+    const ElementRest<dim>& rest() const { return rest_; }
+    const std::vector<Vec<dim>>& start_positions() const { return x_start_; }
+    double dt() const { return dt_; }
 
     /// CCD queries of max_step() since the last begin_step(), and how many of them shortened the step.
-    int ccd_queries() const { return ccd_queries_; }
-    int ccd_limited() const { return ccd_limited_; }
+    int ccd_queries() const { return barrier_ ? barrier_->ccd_queries() : 0; }
+    int ccd_limited() const { return barrier_ ? barrier_->ccd_limited() : 0; }
 
-    /// Project the element Hessians to PSD (default; false: the exact Hessian, for derivative checks).
-    void set_project_psd(bool project) { project_psd_ = project; }
+    /// Project the element and contact Hessians to PSD (default; false: the exact Hessian, for
+    /// derivative checks).
+    void set_project_psd(bool project);
 
 private:
-    double inertia(const VecX& v) const;
-    void evaluate(const VecX& v, typename ParticleEnergy<dim>::Order order);
-    /// The gradient of E at v; returns the contact and friction part of E, evaluated in the same pass.
-    double assemble_gradient(const VecX& v, VecX& gradient);
-    double potential_sum() const;
-    double contact_value(const VecX& v);
-    /// Builds element_hessian_'s pattern (mass diagonal + element blocks) and the slot maps.
-    void build_hessian_pattern();
-    const SparseMatrix& hessian() const { return with_contact_ ? hessian_ : element_hessian_; }
+    /// The forms in their summation order: inertia, elements, then contact (barrier + friction) if set.
+    void update_forms();
 
     const Mesh<dim>& mesh_;
     const ElementRest<dim>& rest_;
-    ParticleEnergy<dim>& energy_;
-    const ContactPotential<dim>* contact_ = nullptr;
-    const Friction<dim>* friction_ = nullptr;
-    std::vector<Vec<dim>> x_start_, x_, dx_;
+    InertiaForm inertia_;
+    ElementEnergyForm<dim> elements_;
+    std::unique_ptr<BarrierForm<dim>> barrier_;
+    std::unique_ptr<FrictionForm<dim>> friction_;
+    FormSum contact_;  // the barrier and friction, summed as one (their value, then the others')
+    bool project_psd_ = true;
+    std::vector<Vec<dim>> x_start_;
     std::vector<int> object_;
     std::vector<double> hardening_;
     double dt_ = 0.0;
-    VecX v_star_, mass_, free_, residual_mass_, inertia_scale_;
+    VecX residual_mass_;
     std::vector<char> fixed_;
-    std::vector<std::array<Vec<dim>, dim + 1>> grad_;  // gt_ea = (F^P)^-T g_ea
-    std::vector<Mat<dim>> FE_, P_;
-    std::vector<double> psi_;
-    std::vector<Tensor4<dim>> H_;
-    SparseMatrix element_hessian_;        // mass + elements, the mesh's fixed pattern
-    std::vector<int> element_slots_;      // per element, (dim+1)^2 dim^2 indices into its values
-    std::vector<int> diagonal_slots_;     // per component, the index of its diagonal entry
-    SparseMatrix contact_hessian_, hessian_;  // hessian_ = element_hessian_ + contact_hessian_
-    bool with_contact_ = false;           // whether hessian_ (not element_hessian_) is the Hessian
-    std::vector<Eigen::Triplet<double>> triplets_;
-    bool project_psd_ = true;
-    int ccd_queries_ = 0, ccd_limited_ = 0;
 };
 
 }  // namespace pnet
