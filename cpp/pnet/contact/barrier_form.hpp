@@ -8,15 +8,14 @@
 #include <vector>
 
 #include "pnet/contact/collisions/contact_potential.hpp"
-#include "pnet/solver/form.hpp"
 #include "pnet/solver/triplet_hessian.hpp"
 
 namespace pnet {
 
 template <int dim>
-class BarrierForm final : public Form {
+class BarrierForm final : public TripletHessianForm {
 public:
-    explicit BarrierForm(const ContactPotential<dim>& contact) : contact_(contact) {}
+    explicit BarrierForm(const ContactPotential<dim>& contact) : TripletHessianForm(dim), contact_(contact) {}
 
     /// The step: positions x^n (referenced, as is `free`, the problem's 1 / 0 mask) and dt.
     void begin_step(const std::vector<Vec<dim>>& x_start, double dt, const VecX& free);
@@ -26,11 +25,6 @@ public:
     double value(const VecX& v) override;
     double add_gradient(const VecX& v, VecX& g) override;
     void prepare_hessian(const VecX& v) override;
-    void add_hessian_multiply(const VecX& d, VecX& out) const override { hessian_.multiply(d, out); }
-    void add_hessian_diagonal(VecX& diagonal) const override { hessian_.diagonal(diagonal); }
-    void add_hessian_block_diagonal(VecX& blocks) const override { hessian_.block_diagonal(blocks, dim); }
-    void add_hessian_triplets(std::vector<Triplet>& triplets) const override { hessian_.append_to(triplets); }
-    bool changing_pattern() const override { return true; }
     double max_step(const VecX& v, const VecX& d) override;
 
     /// Project the pairs' Hessians to PSD (default; false: exact, for derivative checks).
@@ -45,7 +39,6 @@ private:
     const VecX* free_ = nullptr;
     double dt_ = 0.0;
     std::vector<Vec<dim>> x_, dx_;
-    TripletHessian hessian_;
     bool project_psd_ = true;
     int ccd_queries_ = 0, ccd_limited_ = 0;
 };

@@ -3,15 +3,15 @@
 // normal forces and tangent bases frozen at the start of the step. Its gradient is dt dD/dv and
 // its Hessian dt d2D/dv2 (PSD); the pairs are fixed over the step, but they differ from step to
 // step, so the Hessian is summed apart from the fixed-pattern forms.
-#include "pnet/contact/barrier_form.hpp"
 #include "pnet/contact/friction.hpp"
+#include "pnet/solver/triplet_hessian.hpp"
 
 namespace pnet {
 
 template <int dim>
-class FrictionForm final : public Form {
+class FrictionForm final : public TripletHessianForm {
 public:
-    explicit FrictionForm(const Friction<dim>& friction) : friction_(friction) {}
+    explicit FrictionForm(const Friction<dim>& friction) : TripletHessianForm(dim), friction_(friction) {}
 
     /// The step's dt and the problem's 1 / 0 mask of free components (referenced).
     void begin_step(double dt, const VecX& free) {
@@ -22,17 +22,11 @@ public:
     double value(const VecX& v) override { return dt_ * friction_.value(v); }
     double add_gradient(const VecX& v, VecX& g) override;
     void prepare_hessian(const VecX& v) override;
-    void add_hessian_multiply(const VecX& d, VecX& out) const override { hessian_.multiply(d, out); }
-    void add_hessian_diagonal(VecX& diagonal) const override { hessian_.diagonal(diagonal); }
-    void add_hessian_block_diagonal(VecX& blocks) const override { hessian_.block_diagonal(blocks, dim); }
-    void add_hessian_triplets(std::vector<Triplet>& triplets) const override { hessian_.append_to(triplets); }
-    bool changing_pattern() const override { return true; }
 
 private:
     const Friction<dim>& friction_;
     const VecX* free_ = nullptr;
     double dt_ = 0.0;
-    TripletHessian hessian_;
 };
 
 }  // namespace pnet

@@ -123,30 +123,9 @@ void ElementEnergyForm<dim>::add_hessian_triplets(std::vector<Triplet>& triplets
 
 template <int dim>
 void ElementEnergyForm<dim>::add_hessian_values(double* values, const int* slots) const {
-    // for_each_entry()'s order, written out so that each entry is added where it is formed.
-    const Mesh<dim>& mesh = problem_.mesh();
-    const VecX& free = problem_.free_components();
-    const std::vector<double>& volume = problem_.rest().volume;
-    const double dt = problem_.dt();
-    for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
-        const Tensor4<dim>& H = H_[e];
-        const double scale = volume[e] * dt * dt;
-        for (int a = 0; a <= dim; ++a)
-            for (int b = 0; b <= dim; ++b) {
-                const Vec<dim>& ga = grad_[e][a];
-                const Vec<dim>& gb = grad_[e][b];
-                for (int i = 0; i < dim; ++i)
-                    for (int k = 0; k < dim; ++k) {
-                        const int slot = *slots++;
-                        const Eigen::Index row = dim * mesh.elements[e][a] + i, col = dim * mesh.elements[e][b] + k;
-                        if (free[row] == 0.0 || free[col] == 0.0) continue;
-                        double s = 0.0;
-                        for (int j = 0; j < dim; ++j)
-                            for (int l = 0; l < dim; ++l) s += ga[j] * H(i * dim + j, k * dim + l) * gb[l];
-                        values[slot] += scale * s;
-                    }
-            }
-    }
+    // Each entry is added where it is formed (so that the compiler may fuse the product and the sum).
+    for (std::size_t e = 0; e < H_.size(); ++e)
+        for_each_entry(e, [&](Eigen::Index, Eigen::Index, double h) { values[*slots++] += h; });
 }
 
 template <int dim>

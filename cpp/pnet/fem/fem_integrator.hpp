@@ -31,7 +31,7 @@
 #include <memory>
 #include <vector>
 
-#include "pnet/contact/collisions/contact2d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/nn/learned_return_map.hpp"
@@ -131,7 +131,7 @@ public:
     /// shrink, so a fixed explicit step that is stable at the start fails once the plate
     /// presses (measured: metal_frame_2d at 1e-5 s failed at frame 47, at 2e-5 s and at the
     /// rest CFL step at frame 7). Each substep is at most 1 / sqrt(omega_e^2 + omega_c^2)
-    /// (element_frequency() of the step's start, Contact2d::stable_time_step of the
+    /// (element_frequency() of the step's start, Contact::stable_time_step of the
     /// substep's) and closes no gap by more than about a fifth (CCD).
     /// StepStats::substeps counts them. Throws SimulationError naming the step if a value is
     /// not finite or no substep avoids intersection.

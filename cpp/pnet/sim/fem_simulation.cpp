@@ -6,7 +6,7 @@
 #include <fstream>
 
 #include "pnet/contact/adaptive_stiffness.hpp"
-#include "pnet/contact/collisions/contact2d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/energy/analytic_elastoplastic.hpp"
 #include "pnet/energy/neural_elastoplastic.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
@@ -135,15 +135,9 @@ template <int dim>
 std::unique_ptr<ContactPotential<dim>> make_fem_contact(const Scene& scene, const FemSceneSystem<dim>& s) {
     HalfSpace<dim> ground;
     if (scene.contact.ground_height) ground.origin[1] = *scene.contact.ground_height;
-    if constexpr (dim == 2) {
-        auto contact = std::make_unique<Contact2d>(s.system.mesh.boundary, s.dhat, s.kappa);
-        if (scene.contact.ground_height) contact->add_half_space(ground);
-        return contact;
-    } else {
-        auto contact = std::make_unique<Contact3d>(s.system.mesh.boundary, s.system.mesh.x, s.dhat, s.kappa);
-        if (scene.contact.ground_height) contact->add_half_space(ground);
-        return contact;
-    }
+    auto contact = std::make_unique<Contact<dim>>(s.system.mesh.boundary, s.system.mesh.x, s.dhat, s.kappa);
+    if (scene.contact.ground_height) contact->add_half_space(ground);
+    return contact;
 }
 
 template std::unique_ptr<ContactPotential<2>> make_fem_contact<2>(const Scene&, const FemSceneSystem<2>&);

@@ -17,8 +17,7 @@
 #include <vector>
 
 #include "pnet/contact/friction.hpp"
-#include "pnet/contact/collisions/contact3d.hpp"
-#include "pnet/contact/collisions/contact2d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/run_stats.hpp"
@@ -47,7 +46,7 @@ struct FemSceneSystem {
 template <int dim>
 FemSceneSystem<dim> make_fem_system(const Scene& scene);
 
-/// The meshes' IPC contact (Contact2d / Contact3d: between meshes, self-contact, and the ground
+/// The meshes' IPC contact (Contact<dim>: between meshes, self-contact, and the ground
 /// half-space when the scene has contact.ground_height) with the system's dhat and kappa.
 template <int dim>
 std::unique_ptr<ContactPotential<dim>> make_fem_contact(const Scene& scene, const FemSceneSystem<dim>& s);

@@ -46,6 +46,8 @@ public:
     void set_assemble(bool assemble) { assemble_ = assemble; }
     /// 1 on the free components, 0 on the fixed ones.
     const VecX& free_components() const { return free_; }
+    /// The forms, in their summation order.
+    const std::vector<Form*>& forms() const { return forms_; }
 
 protected:
     /// The forms, summed in this order (not owned).

@@ -1,6 +1,7 @@
 #pragma once
 // A form's Hessian kept as a list of triplets (the contact pairs' terms, whose pattern changes
-// from one Newton iterate to the next): its products, diagonals and triplets for the problem.
+// from one Newton iterate to the next): its products, diagonals and triplets for the problem;
+// TripletHessianForm, the base of the forms that keep theirs so.
 #include <vector>
 
 #include "pnet/solver/form.hpp"
@@ -21,6 +22,25 @@ public:
 
 private:
     std::vector<Triplet> triplets_;
+};
+
+/// A form whose prepare_hessian() fills hessian_ (triplets between free components, summed
+/// apart from the fixed-pattern forms): the Hessian views come from it.
+class TripletHessianForm : public Form {
+public:
+    /// block: the unknowns per node (the dimension).
+    explicit TripletHessianForm(int block) : block_(block) {}
+    void add_hessian_multiply(const VecX& d, VecX& out) const override { hessian_.multiply(d, out); }
+    void add_hessian_diagonal(VecX& diagonal) const override { hessian_.diagonal(diagonal); }
+    void add_hessian_block_diagonal(VecX& blocks) const override { hessian_.block_diagonal(blocks, block_); }
+    void add_hessian_triplets(std::vector<Triplet>& triplets) const override { hessian_.append_to(triplets); }
+    bool changing_pattern() const override { return true; }
+
+protected:
+    TripletHessian hessian_;
+
+private:
+    int block_;
 };
 
 }  // namespace pnet

@@ -12,7 +12,7 @@
 #include "pnet/contact/adaptive_stiffness.hpp"
 #include "pnet/contact/ccd/point_edge.hpp"
 #include "pnet/contact/distance/point_edge.hpp"
-#include "pnet/contact/collisions/contact2d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/solver/newton.hpp"

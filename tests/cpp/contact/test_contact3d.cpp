@@ -11,7 +11,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "pnet/contact/collisions/contact3d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/contact/friction.hpp"
 #include "pnet/contact/broad_phase/hash_grid.hpp"
 #include "pnet/fem/fem_integrator.hpp"

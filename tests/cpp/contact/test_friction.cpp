@@ -9,7 +9,7 @@
 #include <Eigen/Geometry>
 
 #include "pnet/contact/friction.hpp"
-#include "pnet/contact/collisions/contact2d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "support/finite_difference.hpp"

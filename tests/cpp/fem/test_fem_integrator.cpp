@@ -7,7 +7,7 @@
 
 #include <memory>
 
-#include "pnet/contact/collisions/contact2d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/energy/analytic_elastoplastic.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"

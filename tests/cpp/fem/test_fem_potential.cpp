@@ -7,11 +7,12 @@
 #include <algorithm>
 #include <cmath>
 
-#include "pnet/contact/collisions/contact2d.hpp"
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/contact/friction.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/solver/newton.hpp"
+#include "support/form_checks.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 
@@ -207,6 +208,9 @@ TEST(FemPotential, AssembledHessianWithContactAndFrictionMatchesFiniteDifference
     EXPECT_NE(soft(2 * node + 1, 2 * neighbour + 1), 0.0);
     EXPECT_GT(soft(2 * node + 1, 2 * node + 1), 1e3 * f.rest.node_mass[node]);
     EXPECT_LT((H - H.transpose()).cwiseAbs().maxCoeff(), 1e-12 * H.cwiseAbs().maxCoeff()) << "symmetric";
+    // Each form (inertia, elements, contact = barrier + friction) on its own.
+    ASSERT_EQ(f.potential.forms().size(), 3u);
+    for (Form* form : f.potential.forms()) EXPECT_GT(test::expect_consistent_form(*form, v, 2, "FEM form"), 0u);
 }
 
 // CHOLMOD's direct solve and PCG find the same minimizer; the direct solve
