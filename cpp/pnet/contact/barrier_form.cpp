@@ -9,7 +9,7 @@ void BarrierForm<dim>::begin_step(const std::vector<Vec<dim>>& x_start, double d
     x_start_ = &x_start;
     dt_ = dt;
     free_ = &free;
-    ccd_queries_ = ccd_limited_ = 0;
+    ccd_ = CcdCount{};
 }
 
 template <int dim>
@@ -44,10 +44,7 @@ double BarrierForm<dim>::max_step(const VecX& v, const VecX& d) {
     positions(v, x_);
     dx_.resize(x_.size());
     for (std::size_t i = 0; i < x_.size(); ++i) dx_[i] = dt_ * d.template segment<dim>(dim * i);
-    const double t = contact_.max_step(x_, dx_);
-    ++ccd_queries_;
-    ccd_limited_ += t < 1.0;
-    return t;
+    return ccd_.record(contact_.max_step(x_, dx_));
 }
 
 template class BarrierForm<2>;

@@ -12,6 +12,18 @@
 
 namespace pnet {
 
+/// The CCD queries of a barrier form's max_step() since its step began, and how many of them
+/// shortened the step.
+struct CcdCount {
+    int queries = 0, limited = 0;
+    /// Counts one query that allowed the fraction t; returns t.
+    double record(double t) {
+        ++queries;
+        limited += t < 1.0;
+        return t;
+    }
+};
+
 template <int dim>
 class BarrierForm final : public TripletHessianForm {
 public:
@@ -29,9 +41,7 @@ public:
 
     /// Project the pairs' Hessians to PSD (default; false: exact, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
-    /// CCD queries of max_step() since begin_step(), and how many of them shortened the step.
-    int ccd_queries() const { return ccd_queries_; }
-    int ccd_limited() const { return ccd_limited_; }
+    const CcdCount& ccd() const { return ccd_; }
 
 private:
     const ContactPotential<dim>& contact_;
@@ -40,7 +50,7 @@ private:
     double dt_ = 0.0;
     std::vector<Vec<dim>> x_, dx_;
     bool project_psd_ = true;
-    int ccd_queries_ = 0, ccd_limited_ = 0;
+    CcdCount ccd_;
 };
 
 }  // namespace pnet

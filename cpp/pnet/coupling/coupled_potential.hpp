@@ -86,8 +86,8 @@ public:
     void set_project_psd(bool project) { barrier_.set_project_psd(project); }
 
     /// CCD queries since begin_step() and how many shortened a step; the pairs at the last evaluation.
-    int ccd_queries() const { return barrier_.ccd_queries(); }
-    int ccd_limited() const { return barrier_.ccd_limited(); }
+    int ccd_queries() const { return barrier_.ccd().queries; }
+    int ccd_limited() const { return barrier_.ccd().limited; }
     std::size_t pairs() const { return barrier_.pairs().size(); }
 
 private:

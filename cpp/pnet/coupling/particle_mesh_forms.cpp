@@ -115,7 +115,7 @@ void ParticleBarrierForm<dim>::begin_step() {
     this->hessian_pairs_.clear();
     this->gradients_.clear();
     this->hessians_.clear();
-    ccd_queries_ = ccd_limited_ = 0;
+    ccd_ = CcdCount{};
 }
 
 template <int dim>
@@ -147,10 +147,7 @@ double ParticleBarrierForm<dim>::max_step(const VecX& v, const VecX& d) {
     this->mpm_.particle_positions(dg, dX_, true);
     dx_.resize(this->x_.size());
     for (std::size_t a = 0; a < this->x_.size(); ++a) dx_[a] = this->mpm_.dt() * df.template segment<dim>(dim * a);
-    const double t = this->contact_.max_step(this->X_, dX_, this->x_, dx_);
-    ++ccd_queries_;
-    ccd_limited_ += t < 1.0;
-    return t;
+    return ccd_.record(this->contact_.max_step(this->X_, dX_, this->x_, dx_));
 }
 
 template <int dim>

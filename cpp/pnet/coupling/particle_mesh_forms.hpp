@@ -89,14 +89,12 @@ public:
 
     /// Project the pair Hessians to PSD (default; false: exact, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
-    /// CCD queries since begin_step() and how many shortened a step.
-    int ccd_queries() const { return ccd_queries_; }
-    int ccd_limited() const { return ccd_limited_; }
+    const CcdCount& ccd() const { return ccd_; }
 
 private:
     std::vector<Vec<dim>> dX_, dx_;
     bool project_psd_ = true;
-    int ccd_queries_ = 0, ccd_limited_ = 0;
+    CcdCount ccd_;
 };
 
 template <int dim>

@@ -104,8 +104,8 @@ public:
     double dt() const { return dt_; }
 
     /// CCD queries of max_step() since the last begin_step(), and how many of them shortened the step.
-    int ccd_queries() const { return barrier_ ? barrier_->ccd_queries() : 0; }
-    int ccd_limited() const { return barrier_ ? barrier_->ccd_limited() : 0; }
+    int ccd_queries() const { return barrier_ ? barrier_->ccd().queries : 0; }
+    int ccd_limited() const { return barrier_ ? barrier_->ccd().limited : 0; }
 
     /// Project the element and contact Hessians to PSD (default; false: the exact Hessian, for
     /// derivative checks).

@@ -146,28 +146,10 @@ void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) con
 }
 
 template <int dim>
-void ParticleEnergyForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
-    scratch_.setZero(diagonal.size());
-    double* diag = scratch_.data();
-    problem_.grid().for_each_particle_coloured([&](int p) {
-        const Tensor4<dim>& K = K_[p];
-        const int* dof = problem_.stencil_dofs(p);
-        const Vec<dim>* grad = problem_.stencil_gradients(p);
-        for (int s = 0; s < kStencil; ++s) {
-            const Vec<dim>& g = grad[s];
-            double* di = diag + dim * dof[s];
-            // d = e_a at this node: dG = e_a g^T, so the entry is g^T K[(a, .), (a, .)] g.
-            for (int a = 0; a < dim; ++a) di[a] += g.dot(K.template block<dim, dim>(a * dim, a * dim) * g);
-        }
-    });
-    diagonal.array() += scratch_.array() * problem_.free_components().array();
-}
-
-template <int dim>
-void ParticleEnergyForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
+void ParticleEnergyForm<dim>::node_blocks(VecX& blocks) const {
     constexpr int kB = dim * dim;
-    scratch_.setZero(blocks.size());
-    double* out = scratch_.data();
+    blocks.setZero(problem_.size() * dim);
+    double* out = blocks.data();
     problem_.grid().for_each_particle_coloured([&](int p) {
         const Tensor4<dim>& K = K_[p];
         const int* dof = problem_.stencil_dofs(p);
@@ -175,18 +157,31 @@ void ParticleEnergyForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
         for (int s = 0; s < kStencil; ++s) {
             const Vec<dim>& g = grad[s];
             double* B = out + kB * dof[s];  // row-major
+            // d = e_b at this node: dG = e_b g^T, so entry (a, b) is g^T K[(a, .), (b, .)] g.
             for (int a = 0; a < dim; ++a)
                 for (int b = 0; b < dim; ++b) B[a * dim + b] += g.dot(K.template block<dim, dim>(a * dim, b * dim) * g);
         }
     });
+}
+
+template <int dim>
+void ParticleEnergyForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
+    node_blocks(scratch_);
+    const VecX& free = problem_.free_components();
+    for (Eigen::Index i = 0; i < diagonal.size(); ++i) diagonal[i] += scratch_[i * dim + i % dim] * free[i];
+}
+
+template <int dim>
+void ParticleEnergyForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
+    constexpr int kB = dim * dim;
+    node_blocks(scratch_);
     const VecX& free = problem_.free_components();
     const Eigen::Index nodes = free.size() / dim;
 #pragma omp parallel for schedule(static)
-    for (Eigen::Index k = 0; k < nodes; ++k) {
-        const double* B = out + kB * k;
+    for (Eigen::Index k = 0; k < nodes; ++k)
         for (int a = 0; a < dim; ++a)
-            for (int b = 0; b < dim; ++b) blocks[kB * k + a * dim + b] += B[a * dim + b] * (free[dim * k + a] * free[dim * k + b]);
-    }
+            for (int b = 0; b < dim; ++b)
+                blocks[kB * k + a * dim + b] += scratch_[kB * k + a * dim + b] * (free[dim * k + a] * free[dim * k + b]);
 }
 
 namespace {

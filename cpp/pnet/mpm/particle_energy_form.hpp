@@ -62,6 +62,8 @@ public:
 private:
     /// sum_p V0_p psi_p, in particle order, serially: the sum must not depend on the thread count.
     double potential_sum() const;
+    /// The unmasked d x d diagonal block of each node, summed over the particles it reaches.
+    void node_blocks(VecX& blocks) const;
     /// g += sum_p V0 dt P_p F^E_p^T grad w_ip.
     void scatter_gradient(VecX& g) const;
     /// K_p = V0 dt^2 T_p^T H_p T_p in place of the Hessians H_p.

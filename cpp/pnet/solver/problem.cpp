@@ -140,6 +140,11 @@ const VecX& ProblemForm<dim>::slice(const VecX& x) const {
 }
 
 template <int dim>
+void ProblemForm<dim>::add_slice(const VecX& part, VecX& whole) const {
+    whole.segment(offset_, problem_.size()) += part;
+}
+
+template <int dim>
 double ProblemForm<dim>::value(const VecX& x) {
     return problem_.value(slice(x));
 }
@@ -147,7 +152,7 @@ double ProblemForm<dim>::value(const VecX& x) {
 template <int dim>
 double ProblemForm<dim>::add_gradient(const VecX& x, VecX& g) {
     const double e = problem_.value_gradient(slice(x), out_);
-    g.segment(offset_, problem_.size()) += out_;
+    add_slice(out_, g);
     return e;
 }
 
@@ -159,20 +164,20 @@ void ProblemForm<dim>::prepare_hessian(const VecX& x) {
 template <int dim>
 double ProblemForm<dim>::add_gradient_hessian(const VecX& x, VecX& g) {
     const double e = problem_.value_gradient_hessian(slice(x), out_);
-    g.segment(offset_, problem_.size()) += out_;
+    add_slice(out_, g);
     return e;
 }
 
 template <int dim>
 void ProblemForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) const {
     problem_.hessian_multiply(slice(d), out_);
-    out.segment(offset_, problem_.size()) += out_;
+    add_slice(out_, out);
 }
 
 template <int dim>
 void ProblemForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
     problem_.hessian_diagonal(out_);
-    diagonal.segment(offset_, problem_.size()) += out_;
+    add_slice(out_, diagonal);
 }
 
 template <int dim>

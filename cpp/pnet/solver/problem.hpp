@@ -96,7 +96,9 @@ public:
     double max_step(const VecX& x, const VecX& d) override;
 
 private:
+    /// x's part on the unknowns of the problem; whole's part += part.
     const VecX& slice(const VecX& x) const;
+    void add_slice(const VecX& part, VecX& whole) const;
 
     Problem<dim>& problem_;
     Eigen::Index offset_ = 0;
