@@ -41,6 +41,8 @@ public:
 
     CoupledPotential(IncrementalPotential<dim>& mpm, FemPotential<dim>& fem, const Contact& contact);
     ~CoupledPotential() override;
+    CoupledPotential(const CoupledPotential&) = delete;  // its forms refer to its members
+    CoupledPotential& operator=(const CoupledPotential&) = delete;
 
     enum class LinearSolve { Assembled, BlockPreconditioned };
     /// Assembled: hessian_matrix() for Newton's CHOLMOD solve. BlockPreconditioned (default):

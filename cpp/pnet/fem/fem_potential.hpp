@@ -55,7 +55,7 @@ template <int dim>
 class FemPotential final : public Problem<dim> {
 public:
     FemPotential(const Mesh<dim>& mesh, const ElementRest<dim>& rest, ParticleEnergy<dim>& energy);
-    FemPotential(const FemPotential&) = delete;
+    FemPotential(const FemPotential&) = delete;  // its forms refer to its members
     FemPotential& operator=(const FemPotential&) = delete;
 
     /// Sets up one step: positions x^n, v* (= v^n + dt g on free nodes, the

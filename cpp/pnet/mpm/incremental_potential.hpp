@@ -36,7 +36,7 @@ public:
         : inertia_(this->free_, dim), particle_energy_(*this, energy) {
         this->set_forms({&inertia_, &particle_energy_});
     }
-    IncrementalPotential(const IncrementalPotential&) = delete;
+    IncrementalPotential(const IncrementalPotential&) = delete;  // its forms refer to its members
     IncrementalPotential& operator=(const IncrementalPotential&) = delete;
 
     /// Sets up one step. `grid` holds this step's P2G (binning, node masses) and

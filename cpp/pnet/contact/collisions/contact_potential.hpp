@@ -1,9 +1,9 @@
 #pragma once
 // The face of IPC contact (docs/methods.md): ContactPotential<dim>, the barrier energy of a
 // mesh's nodal positions with its gradient, Hessian, CCD filter and lagged friction pairs, which
-// the FEM potential adds to its objective; the half-spaces (the ground) and the lagged friction
-// pair it hands to friction.hpp. Contact2d (contact2d.hpp) and Contact3d (contact3d.hpp) are
-// its two implementations.
+// the FEM problem adds as a form (contact/barrier_form.hpp); the half-spaces (the ground) and the
+// lagged friction pair it hands to friction.hpp. Contact<dim> (contact.hpp) implements it for
+// both dimensions.
 #include <array>
 #include <string>
 #include <vector>
