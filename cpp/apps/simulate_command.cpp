@@ -31,6 +31,7 @@ constexpr const char* kUsage =
     "                     [--hessian auto|network|tangent] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
+    "                     [--advection-cfl C] (MPM: cap a step so no particle moves more than C cells; 0: off)\n"
     "                     [--fixed-point-inexact FORCING]\n"
     "                     [--fail-on-unconverged]\n"
     "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
@@ -48,6 +49,7 @@ struct Options {
     bool trust_model = false, fail_on_unconverged = false;
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
+    std::optional<double> advection_cfl;
     std::optional<double> analytic_regularizer;
     std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, kinematic_start, time_integrator;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
@@ -106,6 +108,8 @@ Options parse(int argc, char** argv) {
             o.analytic_regularizer = number(value());
         else if (arg == "--lazy-hessian")
             o.lazy_hessian = number(value());
+        else if (arg == "--advection-cfl")
+            o.advection_cfl = number(value());
         else if (arg == "--preconditioner")
             o.preconditioner = value();
         else if (arg == "--time-integrator") {
@@ -182,6 +186,8 @@ Options parse(int argc, char** argv) {
         throw UsageError("--analytic-regularizer must be a finite number >= 0");
     if (o.lazy_hessian && !(*o.lazy_hessian >= 0.0 && *o.lazy_hessian < 1.0))
         throw UsageError("--lazy-hessian must be in [0, 1)");
+    if (o.advection_cfl && !(*o.advection_cfl >= 0.0 && *o.advection_cfl <= 1.0))
+        throw UsageError("--advection-cfl must be in [0, 1]");
     if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi" &&
         *o.preconditioner != "ichol")
         throw UsageError("--preconditioner: expected jacobi, block_jacobi or ichol, got \"" + *o.preconditioner + "\"");
@@ -239,6 +245,7 @@ int simulate_command(int argc, char** argv) {
         if (o.analytic_regularizer) settings.implicit.analytic_regularizer = *o.analytic_regularizer;
         if (o.preconditioner) settings.implicit.preconditioner = *o.preconditioner;
         if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;
+        if (o.advection_cfl) settings.implicit.advection_cfl = *o.advection_cfl;
         if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
         if (o.fixed_point_anderson) settings.implicit.fixed_point_anderson = *o.fixed_point_anderson;
         if (o.outer_iteration) settings.implicit.outer_iteration = *o.outer_iteration;

@@ -5,6 +5,7 @@ folder is $PNET_BUILD_DIR, default build/)."""
 from __future__ import annotations
 
 import copy
+import csv
 import json
 import os
 import re
@@ -326,7 +327,27 @@ def test_implicit_options_override_the_scene(tmp_path):
     assert len(steps) == 10 and all(line.split(",")[13] == "1" for line in steps)
 
 
+def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
+    """--advection-cfl C: a step of 0.02 s would carry the tiny snowball (3 m/s) over several cells;
+    capped, the frame takes several steps, none longer than C dx / max |v|; the run records C."""
+    runs = {}
+    for name, extra in (("whole", []), ("capped", ["--advection-cfl", 0.25])):
+        out = tmp_path / name
+        r = pnet("simulate", TINY / "snowball_2d.json", "--integrator", "lagged", "--dt", 0.02, "--frames", 1,
+                 "--out", out, *extra)
+        assert r.returncode == 0, r.stderr
+        runs[name] = (json.loads((out / "run.json").read_text()), list(csv.DictReader(open(out / "stats.csv"))))
+    (whole_run, whole), (capped_run, capped) = runs["whole"], runs["capped"]
+    assert whole_run["solver"]["advection_cfl"] == 0 and capped_run["solver"]["advection_cfl"] == 0.25
+    assert int(whole[0]["steps"]) == 1 and float(whole[0]["dt_max_s"]) == 0.02
+    dx = json.loads((TINY / "snowball_2d.json").read_text())["dx"]
+    assert int(capped[0]["steps"]) > 1
+    # 3 m/s: the fastest at the start; stats.csv holds 6 significant digits
+    assert float(capped[0]["dt_max_s"]) <= 0.25 * dx / 3.0 * (1 + 1e-5)
+
+
 @pytest.mark.parametrize("args, expected", [
+    (["--advection-cfl", 2], "--advection-cfl must be in [0, 1]"),
     (["--fixed-point-iterations", 0], "--fixed-point-iterations must be a whole number in [1, 100000]"),
     (["--cg-tol", 1.5], "--cg-tol must be in (0, 1)"),
     (["--regularizer", -1], "--regularizer must be a finite number >= 0"),
@@ -518,6 +539,7 @@ _BAD_OPTIONS = [
     ("--fixed-point-tol", ["-1", "nan", "inf"]),
     ("--regularizer", ["-1", "nan", "inf"]),
     ("--lazy-hessian", ["-0.1", "1", "nan"]),
+    ("--advection-cfl", ["-0.1", "1.5", "nan"]),
     ("--fixed-point-iterations", ["0", "-2", "1.5", "nan", "1e12"]),
     ("--fixed-point-inexact", ["-0.1", "1", "nan"]),
     ("--fixed-point-anderson", ["-1", "1.5", "nan", "1e12"]),

@@ -114,6 +114,16 @@ template struct MpmSystem<2>;
 template struct MpmSystem<3>;
 template class ExplicitIntegrator<2>;
 template class ExplicitIntegrator<3>;
+template <int dim>
+double advection_time_step(const MpmSystem<dim>& system, const Particles<dim>& particles, double dt, double cfl) {
+    if (!(cfl > 0.0)) return dt;
+    double v_max = 0.0;
+    for (const Vec<dim>& v : particles.v) v_max = std::max(v_max, v.norm());
+    return v_max > 0.0 ? std::min(dt, cfl * system.dx / v_max) : dt;
+}
+
+template double advection_time_step<2>(const MpmSystem<2>&, const Particles<2>&, double, double);
+template double advection_time_step<3>(const MpmSystem<3>&, const Particles<3>&, double, double);
 template double cfl_time_step<2>(const MpmSystem<2>&, const Particles<2>&, double);
 template double cfl_time_step<3>(const MpmSystem<3>&, const Particles<3>&, double);
 template std::size_t clamp_to_grid<2>(Particles<2>&, const Grid<2>&, long, double);

@@ -69,6 +69,11 @@ private:
 template <int dim>
 double cfl_time_step(const MpmSystem<dim>& system, const Particles<dim>& particles, double cfl);
 
+/// The step dt capped so that no particle moves more than `cfl` grid cells at its velocity:
+/// min(dt, cfl dx / max_p |v_p|) (dt when cfl = 0 or nothing moves). ImplicitOptions::advection_cfl.
+template <int dim>
+double advection_time_step(const MpmSystem<dim>& system, const Particles<dim>& particles, double dt, double cfl);
+
 /// Pulls particles back inside [lower_limit, upper_limit] of the grid, so that
 /// no stencil leaves it; returns how many moved. Throws SimulationError naming
 /// the step and particle for a non-finite position or velocity, or a speed

@@ -96,7 +96,9 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
 
 template <int dim>
 StepStats CoupledSimulation<dim>::step() {
-    const double dt = clip_to_frame(dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl));
+    const double dt = clip_to_frame(
+        dt_ > 0.0 ? (implicit_ ? advection_time_step(mpm_, particles_, dt_, settings_.implicit.advection_cfl) : dt_)
+                  : explicit_->cfl_time_step(particles_, settings_.cfl));
     StepStats s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
     s.contact_pairs = coupling_->active(particles_.x, state_.x).size();

@@ -74,8 +74,12 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
 
 template <int dim>
 StepStats Simulation<dim>::step() {
-    const double dt =
-        clip_to_frame(settings_.dt > 0.0 ? settings_.dt : cfl_time_step(system_, particles_, settings_.cfl));
+    const double dt = clip_to_frame(
+        settings_.dt > 0.0
+            ? (settings_.name == "explicit"
+                   ? settings_.dt
+                   : advection_time_step(system_, particles_, settings_.dt, settings_.implicit.advection_cfl))
+            : cfl_time_step(system_, particles_, settings_.cfl));
     const StepStats s = integrator_->step(particles_, dt, steps_);
     count_step(dt);
     return s;

@@ -54,6 +54,10 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     if (o.lazy_hessian >= 1.0)
         throw std::invalid_argument(context + ": integrator.lazy_hessian: expected a number in [0, 1), got " +
                                     nlohmann::json(o.lazy_hessian).dump());
+    o.advection_cfl = read_option(block, "advection_cfl", o.advection_cfl, context, 0.0, "a number in [0, 1]");
+    if (o.advection_cfl > 1.0)
+        throw std::invalid_argument(context + ": integrator.advection_cfl: expected a number in [0, 1], got " +
+                                    nlohmann::json(o.advection_cfl).dump());
     o.max_kinematic_stages =
         read_option(block, "max_kinematic_stages", o.max_kinematic_stages, context, 0, "an integer >= 0");
     if (const auto it = block.find("fail_on_unconverged"); it != block.end()) {
@@ -172,7 +176,8 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"max_kinematic_stages", max_kinematic_stages},
             {"kinematic_start", kinematic_start},
             {"fem_predictor", fem_predictor},
-            {"learned_return_map", learned_return_map}};
+            {"learned_return_map", learned_return_map},
+            {"advection_cfl", advection_cfl}};
 }
 
 }  // namespace pnet

@@ -567,8 +567,11 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
                                {"max_kinematic_stages", 5},
                                {"fail_on_unconverged", true},
                                {"fixed_point_anderson", 2},
-                               {"fixed_point_keep_hessian", false}};
+                               {"fixed_point_keep_hessian", false},
+                               {"advection_cfl", 0.25}};
     const ImplicitOptions o = ImplicitOptions::from_json(ok, "s.json");
+    EXPECT_EQ(o.advection_cfl, 0.25);
+    EXPECT_EQ(ImplicitOptions{}.advection_cfl, 0.0) << "off unless asked";
     EXPECT_EQ(o.preconditioner, "block_jacobi");
     EXPECT_EQ(o.lazy_hessian, 0.0);
     EXPECT_EQ(o.max_kinematic_stages, 5);
@@ -606,6 +609,9 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
               "s.json: integrator.fixed_point_keep_hessian: expected true or false, got \"yes\"");
     EXPECT_EQ(message({{"fail_on_unconverged", 1}}),
               "s.json: integrator.fail_on_unconverged: expected true or false, got 1");
+    EXPECT_EQ(message({{"advection_cfl", 1.5}}), "s.json: integrator.advection_cfl: expected a number in [0, 1], got 1.5");
+    EXPECT_EQ(message({{"advection_cfl", -0.1}}),
+              "s.json: integrator.advection_cfl: expected a number in [0, 1], got -0.1");
     EXPECT_EQ(message({{"regularizer_weight", "one"}}),
               "s.json: integrator.regularizer_weight: expected a number >= 0, got \"one\"");
 }

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "pnet/scene/scene.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 #include "support/temp_dir.hpp"
 
@@ -83,6 +84,45 @@ void checkpoint_round_trip(const char* file) {
     EXPECT_EQ(resumed.total_steps(), uninterrupted.total_steps());
     expect_identical(resumed.particles(), uninterrupted.particles());
     EXPECT_EQ(dir.entries(), std::vector<std::string>{"state.bin"});  // no temporary left
+}
+
+// The advection limit (ImplicitOptions::advection_cfl): the implicit steps of a disk thrown down at
+// 8 m/s are cut to C dx / max_p |v_p| (the velocities at each step's start), frames still land on
+// their times, and with the limit off the scene's dt is kept.
+TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
+    nlohmann::json j = scene_to_json(load_scene(PNET_SCENES_DIR "/tiny/snowball_2d.json"));
+    j["objects"][0]["velocity"] = {0.0, -8.0};
+    const Scene scene = scene_from_json(j, "fast.json", PNET_SCENES_DIR "/tiny");
+    IntegratorSettings settings = IntegratorSettings::from_scene(scene);
+    settings.name = "lagged";
+    settings.dt = 2e-3;
+    Simulation<2> off(scene, settings);
+    const FrameStats whole = off.advance_frame();
+    EXPECT_DOUBLE_EQ(whole.dt_max, 2e-3);
+    EXPECT_DOUBLE_EQ(whole.dt_min, 2e-3);
+
+    const double cfl = 0.25;
+    settings.implicit.advection_cfl = cfl;
+    Simulation<2> capped(scene, settings);
+    const double dx = capped.system().dx;
+    auto fastest = [&] {
+        double v = 0.0;
+        for (const Vec<2>& vp : capped.particles().v) v = std::max(v, vp.norm());
+        return v;
+    };
+    double v_max = fastest(), t = 0.0;
+    ASSERT_GT(2e-3 * v_max, cfl * dx) << "the test needs steps the limit cuts";
+    long steps = 0;
+    const FrameStats cut = capped.advance_frame([&] {
+        const double dt = capped.time() - t;
+        EXPECT_LE(dt, cfl * dx / v_max * (1.0 + 1e-12)) << "step " << steps;
+        t = capped.time();
+        v_max = fastest();
+        ++steps;
+    });
+    EXPECT_EQ(cut.steps, steps);
+    EXPECT_GT(cut.steps, whole.steps);
+    EXPECT_DOUBLE_EQ(capped.time(), scene.frame_dt);
 }
 
 TEST(Simulation, CheckpointThenResumeEqualsAnUninterruptedRun2d) {
