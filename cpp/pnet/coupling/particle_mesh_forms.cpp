@@ -7,9 +7,14 @@
 namespace pnet {
 
 template <int dim>
-void ParticleMeshForm<dim>::positions(const VecX& v) const {
+void ParticleMeshForm<dim>::split(const VecX& v) const {
     vg_ = v.head(mpm_.size());
     vf_ = v.tail(fem_.size());
+}
+
+template <int dim>
+void ParticleMeshForm<dim>::positions(const VecX& v) const {
+    split(v);
     mpm_.particle_positions(vg_, X_);
     fem_.positions(vf_, x_);
 }
@@ -164,12 +169,6 @@ void ParticleFrictionForm<dim>::set_pairs(std::vector<ParticleFrictionPair<dim>>
 }
 
 template <int dim>
-void ParticleFrictionForm<dim>::split(const VecX& v) const {
-    this->vg_ = v.head(this->mpm_.size());
-    this->vf_ = v.tail(this->fem_.size());
-}
-
-template <int dim>
 Eigen::Matrix<double, dim - 1, 1> ParticleFrictionForm<dim>::slip(std::size_t k) const {
     const ParticleFrictionPair<dim>& f = friction_pairs_[k];
     constexpr int kStencil = IncrementalPotential<dim>::kStencil;
@@ -185,7 +184,7 @@ Eigen::Matrix<double, dim - 1, 1> ParticleFrictionForm<dim>::slip(std::size_t k)
 template <int dim>
 double ParticleFrictionForm<dim>::value(const VecX& v) {
     if (friction_pairs_.empty()) return 0.0;
-    split(v);
+    this->split(v);
     double sum = 0.0;
     for (std::size_t k = 0; k < friction_pairs_.size(); ++k)
         sum += mu_ * friction_pairs_[k].normal_force * friction_f0(slip(k).norm(), eps_v_);
@@ -195,7 +194,7 @@ double ParticleFrictionForm<dim>::value(const VecX& v) {
 template <int dim>
 double ParticleFrictionForm<dim>::add_gradient(const VecX& v, VecX& g) {
     if (friction_pairs_.empty()) return 0.0;
-    split(v);
+    this->split(v);
     // dD/d(v_p, v_facet) in the stacked slots: f = mu lambda f1(|u|) T u / |u| on the particle,
     // -c_j f on the facet's nodes; scattered with dt, as the barrier's position gradients.
     this->gradients_.resize(friction_pairs_.size());
@@ -217,7 +216,7 @@ double ParticleFrictionForm<dim>::add_gradient(const VecX& v, VecX& g) {
 template <int dim>
 void ParticleFrictionForm<dim>::prepare_hessian(const VecX& v) {
     if (friction_pairs_.empty()) return;
-    split(v);
+    this->split(v);
     this->hessians_.resize(friction_pairs_.size());
     this->hessian_scale_ = this->mpm_.dt();
     for (std::size_t k = 0; k < friction_pairs_.size(); ++k) {

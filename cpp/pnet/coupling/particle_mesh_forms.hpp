@@ -55,7 +55,9 @@ public:
     void for_each_pair_hessian(F&& f) const;
 
 protected:
-    /// The particles' and the mesh's positions at v.
+    /// v's grid and mesh parts into vg_, vf_.
+    void split(const VecX& v) const;
+    /// The particles' and the mesh's positions at v (after split(v)).
     void positions(const VecX& v) const;
     /// g += dt J^T gradient of each pair.
     void scatter_gradient(VecX& g) const;
@@ -115,7 +117,6 @@ public:
 private:
     /// The slip T^T (v_p - sum_j c_j v_j) of pair k at the velocities in vg_, vf_.
     Eigen::Matrix<double, dim - 1, 1> slip(std::size_t k) const;
-    void split(const VecX& v) const;
 
     std::vector<ParticleFrictionPair<dim>> friction_pairs_;
     double mu_ = 0.0, eps_v_ = 1e-4;
