@@ -30,7 +30,8 @@ import matplotlib.pyplot as plt
 from IPython.display import Image, Markdown, display
 
 ROOT = next(p for p in [Path.cwd(), *Path.cwd().parents] if (p / "models" / "MANIFEST").exists())
-RESULTS = ROOT / "notebooks" / "results"
+# PNET_RESULTS: another results folder (the workflow's, scripts/reproduce.sh --config results=...).
+RESULTS = Path(os.environ.get("PNET_RESULTS") or ROOT / "notebooks" / "results")
 TINY = os.environ.get("PNET_NOTEBOOK_TINY") == "1"
 plt.rcParams.update({"figure.dpi": 100, "axes.grid": True, "grid.alpha": 0.3})
 
@@ -104,8 +105,7 @@ NOTEBOOKS["fig05_accuracy"] = [
 each run against explicit MPM at dt = 1e-5 s, per frame, for the sand column and the snowball, beside
 the noise floor (explicit at 2e-5 s and at its CFL step). (c): the mean FEM nodal distance from the
 ground truth on the 2D metal frame, in % of the bounding-box diagonal. Regenerate:
-`/usr/bin/python3 scripts/evaluate_implicit.py --scenes sand_column_2d snowball_2d --groups main floor`
-and `/usr/bin/python3 scripts/evaluate_fem.py` (results in `notebooks/results/implicit_eval/` and
+`scripts/reproduce.sh fig05` (docs/workflow.md; results in `notebooks/results/implicit_eval/` and
 `notebooks/results/fem_eval/`)."""),
     new_code_cell(PREAMBLE),
     new_code_cell('''STYLE = {"explicit_2e-5": ("k", ":"), "explicit_cfl": ("0.5", "--"), "plasticitynet_1e-3": ("C0", "-"),
@@ -141,11 +141,12 @@ NOTEBOOKS["table1_timings"] = [
 The tables written by `bench_table1` (C++, `cpp/bench/bench_table1.cpp`): every integrator runs the
 same simulated interval from the scene's initial state, in one process, and each speed-up is a ratio
 of two timings of that run. Besides the paper's comparison (explicit at its 1e-5 s ground-truth step)
-every row is compared with explicit at its own CFL step. Regenerate (quiet machine, 2 threads):
+every row is compared with explicit at its own CFL step. Regenerate on a quiet machine with
+`scripts/reproduce.sh table1` (docs/workflow.md), which runs
 
-    build/cpp/bench/bench_table1 --no-fem --frames 10 --with-lagged --threads 2   # MPM rows, stiff rows
-    build/cpp/bench/bench_table1 --only metal_frame_2d --with-lagged --threads 2    # FEM rows
-    build/cpp/bench/bench_table1 --only sand_fem_coupling_2d --threads 2            # coupling row
+    build/cpp/bench/bench_table1 --no-fem --frames 10 --with-lagged --threads N   # table1/mpm.md: MPM and stiff rows
+    build/cpp/bench/bench_table1 --only metal_frame_2d --with-lagged --threads N    # table1/fem.md
+    build/cpp/bench/bench_table1 --only sand_fem_coupling_2d --threads N            # table1/coupling.md
 """),
     new_code_cell(PREAMBLE),
     new_code_cell('''def table_rows(path):
@@ -160,13 +161,13 @@ every row is compared with explicit at its own CFL step. Regenerate (quiet machi
     return header, rows
 
 
-sources = {"MPM (and stiff MPM)": RESULTS / "implicit_eval" / "bench_table1_issue19.md",
-           "FEM metal": RESULTS / "fem_eval" / "bench_table1.md",
-           "MPM-FEM coupling": RESULTS / "coupling_eval" / "bench_table1.md"}
+sources = {"MPM (and stiff MPM)": RESULTS / "table1" / "mpm.md",
+           "FEM metal": RESULTS / "table1" / "fem.md",
+           "MPM-FEM coupling": RESULTS / "table1" / "coupling.md"}
 for title, path in sources.items():
     header, rows = table_rows(path)
     keep = [h for h in header if h in ("scene", "integrator", "dt (s)", "s/frame", "Newton/step", "CG/step") or h.startswith("speed-up") or h.startswith("paper")]
-    text = [f"**{title}** (`{path.relative_to(ROOT)}`)", "", "| " + " | ".join(keep) + " |", "|" + "---|" * len(keep)]
+    text = [f"**{title}** (`{path.relative_to(RESULTS)}`)", "", "| " + " | ".join(keep) + " |", "|" + "---|" * len(keep)]
     text += ["| " + " | ".join(r.get(h, "") for h in keep) + " |" for r in rows]
     display(Markdown("\\n".join(text)))'''),
     new_code_cell('''# Seconds per frame of the implicit integrator against explicit at 1e-5 (1e-6 for the stiff rows) and at CFL.
@@ -199,7 +200,7 @@ the loss of eq. 9, batch 8192, 15000 steps), only the form differing:
 | `eq8` | Psi = N(F, F0) - (grad N(F0, F0) - Ptilde(F0)) : F | the exact stress at F = F0 |
 
 Regenerate: `scripts/train_ablation_models.sh` (models/ablation/, ~35 min on one core) and
-`/usr/bin/python3 scripts/evaluate_implicit.py --scenes sand_column_2d --groups main representation --runs explicit_cfl plasticitynet_1e-3 form_eq8_1e-3 form_local_identity_1e-3 form_global_identity_1e-3 form_global_1e-3 --results notebooks/results/representation_ablation --keep-frames 1 5 10 25 50`
+`scripts/reproduce.sh fig11` (docs/workflow.md)
 (plasticitynet at dt = 1e-3 s with each model, `pnet simulate --model`, against the explicit ground
 truth at 1e-5 s; `plasticitynet_1e-3` is the shipped model, trained with the recipe of
 `scripts/train_shipped_models.sh`)."""),
@@ -264,8 +265,8 @@ NOTEBOOKS["fig12_regularizer"] = [
 
 The simulations with the regularizer weight w of eq. 11 set to 0 against the default, on the
 2D metal frame (FEM) and the sand column (MPM). Regenerate:
-`/usr/bin/python3 scripts/evaluate_fem.py` (the `plasticitynet_1e-2_w0` run, 30 frames) and
-`/usr/bin/python3 scripts/evaluate_implicit.py --scenes sand_column_2d --runs plasticitynet_1e-3 plasticitynet_1e-3_w0 --results notebooks/results/regularizer_ablation`."""),
+`scripts/reproduce.sh fig12` (docs/workflow.md: the FEM evaluation's `plasticitynet_1e-2_w0` run, 30
+frames, and the regularizer ablation on sand)."""),
     new_code_cell(PREAMBLE),
     new_code_cell('''fem = RESULTS / "fem_eval" / "metal_frame_2d"
 nodal = read_csv(require(fem / "nodal_error.csv"))
@@ -300,8 +301,7 @@ NOTEBOOKS["fig13_gallery_3d"] = [
 
 The last frames of the 3D scenes: sand and snow (MPM, `plasticitynet` at dt = 1e-3 s) beside their
 explicit ground truth, and the 3D metal frame (FEM, dt = 1e-2 s). Regenerate:
-`/usr/bin/python3 scripts/evaluate_implicit.py --scenes sand_column_3d snowball_3d` and
-`/usr/bin/python3 scripts/evaluate_fem.py --scenes metal_frame_3d`."""),
+`scripts/reproduce.sh fig13` (docs/workflow.md)."""),
     new_code_cell(PREAMBLE),
     new_code_cell('''for scene in ("sand_column_3d", "snowball_3d"):
     folder = RESULTS / "implicit_eval" / scene
@@ -353,9 +353,9 @@ NOTEBOOKS["fig06_10_scenes_2d"] = [
 The last frame of each 2D scene: sand (Fig. 6), snow with hardening (Fig. 7), metal with hardening
 (Fig. 8), metal with the learned return mapping and neo-Hookean elasticity (Fig. 9) and the FEM-MPM
 coupling (Fig. 10), by the explicit ground truth (or, for FEM, explicit at 2e-5 s), `plasticitynet`
-and the lagged baseline. Regenerate: `scripts/evaluate_implicit.py`, `scripts/evaluate_fem.py` and
-`scripts/evaluate_coupling.py` (all `/usr/bin/python3`); each run's frames stay in `out/eval/`, and
-`build/cpp/pnet video out/eval/<scene>/<run>` makes its video."""),
+and the lagged baseline. Regenerate: `scripts/reproduce.sh fig06_10` (docs/workflow.md); each run's
+frames stay in `out/workflow/runs/<key>/frames/` (`python -m plasticitynet.evaluation list` names the
+keys), and `build/cpp/pnet video out/workflow/runs/<key>/frames` makes its video."""),
     new_code_cell(PREAMBLE),
     new_code_cell('''SCENES = [
     ("Fig. 6: sand", RESULTS / "implicit_eval" / "sand_column_2d", ["gt", "plasticitynet_1e-3", "lagged_1e-3"]),

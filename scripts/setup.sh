@@ -27,6 +27,8 @@ packages=(
   libopenblas0-openmp
   # Videos (pnet video, scripts/run.sh) and the notebooks (executed by the test suite).
   ffmpeg jupyter-nbconvert python3-nbformat python3-nbclient python3-ipykernel
+  # The evaluation workflow (workflow/Snakefile, scripts/reproduce.sh).
+  snakemake
 )
 missing=()
 for p in "${packages[@]}"; do

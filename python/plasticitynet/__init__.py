@@ -5,6 +5,13 @@
 
 __version__ = "0.1.0"
 
-from .model import load_model  # noqa: E402
-
 __all__ = ["load_model", "__version__"]
+
+
+def __getattr__(name: str):
+    """`load_model` on first use: importing the package (the evaluation's jobs, the mesh reader) does not
+    pay for torch's import."""
+    if name == "load_model":
+        from .model import load_model
+        return load_model
+    raise AttributeError(f"module 'plasticitynet' has no attribute {name!r}")

@@ -1,0 +1,168 @@
+"""What the evaluation runs, declared once: the runs of each scene family, the studies (one results
+folder each), the sweeps and the named targets (docs/workflow.md).
+
+A *run* is one `pnet simulate` invocation: an integrator, a step (None: the scene's ground-truth step;
+0: the explicit CFL step) and extra options. A *study* is a results folder under notebooks/results/:
+a scene family (mpm, fem, coupling), the scenes it covers, the runs of each scene and the ground truth
+every run is compared with. A *target* (fig05, table1, all, ...) names the studies, sweeps, benchmarks
+and notebooks a figure or table needs.
+
+Nothing here runs anything: plan.py turns these declarations and a configuration into keyed jobs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Run:
+    """One simulation of a scene. `scenes`: the scenes it applies to (None: all of the study's);
+    `frames`: a cap on the study's frame count (the slow w = 0 ablation)."""
+    integrator: str
+    dt: float | None
+    options: tuple[str, ...] = ()
+    scenes: frozenset[str] | None = None
+    frames: int | None = None
+
+
+def _only(*scenes: str) -> frozenset[str]:
+    return frozenset(scenes)
+
+
+# --- The MPM family (pnet compare: soft IoU at dx and 4 dx, deposit spread and height) -------------
+#: The stiff variants (scenes/stiff/, E x 100) have a CFL step 10x smaller: their ground truth is 1e-6 s.
+STIFF = _only("stiff/sand_column_2d", "stiff/snowball_2d")
+SOFT = _only("sand_column_2d", "snowball_2d", "sand_column_3d", "snowball_3d")
+
+MPM_RUNS: dict[str, Run] = {
+    "gt": Run("explicit", None),
+    "explicit_2e-5": Run("explicit", 2e-5, scenes=SOFT),
+    "explicit_cfl": Run("explicit", 0.0),
+    "plasticitynet_1e-3": Run("plasticitynet", 1e-3),
+    "plasticitynet_1e-4": Run("plasticitynet", 1e-4),
+    "lagged_1e-3": Run("lagged", 1e-3),
+    "plasticitynet_1e-3_bdf2": Run("plasticitynet", 1e-3, ("--time-integrator", "bdf2")),
+    "plasticitynet_1e-3_w0": Run("plasticitynet", 1e-3, ("--regularizer", "0")),
+    "plasticitynet_1e-3_fp1": Run("plasticitynet", 1e-3, ("--fixed-point-iterations", "1")),
+    "plasticitynet_1e-3_advection": Run("plasticitynet", 1e-3, ("--advection-cfl", "0.25")),
+}
+#: The energy-representation ablation (paper Fig. 11): the 2D sand energy in eq. 8's form and in the three
+#: forms the paper rejected (scripts/train_ablation_models.sh), each replacing the scene's model.
+ENERGY_FORMS = ("eq8", "local_identity", "global_identity", "global")
+for _form in ENERGY_FORMS:
+    MPM_RUNS[f"form_{_form}_1e-3"] = Run("plasticitynet", 1e-3, ("--model", f"models/ablation/sand_2d_{_form}.pt"))
+
+# --- The FEM family (nodal distance to the ground truth and to a same-step reference) ---------------
+FEM_RUNS: dict[str, Run] = {
+    "gt": Run("explicit", None),
+    "explicit_2e-5": Run("explicit", 2e-5),
+    "explicit_cfl": Run("explicit", 0.0),
+    "analytic_1e-2": Run("analytic", 1e-2, scenes=_only("metal_frame_2d", "metal_frame_3d")),
+    "plasticitynet_1e-2": Run("plasticitynet", 1e-2),
+    "plasticitynet_1e-3": Run("plasticitynet", 1e-3),
+    "lagged_1e-2": Run("lagged", 1e-2),
+    # The regularizer off (paper Fig. 12): ~10x the solves, so 30 frames.
+    "plasticitynet_1e-2_w0": Run("plasticitynet", 1e-2, ("--regularizer", "0"), _only("metal_frame_2d"), frames=30),
+    "plasticitynet_1e-2_exact_rm": Run("plasticitynet", 1e-2, ("--return-map", "exact"), _only("metal_nh_frame_2d")),
+    "plasticitynet_1e-2_bdf2": Run("plasticitynet", 1e-2, ("--time-integrator", "bdf2")),
+}
+#: The same-step reference every implicit FEM run is also compared with.
+FEM_REFERENCE = {"metal_frame_2d": "analytic_1e-2", "metal_nh_frame_2d": "plasticitynet_1e-2_exact_rm",
+                 "metal_frame_3d": "analytic_1e-2"}
+
+# --- The coupling family (sand: IoU; body: nodal distance; particles inside the body) ---------------
+COUPLING_RUNS: dict[str, Run] = {
+    "gt": Run("explicit", None),
+    "explicit_cfl": Run("explicit", 0.0),
+    "plasticitynet_1e-3": Run("plasticitynet", 1e-3),
+    "lagged_1e-3": Run("lagged", 1e-3),
+}
+
+RUNS = {"mpm": MPM_RUNS, "fem": FEM_RUNS, "coupling": COUPLING_RUNS}
+
+
+def ground_truth_step(family: str, scene: str, dim: int) -> float:
+    """The ground truth's step: the paper's 1e-5 s; 1e-6 s for the stiff variants and the 2D coupling
+    (its stiff disk); the 3D coupling's 2 cm elements are stable at 1e-5 s."""
+    if scene in STIFF or (family == "coupling" and dim == 2):
+        return 1e-6
+    return 1e-5
+
+
+@dataclass(frozen=True)
+class Study:
+    """One results folder: `scenes` maps each scene (a name under the scene folder) to its frame count;
+    `keep_frames`: frames whose pictures are copied beside the final ones (<run>_frame_NNNNN.png)."""
+    name: str
+    family: str
+    scenes: dict[str, int]
+    runs: tuple[str, ...]
+    keep_frames: tuple[int, ...] = ()
+
+    def runs_of(self, scene: str) -> list[str]:
+        table = RUNS[self.family]
+        return [r for r in self.runs if table[r].scenes is None or scene in table[r].scenes]
+
+
+MAIN_MPM = ("gt", "explicit_2e-5", "explicit_cfl", "plasticitynet_1e-3", "plasticitynet_1e-4", "lagged_1e-3")
+STUDIES: dict[str, Study] = {s.name: s for s in [
+    Study("implicit_eval", "mpm", {"sand_column_2d": 50, "snowball_2d": 50, "sand_column_3d": 25, "snowball_3d": 25,
+                                   "stiff/sand_column_2d": 50, "stiff/snowball_2d": 50}, MAIN_MPM),
+    Study("representation_ablation", "mpm", {"sand_column_2d": 50},
+          ("gt", "explicit_cfl", "plasticitynet_1e-3") + tuple(f"form_{f}_1e-3" for f in ENERGY_FORMS),
+          keep_frames=(1, 5, 10, 25, 50)),
+    Study("regularizer_ablation", "mpm", {"sand_column_2d": 50}, ("gt", "plasticitynet_1e-3", "plasticitynet_1e-3_w0")),
+    Study("time_integrator_mpm", "mpm", {"sand_column_2d": 50, "snowball_2d": 50, "snowball_3d": 25},
+          ("gt", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3", "plasticitynet_1e-3_bdf2",
+           "plasticitynet_1e-3_advection")),
+    Study("fem_eval", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100, "metal_frame_3d": 25},
+          ("gt", "explicit_2e-5", "explicit_cfl", "analytic_1e-2", "plasticitynet_1e-2", "plasticitynet_1e-3",
+           "lagged_1e-2", "plasticitynet_1e-2_w0", "plasticitynet_1e-2_exact_rm")),
+    Study("coupling_eval", "coupling", {"sand_fem_coupling_2d": 50},
+          ("gt", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3")),
+    Study("coupling_eval_3d", "coupling", {"sand_fem_coupling_3d": 3},
+          ("gt", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3")),
+]}
+
+# --- Sweeps ------------------------------------------------------------------------------------------
+#: The time-step sweep's steps and integrators (every scene; explicit at CFL and the ground truth beside).
+SWEEP_DTS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
+SWEEP_INTEGRATORS = ("plasticitynet", "lagged")
+#: The resolution sweep's refinements: dx, dx/2, dx/4 (MPM: the grid; FEM: the element size).
+SWEEP_REFINEMENTS = (1, 2, 4)
+
+
+@dataclass(frozen=True)
+class Target:
+    """What one figure or table needs: studies, sweeps (scene names), Table 1 benchmark rows and the
+    notebook that draws it."""
+    studies: tuple[str, ...] = ()
+    dt_sweeps: tuple[str, ...] = ()
+    resolution_sweeps: tuple[str, ...] = ()
+    benchmarks: tuple[str, ...] = ()
+    notebooks: tuple[str, ...] = field(default_factory=tuple)
+
+
+#: Table 1's bench_table1 invocations (name: options), each writing notebooks/results/table1/<name>.md.
+BENCHMARKS = {
+    "mpm": ["--no-fem", "--frames", "10", "--with-lagged"],
+    "fem": ["--only", "metal_frame_2d", "--with-lagged"],
+    "coupling": ["--only", "sand_fem_coupling_2d"],
+}
+
+TARGETS: dict[str, Target] = {
+    "fig04": Target(notebooks=("fig04_training_curves",)),
+    "fig05": Target(studies=("implicit_eval", "fem_eval"), notebooks=("fig05_accuracy",)),
+    "fig06_10": Target(studies=("implicit_eval", "fem_eval", "coupling_eval"), notebooks=("fig06_10_scenes_2d",)),
+    "fig11": Target(studies=("representation_ablation",), notebooks=("fig11_energy_representations",)),
+    "fig12": Target(studies=("regularizer_ablation", "fem_eval"), notebooks=("fig12_regularizer",)),
+    "fig13": Target(studies=("implicit_eval", "fem_eval"), notebooks=("fig13_gallery_3d",)),
+    "fig14_16": Target(notebooks=("fig14_16_elastic_regions",)),
+    "table1": Target(benchmarks=tuple(BENCHMARKS), notebooks=("table1_timings",)),
+    "time_integrator": Target(studies=("time_integrator_mpm",)),
+    "coupling_3d": Target(studies=("coupling_eval_3d",)),
+}
+TARGETS["all"] = Target(
+    studies=tuple(dict.fromkeys(s for t in TARGETS.values() for s in t.studies)),
+    benchmarks=tuple(BENCHMARKS),
+    notebooks=tuple(dict.fromkeys(n for t in TARGETS.values() for n in t.notebooks)))

@@ -1,0 +1,233 @@
+"""Comparing a run with its ground truth (docs/metrics.md), one JSON per comparison.
+
+  mpm       `pnet compare`: per frame soft IoU of the B-spline mass fields at dx and 4 dx, binary IoU,
+            the deposit's spread and height (of the last common frame)
+  fem       per frame mean and max nodal distance of the deformable mesh, m and % of the scene's
+            bounding-box diagonal; and the distance to a same-step reference at the last common frame
+  coupling  the sand as mpm, the body's nodal distance (% of its rest size), and the particles inside
+            the body (crossing number in 2D, winding number in 3D; must be 0)
+
+Every metric also carries the run's own figures: seconds per frame, steps, Newton, line-search,
+fixed-point and CG iterations per step, unconverged steps (stats.csv, steps.csv).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+from ..mesh_ply import read_mesh_ply
+from .plan import Plan
+from .runner import frame_numbers
+
+
+def read_csv(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def run_figures(run: Path) -> dict:
+    """A run's cost and solver figures from its stats.csv (per frame) and steps.csv (per step)."""
+    frames = read_csv(run / "frames" / "stats.csv")
+    steps = read_csv(run / "frames" / "steps.csv")
+    n = max(len(steps), 1)
+
+    def mean(key):
+        return sum(float(s[key]) for s in steps) / n if steps and key in steps[0] else 0.0
+
+    def total(key):
+        return sum(float(s[key]) for s in steps) if steps and key in steps[0] else 0.0
+
+    wall = total("wall_s")
+    done = json.loads((run / "done.json").read_text()) if (run / "done.json").exists() else {}
+    return {
+        "frames": len(frames),
+        "failed": bool(done.get("failed", False)),
+        "seconds_per_frame": sum(float(f["wall_s"]) for f in frames) / max(len(frames), 1),
+        "steps_per_frame": len(steps) / max(len(frames), 1),
+        "newton_per_step": mean("newton_iterations"),
+        "cg_per_step": mean("cg_iterations"),
+        "fixed_point_per_step": mean("fixed_point_iterations"),
+        "line_search_per_step": mean("line_search_steps"),
+        "kinematic_stages_per_step": mean("kinematic_stages"),
+        "energy_seconds_share": total("energy_s") / wall if wall > 0 else 0.0,
+        "cg_seconds_share": total("cg_s") / wall if wall > 0 else 0.0,
+        "unconverged_steps": sum(1 for s in steps if s.get("converged") == "0"),
+        "min_contact_distance_m": min((float(f["min_distance_m"]) for f in frames if "min_distance_m" in f),
+                                      default=float("nan")),
+    }
+
+
+def pnet_compare(plan: Plan, gt: Path, run: Path, out: Path, dx: float | None = None) -> list[dict]:
+    """`pnet compare`'s per-frame rows (iou.csv) of a run against the ground truth."""
+    cmd = [plan.pnet, "compare", str(gt / "frames"), str(run / "frames"), "--out", str(out)]
+    if dx is not None:
+        cmd += ["--dx", repr(dx)]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed (exit {done.returncode}):\n{done.stderr}")
+    return [{k: float(v) for k, v in row.items()} for row in read_csv(out / "iou.csv")]
+
+
+def mpm_metric(plan: Plan, gt: Path, run: Path, dx: float, compare_dir: Path) -> dict:
+    rows = pnet_compare(plan, gt, run, compare_dir, dx)
+    out = {"rows": rows}
+    if rows:
+        soft = [r["soft_iou"] for r in rows]
+        coarse = [r["soft_iou_coarse"] for r in rows]
+        binary = [r["binary_iou"] for r in rows]
+        last = rows[-1]  # the deposit at the last common frame
+        out.update({"soft_iou_min": min(soft), "soft_iou_mean": sum(soft) / len(soft),
+                    "binary_iou_min": min(binary), "binary_iou_mean": sum(binary) / len(binary),
+                    "soft_iou_coarse_min": min(coarse), "soft_iou_coarse_mean": sum(coarse) / len(coarse),
+                    "spread_m": last["spread_b_m"], "spread_gt_m": last["spread_a_m"],
+                    "spread_error": last["spread_b_m"] / last["spread_a_m"] - 1.0,
+                    "height_m": last["height_b_m"], "height_gt_m": last["height_a_m"],
+                    "height_error": last["height_b_m"] / last["height_a_m"] - 1.0,
+                    "compared_frames": len(rows)})
+    return out
+
+
+def _mesh_frames(run: Path) -> list[int]:
+    return frame_numbers(run / "frames")
+
+
+def _mesh_file(run: Path, frame: int, coupled: bool) -> Path:
+    return run / "frames" / (f"frame_{frame:05d}_mesh.ply" if coupled else f"frame_{frame:05d}.ply")
+
+
+def nodal_distance(a: Path, b: Path, frame: int, nodes: int | None, coupled: bool = False) -> tuple[float, float]:
+    pa = read_mesh_ply(_mesh_file(a, frame, coupled)).position
+    pb = read_mesh_ply(_mesh_file(b, frame, coupled)).position
+    if nodes is not None:
+        pa, pb = pa[:nodes], pb[:nodes]
+    d = np.linalg.norm(pa - pb, axis=1)
+    return float(d.mean()), float(d.max())
+
+
+def fem_metric(plan: Plan, gt: Path, run: Path, reference: Path | None, frame_dt: float) -> dict:
+    info = json.loads((gt / "frames" / "run.json").read_text())
+    nodes, diagonal = info["mesh_first_node"][1], info["bbox_diagonal"]  # meshes[0]: the deformable body
+    gt_frames = set(_mesh_frames(gt))
+    curve = []
+    for f in _mesh_frames(run):
+        if f > 0 and f in gt_frames:
+            mean, worst = nodal_distance(run, gt, f, nodes)
+            curve.append({"frame": f, "time_s": f * frame_dt, "mean_m": mean, "max_m": worst,
+                          "mean_pct": 100 * mean / diagonal, "max_pct": 100 * worst / diagonal})
+    out = {"curve": curve, "diagonal_m": diagonal}
+    if curve:
+        out.update({"final_mean_pct": curve[-1]["mean_pct"], "final_max_pct": curve[-1]["max_pct"],
+                    "worst_mean_pct": max(c["mean_pct"] for c in curve), "last_frame": curve[-1]["frame"]})
+    if reference is not None and _mesh_frames(run) and _mesh_frames(reference):
+        last = min(_mesh_frames(run)[-1], _mesh_frames(reference)[-1])
+        mean, worst = nodal_distance(run, reference, last, nodes)
+        out["ref_mean_pct"], out["ref_max_pct"] = 100 * mean / diagonal, 100 * worst / diagonal
+    return out
+
+
+def read_particle_positions(path: Path) -> np.ndarray:
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    count = next(int(line.split()[2]) for line in header if line.startswith("element vertex"))
+    properties = [line.split()[-1] for line in header if line.startswith("property")]
+    record = np.frombuffer(data, dtype=np.dtype([(p, "<f8") for p in properties]), count=count, offset=end)
+    return np.stack([record[axis] for axis in ("x", "y", "z") if axis in record.dtype.names], axis=1)
+
+
+def boundary_edges(triangles: np.ndarray) -> np.ndarray:
+    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    _, index, counts = np.unique(np.sort(edges, axis=1), axis=0, return_index=True, return_counts=True)
+    return edges[index[counts == 1]]
+
+
+def inside_count_2d(points: np.ndarray, nodes: np.ndarray, edges: np.ndarray) -> int:
+    """Points inside the region the closed boundary `edges` bounds: crossing number."""
+    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
+    near = points[np.all((points >= lo) & (points <= hi), axis=1)]
+    if len(near) == 0:
+        return 0
+    a, b = nodes[edges[:, 0]], nodes[edges[:, 1]]
+    px, py = near[:, None, 0], near[:, None, 1]
+    straddle = (a[None, :, 1] > py) != (b[None, :, 1] > py)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = a[None, :, 0] + (py - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
+    return int(np.sum(np.sum(straddle & (px < xc), axis=1) % 2 == 1))
+
+
+def inside_count_3d(points: np.ndarray, nodes: np.ndarray, triangles: np.ndarray) -> int:
+    """Points inside the closed surface `triangles`: generalized winding number above 1/2."""
+    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
+    near = points[np.all((points >= lo) & (points <= hi), axis=1)]
+    if len(near) == 0:
+        return 0
+    a, b, c = (nodes[triangles[:, i]][None] - near[:, None] for i in range(3))
+    la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
+    numerator = np.einsum("pti,pti->pt", a, np.cross(b, c))
+    denominator = (la * lb * lc + np.einsum("pti,pti->pt", a, b) * lc + np.einsum("pti,pti->pt", a, c) * lb
+                   + np.einsum("pti,pti->pt", b, c) * la)
+    winding = np.abs(np.sum(2.0 * np.arctan2(numerator, denominator), axis=1)) / (4.0 * np.pi)
+    return int(np.sum(winding > 0.5))
+
+
+def coupling_metric(plan: Plan, gt: Path, run: Path, dim: int, frame_dt: float, compare_dir: Path) -> dict:
+    sand = {int(r["frame"]): r for r in pnet_compare(plan, gt, run, compare_dir)}
+    rest = read_mesh_ply(_mesh_file(gt, 0, True))
+    size = float(np.linalg.norm(rest.position.max(axis=0) - rest.position.min(axis=0)))
+    boundary = boundary_edges(rest.triangles) if dim == 2 else rest.triangles  # a 3D mesh PLY holds its surface
+    gt_frames = set(_mesh_frames(gt))
+    rows = []
+    for f in _mesh_frames(run):
+        if f == 0 or f not in gt_frames:
+            continue
+        mesh = read_mesh_ply(_mesh_file(run, f, True))
+        particles = read_particle_positions(run / "frames" / f"frame_{f:05d}.ply")[:, :dim]  # 2D: z = 0
+        inside = (inside_count_2d(particles, mesh.position, boundary) if dim == 2
+                  else inside_count_3d(particles, mesh.position, boundary))
+        d = np.linalg.norm(mesh.position - read_mesh_ply(_mesh_file(gt, f, True)).position, axis=1)
+        j = sand.get(f, {"soft_iou": 1.0, "soft_iou_coarse": 1.0})
+        rows.append({"frame": f, "time_s": f * frame_dt, "jaccard": j["soft_iou"], "jaccard_4dx": j["soft_iou_coarse"],
+                     "disk_mean_m": float(d.mean()), "disk_max_m": float(d.max()),
+                     "disk_mean_pct": 100 * float(d.mean()) / size, "disk_max_pct": 100 * float(d.max()) / size,
+                     "penetrations": inside})
+    out = {"rows": rows, "body_size_m": size}
+    if rows:
+        out.update({"jaccard_min": min(r["jaccard"] for r in rows),
+                    "jaccard_mean": float(np.mean([r["jaccard"] for r in rows])),
+                    "jaccard_4dx_min": min(r["jaccard_4dx"] for r in rows),
+                    "jaccard_4dx_mean": float(np.mean([r["jaccard_4dx"] for r in rows])),
+                    "disk_mean_pct_last": rows[-1]["disk_mean_pct"],
+                    "disk_mean_pct_worst": max(r["disk_mean_pct"] for r in rows),
+                    "disk_max_pct_worst": max(r["disk_max_pct"] for r in rows),
+                    "penetrations": max(r["penetrations"] for r in rows), "compared_frames": len(rows)})
+    return out
+
+
+def compute(plan: Plan, key: str) -> Path:
+    """Writes the metric plan.metrics[key] to its JSON file (atomically) and returns the path."""
+    job = plan.metrics[key]
+    run, gt = plan.run_dir(job.run_key), plan.run_dir(job.gt_key)
+    content = plan.runs[job.run_key].scene_content
+    frame_dt = float(content.get("frame_dt", 0.02))
+    compare_dir = plan.compare_dir(key)  # pnet compare's iou.csv and iou.png
+    if job.family == "mpm":
+        values = mpm_metric(plan, gt, run, float(content["dx"]), compare_dir)
+    elif job.family == "fem":
+        reference = plan.run_dir(job.reference_key) if job.reference_key else None
+        values = fem_metric(plan, gt, run, reference, frame_dt)
+    else:
+        values = coupling_metric(plan, gt, run, int(content.get("dim", 2)), frame_dt, compare_dir)
+    values.update({"scene": job.scene, "run": job.run, "run_key": job.run_key, "gt_key": job.gt_key,
+                   "reference_key": job.reference_key, "figures": run_figures(run)})
+    path = plan.metric_file(key)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(values, indent=1))
+    tmp.replace(path)
+    return path

@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# Reproduces a figure, a table or everything through the evaluation workflow (workflow/Snakefile,
+# docs/workflow.md): only what is missing or out of date runs.
+#
+#   scripts/reproduce.sh TARGET [TARGET ...] [--dry-run] [--jobs N] [--profile DIR] [--config KEY=VALUE ...]
+#                        [-- SNAKEMAKE OPTIONS]
+#
+# TARGET: fig04 fig05 fig06_10 fig11 fig12 fig13 fig14_16 table1 time_integrator coupling_3d sweep_dt
+#         sweep_dx all (--list prints them).
+# --dry-run      list the jobs that would run, and why, without running them
+# --jobs N       jobs at once (default: every core; each simulation uses `threads` cores, 1 by default)
+# --profile DIR  a Snakemake profile, e.g. workflow/profiles/slurm to submit every job to SLURM
+# --config K=V   override workflow/config.yaml (scenes, results, work, frames, threads, sweep_scenes, ...)
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+
+known="fig04 fig05 fig06_10 fig11 fig12 fig13 fig14_16 table1 time_integrator coupling_3d sweep_dt sweep_dx all"
+targets=() ; config=() ; extra=() ; dry=0 ; jobs="$(nproc)" ; profile=""
+while (($#)); do
+  case "$1" in
+    --dry-run|-n) dry=1 ;;
+    --jobs|-j) jobs="$2"; shift ;;
+    --profile) profile="$2"; shift ;;
+    --config) shift; while (($#)) && [[ "$1" != --* ]]; do config+=("$1"); shift; done; continue ;;
+    --list) echo "$known"; exit 0 ;;
+    --help|-h) sed -n '2,15p' "$0"; exit 0 ;;
+    --) shift; extra=("$@"); break ;;
+    -*) echo "reproduce.sh: unknown option $1 (--help)" >&2; exit 2 ;;
+    *) targets+=("$1") ;;
+  esac
+  shift
+done
+((${#targets[@]})) || { echo "reproduce.sh: name a target (--list), e.g. scripts/reproduce.sh fig05" >&2; exit 2; }
+for t in "${targets[@]}"; do
+  [[ " $known " == *" $t "* ]] || { echo "reproduce.sh: unknown target \"$t\"; known: $known" >&2; exit 2; }
+done
+
+# The environment: the build and .venv (scripts/setup.sh installs snakemake with the rest).
+if [[ ! -x .venv/bin/python || ! -x build/cpp/pnet ]] || ! .venv/bin/python -c 'import snakemake' 2>/dev/null; then
+  ./scripts/setup.sh
+fi
+
+joined="$(IFS=,; echo "${targets[*]}")"
+args=(--snakefile workflow/Snakefile --directory "$root" --config "targets=$joined" "${config[@]}"
+      --rerun-triggers mtime params input --keep-going --printshellcmds)
+if [[ -n "$profile" ]]; then
+  args+=(--profile "$profile")
+else
+  args+=(--cores "$jobs")
+fi
+if ((dry)); then
+  exec .venv/bin/python -m snakemake "${args[@]}" --dry-run --reason "${extra[@]}"
+fi
+exec .venv/bin/python -m snakemake "${args[@]}" "${extra[@]}"
