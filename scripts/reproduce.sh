@@ -43,7 +43,7 @@ fi
 
 joined="$(IFS=,; echo "${targets[*]}")"
 args=(--snakefile workflow/Snakefile --directory "$root" --config "targets=$joined" "${config[@]}"
-      --rerun-triggers mtime params input --keep-going --printshellcmds)
+      --rerun-triggers mtime input --keep-going --printshellcmds)
 if [[ -n "$profile" ]]; then
   args+=(--profile "$profile")
 else

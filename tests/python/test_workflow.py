@@ -144,7 +144,7 @@ def reproduce(*args, timeout=900) -> subprocess.CompletedProcess:
 
 def tiny_config(tmp_path: Path, scenes: Path, name: str, **extra) -> Path:
     config = {"scenes": str(scenes), "frames": 2, "work": str(tmp_path / name / "work"),
-              "results": str(tmp_path / name / "results"), "sweep_frames": 2, "sweep_dts": [1e-3, 1e-2],
+              "results": str(tmp_path / name / "results"), "sweep_frames": 2, "sweep_dx_frames": 2, "sweep_dts": [1e-3, 1e-2],
               "sweep_refinements": [1, 2], "progress_every": 5, **extra}
     path = tmp_path / f"{name}.yaml"
     path.write_text(json.dumps(config))  # JSON is YAML
@@ -209,6 +209,11 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     assert jobs["simulate"] == len(simulated), jobs
     assert jobs["metric"] == len([run for _, run in simulated if not run.endswith("_dx2")]), jobs
 
+    # A fresh clone: the committed tables are there, the work folder is not; everything runs again.
+    shutil.rmtree(tmp_path / "local" / "work")
+    fresh = jobs_of(reproduce("all", "--dry-run", "--", "--configfile", config).stdout)
+    assert fresh["ground_truth"] >= 10 and fresh["study"] == len(catalogue.STUDIES) and fresh["bench"] == 3, fresh
+
 
 def test_the_cluster_path_gives_the_local_results(tmp_path):
     """The same target through workflow/profiles/local-cluster (submit / status / cancel scripts standing
@@ -229,3 +234,31 @@ def test_the_cluster_path_gives_the_local_results(tmp_path):
         if name == "cluster":
             assert len(list(env_queue.glob("*.status"))) >= 5, "every job went through the stand-in scheduler"
     assert outputs["local"] == outputs["cluster"]
+
+
+def test_pnet_reports_the_project_version_runs_are_keyed_by():
+    if not PNET.exists():
+        pytest.fail(f"{PNET} is not built (run scripts/setup.sh)")
+    version = re.search(r"project\(plasticitynet VERSION ([0-9.]+)", (ROOT / "CMakeLists.txt").read_text()).group(1)
+    out = subprocess.run([str(PNET), "--version"], capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == f"pnet {version}"
+
+
+def test_the_time_left_comes_from_the_runs_own_frame_timings(tmp_path, fake_pnet):
+    from plasticitynet.evaluation.progress import report
+    plan = plan_for(fake_pnet(), work=str(tmp_path / "work"), frames=6)
+    keys = [k for k, j in plan.runs.items() if j.scene == "sand_column_2d"][:3]
+    done, running, waiting = keys
+    for key, rows in ((done, [1.5, 2.5]), (running, [0.1, 4.0, 4.0, 4.0])):
+        folder = plan.run_dir(key) / "frames"
+        folder.mkdir(parents=True)
+        (folder / "stats.csv").write_text("frame,wall_s\n" + "".join(f"{i + 1},{w}\n" for i, w in enumerate(rows)))
+    (plan.run_dir(done) / "done.json").write_text("{}")
+    line = report(plan, keys, jobs=1)
+    # running: frames 5-6 left at its last three frames' 4 s (not its mean, 3.0); waiting: its 6 frames at the
+    # finished runs' mean rate, 2 s (no run of its own name has finished): 8 + 12 = 20 s.
+    assert "runs: 1 done, 1 running, 1 waiting; ~20 s left" in line, line
+    assert f"{plan.runs[running].scene}/{plan.runs[running].run} 4/6" in line
+    timings = json.loads((tmp_path / "work" / "timings.json").read_text())
+    assert timings == {f"sand_column_2d/{plan.runs[done].run}": 2.0}
+    assert "~10 s left" in report(plan, keys, jobs=2), "two jobs at once halve it"

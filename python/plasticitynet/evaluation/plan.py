@@ -38,7 +38,8 @@ DEFAULTS = {
     "frames": 0,                             # 0: each study's own frame counts; N: every run N frames
     "threads": 1,                            # threads per simulation
     "sweep_scenes": ["sand_column_2d"],      # the scenes of the sweep_dt / sweep_dx targets
-    "sweep_frames": 25,
+    "sweep_frames": 25,                      # the time-step sweep's frames
+    "sweep_dx_frames": 10,                   # the resolution sweep's (dx / 4 costs ~64x the explicit steps)
     "sweep_dts": list(SWEEP_DTS),
     "sweep_refinements": list(SWEEP_REFINEMENTS),
 }
@@ -298,7 +299,7 @@ class Plan:
         base = self.scene(scene)
         family = self.family_of(base.content)
         table = RUNS[family]
-        frames = int(self.config["sweep_frames"])
+        frames = int(self.config["sweep_frames" if kind == "dt" else "sweep_dx_frames"])
         sweep = SweepJob(f"{scene}_{kind}", kind, scene, family)
         if kind == "dt":
             gt = self.add_run(scene, "gt", table["gt"], frames, family)
@@ -324,20 +325,27 @@ class Plan:
 
     # --- what a target needs -----------------------------------------------------------------------
     def target_outputs(self, target: str) -> list[Path]:
-        """The files a target name stands for (a study's summary, a sweep's plots, a benchmark's table,
-        a notebook's executed copy)."""
+        """The files a target name stands for: the work folder's records of its studies, sweeps and
+        benchmarks and its notebooks' executed markers. They (not the committed tables beside them) are
+        the targets: a fresh clone lacks them, so there everything the target needs runs."""
         if target.startswith("sweep_"):  # sweep_dt, sweep_dx: every configured sweep scene
             kind = target.split("_", 1)[1]
-            return [self.sweep_outputs(s.name)[0] for s in self.sweeps.values() if s.kind == kind]
+            return [self.sweep_record(s.name) for s in self.sweeps.values() if s.kind == kind]
         if target not in catalogue.TARGETS:
             raise KeyError(f"unknown target {target!r}; known: {', '.join(target_names())}")
         t = catalogue.TARGETS[target]
-        out = [self.study_outputs(s)[0] for s in t.studies]
-        out += [self.benchmark_output(b) for b in t.benchmarks]
+        out = [self.study_record(s) for s in t.studies]
+        out += [self.benchmark_record(b) for b in t.benchmarks]
         out += [self.notebook_output(n) for n in t.notebooks]
         if target == "all":
-            out += [self.sweep_outputs(s.name)[0] for s in self.sweeps.values()]
+            out += [self.sweep_record(s.name) for s in self.sweeps.values()]
         return out
+
+    def study_record(self, name: str) -> Path:
+        return self.work / "studies" / f"{name}.json"
+
+    def sweep_record(self, name: str) -> Path:
+        return self.work / "sweeps" / f"{name}.json"
 
     def study_outputs(self, name: str) -> list[Path]:
         folder = self.results / name

@@ -1,8 +1,8 @@
 """A progress line for a running workflow, with an estimate of the time left (docs/workflow.md).
 
 Every `watch` period it reads the plan's run folders: a run with done.json is finished; one with a
-frames/stats.csv but no done.json is running (frames written, its own seconds per frame); the others
-are waiting. The time left is the waiting runs' frames times a seconds-per-frame estimate plus the
+frames/stats.csv but no done.json is running (frames written, its own seconds per frame over its last
+three frames); the others are waiting. The time left is the waiting runs' frames times a seconds-per-frame estimate plus the
 running runs' remaining frames at their own rate, divided by the jobs at once. The estimate of a run
 that has not started is the rate of the last finished run of the same scene and run name (kept in
 <work>/timings.json, so that it improves as runs finish), else the mean rate of the finished runs.
@@ -17,12 +17,14 @@ from .metrics import read_csv
 from .plan import Plan
 
 
-def _rate(plan: Plan, key: str) -> tuple[int, float | None]:
-    """(frames written, seconds per frame) of a run from its stats.csv."""
+def _rate(plan: Plan, key: str, last: int | None = None) -> tuple[int, float | None]:
+    """(frames written, seconds per frame) of a run from its stats.csv: the mean over all its frames, or
+    over the `last` few (a running run's frames may slow down as it goes)."""
     rows = read_csv(plan.run_dir(key) / "frames" / "stats.csv")
     if not rows:
         return 0, None
-    return len(rows), sum(float(r["wall_s"]) for r in rows) / len(rows)
+    recent = rows[-last:] if last else rows
+    return len(rows), sum(float(r["wall_s"]) for r in recent) / len(recent)
 
 
 def needed_runs(plan: Plan, targets: list[str]) -> list[str]:
@@ -54,8 +56,9 @@ def report(plan: Plan, keys: list[str], jobs: int) -> str:
         folder = plan.run_dir(key)
         job = plan.runs[key]
         name = f"{job.scene}/{job.run}"
-        written, rate = _rate(plan, key)
-        if (folder / "done.json").exists():
+        finished = (folder / "done.json").exists()
+        written, rate = _rate(plan, key, last=None if finished else 3)
+        if finished:
             done.append(key)
             if rate is not None:
                 timings[name] = rate
@@ -78,7 +81,8 @@ def report(plan: Plan, keys: list[str], jobs: int) -> str:
             left += job.frames * rate
     left /= max(jobs, 1)
     now = ", ".join(f"{plan.runs[k].scene}/{plan.runs[k].run} {w}/{plan.runs[k].frames}" for k, w, _ in running)
-    eta = f"~{left / 60:.1f} min left" + (f" (+{unknown} runs not yet timed)" if unknown else "")
+    eta = (f"~{left:.0f} s left" if left < 120 else f"~{left / 60:.1f} min left") + (
+        f" (+{unknown} runs not yet timed)" if unknown else "")
     return (f"[progress] runs: {len(done)} done, {len(running)} running, {len(waiting)} waiting; {eta}"
             + (f"; now: {now}" if now else ""))
 

@@ -47,11 +47,20 @@ def _write_csv(path: Path, keys: list[str], rows: list[dict]) -> None:
             w.writerow({k: (f"{r[k]:.6g}" if isinstance(r.get(k), float) else r.get(k, "")) for k in keys})
 
 
+def _record(path: Path, what: dict) -> None:
+    """The work folder's record of a study or sweep: the runs and metrics it was made from."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(what, indent=1))
+    tmp.replace(path)
+
+
 def write_study(plan: Plan, name: str) -> None:
     job = plan.studies[name]
     folder = plan.results / name
     folder.mkdir(parents=True, exist_ok=True)
     {"mpm": _mpm_study, "fem": _fem_study, "coupling": _coupling_study}[job.study.family](plan, job, folder)
+    _record(plan.study_record(name), {"runs": job.runs, "metrics": job.metrics})
 
 
 def _metric(plan: Plan, key: str) -> dict:
@@ -309,7 +318,10 @@ def write_sweep(plan: Plan, name: str) -> None:
             "steps_per_frame", "newton_per_step"] + (["accuracy"] if label else [])
     _write_csv(folder / "summary.csv", keys, rows)
     head = f"| run | dt (s) | refinement | frames | s/frame | steps/frame | Newton/step |{f' {label} |' if label else ''}"
-    lines = [f"# {sweep.scene}: {'time-step' if sweep.kind == 'dt' else 'resolution'} sweep", "", head,
+    lines = [f"# {sweep.scene}: {'time-step' if sweep.kind == 'dt' else 'resolution'} sweep", "",
+             "Seconds per frame: each run's own wall clock (the workflow may run several at once; speed ratios "
+             "from one quiet run: bench_table1). A run marked (failed) stopped with a simulation error; its "
+             "accuracy is over the frames it has.", "", head,
              "|---" * (head.count("|") - 1) + "|"]
     for r in rows:
         acc = f" {r['accuracy']:.3f} |" if label else ""
@@ -318,6 +330,7 @@ def write_sweep(plan: Plan, name: str) -> None:
                      f"{r['newton_per_step']:.2f} |{acc}")
     (folder / "summary.md").write_text("\n".join(lines) + "\n")
     _plot_sweep(sweep, rows, label, folder / f"{name}.png")
+    _record(plan.sweep_record(name), {"points": sweep.points})
 
 
 def _plot_sweep(sweep: SweepJob, rows: list[dict], label: str | None, path: Path) -> None:
@@ -327,8 +340,15 @@ def _plot_sweep(sweep: SweepJob, rows: list[dict], label: str | None, path: Path
     for integrator in dict.fromkeys(r["integrator"] for r in rows if r["integrator"] != "explicit"):
         mine = [r for r in rows if r["integrator"] == integrator and not r["failed"]]
         x = [r["dt"] if sweep.kind == "dt" else r["refinement"] for r in mine]
-        if label:
-            axes[0].plot(x, [r["accuracy"] for r in mine], "o-", label=integrator)
+        if sweep.kind == "dx":  # no ground truth at every resolution: how the solver scales instead
+            axes[0].plot(x, [r["newton_per_step"] for r in mine], "o-", label=integrator)
+        elif label:
+            line, = axes[0].plot(x, [r["accuracy"] for r in mine], "o-", label=integrator)
+            failed = [r for r in rows if r["integrator"] == integrator and r["failed"]]
+            if failed:  # a run that stopped with a simulation error: its frames until then, marked
+                axes[0].plot([r["dt"] if sweep.kind == "dt" else r["refinement"] for r in failed],
+                             [r["accuracy"] for r in failed], "x", color=line.get_color(), markersize=10,
+                             label=f"{integrator}, stopped early")
         axes[1].plot(x, [r["seconds_per_frame"] for r in mine], "o-", label=integrator)
     if sweep.kind == "dt":
         for r in explicit:
@@ -343,7 +363,7 @@ def _plot_sweep(sweep: SweepJob, rows: list[dict], label: str | None, path: Path
         axes[1].plot(x, [r["seconds_per_frame"] for r in explicit], "s--", color="grey", label="explicit at CFL")
         for ax in axes:
             ax.set_xlabel("refinement k (dx / k)")
-    axes[0].set_ylabel(label or "(no ground truth in a resolution sweep)")
+    axes[0].set_ylabel(label if sweep.kind == "dt" else "Newton iterations per step")
     axes[1].set_ylabel("seconds per frame")
     axes[1].set_yscale("log")
     for ax in axes:
