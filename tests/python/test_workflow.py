@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from plasticitynet.evaluation import catalogue
-from plasticitynet.evaluation.plan import Plan, refined
+from plasticitynet.evaluation.plan import Plan, refined, target_names
 
 ROOT = Path(__file__).resolve().parents[2]
 BUILD = ROOT / os.environ.get("PNET_BUILD_DIR", "build")
@@ -118,6 +118,13 @@ def test_every_study_names_runs_of_its_family_and_every_target_resolves(fake_pne
         assert plan.target_outputs(target) or target in ("fig04", "fig14_16"), target
     with pytest.raises(KeyError, match="unknown target 'fig99'"):
         plan.target_outputs("fig99")
+    # A study on its own: its record; the progress line follows its runs and their ground truths.
+    from plasticitynet.evaluation.progress import needed_runs
+    assert plan.target_outputs("regularizer_ablation") == [plan.study_record("regularizer_ablation")]
+    runs = {(plan.runs[k].scene, plan.runs[k].run) for k in needed_runs(plan, ["regularizer_ablation"])}
+    assert runs == {("sand_column_2d", r) for r in ("gt", "plasticitynet_1e-3", "plasticitynet_1e-3_w0")}
+    listed = subprocess.run([str(REPRODUCE), "--list"], capture_output=True, text=True).stdout.split()
+    assert set(listed) == set(target_names()), "reproduce.sh knows every target the plan does"
 
 
 def test_refinement_divides_the_grid_and_the_elements_and_refuses_a_scene_without_either():

@@ -331,6 +331,8 @@ class Plan:
         if target.startswith("sweep_"):  # sweep_dt, sweep_dx: every configured sweep scene
             kind = target.split("_", 1)[1]
             return [self.sweep_record(s.name) for s in self.sweeps.values() if s.kind == kind]
+        if target in catalogue.STUDIES:  # one results folder
+            return [self.study_record(target)]
         if target not in catalogue.TARGETS:
             raise KeyError(f"unknown target {target!r}; known: {', '.join(target_names())}")
         t = catalogue.TARGETS[target]
@@ -367,7 +369,8 @@ class Plan:
 
 
 def target_names() -> list[str]:
-    return sorted(catalogue.TARGETS) + ["sweep_dt", "sweep_dx"]
+    """Figures and tables, the two sweeps, and every study (one results folder) on its own."""
+    return sorted(catalogue.TARGETS) + ["sweep_dt", "sweep_dx"] + list(catalogue.STUDIES)
 
 
 def refined(content: dict, k: int, where: str) -> dict:

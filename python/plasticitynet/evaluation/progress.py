@@ -36,15 +36,17 @@ def needed_runs(plan: Plan, targets: list[str]) -> list[str]:
                     keys |= {p["run_key"] for p in sweep.points}
                     keys |= {plan.metrics[p["metric_key"]].gt_key for p in sweep.points if p["metric_key"]}
             continue
-        from .catalogue import TARGETS
-        t = TARGETS[target]
-        for study in t.studies:
+        from .catalogue import STUDIES, TARGETS
+        studies = [target] if target in STUDIES else list(TARGETS[target].studies)
+        for study in studies:
             for runs in plan.studies[study].runs.values():
                 keys |= set(runs.values())
             for metrics in plan.studies[study].metrics.values():
                 keys |= {plan.metrics[m].gt_key for m in metrics.values()}
         if target == "all":
             keys |= {p["run_key"] for s in plan.sweeps.values() for p in s.points}
+            keys |= {plan.metrics[p["metric_key"]].gt_key for s in plan.sweeps.values() for p in s.points
+                     if p["metric_key"]}
     return sorted(keys)
 
 
