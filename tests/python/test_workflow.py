@@ -136,6 +136,12 @@ def test_refinement_divides_the_grid_and_the_elements_and_refuses_a_scene_withou
         refined({"meshes": [{"shape": "box"}]}, 2, "x.json")
 
 
+def test_the_tiny_folder_finds_the_tiny_stiff_variants(fake_pnet):
+    plan = plan_for(fake_pnet())
+    assert plan.scene_file("stiff/snowball_2d") == ROOT / "scenes" / "stiff" / "tiny" / "snowball_2d.json"
+    assert plan.scene_file("snowball_2d") == ROOT / "scenes" / "tiny" / "snowball_2d.json"
+
+
 def test_a_missing_scene_is_named(tmp_path, fake_pnet):
     with pytest.raises(FileNotFoundError, match=r"sand_column_2d\.json: no such scene file"):
         plan_for(fake_pnet(), tmp_path)

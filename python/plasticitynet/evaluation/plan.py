@@ -212,9 +212,21 @@ class Plan:
         return self.work / "metrics" / f"{key}.compare"
 
     # --- scenes and runs ---------------------------------------------------------------------------
+    def scene_file(self, name: str) -> Path:
+        """<scenes>/<name>.json; a variant of a variant folder ("stiff/x" with scenes = scenes/tiny) is
+        looked up in the variant's own folder for it too (scenes/stiff/tiny/x.json)."""
+        folder = self._path(self.config["scenes"])
+        path = folder / f"{name}.json"
+        if not path.exists() and "/" in name:
+            variant, base = name.rsplit("/", 1)
+            nested = folder.parent / variant / folder.name / f"{base}.json"
+            if nested.exists():
+                return nested
+        return path
+
     def scene(self, name: str) -> SceneFile:
         if name not in self._scenes:
-            self._scenes[name] = SceneFile.load(self._path(self.config["scenes"]) / f"{name}.json", name)
+            self._scenes[name] = SceneFile.load(self.scene_file(name), name)
         return self._scenes[name]
 
     def family_of(self, content: dict) -> str:
