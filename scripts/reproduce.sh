@@ -26,7 +26,7 @@ while (($#)); do
     --profile) profile="$2"; shift ;;
     --config) shift; while (($#)) && [[ "$1" != --* ]]; do config+=("$1"); shift; done; continue ;;
     --list) echo "$known"; exit 0 ;;
-    --help|-h) sed -n '2,15p' "$0"; exit 0 ;;
+    --help|-h) sed -n '2,13p' "$0" | sed -E 's/^# ?//'; exit 0 ;;
     --) shift; extra=("$@"); break ;;
     -*) echo "reproduce.sh: unknown option $1 (--help)" >&2; exit 2 ;;
     *) targets+=("$1") ;;
