@@ -38,13 +38,16 @@ for t in "${targets[@]}"; do
   [[ " $known " == *" $t "* ]] || { echo "reproduce.sh: unknown target \"$t\"; known: $known" >&2; exit 2; }
 done
 
-# The environment: the build and .venv (scripts/setup.sh installs snakemake with the rest).
-if [[ ! -x .venv/bin/python || ! -x build/cpp/pnet ]] || ! .venv/bin/python -c 'import snakemake' 2>/dev/null; then
+# The environment: the build and .venv (scripts/setup.sh installs snakemake with the rest). The build
+# folder is $PNET_BUILD_DIR (default build), as for setup.sh and test.sh.
+build_dir="${PNET_BUILD_DIR:-build}"
+if [[ ! -x .venv/bin/python || ! -x "$build_dir/cpp/pnet" ]] || ! .venv/bin/python -c 'import snakemake' 2>/dev/null; then
   ./scripts/setup.sh
 fi
 
 joined="$(IFS=,; echo "${targets[*]}")"
-args=(--snakefile workflow/Snakefile --directory "$root" --config "targets=$joined" "${config[@]}"
+binaries=("pnet=$build_dir/cpp/pnet" "bench=$build_dir/cpp/bench/bench_table1")
+args=(--snakefile workflow/Snakefile --directory "$root" --config "targets=$joined" "${binaries[@]}" "${config[@]}"
       --rerun-triggers mtime input --keep-going --printshellcmds)
 if [[ -n "$profile" ]]; then
   args+=(--profile "$profile")
