@@ -33,8 +33,8 @@ def load_plan(config: Path | None) -> Plan:
 def bench(plan: Plan, name: str, out: Path, threads: int) -> None:
     """One bench_table1 invocation of catalogue.BENCHMARKS; its table (stdout) to `out`, atomically."""
     options = catalogue.BENCHMARKS[name]
-    binary = plan._path(plan.config["bench"])
-    cmd = [str(binary), *options, "--threads", str(threads), "--scenes", str(plan._path(plan.config["scenes"]))]
+    binary = plan.path(plan.config["bench"])
+    cmd = [str(binary), *options, "--threads", str(threads), "--scenes", str(plan.path(plan.config["scenes"]))]
     if int(plan.config["frames"]):  # every row that many frames (the tiny pipeline)
         n = str(plan.config["frames"])
         cmd += ["--frames", n, "--fem-frames", n, "--coupling-frames", n, "--stiff-frames", n]
@@ -55,7 +55,6 @@ def main(argv: list[str] | None = None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("command", choices=["simulate", "metric", "study", "sweep", "bench", "list", "progress"])
     p.add_argument("name", nargs="?")
-    p.add_argument("out", nargs="?", type=Path)
     p.add_argument("--config", type=Path, help="the workflow's configuration as JSON (default: the defaults)")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--jobs", type=int, default=1, help="progress: jobs running at once (for the estimate)")

@@ -174,7 +174,7 @@ class Plan:
     def __init__(self, config: dict | None = None):
         self.config = {**DEFAULTS, **(config or {})}
         self.root = Path(self.config["root"])
-        self.pnet = str(self._path(self.config["pnet"]))
+        self.pnet = str(self.path(self.config["pnet"]))
         # A job rebuilding the workflow's plan is given the version the workflow keyed with.
         self.version = self.config.get("pnet_version") or pnet_version(self.pnet)
         self.config["pnet_version"] = self.version
@@ -190,17 +190,17 @@ class Plan:
             self.sweeps[f"{scene}_dx"] = self._sweep(scene, "dx")
 
     # --- paths -------------------------------------------------------------------------------------
-    def _path(self, value: str) -> Path:
+    def path(self, value: str) -> Path:
         p = Path(value)
         return p if p.is_absolute() else self.root / p
 
     @property
     def work(self) -> Path:
-        return self._path(self.config["work"])
+        return self.path(self.config["work"])
 
     @property
     def results(self) -> Path:
-        return self._path(self.config["results"])
+        return self.path(self.config["results"])
 
     def run_dir(self, key: str) -> Path:
         return self.work / "runs" / key
@@ -215,7 +215,7 @@ class Plan:
     def scene_file(self, name: str) -> Path:
         """<scenes>/<name>.json; a variant of a variant folder ("stiff/x" with scenes = scenes/tiny) is
         looked up in the variant's own folder for it too (scenes/stiff/tiny/x.json)."""
-        folder = self._path(self.config["scenes"])
+        folder = self.path(self.config["scenes"])
         path = folder / f"{name}.json"
         if not path.exists() and "/" in name:
             variant, base = name.rsplit("/", 1)
@@ -255,7 +255,7 @@ class Plan:
         for option in it:  # a model path among the options is absolute, and keyed by its content
             options.append(option)
             if option == "--model":
-                model = self._path(next(it))
+                model = self.path(next(it))
                 options.append(str(model))
                 files.update(file_hashes(model))
         keyed = copy.deepcopy(content)
@@ -328,8 +328,8 @@ class Plan:
         else:
             for k in self.config["sweep_refinements"]:
                 content = refined(base.content, int(k), f"{base.name}.json")
-                for name in ("explicit_cfl", f"{SWEEP_INTEGRATORS[0]}_1e-3", f"{SWEEP_INTEGRATORS[1]}_1e-3"):
-                    run = table["explicit_cfl"] if name == "explicit_cfl" else Run(name.split("_")[0], 1e-3)
+                runs = {"explicit_cfl": table["explicit_cfl"], **{f"{i}_1e-3": Run(i, 1e-3) for i in SWEEP_INTEGRATORS}}
+                for name, run in runs.items():
                     job = self.add_run(scene, name, run, frames, family, content=content, label=f"{name}_dx{k}")
                     sweep.points.append({"label": name, "integrator": run.integrator, "dt": run.dt, "refinement": k,
                                          "run_key": job.key, "metric_key": None})

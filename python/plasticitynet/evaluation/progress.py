@@ -27,16 +27,20 @@ def _rate(plan: Plan, key: str, last: int | None = None) -> tuple[int, float | N
     return len(rows), sum(float(r["wall_s"]) for r in recent) / len(recent)
 
 
+def _sweep_runs(plan: Plan, sweeps) -> set[str]:
+    """The runs of some sweeps and the ground truths they are compared with."""
+    points = [p for sweep in sweeps for p in sweep.points]
+    return ({p["run_key"] for p in points}
+            | {plan.metrics[p["metric_key"]].gt_key for p in points if p["metric_key"]})
+
+
 def needed_runs(plan: Plan, targets: list[str]) -> list[str]:
+    from .catalogue import STUDIES, TARGETS
     keys = set()
     for target in targets:
         if target.startswith("sweep_"):
-            for sweep in plan.sweeps.values():
-                if f"sweep_{sweep.kind}" == target:
-                    keys |= {p["run_key"] for p in sweep.points}
-                    keys |= {plan.metrics[p["metric_key"]].gt_key for p in sweep.points if p["metric_key"]}
+            keys |= _sweep_runs(plan, [s for s in plan.sweeps.values() if f"sweep_{s.kind}" == target])
             continue
-        from .catalogue import STUDIES, TARGETS
         studies = [target] if target in STUDIES else list(TARGETS[target].studies)
         for study in studies:
             for runs in plan.studies[study].runs.values():
@@ -44,9 +48,7 @@ def needed_runs(plan: Plan, targets: list[str]) -> list[str]:
             for metrics in plan.studies[study].metrics.values():
                 keys |= {plan.metrics[m].gt_key for m in metrics.values()}
         if target == "all":
-            keys |= {p["run_key"] for s in plan.sweeps.values() for p in s.points}
-            keys |= {plan.metrics[p["metric_key"]].gt_key for s in plan.sweeps.values() for p in s.points
-                     if p["metric_key"]}
+            keys |= _sweep_runs(plan, plan.sweeps.values())
     return sorted(keys)
 
 

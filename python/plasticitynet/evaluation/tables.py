@@ -14,7 +14,7 @@ import json
 import shutil
 from pathlib import Path
 
-from .metrics import read_csv, run_figures
+from .metrics import run_figures
 from .plan import Plan, StudyJob, SweepJob
 
 
@@ -249,11 +249,12 @@ def _coupling_study(plan: Plan, job: StudyJob, folder: Path) -> None:
     per_frame, summary, size = [], [], None
     for name, run, metric in _rows(plan, job, scene):
         label = gt_name if name == "gt" else name
+        figures = run_figures(run)
         picture = _last_picture(run)
         if picture:
             _copy(picture, folder / f"{label}_final.png")
         if metric is None:  # the ground truth: its cost only
-            rows = [{"run": label, "frame": f} for f in range(1, run_figures(run)["frames"] + 1)]
+            rows = [{"run": label, "frame": f} for f in range(1, figures["frames"] + 1)]
             metric = {"jaccard_min": 1.0, "jaccard_mean": 1.0, "jaccard_4dx_min": 1.0, "jaccard_4dx_mean": 1.0,
                       "disk_mean_pct_last": 0.0, "disk_mean_pct_worst": 0.0, "disk_max_pct_worst": 0.0,
                       "penetrations": None, "rows": []}
@@ -263,8 +264,8 @@ def _coupling_study(plan: Plan, job: StudyJob, folder: Path) -> None:
             rows = [{"run": label, **r} for r in metric["rows"]]
         per_frame += [r for r in rows if len(r) > 2]
         r = plan.runs[run.name]
-        summary.append({"run": label, "integrator": r.integrator, "dt": r.dt, "frames": run_figures(run)["frames"],
-                        "s_per_frame": run_figures(run)["seconds_per_frame"],
+        summary.append({"run": label, "integrator": r.integrator, "dt": r.dt, "frames": figures["frames"],
+                        "s_per_frame": figures["seconds_per_frame"],
                         **{k: metric.get(k) for k in ("jaccard_min", "jaccard_mean", "jaccard_4dx_min",
                                                       "jaccard_4dx_mean", "disk_mean_pct_last", "disk_mean_pct_worst",
                                                       "disk_max_pct_worst", "penetrations")}})
