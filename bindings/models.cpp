@@ -2,9 +2,11 @@
 // and Hessian (the runtime the simulator uses), and learned return mappings.
 // Loading follows the C++ trust rules (model_file.hpp).
 #include <memory>
+#include <optional>
 
 #include "common.hpp"
 #include "pnet/energy/neural_elastoplastic.hpp"
+#include "pnet/material/material_json.hpp"
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/nn/model_file.hpp"
 
@@ -17,7 +19,7 @@ enum class Output { Value, Gradient, Hessian, Stress };
 
 class PyModel {
 public:
-    PyModel(const py::object& path, bool trusted, const py::object& E) {
+    PyModel(const py::object& path, bool trusted, const py::object& E, const py::object& material) {
         LoadOptions options;
         options.trusted = trusted;
         const std::string file = path_string(path);
@@ -29,6 +31,17 @@ public:
         E_ = E.is_none() ? meta.training_E : E.cast<double>();
         if (!(E_ > 0.0) || !std::isfinite(E_))
             throw py::value_error(file + ": E: expected a positive Young's modulus (Pa), got " + std::to_string(E_));
+        if (!material.is_none()) {
+            if (meta.kind != ModelKind::Energy) throw py::value_error(file + ": material: a return-map model takes none");
+            MaterialDescription object = material_from_json(to_json(material, "material"), "material");
+            object.validate();
+            try {  // checked as the simulator checks an object's material
+                material_for_object(meta, object, file);
+            } catch (const std::invalid_argument& e) {
+                throw py::value_error(e.what());
+            }
+            material_ = object;
+        }
         if (meta.kind == ModelKind::ReturnMap) {
             if (meta.dim == 2)
                 return_map_2_ = std::make_unique<LearnedReturnMap<2>>(*model_);
@@ -81,6 +94,7 @@ private:
         typename NeuralElastoplasticEnergy<d>::Options options;
         options.youngs_modulus = E_;
         options.regularizer_weight = w;
+        options.material = material_;
         NeuralElastoplasticEnergy<d> energy(*model_, options);  // one per call: calls may run in parallel
         std::vector<double> psi(static_cast<std::size_t>(n));
         std::vector<Mat<d>> P(static_cast<std::size_t>(n));
@@ -133,6 +147,7 @@ private:
 
     std::shared_ptr<const ModelFile> model_;
     double E_ = 1.0;
+    std::optional<MaterialDescription> material_;  // the object's material (a parametric model's parameters)
     std::unique_ptr<LearnedReturnMap<2>> return_map_2_;
     std::unique_ptr<LearnedReturnMap<3>> return_map_3_;
 };
@@ -163,6 +178,15 @@ plasticitynet.load_model(...).psi in torch. A return-map model (kind
         .def_property_readonly("widths", [](const PyModel& m) { return m.file().metadata.widths; })
         .def_property_readonly("has_hardening", [](const PyModel& m) { return m.file().metadata.has_hardening; },
                                "Whether the energy takes the hardening state h as an input.")
+        .def_property_readonly("parameters",
+                               [](const PyModel& m) {
+                                   py::list out;
+                                   for (const ModelParameter& p : m.file().metadata.parameters)
+                                       out.append(py::make_tuple(p.field, p.min, p.max));
+                                   return out;
+                               },
+                               "A parametric energy's inputs: (field, min, max) per material parameter, in input "
+                               "order; empty for a model of one material.")
         .def_property_readonly("energy_form", [](const PyModel& m) { return to_string(m.file().metadata.energy_form); },
                                "\"eq8\" (the paper's energy), or a form it rejected (sec. 5.2, Fig. 11; models/ablation/): "
                                "\"local_identity\", \"global_identity\", \"global\".")
@@ -208,14 +232,20 @@ does (default: the raw Hessian). Other arguments as psi().)doc")
 
     m.def(
         "load_model",
-        [](const py::object& path, bool trusted, const py::object& E) { return PyModel(path, trusted, E); },
-        py::arg("path"), py::arg("trusted") = false, py::arg("E") = py::none(),
+        [](const py::object& path, bool trusted, const py::object& E, const py::object& material) {
+            return PyModel(path, trusted, E, material);
+        },
+        py::arg("path"), py::arg("trusted") = false, py::arg("E") = py::none(), py::arg("material") = py::none(),
         R"doc(Load a model file (TorchScript written by train.py).
 
 Files are code to LibTorch: one is read only if a MANIFEST in its folder pins
 its sha256, or trusted=True. E: Young's modulus to scale the energy by, Pa
-(default: the training E). FileNotFoundError, UntrustedModelError, or
-ValueError naming the file and the problem.)doc");
+(default: the training E). material: the material description (a dict, as in a
+scene) the energy is evaluated for: a parametric model takes its parameters
+from it (each within the range it was trained for), a model of one material
+checks it has the same constitutive model (default: the model's own).
+FileNotFoundError, UntrustedModelError, or ValueError naming the file and the
+problem.)doc");
 }
 
 }  // namespace pnet::bindings

@@ -21,7 +21,8 @@ import plasticitynet
 from plasticitynet.training.export import sha256_of
 
 #: The models this release ships (issue 3), in training order.
-SHIPPED = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_rm_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d")
+SHIPPED = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_rm_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d",
+           "sand_param_2d")
 
 
 def shipped_command(command: str | None, path: Path) -> str | None:
@@ -72,6 +73,7 @@ def entry(path: Path) -> dict:
         "device": recipe.get("device"),
         **({"exported_on": recipe["exported_on"]} if "exported_on" in recipe else {}),
         **({"schedule": recipe["schedule"], "warmup": recipe.get("warmup", 0)} if "schedule" in recipe else {}),
+        **({"parameters": meta["parameters"]} if "parameters" in meta else {}),
         "errors": meta.get("errors"),
         "return_map": meta.get("return_map"),
         "loss_curve": f"{stem}_loss.png" if (path.parent / f"{stem}_loss.png").exists() else None,

@@ -11,6 +11,10 @@ with N the network, Ptilde and mu those of the E = 1 material (Ptilde from the l
 mapping, or the learned one the model was trained with), so that grad Psi(F0, F0, h) = E Ptilde(F0, h).
 A return-mapping model (kind "return_map") offers dgamma(Sigma, h) and project(Sigma, h) instead.
 
+A parametric energy (metadata "parameters"; training/parameters.py) is bound to one material of its
+family: load_model(path, material=...) or model.at(material), checked against the trained ranges; without
+one, the family's reference material (the dedicated model's).
+
 Model files are executable code to LibTorch: load only trusted files.
 """
 
@@ -27,6 +31,7 @@ from .materials.validation import as_batch_F, as_batch_hardening, as_batch_Sigma
 from .training import energy, return_map_net
 from .training.export import FORMAT, FORMAT_VERSION, KINDS, METADATA_KEY, sha256_of
 from .training.nets import REPRESENTATIONS, energy_input, mlp_input_width
+from .training.parameters import ParameterSpace
 from .training.targets import TRAINING_E, ElastoplasticStress, with_young_modulus
 
 _REQUIRED = ("format", "format_version", "kind", "material", "dim", "widths", "input_width", "activation", "output")
@@ -59,7 +64,8 @@ def _check_metadata(meta, where: str) -> dict:
         representation = meta.get("representation", "raw")
         if representation not in REPRESENTATIONS:
             raise bad(f"representation = {representation!r}, expected one of {', '.join(REPRESENTATIONS)}")
-        allowed = (mlp_input_width(d, False, representation), mlp_input_width(d, True, representation))
+        k = len(meta.get("parameters", [])) if isinstance(meta.get("parameters", []), list) else 0
+        allowed = (mlp_input_width(d, False, representation, k), mlp_input_width(d, True, representation, k))
         form = meta.get("energy_form", "eq8")  # files written before it existed are eq. 8
         if form not in energy.ENERGY_FORMS:
             raise bad(f"energy_form = {form!r}, expected one of {', '.join(energy.ENERGY_FORMS)}")
@@ -70,9 +76,13 @@ def _check_metadata(meta, where: str) -> dict:
     if meta["activation"] != "silu":
         raise bad(f"activation = {meta['activation']!r}, expected 'silu'")
     try:
-        Material.from_dict(meta["material"], d)
+        material = Material.from_dict(meta["material"], d)
     except ValueError as err:
         raise bad(f"material: {err}") from None
+    if "parameters" in meta:
+        if meta["kind"] != "energy":
+            raise bad("parameters: only an energy can be parametric")
+        ParameterSpace.from_metadata(meta["parameters"], material, f"{where}: bad metadata")
     return meta
 
 
@@ -152,17 +162,34 @@ class LearnedEnergy:
         E: float | None = None,
         return_map: LearnedReturnMap | None = None,
         path: str | None = None,
+        material: Material | dict | None = None,
     ):
         self.network = network
         self.metadata = metadata
         self.path = path
         self.dim = metadata["dim"]
+        where = path or "model"
         #: "raw" (the paper's [F, F0, h]) or "principal" (frame-indifferent; nets.EnergyNet).
         self.representation = metadata.get("representation", "raw")
-        self.has_hardening = metadata["input_width"] == mlp_input_width(self.dim, True, self.representation)
         #: "eq8" (the paper's) or a form it rejected in sec. 5.2 (training.energy.ENERGY_FORMS).
         self.energy_form = metadata.get("energy_form", "eq8")
-        self.training_material = Material.from_dict(metadata["material"], self.dim)
+        reference = Material.from_dict(metadata["material"], self.dim)
+        #: A parametric model's family (None for a dedicated model) and the bound material's values.
+        self.parameters = (
+            ParameterSpace.from_metadata(metadata["parameters"], reference, where) if "parameters" in metadata else None
+        )
+        k = len(self.parameters) if self.parameters else 0
+        self.has_hardening = metadata["input_width"] == mlp_input_width(self.dim, True, self.representation, k)
+        if self.parameters is not None:
+            self.parameter_values = self.parameters.values_of(reference if material is None else material, where)
+            self.training_material = self.parameters.material_at(self.parameter_values)
+            values = torch.tensor([self.parameter_values], dtype=torch.float64)
+            self._parameter_inputs = self.parameters.inputs(values)  # (1, K)
+        else:
+            if material is not None:
+                raise ValueError(f"{where}: material= binds a parametric model; this model was trained for one material")
+            self.parameter_values = []
+            self.training_material = reference
         self.E = float(metadata.get("training_E", TRAINING_E) if E is None else E)
         #: The material at the requested E (Pa).
         self.material = with_young_modulus(self.training_material, E=self.E)
@@ -201,7 +228,17 @@ class LearnedEnergy:
         return torch.clamp(h, lo, hi)
 
     def _net_h(self, h):
-        return self.network_hardening(h) if self.has_hardening else None
+        """The network's inputs after F0 for hardening states h (B,): h, then a parametric model's parameters."""
+        if self.parameters is None:
+            return self.network_hardening(h) if self.has_hardening else None
+        parts = [self.network_hardening(h).reshape(-1, 1)] if self.has_hardening else []
+        parts.append(self._parameter_inputs.expand(h.shape[0], -1))
+        return torch.cat(parts, dim=1)
+
+    def at(self, material: Material | dict) -> "LearnedEnergy":
+        """A parametric model bound to another material of its family (ValueError outside the ranges)."""
+        return LearnedEnergy(self.network, self.metadata, E=self.E, return_map=self.return_map, path=self.path,
+                             material=material)
 
     @property
     def mu(self) -> float:
@@ -275,12 +312,14 @@ class LearnedEnergy:
         return H[0] if single else H
 
 
-def load_model(path, E: float | None = None, return_map=None):
+def load_model(path, E: float | None = None, return_map=None, material=None):
     """Load a PlasticityNet model file: a LearnedEnergy (kind "energy") or a LearnedReturnMap (kind
     "return_map"). E: Young's modulus (Pa) the energy is scaled by (default: the training E = 1).
     return_map: for an energy trained with a learned return mapping, the return-map model (a path or a
     LearnedReturnMap) to use instead of the file named in its metadata (default: that file, resolved
-    beside the model and checked against its sha256). ValueError, naming the file, on any problem."""
+    beside the model and checked against its sha256). material: for a parametric energy, the material (a
+    Material or a description dict) it is bound to (default: its family's reference). ValueError, naming
+    the file, on any problem."""
     path = Path(path)
     network, meta = read_model_file(path)
     if meta["kind"] == "return_map":
@@ -304,7 +343,7 @@ def load_model(path, E: float | None = None, return_map=None):
             raise ValueError(f"{path}: {return_map} is not a {meta['dim']}D return-map model")
     elif not (isinstance(rm_info, dict) and rm_info.get("type") == "analytic"):
         raise ValueError(f"{path}: bad metadata: return_map = {rm_info!r}")
-    return LearnedEnergy(network, meta, E=E, return_map=rm, path=str(path))
+    return LearnedEnergy(network, meta, E=E, return_map=rm, path=str(path), material=material)
 
 
 __all__ = ["load_model", "read_model_file", "LearnedEnergy", "LearnedReturnMap"]

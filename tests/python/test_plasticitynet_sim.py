@@ -510,6 +510,57 @@ def test_a_model_for_other_plasticity_parameters_raises_value_error():
         pns.Simulation(scene, integrator="plasticitynet")
 
 
+def _sand_at(angle: float, nu: float, E: float = 3.537e5) -> dict:
+    material = TorchMaterial.preset("sand", 2).to_dict()
+    material["plasticity"]["friction_angle_deg"] = angle
+    material["elasticity"].update(nu=nu, E=E)
+    return material
+
+
+@pytest.mark.parametrize("angle,nu", [(20.0, 0.2), (30.0, 0.3), (37.5, 0.41), (45.0, 0.45)])
+def test_parametric_model_matches_torch_at_each_parameter(angle, nu):
+    """The C++ runtime (fused kernel, parameters as constant inputs) against the torch model, both bound to
+    the same material of the family: value, gradient and Hessian; and exact at F0 for that material."""
+    path = MODELS / "sand_param_2d.pt"
+    material = _sand_at(angle, nu)
+    model = pns.load_model(path, E=3.537e5, material=material)
+    reference = plasticitynet.load_model(path, E=3.537e5, material=material)
+    assert [p[0] for p in model.parameters] == ["plasticity.friction_angle_deg", "elasticity.nu"]
+    F0 = random_F(16, 2, seed=4)
+    F = F0 + 0.05 * np.random.default_rng(5).standard_normal((16, 2, 2))
+    tF, tF0 = torch.from_numpy(F), torch.from_numpy(F0)
+    scale = 3.537e5
+    for w in (0.0, 1.0):
+        assert np.allclose(model.psi(F, F0, w=w), reference.psi(tF, tF0, w=w).detach().numpy(), rtol=0, atol=1e-10 * scale)
+        assert np.allclose(model.gradient(F, F0, w=w), reference.gradient(tF, tF0, w=w).detach().numpy(), rtol=0,
+                           atol=1e-10 * scale)
+        assert np.allclose(model.hessian(F, F0, w=w), reference.hessian(tF, tF0, w=w).detach().numpy(), rtol=0,
+                           atol=1e-10 * scale)
+    exact = TorchMaterial.from_dict(material, 2).elastoplastic_stress(tF0).numpy()
+    assert np.allclose(model.gradient(F0, F0), exact, rtol=0, atol=1e-9 * scale)
+
+
+def test_parametric_model_refuses_a_material_outside_its_ranges():
+    with pytest.raises(ValueError, match=r"material\.plasticity\.friction_angle_deg = 50\.0 is outside the range "
+                                         r"\[20\.0, 45\.0\]"):
+        pns.load_model(MODELS / "sand_param_2d.pt", material=_sand_at(50.0, 0.3))
+
+
+@pytest.mark.parametrize("angle,nu,accepted", [(20.0, 0.2, True), (45.0, 0.45, True), (19.0, 0.3, False)])
+def test_a_scene_runs_with_a_parametric_model_at_each_end_of_its_ranges(tmp_path, angle, nu, accepted):
+    scene = json.loads((TINY / "sand_column_2d.json").read_text())
+    scene["objects"][0]["material"] = _sand_at(angle, nu)
+    scene["objects"][0]["model"] = str(MODELS / "sand_param_2d.pt")
+    if not accepted:
+        with pytest.raises(ValueError, match=r"objects\[0\]\.model: .*sand_param_2d\.pt: material\.plasticity\."
+                                             r"friction_angle_deg = 19\.0 is outside the range \[20\.0, 45\.0\]"):
+            pns.Simulation(scene, integrator="plasticitynet")
+        return
+    sim = pns.Simulation(scene, integrator="plasticitynet")
+    frames = sim.advance(2)
+    assert all(f["converged"] for f in frames)
+
+
 # FEM scenes (meshes): the same Simulation class, with node and element arrays.
 
 def test_fem_scene_steps_with_mesh_arrays_and_contact_stats(tmp_path):

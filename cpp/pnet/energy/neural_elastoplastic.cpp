@@ -20,15 +20,19 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
           if (meta.dim != dim)
               throw std::invalid_argument(model.path + ": a " + std::to_string(meta.dim) + "D energy where a " +
                                           std::to_string(dim) + "D one is needed");
-          return EnergyNetwork<dim>(model.weights, meta.representation, meta.has_hardening, model.path);
+          const MaterialDescription material =
+              options.material ? material_for_object(meta, *options.material, model.path) : meta.material;
+          return EnergyNetwork<dim>(model.weights, meta.representation, meta.has_hardening, model.path,
+                                    parameter_inputs(meta, material));
       }()),
-      training_material_(model.metadata.material),
+      training_material_(options.material ? material_for_object(model.metadata, *options.material, model.path)
+                                          : model.metadata.material),
       metadata_(model.metadata),
       has_hardening_(model.metadata.has_hardening),
       relative_(options.relative_to_reference),
       E_(options.youngs_modulus / model.metadata.training_E),
       w_(options.regularizer_weight),
-      mu_train_(model.metadata.material.elastic.mu()),
+      mu_train_(training_material_.description().elastic.mu()),
       hessian_kind_(options.hessian) {
     if (hessian_kind_ == Options::Hessian::Auto) {
         // The tangent for every material (docs/solver.md, measured); w = 0 for associative flow,

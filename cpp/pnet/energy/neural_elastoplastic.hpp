@@ -15,6 +15,10 @@
 //   d2 Psi / dF2 = E [ Hess_F N + w mu I ]   (d^2 x d^2, row-major vec(F) basis),
 // optionally projected to positive semi-definite (eigenvalue clamp).
 //
+// A parametric model (ModelMetadata::parameters) takes the object's material
+// parameters as constant network inputs; Ptilde, mu and the tangent are then
+// those of the object's material (Options::material).
+//
 // A model in one of the forms the paper rejected (ModelMetadata::energy_form,
 // for the ablation of its Fig. 11) changes only c and the network's F0 input:
 // c = grad_F N(I, F0, h) (local_identity), grad_F N(I, I, h) with the identity
@@ -22,6 +26,7 @@
 // (global); grad_F Psi(F0) is then not Ptilde(F0, h).
 #include <cstddef>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "pnet/material/material.hpp"
@@ -54,10 +59,15 @@ public:
         /// Cam-Clay, whose symmetrized tangent is not the Jacobian: measured to converge in the
         /// same Newton iterations as the network's Hessian at half the cost; docs/solver.md).
         enum class Hessian { Auto, Network, Tangent } hessian = Hessian::Network;
+        /// The object's material (E aside), checked against the model (material_for_object: a model
+        /// of one material needs the same constitutive model; a parametric one takes its parameters
+        /// from it, within their trained ranges). Unset: the model's own material.
+        std::optional<MaterialDescription> material = std::nullopt;
     };
 
     /// Throws std::invalid_argument (naming the model file) unless `model` is a
-    /// dim-D energy with a compiled kernel, E > 0 and w >= 0.
+    /// dim-D energy with a compiled kernel, E > 0, w >= 0 and Options::material
+    /// (if set) one the model was trained for.
     NeuralElastoplasticEnergy(const ModelFile& model, const Options& options);
 
     /// Starts an optimization: the reference state (F0, h) of n particles and

@@ -40,22 +40,15 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
             throw std::invalid_argument(context[k] + ": the plasticitynet integrator needs an energy model for "
                                                      "every object (none given)");
         const ModelFile& model = *models[k];
-        // A model is used only for the material it was trained for (docs/methods.md): the correction c
-        // uses the model's return mapping, G2P the scene's, so any difference would mix two materials.
-        const std::vector<MaterialDifference> differences =
-            constitutive_differences(model.metadata.material, materials[k].description());
-        if (!differences.empty()) {
-            const MaterialDifference& d = differences.front();
-            throw std::invalid_argument(context[k] + ": " + model.path + " was trained for material." + d.field +
-                                        " = " + d.first + ", the object's material has " + d.second +
-                                        " (a model is used only for the material it was trained for)");
-        }
+        // The model checks the object's material (material_for_object): the same constitutive model,
+        // and for a parametric model its parameters within their trained ranges.
         const MaterialDescription& scene = materials[k].description();
         Group group;
         try {
             group.energy = std::make_unique<NeuralElastoplasticEnergy<dim>>(
                 model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight,
-                                                                        /*relative_to_reference=*/true, hessian});
+                                                                        /*relative_to_reference=*/true, hessian,
+                                                                        scene});
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(context[k] + ": " + e.what());
         }

@@ -107,6 +107,29 @@ Elasticity<dim> make_elasticity(const MaterialDescription& d) {
 
 }  // namespace
 
+double* material_parameter(MaterialDescription& d, const std::string& field) {
+    if (field == "elasticity.nu") return &d.elastic.nu;
+    switch (d.plasticity) {
+        case PlasticityModel::None: break;
+        case PlasticityModel::DruckerPrager:
+            if (field == "plasticity.friction_angle_deg") return &d.drucker_prager.friction_angle_deg;
+            break;
+        case PlasticityModel::CamClay:
+            if (field == "plasticity.friction_angle_deg") return &d.cam_clay.friction_angle_deg;
+            if (field == "plasticity.xi") return &d.cam_clay.xi;
+            if (field == "plasticity.beta") return &d.cam_clay.beta;
+            break;
+        case PlasticityModel::VonMises:
+            if (field == "plasticity.hardening_coefficient") return &d.von_mises.hardening_coefficient;
+            break;
+    }
+    return nullptr;
+}
+
+const double* material_parameter(const MaterialDescription& d, const std::string& field) {
+    return material_parameter(const_cast<MaterialDescription&>(d), field);
+}
+
 std::vector<MaterialDifference> constitutive_differences(const MaterialDescription& a, const MaterialDescription& b) {
     std::vector<MaterialDifference> out;
     auto number = [&](const char* field, double x, double y) {

@@ -48,6 +48,14 @@ struct MaterialDifference {
 /// are not compared: a learned energy is scaled by E, and the others are state.
 std::vector<MaterialDifference> constitutive_differences(const MaterialDescription& a, const MaterialDescription& b);
 
+/// The constitutive parameter at a scene path for d's models: "elasticity.nu",
+/// and per plasticity model "plasticity.friction_angle_deg" (Drucker-Prager,
+/// Cam-Clay), "plasticity.xi", "plasticity.beta" (Cam-Clay),
+/// "plasticity.hardening_coefficient" (von Mises); null for any other field.
+/// What a parametric energy varies (model_file.hpp).
+const double* material_parameter(const MaterialDescription& d, const std::string& field);
+double* material_parameter(MaterialDescription& d, const std::string& field);
+
 /// The materials of docs/physics.md: "sand", "snow", "metal", "metal_nh".
 MaterialDescription material_preset(const std::string& name);
 std::vector<std::string> material_preset_names();

@@ -1,6 +1,8 @@
 #include "pnet/nn/energy_network.hpp"
 
+#include <algorithm>
 #include <stdexcept>
+#include <utility>
 
 #include "pnet/math/svd.hpp"
 
@@ -9,9 +11,9 @@ namespace pnet {
 namespace {
 
 template <int dim>
-int mlp_width(EnergyRepresentation representation, bool has_hardening) {
+int mlp_width(EnergyRepresentation representation, bool has_hardening, int parameters) {
     const int base = representation == EnergyRepresentation::Raw ? 2 * dim * dim : dim * dim + dim;
-    return base + (has_hardening ? 1 : 0);
+    return base + (has_hardening ? 1 : 0) + parameters;
 }
 
 template <int dim>
@@ -26,12 +28,18 @@ Mat<dim> row_matrix(const double* x) {
 
 template <int dim>
 EnergyNetwork<dim>::EnergyNetwork(const MlpWeights& weights, EnergyRepresentation representation,
-                                  bool has_hardening, const std::string& context)
+                                  bool has_hardening, const std::string& context,
+                                  std::vector<double> parameter_inputs)
     : mlp_([&] {
-          const int expected = mlp_width<dim>(representation, has_hardening);
+          const int expected =
+              mlp_width<dim>(representation, has_hardening, static_cast<int>(parameter_inputs.size()));
           if (weights.input_width() != expected)
               throw std::invalid_argument(context + ": a " + std::to_string(dim) + "D " + to_string(representation) +
-                                          " energy network takes " + std::to_string(expected) + " inputs, not " +
+                                          " energy network" +
+                                          (parameter_inputs.empty()
+                                               ? std::string()
+                                               : " with " + std::to_string(parameter_inputs.size()) + " parameters") +
+                                          " takes " + std::to_string(expected) + " inputs, not " +
                                           std::to_string(weights.input_width()));
           if (!FusedMlp::supports(weights.widths, kM))
               throw std::invalid_argument(context + ": no fused kernel for this architecture; compiled: " +
@@ -40,14 +48,16 @@ EnergyNetwork<dim>::EnergyNetwork(const MlpWeights& weights, EnergyRepresentatio
       }()),
       representation_(representation),
       has_hardening_(has_hardening),
+      parameter_inputs_(std::move(parameter_inputs)),
       input_width_(weights.input_width()) {}
 
 template <int dim>
 void EnergyNetwork<dim>::mlp_input(EnergyRepresentation representation, bool has_hardening, const double* x,
-                                   double* out) {
+                                   double* out, int parameters) {
     const int h_at = 2 * kM;
+    const int tail = (has_hardening ? 1 : 0) + parameters;  // [h, u] after F0 in both layouts
     if (representation == EnergyRepresentation::Raw) {
-        std::copy(x, x + h_at + (has_hardening ? 1 : 0), out);
+        std::copy(x, x + h_at + tail, out);
         return;
     }
     const PolarSVD<dim> frame = polar_svd<dim>(row_matrix<dim>(x + kM));
@@ -55,7 +65,7 @@ void EnergyNetwork<dim>::mlp_input(EnergyRepresentation representation, bool has
     for (int i = 0; i < dim; ++i)
         for (int j = 0; j < dim; ++j) out[i * dim + j] = G(i, j);
     for (int i = 0; i < dim; ++i) out[kM + i] = frame.Sigma[i];
-    if (has_hardening) out[kM + dim] = x[h_at];
+    std::copy(x + h_at, x + h_at + tail, out + kM + dim);
 }
 
 template <int dim>
@@ -81,7 +91,8 @@ void EnergyNetwork<dim>::set_reference(const Mat<dim>* F0, const double* h, std:
                 for (int j = 0; j < dim; ++j) x[kM + i * dim + j] = F0[p](i, j);
             next = 2 * kM;
         }
-        if (has_hardening_) x[next] = h ? h[p] : 0.0;
+        if (has_hardening_) x[next++] = h ? h[p] : 0.0;
+        std::copy(parameter_inputs_.begin(), parameter_inputs_.end(), x + next);
     }
 }
 

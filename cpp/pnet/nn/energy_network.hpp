@@ -7,6 +7,9 @@
 //              F0 = U diag(Sigma0) V^T (polar_svd), frame-indifferent by
 //              construction (python/plasticitynet/training/frames.py).
 //
+// A parametric energy's normalised material parameters u follow h in both
+// (ModelMetadata::parameters); they are constants of the object.
+//
 // In both the differentiated inputs come first, so the fused kernel is the
 // same; for Principal, with vec G = M vec F (M_(ij),(kl) = U_ki V_lj),
 //   grad_F N = U (grad_G N) V^T,   Hess_F N = M^T (Hess_G N) M.
@@ -28,8 +31,9 @@ public:
 
     /// Throws std::invalid_argument (naming `context`) unless the weights are
     /// those of a dim-D energy MLP in `representation` with a compiled kernel.
+    /// `parameter_inputs`: a parametric energy's inputs u (the same for every row).
     EnergyNetwork(const MlpWeights& weights, EnergyRepresentation representation, bool has_hardening,
-                  const std::string& context);
+                  const std::string& context, std::vector<double> parameter_inputs = {});
 
     /// The reference state of n rows: F0 and the network's hardening input h
     /// (ignored without hardening; null: 0).
@@ -42,10 +46,10 @@ public:
     void evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient = nullptr,
                   double* hessian = nullptr) const;
 
-    /// The MLP's input for one forward() row [vec F, vec F0, (h)] of a model
-    /// file: what the loader checks forward() against.
+    /// The MLP's input for one forward() row [vec F, vec F0, (h), (u)] of a model
+    /// file (`parameters` entries u): what the loader checks forward() against.
     static void mlp_input(EnergyRepresentation representation, bool has_hardening, const double* forward_row,
-                          double* mlp_row);
+                          double* mlp_row, int parameters = 0);
 
     EnergyRepresentation representation() const { return representation_; }
     const FusedMlp& mlp() const { return mlp_; }
@@ -54,6 +58,7 @@ private:
     FusedMlp mlp_;
     EnergyRepresentation representation_;
     bool has_hardening_;
+    std::vector<double> parameter_inputs_;
     int input_width_;
     std::size_t size_ = 0;
     std::vector<Mat<dim>> U_, V_;  // Principal: the frame of each row's F0

@@ -124,12 +124,16 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
                      "\"" + form + "\" is not \"eq8\", \"local_identity\", \"global_identity\" or \"global\"");
         }
         const bool raw = meta.representation == EnergyRepresentation::Raw;
-        const int expected = (raw ? 2 * d * d : d * d + d) + (meta.has_hardening ? 1 : 0);
+        // A parametric energy's inputs follow (checked with the material below).
+        const int parameters =
+            j.contains("parameters") && j.at("parameters").is_array() ? static_cast<int>(j.at("parameters").size()) : 0;
+        const int expected = (raw ? 2 * d * d : d * d + d) + (meta.has_hardening ? 1 : 0) + parameters;
         if (input_width != expected)
             fail(context, "input_width",
                  std::to_string(input_width) + ": a " + std::to_string(d) + "D " + to_string(meta.representation) +
                      " energy " + (meta.has_hardening ? "with" : "without") + " hardening takes [" +
-                     (raw ? "vec F, vec F0" : "vec G, Sigma0") + (meta.has_hardening ? ", h" : "") + "], " +
+                     (raw ? "vec F, vec F0" : "vec G, Sigma0") + (meta.has_hardening ? ", h" : "") +
+                     (parameters ? ", " + std::to_string(parameters) + " parameters" : std::string()) + "], " +
                      std::to_string(expected) + " inputs");
     } else if (input_width != d + 1) {
         fail(context, "input_width",
@@ -191,6 +195,30 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
         }
     }
 
+    if (j.contains("parameters")) {
+        if (meta.kind != ModelKind::Energy) fail(context, "parameters", "only an energy can be parametric");
+        const json& list = j.at("parameters");
+        if (!list.is_array() || list.empty()) fail(context, "parameters", "expected a non-empty list");
+        for (std::size_t k = 0; k < list.size(); ++k) {
+            const json& e = list[k];
+            const std::string at = "parameters[" + std::to_string(k) + "]";
+            if (!e.is_object() || !e.contains("field") || !e.at("field").is_string() || !e.contains("min") ||
+                !e.at("min").is_number() || !e.contains("max") || !e.at("max").is_number())
+                fail(context, at, "expected {\"field\": string, \"min\": number, \"max\": number}, got " + e.dump());
+            ModelParameter p{e.at("field").get<std::string>(), e.at("min").get<double>(), e.at("max").get<double>()};
+            if (!material_parameter(meta.material, p.field))
+                fail(context, at + ".field",
+                     "\"" + p.field + "\" is not a parameter of the material's models (" +
+                         to_string(meta.material.elasticity) + ", " + to_string(meta.material.plasticity) + ")");
+            if (!(std::isfinite(p.min) && std::isfinite(p.max) && p.min < p.max))
+                fail(context, at, "the range [" + e.at("min").dump() + ", " + e.at("max").dump() +
+                                      "] must be finite with min < max");
+            for (const ModelParameter& q : meta.parameters)
+                if (q.field == p.field) fail(context, at + ".field", "\"" + p.field + "\" is listed twice");
+            meta.parameters.push_back(std::move(p));
+        }
+    }
+
     if (meta.kind == ModelKind::Energy && j.contains("return_map")) {
         const json& rm = j.at("return_map");
         if (!rm.is_object() || !rm.contains("type") || !rm.at("type").is_string())
@@ -205,6 +233,40 @@ ModelMetadata parse_model_metadata(const json& j, const std::string& context) {
         }
     }
     return meta;
+}
+
+MaterialDescription material_for_object(const ModelMetadata& meta, const MaterialDescription& object,
+                                        const std::string& model_path) {
+    // A model is used only for the materials it was trained for: the correction c uses the model's return
+    // mapping, G2P the scene's, so any other difference would mix two materials (docs/methods.md).
+    auto refuse_differences = [&](const MaterialDescription& model) {
+        const std::vector<MaterialDifference> differences = constitutive_differences(model, object);
+        if (differences.empty()) return;
+        const MaterialDifference& d = differences.front();
+        throw std::invalid_argument(model_path + " was trained for material." + d.field + " = " + d.first +
+                                    ", the object's material has " + d.second +
+                                    (meta.parametric() ? " (of its material, only the model's parameters may vary)"
+                                                       : " (a model is used only for the material it was trained for)"));
+    };
+    if (object.elasticity != meta.material.elasticity || object.plasticity != meta.material.plasticity)
+        refuse_differences(meta.material);
+    MaterialDescription out = meta.material;  // at the training E
+    for (const ModelParameter& p : meta.parameters) {
+        const double value = *material_parameter(object, p.field);  // same models: the field exists
+        if (!(value >= p.min && value <= p.max))
+            throw std::invalid_argument(model_path + ": material." + p.field + " = " + json(value).dump() +
+                                        " is outside the range [" + json(p.min).dump() + ", " + json(p.max).dump() +
+                                        "] this parametric model was trained for");
+        *material_parameter(out, p.field) = value;
+    }
+    refuse_differences(out);
+    return out;
+}
+
+std::vector<double> parameter_inputs(const ModelMetadata& meta, const MaterialDescription& material) {
+    std::vector<double> u;
+    for (const ModelParameter& p : meta.parameters) u.push_back(p.input(*material_parameter(material, p.field)));
+    return u;
 }
 
 double ModelMetadata::network_hardening(double state, bool* clamped) const {

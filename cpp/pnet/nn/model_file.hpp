@@ -62,6 +62,16 @@ enum class EnergyForm { Eq8, LocalIdentity, GlobalIdentity, Global };
 /// "eq8", "local_identity", "global_identity" or "global".
 std::string to_string(EnergyForm form);
 
+/// A material parameter that a parametric energy takes as an input (metadata
+/// "parameters", in input order, after h): the material field (its scene path,
+/// e.g. "plasticity.friction_angle_deg") and the range it was trained over. The
+/// network sees u = 2 (value - min) / (max - min) - 1.
+struct ModelParameter {
+    std::string field;
+    double min = 0.0, max = 0.0;
+    double input(double value) const { return 2.0 * (value - min) / (max - min) - 1.0; }
+};
+
 struct ModelMetadata {
     ModelKind kind = ModelKind::Energy;
     int dim = 2;
@@ -75,7 +85,9 @@ struct ModelMetadata {
     /// for their plasticity and dimension.
     double hardening_min = 0.0, hardening_max = 0.0;
     double training_E = 1.0;            // Pa; the net is dimensionless, scaled by the scene's E
-    MaterialDescription material;       // at the training E
+    MaterialDescription material;       // at the training E (a parametric model's: its family's reference)
+    /// A parametric energy's inputs (empty for a model of one material).
+    std::vector<ModelParameter> parameters;
     /// Energy models trained with the learned return mapping name its file
     /// (relative to the model's folder) and pin its sha256.
     std::string return_map_file, return_map_sha256;
@@ -86,8 +98,10 @@ struct ModelMetadata {
     /// The width of the file's forward() input: 2 d^2 (+1) for an energy in
     /// any representation, the MLP's for a return map.
     int forward_input_width() const {
-        return kind == ModelKind::Energy ? 2 * dim * dim + (has_hardening ? 1 : 0) : input_width();
+        return kind == ModelKind::Energy ? 2 * dim * dim + (has_hardening ? 1 : 0) + parameter_count() : input_width();
     }
+    bool parametric() const { return !parameters.empty(); }
+    int parameter_count() const { return static_cast<int>(parameters.size()); }
     /// Inputs the simulator differentiates in: d^2 (F) for an energy, 0 otherwise.
     int derivative_inputs() const { return kind == ModelKind::Energy ? dim * dim : 0; }
     bool learned_return_map() const { return !return_map_file.empty(); }
@@ -98,12 +112,28 @@ struct ModelMetadata {
     double network_hardening(double state, bool* clamped = nullptr) const;
 };
 
+/// The material a model's energy uses for an object of material `object` (E
+/// aside, at the training E). A model of one material: its own, after checking
+/// that `object` has the same constitutive model (constitutive_differences). A
+/// parametric model: its reference with the parameter fields taken from
+/// `object`, each within its trained range, every other constitutive field
+/// equal. std::invalid_argument naming the model file and the field, e.g.
+/// "models/sand_param_2d.pt: material.plasticity.friction_angle_deg = 50 is
+/// outside the range [20, 45] this parametric model was trained for".
+MaterialDescription material_for_object(const ModelMetadata& meta, const MaterialDescription& object,
+                                        const std::string& model_path);
+
+/// A parametric model's inputs u for a material returned by material_for_object
+/// (empty for a model of one material).
+std::vector<double> parameter_inputs(const ModelMetadata& meta, const MaterialDescription& material);
+
 /// Parses and validates the metadata entry; std::invalid_argument naming
 /// `context` (the file) and the field on any problem: unknown format or
 /// version, kind, dim, representation, energy_form, widths (input width 2d^2 (+1) for a raw
 /// energy, d^2 + d (+1) for a principal one, d+1 for a return map; output 1), activation other than "silu", layer parameter
 /// names, material (validated as a material description of this dimension),
-/// training_E, return_map reference.
+/// training_E, return_map reference, parameters (a known parameter of the
+/// material's models, finite min < max, listed once; energies only).
 ModelMetadata parse_model_metadata(const nlohmann::json& j, const std::string& context);
 
 struct LoadOptions {

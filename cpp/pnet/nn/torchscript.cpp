@@ -185,9 +185,9 @@ Archive read_archive(const std::string& path, const LoadOptions& options, const 
         if (meta.kind == ModelKind::ReturnMap)
             std::copy(row, row + in, out);
         else if (meta.dim == 2)
-            EnergyNetwork<2>::mlp_input(meta.representation, meta.has_hardening, row, out);
+            EnergyNetwork<2>::mlp_input(meta.representation, meta.has_hardening, row, out, meta.parameter_count());
         else
-            EnergyNetwork<3>::mlp_input(meta.representation, meta.has_hardening, row, out);
+            EnergyNetwork<3>::mlp_input(meta.representation, meta.has_hardening, row, out, meta.parameter_count());
     }
     torch::Tensor out;
     try {

@@ -3,7 +3,8 @@
     python train.py --material {sand,snow,metal,metal_nh,metal_nh_rm} --dim {2,3}
                     [--epochs --batch --lr --lr-decay --decay-steps --seed --sampling --out --resume
                      --return-map FILE --checkpoint-every N --eval-every N --eval-samples N --threads N
-                     --device cpu|cuda|cuda:N|auto --precision float32|float64 --hidden W.. --shards N]
+                     --device cpu|cuda|cuda:N|auto --precision float32|float64 --hidden W.. --shards N
+                     --parametric]
 
 Several processes (data parallel, torch.distributed): torchrun --nproc-per-node W train.py ... (gloo on
 the CPU, NCCL with --device cuda, one GPU per process); across machines, torchrun's --nnodes /
@@ -169,6 +170,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="parts of each batch with their own random stream, a multiple of the process count; a run with "
         "the same --shards draws the same batches on any number of processes (0: one per process)",
     )
+    p.add_argument(
+        "--parametric",
+        action="store_true",
+        help="a parametric energy: the material's parameters (sand: friction angle, nu; snow: friction angle, xi, "
+        "beta, nu; metal: hardening coefficient, nu) as network inputs over the ranges of docs/physics.md, one "
+        "model for the family (default out: models/<material>_param_<dim>d.pt)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -178,7 +186,8 @@ def main(argv=None, root: str | Path | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     base = Path(root) if root is not None else Path.cwd()
-    out = Path(args.out) if args.out else base / "models" / f"{args.material}_{args.dim}d.pt"
+    stem = f"{args.material}_param" if args.parametric else args.material
+    out = Path(args.out) if args.out else base / "models" / f"{stem}_{args.dim}d.pt"
     if out.suffix != ".pt":
         parser.error(f"--out {out}: the model file name must end in .pt")
     return_map = ""
@@ -199,36 +208,40 @@ def main(argv=None, root: str | Path | None = None) -> int:
     if args.resume and not out.with_suffix(".ckpt").is_file():
         parser.error(f"--resume: no checkpoint {out.with_suffix('.ckpt')}")
     argv_list = sys.argv[1:] if argv is None else list(argv)
-    config = TrainConfig(
-        material=args.material,
-        dim=args.dim,
-        epochs=args.epochs,
-        batch=args.batch,
-        lr=args.lr,
-        lr_decay=args.lr_decay,
-        decay_steps=args.decay_steps,
-        schedule=args.schedule,
-        warmup=args.warmup,
-        seed=args.seed,
-        sampling=args.sampling,
-        rm_loss=args.rm_loss,
-        representation=args.representation,
-        hessian_weight=args.hessian_weight,
-        energy_form=args.energy_form,
-        out=str(out),
-        checkpoint_every=args.checkpoint_every,
-        resume=args.resume,
-        return_map=return_map,
-        eval_every=args.eval_every,
-        eval_samples=args.eval_samples,
-        progress=not args.no_progress,
-        threads=args.threads,
-        device=args.device,
-        precision=args.precision,
-        hidden=tuple(args.hidden),
-        shards=args.shards,
-        command="python train.py " + shlex.join(argv_list),
-    )
+    try:
+        config = TrainConfig(
+            material=args.material,
+            dim=args.dim,
+            epochs=args.epochs,
+            batch=args.batch,
+            lr=args.lr,
+            lr_decay=args.lr_decay,
+            decay_steps=args.decay_steps,
+            schedule=args.schedule,
+            warmup=args.warmup,
+            seed=args.seed,
+            sampling=args.sampling,
+            rm_loss=args.rm_loss,
+            representation=args.representation,
+            hessian_weight=args.hessian_weight,
+            energy_form=args.energy_form,
+            out=str(out),
+            checkpoint_every=args.checkpoint_every,
+            resume=args.resume,
+            return_map=return_map,
+            eval_every=args.eval_every,
+            eval_samples=args.eval_samples,
+            progress=not args.no_progress,
+            threads=args.threads,
+            device=args.device,
+            precision=args.precision,
+            hidden=tuple(args.hidden),
+            shards=args.shards,
+            parametric=args.parametric,
+            command="python train.py " + shlex.join(argv_list),
+        )
+    except ValueError as err:  # a combination TrainConfig refuses (e.g. --parametric without a family)
+        parser.error(str(err))
     try:
         trainer = Trainer(config)
     except ValueError as err:  # unreadable or mismatched checkpoint / return-map model, bad device
@@ -247,6 +260,8 @@ def main(argv=None, root: str | Path | None = None) -> int:
            else f"lr {config.lr} {config.schedule}")
         + (f" after {config.warmup} warm-up steps" if config.warmup else "")
         + f", sampling {config.sampling}, seed {config.seed}"
+        + (" (parametric: " + ", ".join(f"{r.field} in [{r.lo:g}, {r.hi:g}]" for r in trainer.task.parameters.ranges)
+           + ")" if config.parametric else "")
         + (
             f", {config.representation} input, Hessian weight {config.hessian_weight}, energy form {config.energy_form}"
             if args.material != RETURN_MAP_MATERIAL

@@ -177,7 +177,7 @@ def energy_loss(
     else:
         copies = first.shape[0] // B  # the frame of the F0 slot, once per block of `first`
         U, Sigma0, V = (torch.cat([t] * copies) for t in frame)
-        rest = first.new_zeros(first.shape[0], 0) if hh is None else hh.reshape(-1, 1).to(first.dtype)
+        rest = first.new_zeros(first.shape[0], 0) if hh is None else hh.reshape(first.shape[0], -1).to(first.dtype)
         N = net.in_frame(first, U, Sigma0, V, rest)
     (dN,) = torch.autograd.grad(N.sum(), first, create_graph=True)
     grad_psi = dN[:B]
@@ -201,8 +201,12 @@ def energy_loss(
     return loss
 
 
-def stress_directional_derivative(stress, F: torch.Tensor, h: torch.Tensor, v: torch.Tensor, step: float = 1e-6) -> torch.Tensor:
-    """J v = (d Ptilde/dF)[v] at (F, h) by central differences of `stress(F, h)` in float64, (B, d, d)."""
+def stress_directional_derivative(
+    stress, F: torch.Tensor, h: torch.Tensor, v: torch.Tensor, step: float = 1e-6, p: torch.Tensor | None = None
+) -> torch.Tensor:
+    """J v = (d Ptilde/dF)[v] at (F, h) by central differences of `stress(F, h)` in float64, (B, d, d)
+    (`stress(F, h, p)` for a parametric model's rows with parameters p)."""
     F = F.to(torch.float64)
     v = v.to(torch.float64)
-    return (stress(F + step * v, h) - stress(F - step * v, h)) / (2.0 * step)
+    extra = () if p is None else (p,)
+    return (stress(F + step * v, h, *extra) - stress(F - step * v, h, *extra)) / (2.0 * step)

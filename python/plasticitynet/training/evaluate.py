@@ -23,6 +23,7 @@ library's relative surface distance, = |y| / (2 (2 mu h)^2) on the surface); and
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
 import time
@@ -98,6 +99,30 @@ def hessian_error(model, samples: int, seed: int, sampling: str = "near") -> flo
     return float(((H - S) ** 2).sum() / (S**2).sum()) ** 0.5
 
 
+#: The error map of a parametric model: bin centres per parameter (fewer with more parameters, so that the
+#: grid stays ~25-81 points), held-out samples per point.
+MAP_BINS = {1: 9, 2: 5, 3: 4, 4: 3}
+MAP_SAMPLES = 8192
+
+
+def parameter_error_map(model, seed: int = EVAL_SEED, samples: int = MAP_SAMPLES, bins: int | None = None) -> dict:
+    """The relative RMS gradient error (paper sampling 1x) of a parametric model at the centre of each bin of
+    a regular grid over its parameter box: {"fields", "bins", "samples", "points": [{"values", "paper_1x"}],
+    "mean", "max", "max_over_mean"}; the same held-out samples at every point."""
+    space = model.parameters
+    n = bins or MAP_BINS.get(len(space), 3)
+    axes = [[r.lo + (r.hi - r.lo) * (k + 0.5) / n for k in range(n)] for r in space.ranges]
+    points = []
+    for values in itertools.product(*axes):
+        bound = model.at(space.description_at(values))
+        points.append({"values": [round(v, 6) for v in values],
+                       "paper_1x": relative_rms_error(bound, "paper", 1.0, samples, seed)})
+    errors = [p["paper_1x"] for p in points]
+    mean = sum(errors) / len(errors)
+    return {"fields": list(space.fields), "bins": n, "samples": samples, "points": points,
+            "mean": mean, "max": max(errors), "max_over_mean": max(errors) / mean}
+
+
 def evaluate_energy(model, samples: int = 100_000, seed: int = EVAL_SEED) -> dict:
     """The errors of an energy model (a LearnedEnergy) as a JSON-ready dict."""
     t0 = time.perf_counter()
@@ -113,6 +138,9 @@ def evaluate_energy(model, samples: int = 100_000, seed: int = EVAL_SEED) -> dic
         }
     out["at_F0_max_rel"] = error_at_F0(model, samples, seed)
     out["hessian_rel_rms_near"] = hessian_error(model, min(samples, HESSIAN_SAMPLES), seed)
+    if getattr(model, "parameters", None) is not None:
+        out["parameter_values"] = list(model.parameter_values)
+        out["parameter_map"] = parameter_error_map(model, seed=seed, samples=min(samples, MAP_SAMPLES))
     out["wall_seconds"] = round(time.perf_counter() - t0, 2)
     return out
 
@@ -169,6 +197,13 @@ def format_errors(errors: dict, title: str = "") -> str:
                 + ", ".join(f"{s} {100 * v['1x']:.3f}%" for s, v in vs.items())
             )
         lines.append(f"  at F = F0 (max relative, float64): {errors['at_F0_max_rel']:.3e}")
+        if "parameter_map" in errors:
+            m = errors["parameter_map"]
+            lines.append(
+                f"  at the reference material ({', '.join(f'{f} = {v:g}' for f, v in zip(m['fields'], errors['parameter_values']))}); "
+                f"over the parameter box ({m['bins']} bins per parameter, {len(m['points'])} points, paper 1x): "
+                f"mean {100 * m['mean']:.3f}%, worst {100 * m['max']:.3f}% ({m['max_over_mean']:.2f}x the mean)"
+            )
         if "hessian_rel_rms_near" in errors:
             lines.append(
                 f"  Hessian vs sym(d Ptilde/dF), near sampling (relative RMS): {100 * errors['hessian_rel_rms_near']:.3f}%"

@@ -109,17 +109,23 @@ def energy_metadata(
     errors: dict | None = None,
     return_map: dict | None = None,
     energy_form: str = "eq8",
+    parameters: list[dict] | None = None,
 ) -> dict:
     """Metadata of an energy model. `return_map`: {"type": "analytic"} (default) or
     {"type": "learned", "file": path relative to the model's folder, "sha256": ...}. `energy_form`: eq. 8 or
-    one of the rejected forms of the paper's Fig. 11 (energy.ENERGY_FORMS), recorded as "energy_form"."""
+    one of the rejected forms of the paper's Fig. 11 (energy.ENERGY_FORMS), recorded as "energy_form".
+    `parameters`: a parametric model's ranges (parameters.ParameterSpace.to_metadata), recorded as
+    "parameters" with `material` the family's reference; absent for a dedicated model."""
     d = material.dim
     representation = getattr(net, "representation", "raw")
-    forward_layout = [f"F (row-major, {d * d})", f"F0 (row-major, {d * d})"] + (["h"] if has_hardening else [])
+    tail = (["h"] if has_hardening else []) + [
+        f"u({p['field']}) = 2 (value - {p['min']:g}) / ({p['max']:g} - {p['min']:g}) - 1" for p in parameters or []
+    ]
+    forward_layout = [f"F (row-major, {d * d})", f"F0 (row-major, {d * d})"] + tail
     if representation == "raw":
         layout = forward_layout
     else:
-        layout = [f"G = U^T F V (row-major, {d * d})", f"Sigma0 ({d})"] + (["h"] if has_hardening else [])
+        layout = [f"G = U^T F V (row-major, {d * d})", f"Sigma0 ({d})"] + tail
     meta = _common("energy", material, net, recipe, errors)
     meta.update(
         rescale=ENERGY_RESCALE,
@@ -137,6 +143,8 @@ def energy_metadata(
         energy=ENERGY_DESCRIPTIONS[energy_form],
         return_map=dict(return_map or {"type": "analytic"}),
     )
+    if parameters:
+        meta["parameters"] = [dict(p) for p in parameters]
     return meta
 
 

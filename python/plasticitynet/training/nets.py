@@ -12,7 +12,8 @@ An energy network (`EnergyNet`) always takes this x; its representation decides 
   "raw"        (the paper's)  the MLP takes x itself, 2 d^2 (+1) inputs;
   "principal"  (frames.py)    the MLP takes [vec(U^T F V), Sigma0, h], d^2 + d (+1) inputs, with
                               F0 = U diag(Sigma0) V^T: frame-indifferent by construction.
-In both, the inputs the simulator differentiates in (F, or G) come first.
+In both, the inputs the simulator differentiates in (F, or G) come first. A parametric energy
+(parameters.py) appends its K normalised material parameters u after h, in x and in the MLP's input.
 """
 
 from __future__ import annotations
@@ -56,12 +57,13 @@ def energy_input_width(dim: int, has_hardening: bool) -> int:
     return 2 * dim * dim + (1 if has_hardening else 0)
 
 
-def mlp_input_width(dim: int, has_hardening: bool, representation: str = "raw") -> int:
-    """Width of the MLP's input: 2 d^2 (+1) raw; d^2 + d (+1) principal (6/7 in 2D, 12/13 in 3D)."""
+def mlp_input_width(dim: int, has_hardening: bool, representation: str = "raw", parameters: int = 0) -> int:
+    """Width of the MLP's input: 2 d^2 (+1) raw; d^2 + d (+1) principal (6/7 in 2D, 12/13 in 3D); plus the
+    number of material parameters of a parametric energy."""
     if representation not in REPRESENTATIONS:
         raise ValueError(f"representation = {representation!r}: expected one of {', '.join(REPRESENTATIONS)}")
     base = 2 * dim * dim if representation == "raw" else dim * dim + dim
-    return base + (1 if has_hardening else 0)
+    return base + (1 if has_hardening else 0) + int(parameters)
 
 
 def hidden_widths(dim: int, hidden=None) -> tuple[int, ...]:
@@ -74,8 +76,8 @@ def hidden_widths(dim: int, hidden=None) -> tuple[int, ...]:
     return hidden
 
 
-def energy_widths(dim: int, has_hardening: bool, representation: str = "raw", hidden=None) -> list[int]:
-    return [mlp_input_width(dim, has_hardening, representation), *hidden_widths(dim, hidden), 1]
+def energy_widths(dim: int, has_hardening: bool, representation: str = "raw", hidden=None, parameters: int = 0) -> list[int]:
+    return [mlp_input_width(dim, has_hardening, representation, parameters), *hidden_widths(dim, hidden), 1]
 
 
 def return_map_widths(dim: int, hidden=None) -> list[int]:
@@ -93,9 +95,10 @@ def make_mlp(widths, seed: int) -> MLP:
 class EnergyNet(nn.Module):
     """An energy network: forward(x = [vec F, vec F0, h]) -> N (B, 1) whatever the representation, so that
     every model is called the same way from PyTorch, TorchScript and LibTorch. Parameters are the MLP's,
-    named mlp.layers.{2k}.weight / .bias; `widths` are the MLP's."""
+    named mlp.layers.{2k}.weight / .bias; `widths` are the MLP's. `parameters`: the number of material
+    parameters a parametric energy takes after h (0 for a dedicated one)."""
 
-    def __init__(self, mlp: MLP, dim: int, representation: str = "raw"):
+    def __init__(self, mlp: MLP, dim: int, representation: str = "raw", parameters: int = 0):
         super().__init__()
         if representation not in REPRESENTATIONS:
             raise ValueError(f"representation = {representation!r}: expected one of {', '.join(REPRESENTATIONS)}")
@@ -103,8 +106,9 @@ class EnergyNet(nn.Module):
         self.dim = int(dim)
         self.representation = representation
         self.widths = list(mlp.widths)
-        self.has_hardening = self.widths[0] == mlp_input_width(dim, True, representation)
-        if not self.has_hardening and self.widths[0] != mlp_input_width(dim, False, representation):
+        self.material_inputs = int(parameters)  # (nn.Module has parameters())
+        self.has_hardening = self.widths[0] == mlp_input_width(dim, True, representation, parameters)
+        if not self.has_hardening and self.widths[0] != mlp_input_width(dim, False, representation, parameters):
             raise ValueError(f"widths = {self.widths}: not a {dim}D {representation} energy network")
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -128,15 +132,19 @@ class EnergyNet(nn.Module):
         return self.mlp(torch.cat([G, Sigma0, rest], dim=1))
 
 
-def make_energy_net(dim: int, has_hardening: bool, representation: str, seed: int, hidden=None) -> EnergyNet:
-    """An energy network with PyTorch's default initialisation drawn from `seed` (hidden: hidden_widths)."""
-    return EnergyNet(make_mlp(energy_widths(dim, has_hardening, representation, hidden), seed), dim, representation)
+def make_energy_net(
+    dim: int, has_hardening: bool, representation: str, seed: int, hidden=None, parameters: int = 0
+) -> EnergyNet:
+    """An energy network with PyTorch's default initialisation drawn from `seed` (hidden: hidden_widths;
+    parameters: the number of material parameters of a parametric energy)."""
+    widths = energy_widths(dim, has_hardening, representation, hidden, parameters)
+    return EnergyNet(make_mlp(widths, seed), dim, representation, parameters)
 
 
 def energy_input(F: torch.Tensor, F0: torch.Tensor, h: torch.Tensor | None) -> torch.Tensor:
     """x = [vec(F), vec(F0), h] (row-major vec; no h column when h is None), shape (B, 2 d^2 [+1])."""
     B = F.shape[0]
     parts = [F.reshape(B, -1), F0.reshape(B, -1)]
-    if h is not None:
-        parts.append(h.reshape(B, 1).to(F.dtype))
+    if h is not None:  # h (B,), or the tail [h, u] (B, k) of a parametric model
+        parts.append(h.reshape(B, -1).to(F.dtype))
     return torch.cat(parts, dim=1)

@@ -14,6 +14,10 @@ with Qa, Qb small random rotations of angle <= 0.1 rad.
 Hardening h ~ U[h_lo, h_hi] (appendix A.2): Cam-Clay (snow) h = min(a, 0) in [-0.5, 0] (2D) or
 [-1, 0] (3D); von Mises (metal) h = tau_Y / (2 mu) in [0, 1]; Drucker-Prager (sand) has none.
 
+A parametric model's batches also carry material parameters p (parameters.py): uniform in the family's
+box, one vector per group of parameters.GROUP_SIZE consecutive samples (fewer, larger groups beyond
+parameters.MAX_GROUPS per part), from a stream of their own.
+
 Every draw comes from a torch.Generator seeded from (seed, step, stream), so that a batch is fully
 determined by those three integers (resumed training sees the same batches; evaluation uses a
 stream disjoint from training). Samples are drawn in float64 and cast at the end.
@@ -31,6 +35,7 @@ import numpy as np
 import torch
 
 from ..materials import Material
+from .parameters import GROUP_SIZE, MAX_GROUPS, ParameterRange
 
 SAMPLINGS = ("paper", "near")
 #: Training may also draw "mixed" batches: half "paper", half "near" (beyond the paper: the states a
@@ -41,6 +46,9 @@ _MIXED_NEAR_STEP = 1 << 40
 
 #: Independent random streams: training batches never share a seed with evaluation samples.
 STREAMS = {"train": 0, "eval": 1, "test": 2, "hessian": 3}
+#: A parametric batch's parameters come from the stream of its samples offset by this (its own numbers, so
+#: that adding parameters changes no other draw).
+_PARAMETER_STREAM_OFFSET = 16
 
 #: Log-singular values eps ~ U[-EPS_RANGE, EPS_RANGE]^d (sec. 5.1).
 EPS_RANGE = 1.0
@@ -51,13 +59,15 @@ NEAR_MAX_ANGLE = 0.1
 @dataclass(frozen=True)
 class SamplingSpec:
     """What to sample for one material: deps ~ U[-deps_scale deps, deps_scale deps]^d and h ~ U[h_range]
-    (h_range None: the material has no hardening input)."""
+    (h_range None: the material has no hardening input); for a parametric model, the ranges of its
+    material parameters (parameters.ParameterRange, in input order; empty otherwise)."""
 
     dim: int
     deps: float
     h_range: tuple[float, float] | None
     sampling: str = "paper"
     deps_scale: float = 1.0
+    parameters: tuple[ParameterRange, ...] = ()
 
     def __post_init__(self):
         if self.sampling not in TRAINING_SAMPLINGS:
@@ -79,6 +89,8 @@ class SamplingSpec:
             "deps_range": [-self.deps * self.deps_scale, self.deps * self.deps_scale],
             "h_range": None if self.h_range is None else list(self.h_range),
             "near_max_angle": NEAR_MAX_ANGLE if self.sampling in ("near", "mixed") else None,
+            **({"parameters": [r.to_dict() for r in self.parameters], "parameter_group_size": GROUP_SIZE}
+               if self.parameters else {}),
         }
 
 
@@ -96,7 +108,8 @@ def sampling_spec(material: Material, sampling: str = "paper", deps_scale: float
 
 
 def generator_for(
-    seed: int, step: int, stream: str = "train", device: torch.device | str = "cpu", shard: int = 0
+    seed: int, step: int, stream: str = "train", device: torch.device | str = "cpu", shard: int = 0,
+    offset: int = 0,
 ) -> torch.Generator:
     """A generator on `device` whose state depends only on (seed, step, stream, shard) (numpy SeedSequence
     mixing, so that neighbouring seeds and steps give unrelated streams). Draws are reproducible per
@@ -107,7 +120,7 @@ def generator_for(
         raise ValueError(f"stream = {stream!r}: expected one of {', '.join(STREAMS)}")
     if seed < 0 or step < 0 or shard < 0:
         raise ValueError(f"seed = {seed}, step = {step}, shard = {shard}: must be >= 0")
-    words = [STREAMS[stream], int(seed), int(step)] + ([int(shard)] if shard else [])
+    words = [STREAMS[stream] + offset, int(seed), int(step)] + ([int(shard)] if shard else [])
     state = np.random.SeedSequence(words).generate_state(2, dtype=np.uint32)
     return torch.Generator(device=torch.device(device)).manual_seed((int(state[0]) << 31) ^ int(state[1]))
 
@@ -168,7 +181,7 @@ def small_rotations(n: int, d: int, max_angle: float, generator: torch.Generator
 class DeformationBatch:
     """A batch of (F, F0, h) with the factors F = U diag(Sigma) V^T, F0 = U0 diag(Sigma0) V0^T
     (U, V, U0, V0 rotations; Sigma, Sigma0 > 0, unsorted). h is (B,) (zeros, unused, without
-    hardening)."""
+    hardening); p (B, K) the material parameters of a parametric model (K = 0 otherwise)."""
 
     F: torch.Tensor
     F0: torch.Tensor
@@ -179,6 +192,7 @@ class DeformationBatch:
     U0: torch.Tensor
     Sigma0: torch.Tensor
     V0: torch.Tensor
+    p: torch.Tensor
 
     def to(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None) -> "DeformationBatch":
         """The batch in another dtype and/or on another device."""
@@ -263,7 +277,16 @@ def _sample_part(spec, n, seed, step, stream, dtype, device, shard) -> Deformati
     def compose(U_, S_, V_):
         return (U_ * S_[:, None, :]) @ V_.transpose(-1, -2)
 
-    batch = DeformationBatch(compose(U, Sigma, V), compose(U0, Sigma0, V0), h, U, Sigma, V, U0, Sigma0, V0)
+    p = torch.zeros(n, 0, dtype=torch.float64, device=g.device)
+    if spec.parameters:
+        gp = generator_for(seed, step, stream, device, shard, offset=_PARAMETER_STREAM_OFFSET)
+        lo = torch.tensor([r.lo for r in spec.parameters], dtype=torch.float64, device=g.device)
+        hi = torch.tensor([r.hi for r in spec.parameters], dtype=torch.float64, device=g.device)
+        size = max(GROUP_SIZE, -(-n // MAX_GROUPS))  # samples per group
+        groups = -(-n // size)
+        values = lo + (hi - lo) * torch.rand((groups, len(lo)), generator=gp, dtype=torch.float64, device=g.device)
+        p = values.repeat_interleave(size, dim=0)[:n]
+    batch = DeformationBatch(compose(U, Sigma, V), compose(U0, Sigma0, V0), h, U, Sigma, V, U0, Sigma0, V0, p)
     return batch if dtype == torch.float64 else batch.to(dtype)
 
 

@@ -43,11 +43,32 @@ ReturnMap = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
 class ElastoplasticStress:
     """Ptilde(F, h) = U diag(tau_i(Z) / Sigma_c_i) V^T, with Z the material's own return mapping or
-    `return_map` (e.g. a learned one). Batched (B, d, d); float32 or float64."""
+    `return_map` (e.g. a learned one). Batched (B, d, d); float32 or float64.
 
-    def __init__(self, material: Material, return_map: ReturnMap | None = None):
+    With `parameters` (a parametric model's family, parameters.ParameterSpace), the methods take the
+    rows' material parameters p (B, K) too, and each run of equal rows uses the family's material at
+    its p (the analytic return mapping only)."""
+
+    def __init__(self, material: Material, return_map: ReturnMap | None = None, parameters=None):
+        if parameters is not None and return_map is not None:
+            raise ValueError("a parametric model uses the analytic return mapping (no learned one)")
         self.material = material
         self.return_map = return_map
+        self.parameters = parameters if parameters is not None and len(parameters) else None
+
+    def _per_material(self, fn, rows: int, p: torch.Tensor | None, *args) -> torch.Tensor:
+        """fn(stress, *args) for a single material; per run of equal parameters for a parametric one."""
+        if self.parameters is None:
+            return fn(self, *args)
+        if p is None or p.shape != (rows, len(self.parameters)):
+            raise ValueError(f"a parametric stress needs the parameters p of the {rows} rows, (B, {len(self.parameters)})")
+        from .parameters import runs
+
+        parts = []
+        for start, end in runs(p):
+            one = ElastoplasticStress(self.parameters.material_at(p[start].tolist()))
+            parts.append(fn(one, *(a[start:end] for a in args)))
+        return torch.cat(parts)
 
     def project(self, Sigma: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
         """Z(Sigma_c, h), (B, d)."""
@@ -55,15 +76,20 @@ class ElastoplasticStress:
             return self.material.return_map(Sigma, h)[0]
         return self.return_map(clamp_sigma(Sigma), h)
 
-    def from_factors(self, U: torch.Tensor, Sigma: torch.Tensor, V: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+    def from_factors(self, U: torch.Tensor, Sigma: torch.Tensor, V: torch.Tensor, h: torch.Tensor,
+                     p: torch.Tensor | None = None) -> torch.Tensor:
         """Ptilde of F = U diag(Sigma) V^T given its factors (U, V rotations; Sigma > 0 in any order,
         every model being a symmetric function of Sigma): no SVD needed."""
+        if self.parameters is not None:
+            return self._per_material(lambda s, *a: s.from_factors(*a), U.shape[0], p, U, Sigma, V, h)
         Sigma_c = clamp_sigma(Sigma)
         Z = self.project(Sigma_c, h)
         return compose(U, self.material.tau(Z) / Sigma_c, V)
 
-    def __call__(self, F: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+    def __call__(self, F: torch.Tensor, h: torch.Tensor, p: torch.Tensor | None = None) -> torch.Tensor:
         """Ptilde(F, h) through the library's polar SVD."""
+        if self.parameters is not None:
+            return self._per_material(lambda s, *a: s(*a), F.shape[0], p, F, h)
         if self.return_map is None:
             return self.material.elastoplastic_stress(F, h)
         U, Sigma, V = polar_svd(F)

@@ -49,6 +49,7 @@ from .nets import MLP, REPRESENTATIONS, hidden_widths, make_energy_net, make_mlp
 from .sampling import (
     SAMPLINGS, TRAINING_SAMPLINGS, DeformationBatch, generator_for, sample_batch, sample_return_map_states, sampling_spec, shard_parts,
 )
+from .parameters import FAMILIES, ParameterSpace
 from .targets import ElastoplasticStress, nondimensional_material
 
 #: --material choices: the energies of the four presets and the learned return mapping of metal_nh.
@@ -59,13 +60,13 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
     "representation", "hessian_weight", "energy_form", "device_type", "shards", "schedule", "warmup", "precision",
-    "hidden",
+    "hidden", "parametric",
 )
 
 #: What checkpoints written before a field existed were trained with.
 _LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1,
                   "schedule": "step", "warmup": 0, "precision": "float32",
-                  "hidden": []}
+                  "hidden": [], "parametric": False}
 
 #: Learning-rate schedules (--schedule): the paper's step decay (lr x lr_decay every decay_steps), cosine
 #: annealing from lr to lr_min_fraction x lr over the run, and one-cycle (up to lr and down, torch's
@@ -117,6 +118,7 @@ class TrainConfig:
     hidden: tuple = ()  # hidden layers' widths; (): Table 2's (nets.HIDDEN_WIDTHS)
     precision: str = "float32"  # PRECISIONS: the network's parameters and the loss (samples and targets: float64)
     shards: int = 0  # parts of each batch with their own random stream; 0: the data-parallel world size
+    parametric: bool = False  # energies: the material's parameters as inputs (parameters.FAMILIES)
     command: str = ""  # the command line, recorded in the metadata
 
     def __post_init__(self):
@@ -165,8 +167,12 @@ class TrainConfig:
             raise ValueError(f"device = {self.device!r}: expected cpu, cuda, cuda:N or auto")
         if self.shards < 0:
             raise ValueError(f"shards = {self.shards!r}: must be >= 0 (0: one per process)")
+        if self.parametric and self.material not in FAMILIES:
+            raise ValueError(f"material = {self.material!r}: no parametric family (parametric models exist for "
+                             f"{', '.join(FAMILIES)})")
         if not self.out:
-            self.out = str(Path("models") / f"{self.material}_{self.dim}d.pt")
+            stem = f"{self.material}_param" if self.parametric else self.material
+            self.out = str(Path("models") / f"{stem}_{self.dim}d.pt")
 
     @property
     def paths(self) -> dict:
@@ -257,8 +263,12 @@ class EnergyTask:
             self.return_map = rm
             rel = os.path.relpath(Path(config.return_map).resolve(), Path(config.out).resolve().parent)
             self.return_map_info = {"type": "learned", "file": rel, "sha256": sha256_of(config.return_map)}
-        self.stress = ElastoplasticStress(self.material, self.return_map)
-        self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed, config.hidden)
+        self.parameters = ParameterSpace.family(config.material, self.material) if config.parametric else None
+        if self.parameters is not None:
+            self.spec = self.spec.with_(parameters=self.parameters.ranges)
+        self.stress = ElastoplasticStress(self.material, self.return_map, self.parameters)
+        self.net = make_energy_net(config.dim, self.spec.has_hardening, config.representation, config.seed, config.hidden,
+                                   len(self.parameters or ()))
         self.dtype, self.scripted = _place(self.net, config, device)
         self.loss_parts: dict = {}  # the last step's loss terms (energy.energy_loss)
         # Steps whose batches, targets and frames are prepared together: on a GPU a step is bound by kernel
@@ -266,8 +276,13 @@ class EnergyTask:
         self.prefetch_steps = PREFETCH_STEPS if device.type == "cuda" else 1
         self._prepared: dict = {}
 
-    def _h(self, h: torch.Tensor):
-        return h if self.spec.has_hardening else None
+    def _tail(self, b: DeformationBatch):
+        """The network's inputs after F0: h (with hardening), then a parametric model's normalised parameters
+        (B, K); None when there are none."""
+        parts = [b.h.reshape(-1, 1)] if self.spec.has_hardening else []
+        if self.parameters is not None:
+            parts.append(self.parameters.inputs(b.p))
+        return torch.cat(parts, dim=1) if parts else None
 
     def loss(self, step: int, shards: int = 1, shard_range: tuple[int, int] | None = None) -> torch.Tensor:
         """Eq. 9 on batch `step` (the parts shard_range of its `shards`): samples and targets in float64
@@ -295,8 +310,8 @@ class EnergyTask:
         sizes = [len(b) for b in batches]
         b = DeformationBatch.cat(batches)
         with torch.no_grad():
-            P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).to(self.dtype)
-            P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).to(self.dtype)
+            P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h, b.p).to(self.dtype)
+            P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h, b.p).to(self.dtype)
         bn = b.to(self.dtype)
         v = Sv = None
         if cfg.hessian_weight > 0.0:
@@ -307,12 +322,13 @@ class EnergyTask:
                 for s in steps for k in parts
             ])
             with torch.no_grad():
-                Sv = stress_directional_derivative(self.stress, b.F, b.h, v).to(self.dtype)
+                Sv = stress_directional_derivative(self.stress, b.F, b.h, v, p=b.p if self.parameters else None)
+                Sv = Sv.to(self.dtype)
             v = v.to(self.dtype)
         frame = (None,) * 3
         if self.net.representation == "principal":
             frame = principal_frame(network_reference(cfg.energy_form, bn.F0))
-        fields = {"F": bn.F, "F0": bn.F0, "h": bn.h if self.spec.has_hardening else None, "P": P, "P0": P0,
+        fields = {"F": bn.F, "F0": bn.F0, "h": self._tail(bn), "P": P, "P0": P0,
                   "v": v, "Sv": Sv, "U": frame[0], "Sigma0": frame[1], "V": frame[2]}
         split = {k: (None,) * len(sizes) if t is None else t.split(sizes) for k, t in fields.items()}
         prepared = {}
@@ -329,17 +345,17 @@ class EnergyTask:
             b = sample_batch(self.spec.with_(sampling=s), CURVE_SAMPLES, self.config.seed, CURVE_STEP, "eval")
             b = b.to(device=self.device)  # drawn on the CPU: the same held-out set on every device
             with torch.no_grad():
-                P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h).to(self.dtype)
-                P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h).to(self.dtype)
+                P = self.stress.from_factors(b.U, b.Sigma, b.V, b.h, b.p).to(self.dtype)
+                P0 = self.stress.from_factors(b.U0, b.Sigma0, b.V0, b.h, b.p).to(self.dtype)
             bn = b.to(self.dtype)
-            g = psi_gradient(self.net, bn.F, bn.F0, self._h(bn.h), P0, form=self.config.energy_form).detach()
+            g = psi_gradient(self.net, bn.F, bn.F0, self._tail(bn), P0, form=self.config.energy_form).detach()
             out[s] = float(((g - P) ** 2).sum() / (P**2).sum()) ** 0.5
         return out
 
     def metadata(self, recipe: dict, errors=None) -> dict:
         return energy_metadata(
             self.material, self.net, self.spec.has_hardening, recipe, errors, self.return_map_info,
-            self.config.energy_form,
+            self.config.energy_form, self.parameters.to_metadata() if self.parameters else None,
         )
 
     def in_memory_model(self, metadata: dict):

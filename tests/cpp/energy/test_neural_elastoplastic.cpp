@@ -265,6 +265,51 @@ TEST(ModelMetadata, UnknownEnergyFormIsRefusedNamingTheField) {
     }
 }
 
+// A parametric energy's "parameters" (issue 36): read in input order, and every malformed entry
+// refused naming the file and the field.
+TEST(ModelMetadata, ParametersAreReadAndCheckedNamingTheField) {
+    const ModelFile model = load_model_file(kModels + "/sand_2d.pt");  // principal, 6 inputs, no hardening
+    nlohmann::json j = model.metadata.json;
+    j["widths"][0] = 8;
+    j["input_width"] = 8;
+    j["parameters"] = {{{"field", "plasticity.friction_angle_deg"}, {"min", 20.0}, {"max", 45.0}},
+                       {{"field", "elasticity.nu"}, {"min", 0.2}, {"max", 0.45}}};
+    const ModelMetadata meta = parse_model_metadata(j, "m.pt");
+    ASSERT_EQ(meta.parameter_count(), 2);
+    EXPECT_EQ(meta.parameters[0].field, "plasticity.friction_angle_deg");
+    EXPECT_EQ(meta.parameters[1].max, 0.45);
+    EXPECT_EQ(meta.forward_input_width(), 10);
+    EXPECT_DOUBLE_EQ(meta.parameters[0].input(20.0), -1.0);
+    EXPECT_DOUBLE_EQ(meta.parameters[0].input(45.0), 1.0);
+    auto message = [&](const nlohmann::json& bad) {
+        try {
+            parse_model_metadata(bad, "m.pt");
+        } catch (const std::invalid_argument& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    nlohmann::json bad = j;
+    bad["parameters"][1]["field"] = "plasticity.xi";  // a Cam-Clay field on a Drucker-Prager model
+    EXPECT_EQ(message(bad), "m.pt: metadata.parameters[1].field: \"plasticity.xi\" is not a parameter of the "
+                            "material's models (stvk_hencky, drucker_prager)");
+    bad = j;
+    bad["parameters"][0]["max"] = 10.0;
+    EXPECT_EQ(message(bad), "m.pt: metadata.parameters[0]: the range [20.0, 10.0] must be finite with min < max");
+    bad = j;
+    bad["parameters"][1]["field"] = "plasticity.friction_angle_deg";
+    EXPECT_EQ(message(bad), "m.pt: metadata.parameters[1].field: \"plasticity.friction_angle_deg\" is listed twice");
+    bad = j;
+    bad["parameters"][1].erase("min");
+    EXPECT_NE(message(bad).find("m.pt: metadata.parameters[1]: expected {\"field\""), std::string::npos);
+    bad = j;
+    bad["parameters"].erase(1);  // 8 inputs do not fit [vec G, Sigma0] and one parameter
+    EXPECT_NE(message(bad).find("m.pt: metadata.input_width: 8: a 2D principal energy without hardening takes "
+                                "[vec G, Sigma0, 1 parameters], 7 inputs"),
+              std::string::npos)
+        << message(bad);
+}
+
 TEST(NeuralElastoplasticEnergy, ProjectionClampsNegativeEigenvalues) {
     // Strong compression makes the learned Hessian indefinite for some particles;
     // count them so that the clamp is known to have been exercised.

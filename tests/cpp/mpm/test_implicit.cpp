@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <array>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -687,6 +688,67 @@ TEST(NeuralParticleEnergy, RefusesModelsTrainedForOtherPlasticityParameters) {
     harder.von_mises.hardening_coefficient = 0.2;
     EXPECT_EQ(constitutive_differences(metal, harder).size(), 1u);
     EXPECT_EQ(constitutive_differences(metal, harder)[0].field, "plasticity.hardening_coefficient");
+}
+
+// A parametric model (issue 36) takes the object's parameters, each within the range it was trained
+// for, and refuses a value outside naming the field and the range; every other constitutive field must
+// still be the model's. Its energy is exact at F0 for the object's material, not the reference's.
+TEST(NeuralParticleEnergy, ParametricModelsTakeTheObjectsParametersWithinTheirRanges) {
+    const MaterialDescription sand = material_preset("sand");
+    auto model = std::make_shared<ModelFile>(*memory_model<2>(sand, 1.0));
+    model->metadata.representation = EnergyRepresentation::Principal;
+    model->metadata.parameters = {{"plasticity.friction_angle_deg", 20.0, 45.0}, {"elasticity.nu", 0.2, 0.45}};
+    model->metadata.widths = {8, 32, 32, 32, 1};
+    model->weights = random_mlp(model->metadata.widths, 7, 1.0);
+    auto message = [&](const MaterialDescription& scene) {
+        const std::vector<Material<2>> materials = {Material<2>(scene)};
+        try {
+            NeuralParticleEnergy<2>({model}, materials, {"s.json: objects[0].model"}, 1.0);
+        } catch (const std::invalid_argument& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    MaterialDescription other = sand;
+    other.drucker_prager.friction_angle_deg = 45.0;  // the ends of the ranges are inside
+    other.elastic.nu = 0.2;
+    EXPECT_EQ(message(other), "accepted");
+    other.drucker_prager.friction_angle_deg = 50.0;
+    EXPECT_EQ(message(other), "s.json: objects[0].model: <in-memory test model>: material.plasticity.friction_angle_deg "
+                              "= 50.0 is outside the range [20.0, 45.0] this parametric model was trained for");
+    other = sand;
+    other.elastic.nu = 0.1;
+    EXPECT_EQ(message(other), "s.json: objects[0].model: <in-memory test model>: material.elasticity.nu = 0.1 is "
+                              "outside the range [0.2, 0.45] this parametric model was trained for");
+    EXPECT_NE(message(material_preset("snow")).find("was trained for material.elasticity.model = \"stvk_hencky\""),
+              std::string::npos);
+
+    // grad Psi(F0) = E Ptilde(F0) of the object's material at 25 deg and nu 0.4, and the network sees
+    // those parameters: the gradient away from F0 differs from the 40 deg object's.
+    auto gradients = [&](double angle, double nu, const Mat<2>& F0, const Mat<2>& F) {
+        MaterialDescription object = sand;
+        object.drucker_prager.friction_angle_deg = angle;
+        object.elastic.nu = nu;
+        typename NeuralElastoplasticEnergy<2>::Options options;
+        options.youngs_modulus = object.elastic.E;
+        options.material = object;
+        NeuralElastoplasticEnergy<2> energy(*model, options);
+        energy.set_reference(&F0, nullptr, 1);
+        double psi = 0.0;
+        std::array<Mat<2>, 2> g;
+        energy.value_gradient(&F0, &psi, &g[0]);
+        energy.value_gradient(&F, &psi, &g[1]);
+        return std::pair{g, Material<2>(object).elastoplastic_stress(F0, 0.0)};
+    };
+    Mat<2> F0, F;
+    F0 << 0.8, 0.05, 0.0, 1.1;  // sheared: on the 25 deg cone, inside the 40 deg one
+    F << 0.82, 0.03, 0.02, 1.09;
+    const auto [g25, P25] = gradients(25.0, 0.4, F0, F);
+    const auto [g40, P40] = gradients(40.0, 0.4, F0, F);
+    EXPECT_LT((g25[0] - P25).norm(), 1e-9 * P25.norm());
+    EXPECT_LT((g40[0] - P40).norm(), 1e-9 * P40.norm());
+    EXPECT_GT((P25 - P40).norm(), 1e-3 * P25.norm());  // the two materials differ at F0
+    EXPECT_GT(((g25[1] - P25) - (g40[1] - P40)).norm(), 1e-6 * P25.norm());  // and so does the network's part
 }
 
 // --- Implicit against explicit ---------------------------------------------------

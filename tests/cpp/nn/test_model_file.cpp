@@ -25,8 +25,9 @@ namespace fs = std::filesystem;
 const std::string kModels = PNET_MODELS_DIR;
 const std::string kTestModels = std::string(PNET_TEST_DATA_DIR) + "/models";
 
-const std::vector<std::string> kShipped = {"sand_2d.pt",      "snow_2d.pt",  "metal_2d.pt", "metal_nh_rm_2d.pt",
-                                           "metal_nh_2d.pt",  "sand_3d.pt",  "snow_3d.pt",  "metal_3d.pt"};
+const std::vector<std::string> kShipped = {"sand_2d.pt",     "snow_2d.pt", "metal_2d.pt", "metal_nh_rm_2d.pt",
+                                           "metal_nh_2d.pt", "sand_3d.pt", "snow_3d.pt",  "metal_3d.pt",
+                                           "sand_param_2d.pt"};
 
 class ShippedModel : public ::testing::TestWithParam<std::string> {};
 
@@ -45,11 +46,11 @@ void expect_rows_close(const std::vector<double>& a, const std::vector<double>& 
 
 /// The simulator's evaluation of an energy file (EnergyNetwork: the frame of F0
 /// for a principal model, the fused MLP, the change of frame back) against the
-/// file's own forward([F, F0, h]) under LibTorch autograd in F: value,
-/// gradient and Hessian to 1e-10.
+/// file's own forward([F, F0, h, u]) under LibTorch autograd in F: value,
+/// gradient and Hessian to 1e-10. u: a parametric model's inputs (one object).
 template <int dim>
 void expect_energy_matches_libtorch(const std::string& path, const ModelFile& model, const std::vector<Mat<dim>>& F0,
-                                    std::uint64_t seed) {
+                                    std::uint64_t seed, const std::vector<double>& u = {}) {
     constexpr int m = dim * dim;
     const ModelMetadata& meta = model.metadata;
     const std::size_t rows = F0.size();
@@ -67,8 +68,10 @@ void expect_energy_matches_libtorch(const std::string& path, const ModelFile& mo
             x[r * in + m + k] = F0[r](k / dim, k % dim);
         }
         if (meta.has_hardening) x[r * in + 2 * m] = h[r];
+        std::copy(u.begin(), u.end(), &x[r * in + 2 * m + (meta.has_hardening ? 1 : 0)]);
     }
-    EnergyNetwork<dim> network(model.weights, meta.representation, meta.has_hardening, path);
+    ASSERT_EQ(static_cast<int>(u.size()), meta.parameter_count());
+    EnergyNetwork<dim> network(model.weights, meta.representation, meta.has_hardening, path, u);
     network.set_reference(F0.data(), h.data(), rows);
     std::vector<double> v(rows), g(rows * m), H(rows * m * m), rv(rows), rg(rows * m), rH(rows * m * m);
     network.evaluate(F.data(), FusedMlp::Order::Hessian, v.data(), g.data(), H.data());
@@ -120,9 +123,27 @@ TEST_P(ShippedModel, LoadsPinnedAndMatchesLibTorch) {
     const int mlp_in = meta.kind == ModelKind::ReturnMap                          ? d + 1
                        : meta.representation == EnergyRepresentation::Principal ? d * d + d + meta.has_hardening
                                                                                  : 2 * d * d + meta.has_hardening;
-    EXPECT_EQ(meta.input_width(), mlp_in);
+    EXPECT_EQ(meta.input_width(), mlp_in + meta.parameter_count());
     EXPECT_EQ(meta.learned_return_map(), model.return_map != nullptr);
 
+    if (meta.parametric()) {  // at the ends of every range and inside (one object each)
+        const std::size_t K = meta.parameters.size();
+        std::mt19937_64 rng(11);
+        std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+        std::vector<std::vector<double>> inputs = {std::vector<double>(K, -1.0), std::vector<double>(K, 1.0)};
+        for (int k = 0; k < 3; ++k) {
+            inputs.emplace_back(K);
+            for (double& v : inputs.back()) v = uniform(rng);
+        }
+        for (std::size_t k = 0; k < inputs.size(); ++k) {
+            SCOPED_TRACE("parameter inputs #" + std::to_string(k));
+            if (d == 2)
+                expect_energy_matches_libtorch<2>(path, model, reference_states<2>(18, 3), 4 + k, inputs[k]);
+            else
+                expect_energy_matches_libtorch<3>(path, model, reference_states<3>(18, 3), 4 + k, inputs[k]);
+        }
+        return;
+    }
     if (meta.kind == ModelKind::Energy) {
         if (d == 2)
             expect_energy_matches_libtorch<2>(path, model, reference_states<2>(18, 3), 4);

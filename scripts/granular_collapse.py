@@ -1,0 +1,211 @@
+#!/usr/bin/env python3
+"""The granular column collapse swept over friction angle and aspect ratio with one parametric sand model
+(models/sand_param_2d.pt; docs/physics.md), against the explicit ground truth at each angle.
+
+A column of half-width L0 and height H = a L0 stands on a rough floor and collapses on both sides (the
+symmetric 2D collapse: each half is the classic column against a wall). Its final half-extent L_inf gives
+the normalised run-out (L_inf - L0) / L0, which experiments find to grow as ~lambda a for small a and as
+~a^(2/3) beyond a ~ 2-3 (Lajeunesse et al. 2004, Lube et al. 2005); the coefficients depend on the
+friction. For each (angle, a) the script writes the scene (scenes/sand_column_2d.json with the column,
+the domain and the material changed), runs
+
+    explicit at the ground-truth step (--ground-truth-dt, default 2e-5 s),
+    explicit at its CFL step (the noise floor: what a valid explicit run differs by),
+    plasticitynet at 1e-3 s with the parametric model,
+
+with `pnet simulate`, and measures L_inf = L0 + e(last frame) - e(first frame), e the 99.5th mass
+percentile of |x - x_c| (the outermost particle alone swings between two valid runs; docs/metrics.md).
+It writes
+
+    OUT/runout.csv    angle, aspect, integrator, L_inf, run-out, wall seconds;
+    OUT/runout.md     the table: run-out per integrator, the plasticitynet error and the floor;
+    OUT/runout.png    run-out against a per angle (log-log), ground truth and plasticitynet.
+
+Runs are kept in --work (a finished run is not run again).
+
+    .venv/bin/python scripts/granular_collapse.py [--angles 20 30 40] [--aspects 0.5 1 2 4 8]
+        [--jobs 2] [--frames 50] [--dx 0.0078125] [--work out/granular_collapse]
+        [--out notebooks/results/granular_collapse]
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import copy
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "python"))
+
+from plasticitynet.evaluation.metrics import read_particle_positions  # noqa: E402
+
+HALF_WIDTH = 0.05  # L0, m
+MODEL = ROOT / "models" / "sand_param_2d.pt"
+PERCENTILE = 99.5
+
+
+def scene_for(angle: float, aspect: float, dx: float, frames: int) -> dict:
+    """scenes/sand_column_2d.json with a column of half-width L0 and height a L0 centred in a domain wide
+    enough for its run-out (a front at L0 (2 + 1.6 a) from the centre, ~1.5x the run-out of 30 deg sand),
+    sand at `angle` degrees, the parametric model."""
+    scene = json.loads((ROOT / "scenes" / "sand_column_2d.json").read_text())
+    scene = copy.deepcopy(scene)
+    floor = 3 * dx
+    height = aspect * HALF_WIDTH
+    scene["name"] = f"granular_collapse_phi{angle:g}_a{aspect:g}"
+    scene["description"] = (f"scripts/granular_collapse.py: sand column of half-width {HALF_WIDTH} m and height "
+                            f"{height:g} m (aspect {aspect:g}), friction angle {angle:g} deg, dx {dx:g} m")
+    cells = lambda length: math.ceil(length / dx) * dx  # noqa: E731 (the domain is whole cells)
+    width = 2.0 * cells(max(0.3, HALF_WIDTH * (2.0 + 1.6 * aspect)))
+    centre = 0.5 * width
+    scene["domain"] = {"min": [0, 0], "max": [width, cells(height + 0.2)]}
+    scene["view"] = {"min": [0, 0], "max": [width, height + 0.05]}
+    scene["dx"] = dx
+    scene["frames"] = frames
+    scene["boundary"]["sticky_floor_cells"] = 3
+    obj = scene["objects"][0]
+    obj["min"] = [centre - HALF_WIDTH, floor]
+    obj["max"] = [centre + HALF_WIDTH, floor + height]
+    obj["material"]["plasticity"]["friction_angle_deg"] = angle
+    obj["model"] = str(MODEL)
+    return scene
+
+
+def extent(frame: Path) -> float:
+    """The PERCENTILE-th percentile of |x - x_c| over the particles of a frame (equal masses)."""
+    x = read_particle_positions(frame)[:, 0]
+    return float(np.percentile(np.abs(x - x.mean()), PERCENTILE))
+
+
+def runout(run: Path) -> float:
+    """L_inf: L0 plus how far the extent grew from the first frame to the last (the first frame's extent is
+    below L0 by the particles' spacing and the percentile, the same offset as the last one's)."""
+    frames = sorted(run.glob("frame_*.ply"))
+    return HALF_WIDTH + extent(frames[-1]) - extent(frames[0])
+
+
+def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float | None) -> float:
+    """Runs one simulation unless `out` holds a finished one; the wall seconds (0 if reused)."""
+    if (out / "done").exists():
+        return float((out / "done").read_text())
+    cmd = [str(pnet), "simulate", str(scene_file), "--out", str(out), "--integrator", integrator, "--threads", "1",
+           "--overwrite"]
+    if dt is not None:
+        cmd += ["--dt", f"{dt:g}"]
+    t0 = time.perf_counter()
+    result = subprocess.run(cmd, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({result.returncode}):\n{result.stderr[-2000:]}")
+    wall = time.perf_counter() - t0
+    (out / "done").write_text(f"{wall:.1f}")
+    return wall
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--angles", type=float, nargs="+", default=[20, 25, 30, 35, 40], help="friction angles, deg")
+    p.add_argument("--aspects", type=float, nargs="+", default=[0.5, 1, 2, 4, 8], help="aspect ratios H / L0")
+    p.add_argument("--dx", type=float, default=1 / 128, help="grid spacing, m (1/128)")
+    p.add_argument("--frames", type=int, default=50, help="frames of 0.02 s (50: 1 s)")
+    p.add_argument("--ground-truth-dt", type=float, default=2e-5, help="explicit ground-truth step, s (2e-5)")
+    p.add_argument("--jobs", type=int, default=2, help="simulations at once (one thread each)")
+    p.add_argument("--work", type=Path, default=ROOT / "out" / "granular_collapse")
+    p.add_argument("--out", type=Path, default=ROOT / "notebooks" / "results" / "granular_collapse")
+    args = p.parse_args()
+    pnet = ROOT / os.environ.get("PNET_BUILD_DIR", "build") / "cpp" / "pnet"
+    if not pnet.exists():
+        p.error(f"{pnet}: not built (./scripts/setup.sh)")
+    if not MODEL.exists():
+        p.error(f"{MODEL}: no parametric sand model (python train.py --material sand --dim 2 --parametric)")
+    runs = {
+        "ground_truth": ("explicit", args.ground_truth_dt),
+        "explicit_cfl": ("explicit", None),
+        "plasticitynet": ("plasticitynet", 1e-3),
+    }
+    jobs = []
+    for angle in args.angles:
+        for aspect in args.aspects:
+            folder = args.work / f"phi{angle:g}_a{aspect:g}"
+            folder.mkdir(parents=True, exist_ok=True)
+            scene_file = folder / "scene.json"
+            scene_file.write_text(json.dumps(scene_for(angle, aspect, args.dx, args.frames), indent=2))
+            for name, (integrator, dt) in runs.items():
+                jobs.append((angle, aspect, name, scene_file, folder / name, integrator, dt))
+    # The longest first (tall columns, small steps), so that the pool ends together.
+    jobs.sort(key=lambda j: -(j[1] * (50.0 if j[2] == "ground_truth" else 1.0)))
+    rows = []
+    with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
+        futures = {pool.submit(simulate, pnet, j[3], j[4], j[5], j[6]): j for j in jobs}
+        for done, future in enumerate(concurrent.futures.as_completed(futures), 1):
+            angle, aspect, name, _, out, _, _ = futures[future]
+            wall = future.result()
+            L = runout(out)
+            rows.append({"angle": angle, "aspect": aspect, "integrator": name, "L_inf": L,
+                         "runout": (L - HALF_WIDTH) / HALF_WIDTH, "wall_seconds": wall})
+            print(f"[{done}/{len(jobs)}] phi {angle:g} a {aspect:g} {name}: run-out {(L - HALF_WIDTH) / HALF_WIDTH:.3f} "
+                  f"({wall:.0f} s)", flush=True)
+    rows.sort(key=lambda r: (r["angle"], r["aspect"], r["integrator"]))
+    args.out.mkdir(parents=True, exist_ok=True)
+    with open(args.out / "runout.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    table = {(r["angle"], r["aspect"], r["integrator"]): r for r in rows}
+    lines = [
+        "# Granular column collapse with one parametric model (scripts/granular_collapse.py)", "",
+        f"Run-out (L_inf - L0) / L0, L0 = {HALF_WIDTH} m, L_inf = L0 + e(last) - e(first), e the {PERCENTILE}th "
+        f"percentile of |x - x_c| on a frame ({args.frames} frames of 0.02 s), dx = {args.dx:g} m. Ground truth: explicit at "
+        f"{args.ground_truth_dt:g} s; floor: |explicit at CFL - ground truth|; plasticitynet at 1e-3 s with "
+        f"{MODEL.name} bound to each angle.", "",
+        "| friction angle | a = H / L0 | ground truth | explicit CFL | plasticitynet | plasticitynet error | floor | "
+        "within floor | wall s (GT / CFL / pnet) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    within = []
+    for angle in args.angles:
+        for aspect in args.aspects:
+            gt, cfl, pn = (table[(angle, aspect, k)] for k in runs)
+            err, floor = abs(pn["runout"] - gt["runout"]), abs(cfl["runout"] - gt["runout"])
+            within.append(err <= floor)
+            lines.append(f"| {angle:g} | {aspect:g} | {gt['runout']:.3f} | {cfl['runout']:.3f} | {pn['runout']:.3f} | "
+                         f"{err:.3f} | {floor:.3f} | {'yes' if err <= floor else 'no'} | "
+                         f"{gt['wall_seconds']:.0f} / {cfl['wall_seconds']:.0f} / {pn['wall_seconds']:.0f} |")
+    lines += ["", f"plasticitynet within the floor in {sum(within)} of {len(within)} cases."]
+    (args.out / "runout.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for k, angle in enumerate(args.angles):
+        color = plt.cm.viridis(k / max(1, len(args.angles) - 1))
+        for name, style in (("ground_truth", "-o"), ("plasticitynet", "--x")):
+            ax.plot(args.aspects, [table[(angle, a, name)]["runout"] for a in args.aspects], style, color=color,
+                    label=f"{angle:g} deg, {'explicit 2e-5' if name == 'ground_truth' else 'plasticitynet 1e-3'}")
+    a = np.array(args.aspects)
+    ax.plot(a, 1.2 * a, ":", color="gray", label="~a")
+    ax.plot(a, 1.9 * a ** (2 / 3), "-.", color="gray", label="~a^(2/3)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("aspect ratio a = H / L0")
+    ax.set_ylabel("run-out (L_inf - L0) / L0")
+    ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(args.out / "runout.png", dpi=130)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
