@@ -21,7 +21,7 @@ It writes
     OUT/runout.md     the table: run-out per integrator, the plasticitynet error and the floor;
     OUT/runout.png    run-out against a per angle (log-log), ground truth and plasticitynet.
 
-Runs are kept in --work (a finished run is not run again).
+Runs are kept in --work (a finished run of the same scene, integrator and step is not run again).
 
     .venv/bin/python scripts/granular_collapse.py [--angles 20 30 40] [--aspects 0.5 1 2 4 8]
         [--jobs 2] [--frames 50] [--dx 0.0078125] [--work out/granular_collapse]
@@ -34,6 +34,7 @@ import argparse
 import concurrent.futures
 import copy
 import csv
+import hashlib
 import json
 import math
 import os
@@ -56,7 +57,7 @@ PERCENTILE = 99.5
 
 def scene_for(angle: float, aspect: float, dx: float, frames: int) -> dict:
     """scenes/sand_column_2d.json with a column of half-width L0 and height a L0 centred in a domain wide
-    enough for its run-out (a front at L0 (2 + 1.6 a) from the centre, ~1.5x the run-out of 30 deg sand),
+    enough for its run-out (walls at L0 (2 + 2.5 a) from the centre: 20 deg sand at a = 8 stops at ~0.7 of it),
     sand at `angle` degrees, the parametric model."""
     scene = json.loads((ROOT / "scenes" / "sand_column_2d.json").read_text())
     scene = copy.deepcopy(scene)
@@ -66,7 +67,7 @@ def scene_for(angle: float, aspect: float, dx: float, frames: int) -> dict:
     scene["description"] = (f"scripts/granular_collapse.py: sand column of half-width {HALF_WIDTH} m and height "
                             f"{height:g} m (aspect {aspect:g}), friction angle {angle:g} deg, dx {dx:g} m")
     cells = lambda length: math.ceil(length / dx) * dx  # noqa: E731 (the domain is whole cells)
-    width = 2.0 * cells(max(0.3, HALF_WIDTH * (2.0 + 1.6 * aspect)))
+    width = 2.0 * cells(max(0.3, HALF_WIDTH * (2.0 + 2.5 * aspect)))
     centre = 0.5 * width
     scene["domain"] = {"min": [0, 0], "max": [width, cells(height + 0.2)]}
     scene["view"] = {"min": [0, 0], "max": [width, height + 0.05]}
@@ -95,9 +96,12 @@ def runout(run: Path) -> float:
 
 
 def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float | None) -> float:
-    """Runs one simulation unless `out` holds a finished one; the wall seconds (0 if reused)."""
-    if (out / "done").exists():
-        return float((out / "done").read_text())
+    """Runs one simulation unless `out` holds a finished one of the same scene, integrator and step; the wall
+    seconds (the recorded ones if reused)."""
+    key = hashlib.sha256(f"{scene_file.read_text()}\n{integrator}\n{dt}".encode()).hexdigest()
+    done = out / "done"
+    if done.exists() and done.read_text().split()[1:] == [key]:
+        return float(done.read_text().split()[0])
     cmd = [str(pnet), "simulate", str(scene_file), "--out", str(out), "--integrator", integrator, "--threads", "1",
            "--overwrite"]
     if dt is not None:
@@ -106,8 +110,8 @@ def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({result.returncode}):\n{result.stderr[-2000:]}")
-    wall = time.perf_counter() - t0
-    (out / "done").write_text(f"{wall:.1f}")
+    wall = round(time.perf_counter() - t0, 1)
+    done.write_text(f"{wall:.1f} {key}")
     return wall
 
 

@@ -5,6 +5,7 @@ checks, the sampled parameters, the per-group targets, training end to end, the 
 import copy
 import json
 import math
+from pathlib import Path
 
 import pytest
 import torch
@@ -513,3 +514,30 @@ def test_bad_parametric_metadata_is_named(tmp_path):
                    _extra_files={"metadata.json": json.dumps({k: v for k, v in meta.items() if k != "parameters"})})
     with pytest.raises(ValueError, match=r"bad\.pt: bad metadata: .*input_width"):
         plasticitynet.load_model(bad)
+
+
+def test_granular_collapse_sweep_end_to_end(tmp_path):
+    """scripts/granular_collapse.py at one angle and aspect ratio, 2 coarse frames: three runs per case, the
+    table, the CSV and the plot; a finished run is reused by a second invocation."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    cmd = [sys.executable, str(root / "scripts" / "granular_collapse.py"), "--angles", "35", "--aspects", "2",
+           "--frames", "2", "--dx", "0.015625", "--jobs", "2", "--work", str(tmp_path / "work"), "--out",
+           str(tmp_path / "out")]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    rows = (tmp_path / "out" / "runout.csv").read_text().splitlines()
+    assert rows[0] == "angle,aspect,integrator,L_inf,runout,wall_seconds" and len(rows) == 4
+    assert {row.split(",")[2] for row in rows[1:]} == {"ground_truth", "explicit_cfl", "plasticitynet"}
+    table = (tmp_path / "out" / "runout.md").read_text()
+    assert "| 35 | 2 |" in table and (tmp_path / "out" / "runout.png").stat().st_size > 0
+    scene = json.loads((tmp_path / "work" / "phi35_a2" / "scene.json").read_text())
+    assert scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] == 35
+    assert scene["objects"][0]["max"][1] - scene["objects"][0]["min"][1] == pytest.approx(0.1)  # H = a L0
+    frame = tmp_path / "work" / "phi35_a2" / "ground_truth" / "frame_00002.ply"
+    written = frame.stat().st_mtime_ns
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0 and frame.stat().st_mtime_ns == written, r.stderr  # the finished runs are reused
+    assert (tmp_path / "out" / "runout.csv").read_text().splitlines() == rows

@@ -250,6 +250,25 @@ def test_wrong_dimension_model_message_says_what_was_expected(tmp_path):
     assert "sand_3d.pt: a 3D model where a 2D one is needed" in r.stderr
 
 
+def test_parametric_model_runs_a_scene_of_its_family_and_refuses_a_value_outside_its_range(tmp_path):
+    """One parametric model (models/sand_param_2d.pt) for a 40 deg sand scene through --model; at 50 deg it
+    exits 2 naming the object, the field and the range, and writes no frame."""
+    scene = tiny_scene("sand_column_2d")
+    scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = 40
+    model = ROOT / "models" / "sand_param_2d.pt"
+    r = pnet("simulate", write_scene(tmp_path, scene, "s40.json"), "--integrator", "plasticitynet", "--frames", 2,
+             "--model", model, "--out", tmp_path / "s40")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "s40" / "frame_00002.ply").exists()
+    scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = 50
+    path = write_scene(tmp_path, scene, "s50.json")
+    r = pnet("simulate", path, "--integrator", "plasticitynet", "--frames", 2, "--model", model, "--out", tmp_path / "s50")
+    assert r.returncode == 2, r.stderr
+    assert f"objects[0].model: {model}: material.plasticity.friction_angle_deg = 50.0 is outside the range " \
+           "[20.0, 45.0] this parametric model was trained for" in r.stderr, r.stderr
+    assert not list((tmp_path / "s50").glob("frame_*"))
+
+
 def test_missing_scene_file_and_usage_errors(tmp_path):
     r = pnet("simulate", tmp_path / "nope.json", "--out", tmp_path / "o")
     assert r.returncode == 2 and "nope.json" in r.stderr
