@@ -7,6 +7,8 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <fstream>
+#include <optional>
+#include <utility>
 #include <nlohmann/json.hpp>
 
 #include "pnet/energy/neural_elastoplastic.hpp"
@@ -51,13 +53,16 @@ Eigen::Matrix<double, dim * dim, 1> as_vec(const Mat<dim>& A) {
     return flatten<dim>(A);
 }
 
+/// material: the object's (a parametric model's parameters); unset, the model's own.
 template <int dim>
-void check_model(const std::string& file) {
+void check_model(const std::string& file, const std::optional<MaterialDescription>& material = std::nullopt) {
     SCOPED_TRACE(file);
     constexpr int m = dim * dim;
     const ModelFile model = load_model_file(kModels + "/" + file);
     const double E = 3.0e5;
-    NeuralElastoplasticEnergy<dim> energy(model, {E, 1.0});
+    typename NeuralElastoplasticEnergy<dim>::Options options{E, 1.0};
+    options.material = material;
+    NeuralElastoplasticEnergy<dim> energy(model, options);
     const std::size_t n = 9;
     Batch<dim> b = make_batch<dim>(model.metadata, n, 17);
     energy.set_reference(b.F0.data(), b.h.data(), n);
@@ -189,6 +194,17 @@ TEST(NeuralElastoplasticEnergy, Snow3d) {
 }
 TEST(NeuralElastoplasticEnergy, Metal3d) {
     check_model<3>("metal_3d.pt");
+}
+// A parametric model at the ends of its ranges and inside: exact at F0 for that material, derivatives
+// against finite differences.
+TEST(NeuralElastoplasticEnergy, SandParametric2d) {
+    for (const auto& [angle, nu] : {std::pair{20.0, 0.2}, std::pair{45.0, 0.45}, std::pair{33.0, 0.27}}) {
+        SCOPED_TRACE(std::to_string(angle) + " deg, nu " + std::to_string(nu));
+        MaterialDescription sand = material_preset("sand");
+        sand.drucker_prager.friction_angle_deg = angle;
+        sand.elastic.nu = nu;
+        check_model<2>("sand_param_2d.pt", sand);
+    }
 }
 
 // The models of the energy-representation ablation (models/ablation/, paper sec. 5.2, Fig. 11):
