@@ -25,7 +25,7 @@ if [[ "${1:-}" == --threads ]]; then threads=$2; shift 2; fi
 common=(--lr 0.01 --seed 0 --threads "$threads" --no-progress)
 models=("$@")
 ((${#models[@]})) || models=(sand_2d snow_2d metal_2d metal_nh_rm_2d metal_nh_2d sand_3d snow_3d metal_3d
-                             sand_param_2d)
+                             sand_param_2d snow_param_2d metal_param_2d)
 for model in "${models[@]}"; do
   material=${model%_*d}; dim=${model##*_}; dim=${dim%d}
   parametric=()
