@@ -33,7 +33,7 @@ import torch
 from ..materials import Material
 
 #: Consecutive samples of a batch that share one parameter vector (one material evaluation per group), and
-#: the most groups per part of a batch (larger parts have larger groups: sampling.group_sizes).
+#: the most groups per part of a batch (larger parts have larger groups; sampling.sample_batch).
 GROUP_SIZE = 32
 MAX_GROUPS = 64
 
