@@ -540,6 +540,29 @@ def test_parametric_model_matches_torch_at_each_parameter(angle, nu):
     assert np.allclose(model.gradient(F0, F0), exact, rtol=0, atol=1e-9 * scale)
 
 
+@pytest.mark.parametrize("values", [(30.0, 0.2, 0.1, 0.15), (60.0, 1.0, 0.5, 0.35), (52.0, 0.7, 0.25, 0.3)])
+def test_parametric_snow_model_matches_torch_with_hardening(values):
+    """The 2D snow family (four parameters after h) at both ends of its box and inside, hardening states
+    inside and outside the trained range: the C++ runtime against torch, and exact at F0."""
+    path = MODELS / "snow_param_2d.pt"
+    material = TorchMaterial.preset("snow", 2).to_dict()
+    angle, xi, beta, nu = values
+    material["plasticity"].update(friction_angle_deg=angle, xi=xi, beta=beta)
+    material["elasticity"]["nu"] = nu
+    model = pns.load_model(path, E=1.4e5, material=material)
+    reference = plasticitynet.load_model(path, E=1.4e5, material=material)
+    F0 = random_F(12, 2, seed=6)
+    F = F0 + 0.05 * np.random.default_rng(7).standard_normal((12, 2, 2))
+    h = -1.2 + 1.5 * np.random.default_rng(8).random(12)
+    tF, tF0, th = (torch.from_numpy(a) for a in (F, F0, h))
+    scale = 1.4e5
+    assert np.allclose(model.gradient(F, F0, h, w=1.0), reference.gradient(tF, tF0, th, w=1.0).detach().numpy(),
+                       rtol=0, atol=1e-10 * scale)
+    assert np.allclose(model.hessian(F, F0, h), reference.hessian(tF, tF0, th).detach().numpy(), rtol=0,
+                       atol=1e-10 * scale)
+    assert np.allclose(model.gradient(F0, F0, h), reference.Ptilde(tF0, th).numpy(), rtol=0, atol=1e-9 * scale)
+
+
 def test_parametric_model_refuses_a_material_outside_its_ranges():
     with pytest.raises(ValueError, match=r"material\.plasticity\.friction_angle_deg = 50\.0 is outside the range "
                                          r"\[20\.0, 45\.0\]"):
