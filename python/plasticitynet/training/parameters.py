@@ -177,9 +177,14 @@ class ParameterSpace:
 
     def inputs(self, p: torch.Tensor) -> torch.Tensor:
         """The network's inputs u (B, K) for physical values p (B, K)."""
-        lo = torch.tensor([r.lo for r in self.ranges], dtype=p.dtype, device=p.device)
-        hi = torch.tensor([r.hi for r in self.ranges], dtype=p.dtype, device=p.device)
+        lo, hi = bounds(self.ranges, p.dtype, p.device)
         return 2.0 * (p - lo) / (hi - lo) - 1.0
+
+
+def bounds(ranges, dtype=torch.float64, device=None) -> tuple[torch.Tensor, torch.Tensor]:
+    """(min, max) of each range, (K,) tensors each."""
+    return (torch.tensor([r.lo for r in ranges], dtype=dtype, device=device),
+            torch.tensor([r.hi for r in ranges], dtype=dtype, device=device))
 
 
 def runs(p: torch.Tensor):

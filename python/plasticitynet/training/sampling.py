@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from ..materials import Material
-from .parameters import GROUP_SIZE, MAX_GROUPS, ParameterRange
+from .parameters import GROUP_SIZE, MAX_GROUPS, ParameterRange, bounds
 
 SAMPLINGS = ("paper", "near")
 #: Training may also draw "mixed" batches: half "paper", half "near" (beyond the paper: the states a
@@ -280,8 +280,7 @@ def _sample_part(spec, n, seed, step, stream, dtype, device, shard) -> Deformati
     p = torch.zeros(n, 0, dtype=torch.float64, device=g.device)
     if spec.parameters:
         gp = generator_for(seed, step, stream, device, shard, offset=_PARAMETER_STREAM_OFFSET)
-        lo = torch.tensor([r.lo for r in spec.parameters], dtype=torch.float64, device=g.device)
-        hi = torch.tensor([r.hi for r in spec.parameters], dtype=torch.float64, device=g.device)
+        lo, hi = bounds(spec.parameters, device=g.device)
         size = max(GROUP_SIZE, -(-n // MAX_GROUPS))  # samples per group
         groups = -(-n // size)
         values = lo + (hi - lo) * torch.rand((groups, len(lo)), generator=gp, dtype=torch.float64, device=g.device)

@@ -17,6 +17,7 @@ from typing import Callable
 import torch
 
 from ..materials import Material, clamp_sigma, compose, polar_svd
+from .parameters import runs
 
 #: Young's modulus of every training material (dimensionless stress).
 TRAINING_E = 1.0
@@ -62,8 +63,6 @@ class ElastoplasticStress:
             return fn(self, *args)
         if p is None or p.shape != (rows, len(self.parameters)):
             raise ValueError(f"a parametric stress needs the parameters p of the {rows} rows, (B, {len(self.parameters)})")
-        from .parameters import runs
-
         parts = []
         for start, end in runs(p):
             one = ElastoplasticStress(self.parameters.material_at(p[start].tolist()))
