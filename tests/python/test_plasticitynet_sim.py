@@ -563,6 +563,30 @@ def test_parametric_snow_model_matches_torch_with_hardening(values):
     assert np.allclose(model.gradient(F0, F0, h), reference.Ptilde(tF0, th).numpy(), rtol=0, atol=1e-9 * scale)
 
 
+@pytest.mark.parametrize("values", [(0.0, 0.25), (0.3, 0.45), (0.17, 0.31)])
+def test_parametric_metal_model_matches_torch_with_hardening(values):
+    """The 2D metal family (hardening coefficient and nu after the yield state h) at both ends of its box
+    and inside: the C++ runtime against torch, and exact at F0."""
+    path = MODELS / "metal_param_2d.pt"
+    material = TorchMaterial.preset("metal", 2).to_dict()
+    coefficient, nu = values
+    material["plasticity"]["hardening_coefficient"] = coefficient
+    material["elasticity"]["nu"] = nu
+    E = 2.0e8
+    model = pns.load_model(path, E=E, material=material)
+    reference = plasticitynet.load_model(path, E=E, material=material)
+    assert [p[0] for p in model.parameters] == ["plasticity.hardening_coefficient", "elasticity.nu"]
+    F0 = random_F(12, 2, seed=9)
+    F = F0 + 0.02 * np.random.default_rng(10).standard_normal((12, 2, 2))
+    h = np.random.default_rng(11).random(12)
+    tF, tF0, th = (torch.from_numpy(a) for a in (F, F0, h))
+    assert np.allclose(model.gradient(F, F0, h, w=1.0), reference.gradient(tF, tF0, th, w=1.0).detach().numpy(),
+                       rtol=0, atol=1e-10 * E)
+    assert np.allclose(model.hessian(F, F0, h), reference.hessian(tF, tF0, th).detach().numpy(), rtol=0,
+                       atol=1e-10 * E)
+    assert np.allclose(model.gradient(F0, F0, h), reference.Ptilde(tF0, th).numpy(), rtol=0, atol=1e-9 * E)
+
+
 def test_parametric_model_refuses_a_material_outside_its_ranges():
     with pytest.raises(ValueError, match=r"material\.plasticity\.friction_angle_deg = 50\.0 is outside the range "
                                          r"\[20\.0, 45\.0\]"):

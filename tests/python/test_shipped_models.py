@@ -14,7 +14,7 @@ from plasticitynet.training.sampling import sample_batch, sampling_spec
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 SHIPPED = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_rm_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d",
-           "sand_param_2d", "snow_param_2d")
+           "sand_param_2d", "snow_param_2d", "metal_param_2d")
 #: Held-out samples per check here (MANIFEST's figures use 1e5): the estimate's spread at this size is
 #: a few percent of the error itself, hence the relative margin below.
 SAMPLES = 1 << 13

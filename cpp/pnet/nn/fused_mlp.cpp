@@ -261,9 +261,10 @@ constexpr Architecture kArchitectures[] = {
     {12, 128, 9, make_kernel<12, 128, 9>}, {13, 128, 9, make_kernel<13, 128, 9>},
     // Parametric energies (train.py --parametric): the principal inputs and the material
     // parameters, sand 2D (+ friction angle, nu), metal 2D (+ h, hardening coefficient, nu),
-    // snow 2D (+ h, friction angle, xi, beta, nu), sand 3D.
+    // snow 2D (+ h, friction angle, xi, beta, nu), sand 3D, snow 3D.
     {8, 64, 4, make_kernel<8, 64, 4>},    {9, 64, 4, make_kernel<9, 64, 4>},
     {11, 64, 4, make_kernel<11, 64, 4>},  {14, 128, 9, make_kernel<14, 128, 9>},
+    {17, 128, 9, make_kernel<17, 128, 9>},
 };
 
 const Architecture* find_architecture(const std::vector<int>& widths, int derivative_inputs) {

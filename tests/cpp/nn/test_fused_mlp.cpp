@@ -177,6 +177,16 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Combine(::testing::Values(Architecture{{7, 64, 64, 64, 1}, 4}, Architecture{{13, 128, 128, 128, 1}, 9}),
                        ::testing::Values(1.0)));
 
+// The parametric energies (train.py --parametric): principal inputs, h where the material hardens, then
+// the material's parameters: sand 2D, metal 2D, snow 2D, sand 3D, snow 3D.
+INSTANTIATE_TEST_SUITE_P(
+    ParametricArchitectures, FusedMlpTest,
+    ::testing::Combine(::testing::Values(Architecture{{8, 64, 64, 64, 1}, 4}, Architecture{{9, 64, 64, 64, 1}, 4},
+                                         Architecture{{11, 64, 64, 64, 1}, 4},
+                                         Architecture{{14, 128, 128, 128, 1}, 9},
+                                         Architecture{{17, 128, 128, 128, 1}, 9}),
+                       ::testing::Values(1.0)));
+
 TEST(FusedMlp, RejectsArchitecturesWithoutAKernel) {
     EXPECT_FALSE(FusedMlp::supports({9, 16, 16, 16, 1}, 4));
     EXPECT_FALSE(FusedMlp::supports({9, 32, 32, 1}, 4));
