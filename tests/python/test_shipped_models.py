@@ -14,7 +14,7 @@ from plasticitynet.training.sampling import sample_batch, sampling_spec
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 SHIPPED = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_rm_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d",
-           "sand_param_2d", "snow_param_2d", "metal_param_2d")
+           "sand_param_2d", "snow_param_2d", "metal_param_2d", "sand_param_3d")
 #: Held-out samples per check here (MANIFEST's figures use 1e5): the estimate's spread at this size is
 #: a few percent of the error itself, hence the relative margin below.
 SAMPLES = 1 << 13
@@ -62,13 +62,18 @@ def test_shipped_model_matches_manifest_and_is_exact_at_F0(name):
 
 def test_parametric_model_beside_its_dedicated_one():
     """Issue 36's targets, on MANIFEST's figures (1e5 held-out samples): at the dedicated model's material the
-    parametric model's error is within 1.5x of the dedicated model's, and no bin of its parameter box is worse
-    than 2x the box's mean."""
+    2D sand and snow parametric models' errors are within 1.5x of the dedicated models' (metal_param_2d and
+    sand_param_3d do not meet it yet: 1.6-1.8x, issue 36), and no bin of any parametric model's parameter box
+    is worse than 2x the box's mean."""
     entries = manifest()
     for name, dedicated, reference in (("sand_param_2d", "sand_2d", [30.0, 0.3]),
                                        ("snow_param_2d", "snow_2d", [45.0, 0.5, 0.3, 0.2])):
         errors = entries[f"{name}.pt"]["errors"]
         assert errors["parameter_values"] == reference
         assert errors["rel_rms"]["paper"]["1x"] <= 1.5 * entries[f"{dedicated}.pt"]["errors"]["rel_rms"]["paper"]["1x"]
-        box = errors["parameter_map"]
-        assert len(box["points"]) == box["bins"] ** len(box["fields"]) and box["max_over_mean"] <= 2.0
+    parametric = [name for name in SHIPPED if "_param_" in name]
+    assert len(parametric) >= 4
+    for name in parametric:
+        box = entries[f"{name}.pt"]["errors"]["parameter_map"]
+        assert len(box["points"]) == box["bins"] ** len(box["fields"]), name
+        assert box["max_over_mean"] <= 2.0, f"{name}: worst bin {box['max_over_mean']:.2f}x the mean"
