@@ -22,7 +22,7 @@ from plasticitynet.training.export import sha256_of
 
 #: The models this release ships (issue 3), in training order.
 SHIPPED = ("sand_2d", "snow_2d", "metal_2d", "metal_nh_rm_2d", "metal_nh_2d", "sand_3d", "snow_3d", "metal_3d",
-           "sand_param_2d", "snow_param_2d", "metal_param_2d", "sand_param_3d")
+           "sand_param_2d", "snow_param_2d", "metal_param_2d", "sand_param_3d", "snow_param_3d")
 
 
 def shipped_command(command: str | None, path: Path) -> str | None:

@@ -28,7 +28,7 @@ const std::string kTestModels = std::string(PNET_TEST_DATA_DIR) + "/models";
 const std::vector<std::string> kShipped = {"sand_2d.pt",     "snow_2d.pt", "metal_2d.pt", "metal_nh_rm_2d.pt",
                                            "metal_nh_2d.pt", "sand_3d.pt", "snow_3d.pt",  "metal_3d.pt",
                                            "sand_param_2d.pt", "snow_param_2d.pt", "metal_param_2d.pt",
-                                           "sand_param_3d.pt"};
+                                           "sand_param_3d.pt", "snow_param_3d.pt"};
 
 class ShippedModel : public ::testing::TestWithParam<std::string> {};
 
