@@ -17,7 +17,6 @@ and costs gradient accuracy (notebooks/results/model_eval/recipe/cpu6).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -28,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
 
 from plasticitynet.model import LearnedEnergy, load_model  # noqa: E402
 from plasticitynet.training.evaluate import EVAL_SEED, hessian_error, relative_rms_error  # noqa: E402
-from plasticitynet.training.trainer import EnergyTask, TrainConfig  # noqa: E402
+from plasticitynet.training.trainer import EnergyTask, TrainConfig, make_scheduler  # noqa: E402
 
 
 def percent(errors: dict) -> str:
@@ -58,6 +57,7 @@ def main(argv=None) -> int:
         material=meta["material"]["name"], dim=model.dim, batch=args.batch, sampling=args.sampling,
         representation=meta.get("representation", "raw"), hessian_weight=args.hessian_weight,
         energy_form=meta.get("energy_form", "eq8"), hidden=tuple(widths[1:-1]), seed=7,
+        lr=args.lr, schedule="cosine", epochs=args.steps,
         parametric=bool(meta.get("parameters")),
         return_map=str(Path(args.model).parent / return_map["file"]) if return_map.get("type") == "learned" else "",
         out=str(Path("/tmp") / "continue_training.pt"),
@@ -66,14 +66,14 @@ def main(argv=None) -> int:
     task.net.load_state_dict(torch.jit.load(args.model).state_dict())
     print(f"start: {percent(task.curve_error())}", flush=True)
     optimizer = torch.optim.Adam(task.net.parameters(), lr=args.lr)
+    scheduler = make_scheduler(optimizer, config)  # the trainer's cosine, to 1% of lr
     t0 = time.perf_counter()
     for step in range(args.steps):
-        for group in optimizer.param_groups:
-            group["lr"] = args.lr * (0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * step / args.steps)))
         loss = task.loss(step)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
+        scheduler.step()
         if (step + 1) % 500 == 0 or step + 1 == args.steps:
             parts = ", ".join(f"{k} {v:.3e}" for k, v in task.loss_parts.items())
             print(f"step {step + 1} ({time.perf_counter() - t0:.0f} s): {percent(task.curve_error())}; loss {parts}",
