@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Copies a model trained elsewhere (e.g. a run of scripts/recipe_study.py) into models/ as a shipped model:
-the TorchScript file with its metadata, the loss log (<stem>.csv), the error curve (<stem>_eval.csv) and
+the TorchScript file with its metadata, the loss log (<stem>.csv; a long run's thinned to LOSS_LOG_ROWS
+rows), the error curve (<stem>_eval.csv) and
 the loss plot (<stem>_loss.png), renamed to NAME. A model trained against a learned return mapping
 (metal_nh) records that file relative to itself; the reference is rewritten relative to the new place
 (after checking the file there is the one it was trained with, by sha256), so that the copy loads.
@@ -30,6 +31,25 @@ from plasticitynet.training.export import export_model, sha256_of  # noqa: E402
 
 #: The files beside a model, by suffix after its stem.
 SIDECARS = (".csv", "_eval.csv", "_loss.png")
+
+#: A shipped loss log (one row per step) keeps at most about this many rows: every k-th step and the last.
+#: A 100000-step run's full log is 5.5 MiB, and the repository travels (clones, the device machine).
+LOSS_LOG_ROWS = 10000
+
+
+def thin_loss_log(source: Path, dest: Path, max_rows: int = LOSS_LOG_ROWS) -> int:
+    """Copies the loss log `source` (a header, then one row per step) to `dest` keeping the header, every
+    k-th step (k the smallest integer leaving <= max_rows + 1 rows) and the last row; returns k."""
+    lines = source.read_text().splitlines(keepends=True)
+    header, rows = lines[:1], lines[1:]
+    k = max(1, -(-len(rows) // max_rows))
+    kept = rows[k - 1 :: k]
+    if rows and (not kept or kept[-1] is not rows[-1]):
+        kept.append(rows[-1])
+    tmp = dest.with_name(dest.name + ".tmp")
+    tmp.write_text("".join(header + kept))
+    os.replace(tmp, dest)
+    return k
 
 
 def relocated_metadata(meta: dict, source: Path, dest: Path) -> dict:
@@ -64,8 +84,13 @@ def main(argv=None) -> int:
     for suffix in SIDECARS:
         side = args.source.with_name(args.source.stem + suffix)
         if side.is_file():
-            shutil.copyfile(side, args.models / f"{args.name}{suffix}")
-            copied.append(f"{args.name}{suffix}")
+            target = args.models / f"{args.name}{suffix}"
+            if suffix == ".csv":
+                k = thin_loss_log(side, target)
+                copied.append(f"{args.name}{suffix}" + (f" (every {k}th step)" if k > 1 else ""))
+            else:
+                shutil.copyfile(side, target)
+                copied.append(f"{args.name}{suffix}")
     print(f"shipped {args.source} as {', '.join(copied)} in {args.models}")
     print("next: scripts/make_manifest.py, scripts/gen_energy_vectors.py")
     return 0

@@ -55,3 +55,17 @@ def test_a_different_return_map_is_refused_and_nothing_written(trained, tmp_path
     shutil.copyfile(ROOT / "models" / "metal_nh_2d.pt", base / "study" / "models" / "metal_nh_rm_2d.pt")
     assert ship_model.main([str(moved / "model.pt"), "x", "--models", str(dest)]) == 2
     assert "sha256 differs" in capsys.readouterr().err and not any(dest.iterdir())
+
+
+def test_a_long_loss_log_is_thinned_to_every_kth_step_and_the_last(tmp_path):
+    source = tmp_path / "run.csv"
+    source.write_text("step,loss\n" + "".join(f"{s},{1.0 / s}\n" for s in range(1, 25)))
+    dest = tmp_path / "shipped.csv"
+    assert ship_model.thin_loss_log(source, dest, max_rows=10) == 3
+    steps = [int(line.split(",")[0]) for line in dest.read_text().splitlines()[1:]]
+    assert steps == [3, 6, 9, 12, 15, 18, 21, 24]
+    source.write_text("step,loss\n" + "".join(f"{s},0\n" for s in range(1, 26)))
+    ship_model.thin_loss_log(source, dest, max_rows=10)
+    assert [int(line.split(",")[0]) for line in dest.read_text().splitlines()[1:]][-2:] == [24, 25]
+    ship_model.thin_loss_log(source, dest, max_rows=100)  # a short log is copied whole
+    assert dest.read_text() == source.read_text()
