@@ -52,6 +52,8 @@ def entry(path: Path) -> dict:
         "dim": meta["dim"],
         "widths": meta["widths"],
         "command": shipped_command(recipe.get("command"), path),
+        # a fine-tuned model (train.py --init-from): the file and sha256 its weights started from
+        **({"init_from": recipe["init_from"]} if recipe.get("init_from") else {}),
         **(
             {
                 "representation": meta.get("representation", "raw"),

@@ -87,7 +87,7 @@ def main(argv=None) -> int:
             target = args.models / f"{args.name}{suffix}"
             if suffix == ".csv":
                 k = thin_loss_log(side, target)
-                copied.append(f"{args.name}{suffix}" + (f" (every {k}th step)" if k > 1 else ""))
+                copied.append(f"{args.name}{suffix}" + (f" (1 row in {k})" if k > 1 else ""))
             else:
                 shutil.copyfile(side, target)
                 copied.append(f"{args.name}{suffix}")

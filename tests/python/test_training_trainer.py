@@ -245,3 +245,39 @@ def test_train_py_rejected_energy_form(tmp_path, form):
         assert float(model.gradient(eye, F0).abs().max()) < 1e-9
     else:
         assert torch.allclose(model.gradient(F0, F0), model.gradient(F0, eye), rtol=1e-13, atol=1e-15)
+
+
+def test_init_from_starts_at_a_trained_models_weights_and_records_it(tmp_path):
+    """--init-from (fine-tuning): the run's network starts with the shipped sand_2d's weights, so its held-out
+    error before any step is the model's; the recipe names the file and its sha256; a resume must start from
+    the same weights; a model of another material or other widths is refused naming the field."""
+    shipped = ROOT / "models" / "sand_2d.pt"
+    kw = dict(hidden=(64, 64, 64), representation="principal", sampling="mixed", epochs=4, batch=64,
+              lr=1e-4, checkpoint_every=2, init_from=str(shipped))
+    trainer = Trainer(_config(tmp_path / "a", **kw))
+    model = plasticitynet.load_model(shipped)
+    for k, v in model.network.state_dict().items():
+        assert torch.equal(trainer.net.state_dict()[k], v.to(torch.float32))
+    fresh = Trainer(_config(tmp_path / "b", **{**kw, "init_from": ""}))
+    assert trainer.task.curve_error()["paper"] < 0.02 < fresh.task.curve_error()["paper"]
+    assert trainer.run(stop_at=2).finished is False
+    resumed = Trainer(_config(tmp_path / "a", resume=True, **kw))
+    recipe = resumed.recipe()
+    assert recipe["init_from"]["file"] == "sand_2d.pt" and len(recipe["init_from"]["sha256"]) == 64
+    with pytest.raises(ValueError, match="init_from"):  # resumed without the starting weights
+        Trainer(_config(tmp_path / "a", resume=True, **{**kw, "init_from": ""}))
+    with pytest.raises(ValueError, match="layer widths"):
+        Trainer(_config(tmp_path / "c", **{**kw, "hidden": (32, 32, 32)}))
+    with pytest.raises(ValueError, match="its material is 'sand', this run trains 'snow'"):
+        Trainer(_config(tmp_path / "d", **{**kw, "material": "snow"}))
+
+
+def test_init_from_cli_errors(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        cli_main(["--material", "sand", "--dim", "2", "--init-from", str(tmp_path / "none.pt"),
+                  "--out", str(tmp_path / "m.pt")])
+    assert exit_info.value.code == 2 and "--init-from" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:
+        cli_main(["--material", "metal_nh_rm", "--dim", "2", "--init-from", str(ROOT / "models" / "sand_2d.pt"),
+                  "--out", str(tmp_path / "m.pt")])
+    assert exit_info.value.code == 2 and "applies to energies" in capsys.readouterr().err

@@ -177,6 +177,13 @@ def build_parser() -> argparse.ArgumentParser:
         "beta, nu; metal: hardening coefficient, nu) as network inputs over the ranges of docs/physics.md, one "
         "model for the family (default out: models/<material>_param_<dim>d.pt)",
     )
+    p.add_argument(
+        "--init-from",
+        default=None,
+        metavar="MODEL",
+        help="energies: start from this trained model's weights instead of a random initialisation (fine-tuning "
+        "with a fresh optimizer and schedule); it must have the run's material, dimension, widths and inputs",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -205,6 +212,11 @@ def main(argv=None, root: str | Path | None = None) -> int:
         parser.error(f"--energy-form applies to energies, not --material {RETURN_MAP_MATERIAL}")
     if args.warmup and args.schedule == "onecycle":
         parser.error("--warmup applies to the step and cosine schedules (onecycle warms up by itself)")
+    if args.init_from is not None:
+        if args.material == RETURN_MAP_MATERIAL:
+            parser.error(f"--init-from applies to energies, not --material {RETURN_MAP_MATERIAL}")
+        if not Path(args.init_from).is_file():
+            parser.error(f"--init-from {args.init_from}: no such model file")
     if args.resume and not out.with_suffix(".ckpt").is_file():
         parser.error(f"--resume: no checkpoint {out.with_suffix('.ckpt')}")
     argv_list = sys.argv[1:] if argv is None else list(argv)
@@ -238,6 +250,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
             hidden=tuple(args.hidden),
             shards=args.shards,
             parametric=args.parametric,
+            init_from=args.init_from or "",
             command="python train.py " + shlex.join(argv_list),
         )
     except ValueError as err:  # a combination TrainConfig refuses (e.g. --parametric without a family)

@@ -60,13 +60,13 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
     "representation", "hessian_weight", "energy_form", "device_type", "shards", "schedule", "warmup", "precision",
-    "hidden", "parametric",
+    "hidden", "parametric", "init_from",
 )
 
 #: What checkpoints written before a field existed were trained with.
 _LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1,
                   "schedule": "step", "warmup": 0, "precision": "float32",
-                  "hidden": [], "parametric": False}
+                  "hidden": [], "parametric": False, "init_from": ""}
 
 #: Learning-rate schedules (--schedule): the paper's step decay (lr x lr_decay every decay_steps), cosine
 #: annealing from lr to lr_min_fraction x lr over the run, and one-cycle (up to lr and down, torch's
@@ -119,6 +119,7 @@ class TrainConfig:
     precision: str = "float32"  # PRECISIONS: the network's parameters and the loss (samples and targets: float64)
     shards: int = 0  # parts of each batch with their own random stream; 0: the data-parallel world size
     parametric: bool = False  # energies: the material's parameters as inputs (parameters.FAMILIES)
+    init_from: str = ""  # energies: a trained model file whose weights start the run (fine-tuning); "": random
     command: str = ""  # the command line, recorded in the metadata
 
     def __post_init__(self):
@@ -476,6 +477,40 @@ class TrainResult:
     finished: bool = True
 
 
+def initialise_from(task, path: str) -> dict:
+    """Copies the weights of the trained energy at `path` into `task`'s network (fine-tuning: the run then
+    trains them with a fresh optimizer and schedule). The model must be the same kind of network: material,
+    dimension, input representation, energy form, parametric family and layer widths; ValueError naming the
+    file and the field that differs. Returns {"file": its name, "sha256"} for the recipe."""
+    from ..model import read_model_file
+
+    if getattr(task, "kind", "energy") == "return_map":
+        raise ValueError(f"init_from = {path!r}: fine-tuning applies to energies, not the return-map network")
+    network, meta = read_model_file(path)
+    cfg = task.config
+    material = (meta.get("material") or {}).get("name")
+    expected = {
+        "kind": ("energy", meta.get("kind")),
+        "material": (cfg.material, material),
+        "dim": (cfg.dim, meta.get("dim")),
+        "representation": (cfg.representation, meta.get("representation", "raw")),
+        "energy_form": (cfg.energy_form, meta.get("energy_form", "eq8")),
+        "parametric": (bool(cfg.parametric), bool(meta.get("parameters"))),
+    }
+    for field_name, (want, got) in expected.items():
+        if want != got:
+            raise ValueError(f"{path}: its {field_name} is {got!r}, this run trains {want!r}")
+    ours = {k: tuple(v.shape) for k, v in task.net.state_dict().items()}
+    theirs = {k: tuple(v.shape) for k, v in network.state_dict().items()}
+    if ours != theirs:
+        raise ValueError(
+            f"{path}: its layer widths {meta.get('widths')} differ from this run's {task.net.widths} (--hidden)"
+        )
+    with torch.no_grad():
+        task.net.load_state_dict({k: v.to(task.dtype) for k, v in network.state_dict().items()})
+    return {"file": Path(path).name, "sha256": sha256_of(path)}
+
+
 def make_scheduler(optimizer: torch.optim.Optimizer, config: TrainConfig):
     """The learning-rate schedule of `config` (SCHEDULES), stepped once per training step."""
     if config.schedule == "onecycle":
@@ -517,6 +552,9 @@ class Trainer:
             self._owns_process_group = False
         self.task = make_task(config, self.device)
         self.net: MLP = self.task.net
+        self.init_from = None  # {"file", "sha256"} of the model the weights started from
+        if config.init_from:
+            self.init_from = initialise_from(self.task, config.init_from)
         self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.lr)
         self.scheduler = make_scheduler(self.optimizer, config)
         self.step = 0  # number of completed steps
@@ -529,6 +567,8 @@ class Trainer:
             self._load_checkpoint()
 
     def _resume_value(self, key: str):
+        if key == "init_from":  # the starting weights, by content: the path may differ between machines
+            return self.init_from["sha256"] if self.init_from else ""
         if key == "device_type":
             return self.device.type
         if key == "shards":
@@ -708,6 +748,8 @@ class Trainer:
         else:  # the return-map net
             recipe["distribution"] = {"eps_range": [-1.0, 1.0], "h_range": [0.0, 1.0]}
             recipe["rm_loss"] = cfg.rm_loss
+        if self.init_from:
+            recipe["init_from"] = self.init_from
         if cfg.command:
             recipe["command"] = cfg.command
         if self.trained_device_type != self.device.type:  # trained elsewhere, finished here
