@@ -44,7 +44,7 @@ MPM_RUNS: dict[str, Run] = {
     "plasticitynet_1e-3_bdf2": Run("plasticitynet", 1e-3, ("--time-integrator", "bdf2")),
     "plasticitynet_1e-3_w0": Run("plasticitynet", 1e-3, ("--regularizer", "0")),
     "plasticitynet_1e-3_fp1": Run("plasticitynet", 1e-3, ("--fixed-point-iterations", "1")),
-    "plasticitynet_1e-3_advection": Run("plasticitynet", 1e-3, ("--advection-cfl", "0.25")),
+    "plasticitynet_1e-3_advection": Run("plasticitynet", 1e-3, ("--advection-cfl", "0.2")),
 }
 #: The energy-representation ablation (paper Fig. 11): the 2D sand energy in eq. 8's form and in the three
 #: forms the paper rejected (scripts/train_ablation_models.sh), each replacing the scene's model.
