@@ -72,10 +72,23 @@ for model in "${models[@]}"; do
     sand_2d)        finetune=(--hidden 64 64 64 --batch 4096 --epochs 4500 --eval-every 500) ;;
     metal_param_2d) finetune=(--hidden 64 64 64 --batch 2048 --epochs 10000 --eval-every 2500) ;;
     metal_3d)       finetune=(--hidden 128 128 128 --batch 2048 --epochs 5500 --eval-every 1000) ;;
+    snow_3d)        finetune=(--hidden 128 128 128 --batch 2048 --epochs 6000 --eval-every 1000) ;;
+    sand_param_3d)  finetune=(--hidden 128 128 128 --batch 512 --epochs 12000 --eval-every 2000) ;;
   esac
   if ((${#finetune[@]})); then
     echo "=== $model: fine-tuning ($(date -u +%H:%M:%S))"
     $py train.py --material "$material" --dim "$dim" "${parametric[@]}" "${finetune[@]}" "${ft[@]}" \
         --init-from "models/$model.pt" --lr 0.001 "${run[@]}"
+  fi
+  # A second fine-tuning from the first one's weights, at half its lr (snow_3d, sand_param_3d).
+  second=()
+  case "$model" in
+    snow_3d)       second=(--hidden 128 128 128 --batch 2048 --epochs 2900 --eval-every 2900) ;;
+    sand_param_3d) second=(--hidden 128 128 128 --batch 512 --epochs 5000 --eval-every 5000) ;;
+  esac
+  if ((${#second[@]})); then
+    echo "=== $model: second fine-tuning ($(date -u +%H:%M:%S))"
+    $py train.py --material "$material" --dim "$dim" "${parametric[@]}" "${second[@]}" "${ft[@]}" --warmup 200 \
+        --init-from "models/$model.pt" --lr 0.0005 "${run[@]}"
   fi
 done
