@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
 
 from plasticitynet.model import LearnedEnergy, load_model  # noqa: E402
 from plasticitynet.training.evaluate import EVAL_SEED, hessian_error, relative_rms_error  # noqa: E402
-from plasticitynet.training.trainer import EnergyTask, TrainConfig, make_scheduler  # noqa: E402
+from plasticitynet.training.trainer import EnergyTask, TrainConfig, initialise_from, make_scheduler  # noqa: E402
 
 
 def percent(errors: dict) -> str:
@@ -63,7 +63,7 @@ def main(argv=None) -> int:
         out=str(Path("/tmp") / "continue_training.pt"),
     )
     task = EnergyTask(config)
-    task.net.load_state_dict(torch.jit.load(args.model).state_dict())
+    initialise_from(task, args.model)
     print(f"start: {percent(task.curve_error())}", flush=True)
     optimizer = torch.optim.Adam(task.net.parameters(), lr=args.lr)
     scheduler = make_scheduler(optimizer, config)  # the trainer's cosine, to 1% of lr

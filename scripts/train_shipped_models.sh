@@ -35,11 +35,18 @@ common=(--lr 0.01 "${run[@]}")
 cosine=(--schedule cosine --warmup 1000 --sampling mixed --representation principal --checkpoint-every 1000)
 gradient_only=(--hessian-weight 0)
 with_hessian=(--hessian-weight 0.1)
-# Fine-tuning: from the first run's weights, a small lr after a short warm-up (Adam's first steps at 0.01 undo them).
-ft=(--schedule cosine --warmup 300 --sampling mixed --representation principal --checkpoint-every 500 --hessian-weight 0)
 models=("$@")
 ((${#models[@]})) || models=(sand_2d snow_2d metal_2d metal_nh_rm_2d metal_nh_2d sand_3d snow_3d metal_3d
                              sand_param_2d snow_param_2d metal_param_2d sand_param_3d snow_param_3d)
+# One fine-tuning stage of $model from models/$model.pt (train.py --init-from): a small lr after a short
+# warm-up (Adam's first steps at 0.01 would undo the weights), cosine, no Hessian term.
+finetune() {
+  local lr=$1 warmup=$2; shift 2
+  echo "=== $model: fine-tuning at lr $lr ($(date -u +%H:%M:%S))"
+  $py train.py --material "$material" --dim "$dim" "${parametric[@]}" "$@" --schedule cosine --warmup "$warmup" \
+      --sampling mixed --representation principal --checkpoint-every 500 --hessian-weight 0 \
+      --init-from "models/$model.pt" --lr "$lr" "${run[@]}"
+}
 for model in "${models[@]}"; do
   material=${model%_*d}; dim=${model##*_}; dim=${dim%d}
   parametric=()
@@ -66,29 +73,15 @@ for model in "${models[@]}"; do
   esac
   echo "=== $model ($(date -u +%H:%M:%S))"
   $py train.py --material "$material" --dim "$dim" "${parametric[@]}" "${schedule[@]}" "${common[@]}"
-  finetune=()
+  # Fine-tuning stages, each from the weights the previous stage wrote: lr, warm-up steps, shape.
   case "$model" in
-    metal_2d)       finetune=(--batch 2048 --epochs 15000 --eval-every 2500) ;;
-    sand_2d)        finetune=(--hidden 64 64 64 --batch 4096 --epochs 4500 --eval-every 500) ;;
-    metal_param_2d) finetune=(--hidden 64 64 64 --batch 2048 --epochs 10000 --eval-every 2500) ;;
-    metal_3d)       finetune=(--hidden 128 128 128 --batch 2048 --epochs 5500 --eval-every 1000) ;;
-    snow_3d)        finetune=(--hidden 128 128 128 --batch 2048 --epochs 6000 --eval-every 1000) ;;
-    sand_param_3d)  finetune=(--hidden 128 128 128 --batch 512 --epochs 12000 --eval-every 2000) ;;
+    metal_2d)       finetune 0.001 300 --batch 2048 --epochs 15000 --eval-every 2500 ;;
+    sand_2d)        finetune 0.001 300 --hidden 64 64 64 --batch 4096 --epochs 4500 --eval-every 500 ;;
+    metal_param_2d) finetune 0.001 300 --hidden 64 64 64 --batch 2048 --epochs 10000 --eval-every 2500 ;;
+    metal_3d)       finetune 0.001 300 --hidden 128 128 128 --batch 2048 --epochs 5500 --eval-every 1000 ;;
+    snow_3d)        finetune 0.001 300 --hidden 128 128 128 --batch 2048 --epochs 6000 --eval-every 1000
+                    finetune 0.0005 200 --hidden 128 128 128 --batch 2048 --epochs 2900 --eval-every 2900 ;;
+    sand_param_3d)  finetune 0.001 300 --hidden 128 128 128 --batch 512 --epochs 12000 --eval-every 2000
+                    finetune 0.0005 200 --hidden 128 128 128 --batch 512 --epochs 5000 --eval-every 5000 ;;
   esac
-  if ((${#finetune[@]})); then
-    echo "=== $model: fine-tuning ($(date -u +%H:%M:%S))"
-    $py train.py --material "$material" --dim "$dim" "${parametric[@]}" "${finetune[@]}" "${ft[@]}" \
-        --init-from "models/$model.pt" --lr 0.001 "${run[@]}"
-  fi
-  # A second fine-tuning from the first one's weights, at half its lr (snow_3d, sand_param_3d).
-  second=()
-  case "$model" in
-    snow_3d)       second=(--hidden 128 128 128 --batch 2048 --epochs 2900 --eval-every 2900) ;;
-    sand_param_3d) second=(--hidden 128 128 128 --batch 512 --epochs 5000 --eval-every 5000) ;;
-  esac
-  if ((${#second[@]})); then
-    echo "=== $model: second fine-tuning ($(date -u +%H:%M:%S))"
-    $py train.py --material "$material" --dim "$dim" "${parametric[@]}" "${second[@]}" "${ft[@]}" --warmup 200 \
-        --init-from "models/$model.pt" --lr 0.0005 "${run[@]}"
-  fi
 done

@@ -484,7 +484,7 @@ def initialise_from(task, path: str) -> dict:
     file and the field that differs. Returns {"file": its name, "sha256"} for the recipe."""
     from ..model import read_model_file
 
-    if getattr(task, "kind", "energy") == "return_map":
+    if task.kind == "return_map":
         raise ValueError(f"init_from = {path!r}: fine-tuning applies to energies, not the return-map network")
     network, meta = read_model_file(path)
     cfg = task.config
