@@ -104,6 +104,11 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
 
     // MPM: the grid velocities, slip walls, G2P.
     const Eigen::Index ng = coupled_.grid_size();
+    if (mpm_system_.boundary.coulomb_floor()) {  // the Coulomb floor's friction, as in ImplicitIntegrator
+        floor_v_ = v_.head(ng);
+        mpm_.apply_floor_friction(floor_v_);
+        v_.head(ng) = floor_v_;
+    }
     mpm_.write_velocity(v_.head(ng), grid_);
     grid_.project_velocity(mpm_system_.boundary);
     double max_speed = 0.0;

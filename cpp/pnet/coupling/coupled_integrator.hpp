@@ -80,6 +80,7 @@ private:
     CoupledPotential<dim> coupled_;
     ReferenceSolveWork<dim> work_;
     VecX v_;
+    VecX floor_v_;  // the grid part of v_ for the Coulomb floor's friction
 };
 
 template <int dim>

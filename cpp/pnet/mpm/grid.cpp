@@ -115,9 +115,12 @@ void Grid<dim>::bin_and_clear(const std::vector<Vec<dim>>& x) {
 
 template <int dim>
 void Grid<dim>::apply_boundary(const int* node, Vec<dim>& v, const BoundaryConditions& bc) const {
-    if (bc.sticky_floor_cells > 0 && node[1] <= bc.sticky_floor_cells) {
-        v.setZero();
-        return;
+    if (bc.in_floor(node[1])) {
+        if (!bc.coulomb_floor()) {
+            v.setZero();
+            return;
+        }
+        if (v[1] < 0.0) coulomb_projection<dim>(v, -v[1], bc.floor_friction);
     }
     if (!bc.slip_walls) return;
     for (int a = 0; a < dim; ++a) {
@@ -142,9 +145,10 @@ void Grid<dim>::project_velocity(const BoundaryConditions& bc) {
 
 template <int dim>
 void Grid<dim>::constrained_components(const int* node, bool* fixed, const BoundaryConditions& bc) const {
-    const bool floor = bc.sticky_floor_cells > 0 && node[1] <= bc.sticky_floor_cells;
+    const bool floor = bc.in_floor(node[1]);
     for (int a = 0; a < dim; ++a)
-        fixed[a] = floor || (bc.slip_walls && (node[a] < kWallNodes || node[a] >= nodes_[a] - kWallNodes));
+        fixed[a] = (floor && (!bc.coulomb_floor() || a == 1)) ||
+                   (bc.slip_walls && (node[a] < kWallNodes || node[a] >= nodes_[a] - kWallNodes));
 }
 
 template <int dim>

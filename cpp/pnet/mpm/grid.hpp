@@ -11,6 +11,7 @@
 // of a colour in parallel, and the particles of a block in index order. Every
 // node thus sums its contributions in the same order whatever the thread count.
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -21,8 +22,33 @@ namespace pnet {
 
 struct BoundaryConditions {
     bool slip_walls = true;        // remove the wall-ward normal velocity within 3 nodes of a wall
-    int sticky_floor_cells = 3;    // zero velocity on the nodes within this many cells of the floor (y = min)
+    int sticky_floor_cells = 3;    // the floor layer: the nodes within this many cells of the floor (y = min)
+    // < 0: the floor layer is sticky (velocity zeroed). >= 0: it is a Coulomb floor of this friction
+    // coefficient: a node moving into the floor (v_y < 0) loses that normal velocity and as much
+    // tangential speed as mu |v_y| (all of it when it is less: static friction); a node moving away is
+    // free. The sticky floor takes a fraction of a node's momentum every step, so its drag grows as the
+    // step shrinks; the Coulomb floor's impulse is mu times the normal one, whatever the step.
+    double floor_friction = -1.0;
+
+    bool coulomb_floor() const { return floor_friction >= 0.0; }
+    /// Node coordinate y (index along axis 1) in the floor layer.
+    bool in_floor(int y) const { return sticky_floor_cells > 0 && y <= sticky_floor_cells; }
 };
+
+/// The Coulomb floor's projection of a velocity v pressing into the floor with normal impulse per unit
+/// mass `pressure` (>= 0; v_y itself when it is below 0): v_y = 0 and the tangential part shrunk by
+/// mu pressure, to 0 if that is more than its length.
+template <int dim>
+inline void coulomb_projection(Vec<dim>& v, double pressure, double mu) {
+    v[1] = 0.0;
+    double tangential = 0.0;
+    for (int a = 0; a < dim; ++a)
+        if (a != 1) tangential += v[a] * v[a];
+    tangential = std::sqrt(tangential);
+    const double scale = tangential > mu * pressure ? 1.0 - mu * pressure / tangential : 0.0;
+    for (int a = 0; a < dim; ++a)
+        if (a != 1) v[a] *= scale;
+}
 
 template <int dim>
 class Grid {
@@ -98,6 +124,8 @@ public:
 
     /// The velocity components of node `node` that the boundary conditions
     /// constrain (fixed[a] for axis a): all of them on the sticky floor, the
+    /// normal one on the Coulomb floor (its tangential ones are free during a
+    /// solve; IncrementalPotential::apply_floor_friction acts after it), the
     /// wall-normal one within kWallNodes of a slip wall. An implicit solve
     /// holds these at their apply_boundary() value (the integrators pass
     /// conditions without slip walls: those act after the solve, see

@@ -110,6 +110,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         throw SimulationError(e.what());
     }
     record_solve(s, stats);
+    potential_.apply_floor_friction(v_);  // the Coulomb floor's friction (an operator split; see the header)
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).
     potential_.write_velocity(potential_.displacement_rate(v_), grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM

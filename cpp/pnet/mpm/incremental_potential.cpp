@@ -78,6 +78,8 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
         grid.coordinates(dof_node_[k], coord);
         grid.constrained_components(coord, fixed, bc);
         const bool massless = !(node.mass > 0.0);  // a stencil node with weight exactly 0
+        // The Coulomb floor holds a node's normal velocity only where it presses into the floor.
+        if (bc.coulomb_floor() && bc.in_floor(coord[1]) && node.momentum[1] > 0.0) fixed[1] = false;
         for (int a = 0; a < dim; ++a) {
             const Eigen::Index i = dim * k + a;
             mass[i] = massless ? 1.0 : node.mass;
@@ -87,8 +89,43 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
             residual_mass_[i] = free[i] * mass[i];
         }
     }
+    // The Coulomb floor's contacts: the nodes whose normal velocity is held (in dof order).
+    floor_friction_ = bc.coulomb_floor() ? bc.floor_friction : -1.0;
+    floor_dofs_.clear();
+    if (bc.coulomb_floor())
+        for (std::ptrdiff_t k = 0; k < dofs; ++k) {
+            int coord[dim];
+            grid.coordinates(dof_node_[k], coord);
+            if (bc.in_floor(coord[1]) && free[dim * k + 1] == 0.0 && grid.node(dof_node_[k]).mass > 0.0)
+                floor_dofs_.push_back(static_cast<int>(k));
+        }
     particle_energy_.begin_step(particles.size());
     this->invalidate_pattern();  // a new grid
+}
+
+template <int dim>
+int IncrementalPotential<dim>::apply_floor_friction(VecX& v) {
+    if (floor_dofs_.empty()) return 0;
+    // The floor's normal impulse on a held component is what keeps it at its value: m (v - v*) plus the
+    // particles' dPsi/dv there (the unmasked gradient; the inertia term is 0, held at v*). v* already
+    // carries the floor's reaction to the inertia and gravity (Grid::apply_boundary); this is the rest,
+    // the stress the material above presses the node with.
+    floor_gradient_.setZero(v.size());
+    particle_energy_.add_gradient(v, floor_gradient_);
+    const VecX& mass = inertia_.mass();
+    int sliding = 0;
+    for (int k : floor_dofs_) {
+        const Eigen::Index normal = dim * k + 1;
+        const double impulse = floor_gradient_[normal];
+        if (!(impulse > 0.0)) continue;
+        Vec<dim> vk = v.template segment<dim>(dim * k);
+        const double held = vk[1];
+        coulomb_projection<dim>(vk, impulse / mass[normal], floor_friction_);
+        vk[1] = held;
+        v.template segment<dim>(dim * k) = vk;
+        sliding += vk.squaredNorm() > held * held ? 1 : 0;
+    }
+    return sliding;
 }
 
 template <int dim>

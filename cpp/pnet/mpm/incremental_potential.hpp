@@ -56,6 +56,13 @@ public:
     /// Euler, (u / 2 + v) beta for BDF2 (what moves the particles and their F).
     const VecX& displacement_rate(const VecX& v);
 
+    /// The Coulomb floor (BoundaryConditions::floor_friction), after the solve: shrinks the tangential
+    /// velocity of each node held on the floor by mu J / m_i, J the normal impulse the floor gives it
+    /// beyond v*'s (the material's weight and stress on it; dPsi/dv at v), as explicit MPM's grid
+    /// update does with the whole normal impulse. An operator split, as the slip walls' projection
+    /// after the solve. Returns the nodes still sliding. No-op without a Coulomb floor.
+    int apply_floor_friction(VecX& v);
+
     /// v* on the unknowns: the starting point of the solve.
     const VecX& v_star() const { return inertia_.target(); }
     /// 1 / m_i on free components, 0 on fixed ones.
@@ -122,6 +129,9 @@ private:
     std::vector<Vec<dim>> stencil_grad_;     // grad w_ip, 1/m
     std::vector<double> stencil_weight_;     // w_ip
     std::vector<int> node_entry_start_, node_entries_;
+    double floor_friction_ = -1.0;           // the Coulomb floor's mu (< 0: none)
+    std::vector<int> floor_dofs_;            // nodes held on the Coulomb floor (normal component)
+    VecX floor_gradient_;
 };
 
 }  // namespace pnet

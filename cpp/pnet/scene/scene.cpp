@@ -186,7 +186,7 @@ void read_boundary(const Reader& r, const json& j, Scene& scene) {
     const json* boundary = Reader::find(j, "boundary");
     if (!boundary) return;
     r.require_object(*boundary, "boundary");
-    r.reject_unknown_keys(*boundary, "boundary", {"walls", "sticky_floor_cells"});
+    r.reject_unknown_keys(*boundary, "boundary", {"walls", "sticky_floor_cells", "floor_friction"});
     if (const json* v = Reader::find(*boundary, "walls")) {
         const std::string walls = v->is_string() ? v->get<std::string>() : "";
         if (walls != "slip" && walls != "none")
@@ -199,6 +199,11 @@ void read_boundary(const Reader& r, const json& j, Scene& scene) {
             r.fail("boundary.sticky_floor_cells", "must be less than the " + std::to_string(scene.cells(1)) +
                                                       " cells along y, got " + std::to_string(cells));
         scene.boundary.sticky_floor_cells = cells;
+    }
+    if (const json* v = Reader::find(*boundary, "floor_friction")) {
+        scene.boundary.floor_friction = r.non_negative(*v, "boundary.floor_friction");
+        if (scene.boundary.sticky_floor_cells == 0)
+            r.fail("boundary.floor_friction", "needs a floor layer (boundary.sticky_floor_cells > 0)");
     }
 }
 
@@ -663,6 +668,7 @@ json scene_to_json(const Scene& scene) {
         j["particles_per_cell"] = scene.particles_per_cell;
         j["boundary"] = {{"walls", scene.boundary.slip_walls ? "slip" : "none"},
                          {"sticky_floor_cells", scene.boundary.sticky_floor_cells}};
+        if (scene.boundary.floor_friction >= 0.0) j["boundary"]["floor_friction"] = scene.boundary.floor_friction;
         j["objects"] = objects;
     }
     if (scene.has_meshes()) {

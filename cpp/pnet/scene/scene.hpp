@@ -14,7 +14,8 @@
 //     "gravity": [0, -9.8],                       // m/s^2, optional, default (0, -9.8[, 0])
 //     "frame_dt": 0.02, "frames": 50,             // s, optional
 //     "particles_per_cell": 2,                    // per axis, optional
-//     "boundary": {"walls": "slip", "sticky_floor_cells": 3},          // optional ("walls": "slip" | "none")
+//     "boundary": {"walls": "slip", "sticky_floor_cells": 3},          // optional ("walls": "slip" | "none";
+//                                                                     //  "floor_friction": mu, a Coulomb floor)
 //     "integrator": {"name": "plasticitynet", "dt": 1e-3, "cfl": 0.5, ...},
 //         // optional, default explicit with the CFL step; "name" is required when the block is given;
 //         // dt = 0 or absent: the CFL step; other keys are kept in Scene::Integrator::options
@@ -153,7 +154,8 @@ struct Scene {
 
     struct Boundary {
         bool slip_walls = true;      // "walls": "slip" | "none"
-        int sticky_floor_cells = 3;  // grid velocity zeroed within this many cells of the floor (docs/methods.md)
+        int sticky_floor_cells = 3;  // the floor layer: nodes within this many cells of the floor (docs/methods.md)
+        double floor_friction = -1;  // absent (< 0): the layer is sticky; >= 0: a Coulomb floor of this mu
     } boundary;
 
     struct Integrator {

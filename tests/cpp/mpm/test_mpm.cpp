@@ -135,6 +135,35 @@ TYPED_TEST(MpmTest, TransfersConserveMassMomentumAndAngularMomentum) {
     EXPECT_LE((angular_momentum(Q, dx) - L_g).norm(), 1e-12 * L_g.norm());
 }
 
+// The floor layer's boundary conditions on one node's velocity: sticky zeroes it; Coulomb (mu 0.5) removes
+// a velocity into the floor with mu times as much tangential speed (all of it when that is less: static
+// friction) and leaves a velocity away from it; above the layer nothing changes.
+TEST(Boundary, StickyAndCoulombFloors) {
+    const Grid<3> grid(Vec<3>::Zero(), 0.1, {16, 16, 16});
+    BoundaryConditions sticky, coulomb;
+    sticky.slip_walls = coulomb.slip_walls = false;
+    coulomb.floor_friction = 0.5;
+    const int on_floor[3] = {8, 2, 8}, above[3] = {8, 4, 8};
+    auto applied = [&](const BoundaryConditions& bc, const int* node, Vec<3> v) {
+        grid.apply_boundary(node, v, bc);
+        return v;
+    };
+    EXPECT_EQ(applied(sticky, on_floor, Vec<3>(1.0, 1.0, 0.0)), Vec<3>::Zero());
+    EXPECT_EQ(applied(sticky, above, Vec<3>(1.0, -1.0, 0.0)), Vec<3>(1.0, -1.0, 0.0));
+    // Kinetic: |v_t| = 5 shrinks by 0.5 * 2 = 1, along its direction (3, 4) / 5.
+    EXPECT_TRUE(applied(coulomb, on_floor, Vec<3>(3.0, -2.0, 4.0)).isApprox(Vec<3>(2.4, 0.0, 3.2), 1e-15));
+    EXPECT_EQ(applied(coulomb, on_floor, Vec<3>(0.4, -1.0, 0.3)), Vec<3>::Zero());  // static: 0.5 <= 0.5
+    EXPECT_EQ(applied(coulomb, on_floor, Vec<3>(3.0, 2.0, 4.0)), Vec<3>(3.0, 2.0, 4.0));  // lifting off
+    EXPECT_EQ(applied(coulomb, above, Vec<3>(3.0, -2.0, 4.0)), Vec<3>(3.0, -2.0, 4.0));
+    bool fixed[3];
+    grid.constrained_components(on_floor, fixed, coulomb);
+    EXPECT_FALSE(fixed[0]);
+    EXPECT_TRUE(fixed[1]) << "the normal component is held during an implicit solve";
+    EXPECT_FALSE(fixed[2]);
+    grid.constrained_components(on_floor, fixed, sticky);
+    EXPECT_TRUE(fixed[0] && fixed[1] && fixed[2]);
+}
+
 TYPED_TEST(MpmTest, FreeFallMatchesTheAnalyticTrajectory) {
     constexpr int dim = TypeParam::value;
     MaterialDescription sand = material_preset("sand");

@@ -448,7 +448,15 @@ TEST(SceneJson, OptionalFieldsAndDefaults) {
     const Scene no_walls = scene_from_json(none, "<dict>", "");
     EXPECT_FALSE(no_walls.boundary.slip_walls);
     EXPECT_EQ(no_walls.boundary.sticky_floor_cells, 0);
+    EXPECT_LT(no_walls.boundary.floor_friction, 0.0) << "sticky unless floor_friction is given";
     expect_round_trip(no_walls);
+
+    json coulomb = example_3d();
+    coulomb["boundary"] = {{"sticky_floor_cells", 2}, {"floor_friction", 0.4}};
+    const Scene on_coulomb = scene_from_json(coulomb, "<dict>", "");
+    EXPECT_EQ(on_coulomb.boundary.floor_friction, 0.4);
+    EXPECT_EQ(on_coulomb.boundary.sticky_floor_cells, 2);
+    expect_round_trip(on_coulomb);
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -560,6 +568,11 @@ const std::vector<MalformedCase> kMalformedCases = {
      {"scenes/x.json: boundary.sticky_floor_cells: expected an integer >= 0, got -1"}},
     {"StickyFloorTooHigh", 2, [](json& j) { j["boundary"]["sticky_floor_cells"] = 64; },
      {"scenes/x.json: boundary.sticky_floor_cells: must be less than the 64 cells along y, got 64"}},
+    {"NegativeFloorFriction", 2, [](json& j) { j["boundary"]["floor_friction"] = -0.1; },
+     {"scenes/x.json: boundary.floor_friction: expected a number >= 0, got -0.1"}},
+    {"FloorFrictionWithoutAFloor", 2,
+     [](json& j) { j["boundary"] = {{"sticky_floor_cells", 0}, {"floor_friction", 0.3}}; },
+     {"scenes/x.json: boundary.floor_friction: needs a floor layer (boundary.sticky_floor_cells > 0)"}},
     {"UnknownIntegrator", 2, [](json& j) { j["integrator"]["name"] = "implicit_euler"; },
      {"scenes/x.json: integrator.name: unknown integrator 'implicit_euler'",
       "(expected explicit, plasticitynet, lagged or analytic)"}},
