@@ -53,11 +53,17 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     const std::string context = "step " + std::to_string(step_index);
 
     particles_to_grid<dim>(grid_, particles, nullptr);
+    const double flip_alpha = flip_fraction(dt, mpm_system_.flip_relaxation_time);
+    if (flip_alpha > 0.0) velocity_residual(grid_, particles, residual_);  // AFLIP (transfer.hpp)
     const auto after_p2g = std::chrono::steady_clock::now();
     BoundaryConditions solve_boundary = mpm_system_.boundary;
     solve_boundary.slip_walls = false;  // slip walls act after the solve, as in ImplicitIntegrator
-    grid_.update_velocity(dt, mpm_system_.gravity, solve_boundary);
+    grid_.update_velocity(dt, mpm_system_.gravity, unprojected_floor(solve_boundary));
     mpm_.begin_step(grid_, particles, dt, solve_boundary);
+    if (mpm_system_.boundary.coulomb_floor()) {  // its friction, as in ImplicitIntegrator
+        mpm_.set_reference(particles.F_elastic);
+        mpm_.floor_friction_contacts();
+    }
 
     const std::size_t nodes = fem_system_.mesh.nodes();
     VecX v_star_fem(dim * nodes);
@@ -87,15 +93,26 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
     solve.work_line_search = mpm_energy_->tangent_hessian();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
-    ReferenceSolveStats s;
-    try {
-        s = solve_with_reference<dim>(coupled_, v_, newton, solve, context, work_, [&] {
-            stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped());
-        });
-    } catch (const NewtonError& e) {
-        throw SimulationError(e.what());
+    // The Coulomb floor's friction is lagged as in ImplicitIntegrator: kFloorLagSolves more solves.
+    const int solves = mpm_system_.boundary.coulomb_floor() ? 1 + kFloorLagSolves : 1;
+    int fixed_point_solves = 0;
+    for (int pass = 0; pass < solves; ++pass) {
+        if (pass > 0) {
+            const VecX grid_v = v_.head(coupled_.grid_size());
+            mpm_.floor_friction_contacts(&grid_v);
+        }
+        ReferenceSolveStats s;
+        try {
+            s = solve_with_reference<dim>(coupled_, v_, newton, solve, context, work_, [&] {
+                stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped());
+            });
+        } catch (const NewtonError& e) {
+            throw SimulationError(e.what());
+        }
+        record_solve(s, stats);
+        fixed_point_solves += s.solves;
     }
-    record_solve(s, stats);
+    stats.fixed_point_iterations = fixed_point_solves;
     stats.ccd_queries = coupled_.ccd_queries();
     stats.ccd_limited = coupled_.ccd_limited() + (alpha < 1.0);
     stats.energy_seconds = mpm_.energy_seconds();
@@ -104,11 +121,6 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
 
     // MPM: the grid velocities, slip walls, G2P.
     const Eigen::Index ng = coupled_.grid_size();
-    if (mpm_system_.boundary.coulomb_floor()) {  // the Coulomb floor's friction, as in ImplicitIntegrator
-        floor_v_ = v_.head(ng);
-        mpm_.apply_floor_friction(floor_v_);
-        v_.head(ng) = floor_v_;
-    }
     mpm_.write_velocity(v_.head(ng), grid_);
     grid_.project_velocity(mpm_system_.boundary);
     double max_speed = 0.0;
@@ -124,6 +136,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
                       [](std::ptrdiff_t, const PolarSVD<dim>&, const ReturnResult<dim>&) {});
     double extent = 1e300;
     for (int a = 0; a < dim; ++a) extent = std::min(extent, mpm_system_.cells[a] * mpm_system_.dx);
+    if (flip_alpha > 0.0) add_velocity_residual(particles, residual_, flip_alpha);
     stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
 
     // FEM: positions and the return mapping (identity for elastic bodies).

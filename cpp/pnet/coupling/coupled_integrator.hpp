@@ -80,7 +80,7 @@ private:
     CoupledPotential<dim> coupled_;
     ReferenceSolveWork<dim> work_;
     VecX v_;
-    VecX floor_v_;  // the grid part of v_ for the Coulomb floor's friction
+    std::vector<Vec<dim>> residual_;  // AFLIP's r_p (MpmSystem::flip_relaxation_time)
 };
 
 template <int dim>

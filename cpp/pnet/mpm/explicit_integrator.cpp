@@ -85,6 +85,11 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     stats.dt = dt;
     if (!stress_valid_ || scaled_stress_.size() != particles.size()) compute_stress(particles);
     force_matrix_.resize(particles.size());
+    const double alpha = flip_fraction(dt, system_.flip_relaxation_time);
+    if (alpha > 0.0) {  // AFLIP: the residual from a force-free P2G first
+        particles_to_grid<dim>(grid_, particles, nullptr);
+        velocity_residual(grid_, particles, residual_);
+    }
 
     // P2G (race-free by block colouring, see grid.hpp) with the stress force.
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
@@ -104,6 +109,7 @@ StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
                           const Vec<dim> tau = material.elasticity().tau_of_strain(Z.hencky_strain());
                           scaled_stress_[p] = particles.rest_volume[p] * (svd.U * tau.asDiagonal() * svd.U.transpose());
                       });
+    if (alpha > 0.0) add_velocity_residual(particles, residual_, alpha);
     stats.clamped = clamp_to_grid(particles, grid_, step_index, system_.dx / dt);
     const auto end = std::chrono::steady_clock::now();
     record_phases(stats, start, after_p2g, after_grid, end);

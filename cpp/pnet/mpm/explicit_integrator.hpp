@@ -58,6 +58,7 @@ public:
 private:
     const MpmSystem<dim>& system_;
     Grid<dim> grid_;
+    std::vector<Vec<dim>> residual_;  // AFLIP's r_p (MpmSystem::flip_relaxation_time)
     std::vector<Mat<dim>> scaled_stress_;  // V0_p tau_p, N m
     std::vector<Mat<dim>> force_matrix_;   // -dt V0_p tau_p
     bool stress_valid_ = false;

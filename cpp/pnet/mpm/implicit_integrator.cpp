@@ -74,11 +74,13 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     stats.dt = dt;
 
     particles_to_grid<dim>(grid_, particles, nullptr);
+    const double alpha = flip_fraction(dt, system_.flip_relaxation_time);
+    if (alpha > 0.0) velocity_residual(grid_, particles, residual_);  // AFLIP (transfer.hpp)
     const auto after_p2g = std::chrono::steady_clock::now();
     // v* with the sticky floor applied; slip walls act after the solve (see the header).
     BoundaryConditions solve_boundary = system_.boundary;
     solve_boundary.slip_walls = false;
-    grid_.update_velocity(dt, system_.gravity, solve_boundary);
+    grid_.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
     potential_.begin_step(grid_, particles, dt, solve_boundary);
     const bool bdf2 = options_.time_integrator == "bdf2";
     if (bdf2 && rate_.size() == particles.size()) {  // BDF2 once there is history
@@ -87,6 +89,11 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         field_to_grid<dim>(history_grid_, particles, previous_v_, previous_C_, nullptr);
         potential_.grid_field(history_grid_, history_v_);
         potential_.use_bdf2(history_u_, history_v_, system_.gravity);
+    }
+
+    if (system_.boundary.coulomb_floor()) {  // its friction, lagged to the start-of-step stress
+        potential_.set_reference(particles.F_elastic);
+        potential_.floor_friction_contacts();
     }
 
     NewtonOptions newton = options_.newton_options();
@@ -101,16 +108,24 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
-    ReferenceSolveStats s;
-    try {
-        s = solve_with_reference<dim>(potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, [&] {
-            stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped());
-        });
-    } catch (const NewtonError& e) {
-        throw SimulationError(e.what());
+    // The Coulomb floor's friction is lagged (IPC): a solve with the normal impulses of the start-of-step
+    // stress, then kFloorLagSolves more, each with those of the last solution (the backward-Euler ones).
+    const int solves = system_.boundary.coulomb_floor() ? 1 + kFloorLagSolves : 1;
+    int fixed_point_solves = 0;
+    for (int pass = 0; pass < solves; ++pass) {
+        if (pass > 0) potential_.floor_friction_contacts(&v_);
+        ReferenceSolveStats s;
+        try {
+            s = solve_with_reference<dim>(potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, [&] {
+                stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped());
+            });
+        } catch (const NewtonError& e) {
+            throw SimulationError(e.what());
+        }
+        record_solve(s, stats);
+        fixed_point_solves += s.solves;
     }
-    record_solve(s, stats);
-    potential_.apply_floor_friction(v_);  // the Coulomb floor's friction (an operator split; see the header)
+    stats.fixed_point_iterations = fixed_point_solves;
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).
     potential_.write_velocity(potential_.displacement_rate(v_), grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM
@@ -146,6 +161,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
             gather_velocity(grid_, start_x_[p], particles.v[p], particles.C[p], grad_v);
         }
     }
+    if (alpha > 0.0) add_velocity_residual(particles, residual_, alpha);
     // Large steps legitimately move particles several cells; a quarter of the
     // domain in one step only happens after a blow-up.
     double extent = 1e300;

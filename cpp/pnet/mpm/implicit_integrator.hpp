@@ -95,6 +95,7 @@ private:
     // and APIC matrix at the start of the last step (v^{n-1}), and that step's displacement rate
     // u = (x^n - x^{n-1}) / dt with its affine part, each transferred to the grid like the velocity.
     std::vector<Vec<dim>> previous_v_, rate_;
+    std::vector<Vec<dim>> residual_;  // AFLIP's r_p (MpmSystem::flip_relaxation_time)
     std::vector<Mat<dim>> previous_C_, rate_C_;
     Grid<dim> history_grid_;  // the P2G of a history field
     VecX history_u_, history_v_;

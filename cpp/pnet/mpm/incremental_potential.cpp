@@ -78,54 +78,66 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
         grid.coordinates(dof_node_[k], coord);
         grid.constrained_components(coord, fixed, bc);
         const bool massless = !(node.mass > 0.0);  // a stencil node with weight exactly 0
-        // The Coulomb floor holds a node's normal velocity only where it presses into the floor.
-        if (bc.coulomb_floor() && bc.in_floor(coord[1]) && node.momentum[1] > 0.0) fixed[1] = false;
+        // The Coulomb floor holds a node's normal velocity at 0 where it presses into the floor (v*
+        // comes unprojected there, see floor_friction_contacts()); one moving away is free.
+        const bool on_floor = bc.coulomb_floor() && bc.in_floor(coord[1]) && !massless;
+        if (on_floor) fixed[1] = node.momentum[1] <= 0.0;
         for (int a = 0; a < dim; ++a) {
             const Eigen::Index i = dim * k + a;
             mass[i] = massless ? 1.0 : node.mass;
             v_star[i] = massless ? 0.0 : node.momentum[a];
+            if (on_floor && a == 1 && fixed[1]) v_star[i] = 0.0;
             free[i] = (fixed[a] || massless) ? 0.0 : 1.0;
             residual_scale_[i] = free[i] / mass[i];
             residual_mass_[i] = free[i] * mass[i];
         }
     }
-    // The Coulomb floor's contacts: the nodes whose normal velocity is held (in dof order).
+    // The Coulomb floor's contacts: the nodes whose normal velocity is held, in dof order, with the
+    // normal velocity v* had (what the floor stops); their friction comes with floor_friction_contacts().
     floor_friction_ = bc.coulomb_floor() ? bc.floor_friction : -1.0;
     floor_dofs_.clear();
+    floor_normal_velocity_.clear();
     if (bc.coulomb_floor())
         for (std::ptrdiff_t k = 0; k < dofs; ++k) {
             int coord[dim];
             grid.coordinates(dof_node_[k], coord);
-            if (bc.in_floor(coord[1]) && free[dim * k + 1] == 0.0 && grid.node(dof_node_[k]).mass > 0.0)
+            const typename Grid<dim>::Node& node = grid.node(dof_node_[k]);
+            if (bc.in_floor(coord[1]) && node.mass > 0.0 && free[dim * k + 1] == 0.0) {
                 floor_dofs_.push_back(static_cast<int>(k));
+                floor_normal_velocity_.push_back(node.momentum[1]);
+            }
         }
+    floor_friction_form_.begin_step({}, 1.0, free);
+    if (bc.coulomb_floor()) this->set_forms({&inertia_, &particle_energy_, &floor_friction_form_});
+    else this->set_forms({&inertia_, &particle_energy_});
     particle_energy_.begin_step(particles.size());
     this->invalidate_pattern();  // a new grid
 }
 
 template <int dim>
-int IncrementalPotential<dim>::apply_floor_friction(VecX& v) {
+std::size_t IncrementalPotential<dim>::floor_friction_contacts(const VecX* v) {
     if (floor_dofs_.empty()) return 0;
-    // The floor's normal impulse on a held component is what keeps it at its value: m (v - v*) plus the
-    // particles' dPsi/dv there (the unmasked gradient; the inertia term is 0, held at v*). v* already
-    // carries the floor's reaction to the inertia and gravity (Grid::apply_boundary); this is the rest,
-    // the stress the material above presses the node with.
-    floor_gradient_.setZero(v.size());
-    particle_energy_.add_gradient(v, floor_gradient_);
+    // J_k = m_k (0 - v*_k,y) + dPsi/dv_k,y at the start-of-step deformation (v = 0 gives F = F^E, where
+    // every energy's gradient is the elastic stress of F^E): the impulse the floor gives node k against
+    // the material's inertia, gravity and stress, the one explicit MPM's grid update sees.
+    VecX zero = VecX::Zero(this->size());
+    if (bdf2_) zero = -offset_;  // F_p(v) about G_p(offset + v)
+    VecX gradient = VecX::Zero(this->size());
+    particle_energy_.add_gradient(v ? *v : zero, gradient);
     const VecX& mass = inertia_.mass();
-    int sliding = 0;
-    for (int k : floor_dofs_) {
-        const Eigen::Index normal = dim * k + 1;
-        const double impulse = floor_gradient_[normal];
-        if (!(impulse > 0.0)) continue;
-        Vec<dim> vk = v.template segment<dim>(dim * k);
-        const double held = vk[1];
-        coulomb_projection<dim>(vk, impulse / mass[normal], floor_friction_);
-        vk[1] = held;
-        v.template segment<dim>(dim * k) = vk;
-        sliding += vk.squaredNorm() > held * held ? 1 : 0;
+    std::vector<typename FloorFrictionForm<dim>::Contact> contacts;
+    for (std::size_t c = 0; c < floor_dofs_.size(); ++c) {
+        const Eigen::Index normal = dim * floor_dofs_[c] + 1;
+        const double impulse = -mass[normal] * floor_normal_velocity_[c] + gradient[normal];
+        if (impulse > 0.0) contacts.push_back({floor_dofs_[c], floor_friction_ * impulse});
     }
-    return sliding;
+    // Below eps_v the friction is a stiff drag (static friction): a node held by it creeps at most
+    // eps_v / 2, a twentieth of a cell per second, whatever the step. Ten times smaller costs twice
+    // the Newton iterations again for a granular collapse (docs/methods.md).
+    const double eps_v = 0.1 * grid_->dx();  // m/s
+    const std::size_t count = contacts.size();
+    floor_friction_form_.begin_step(std::move(contacts), eps_v, this->free_);
+    return count;
 }
 
 template <int dim>

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "pnet/energy/particle_energy.hpp"
+#include "pnet/mpm/floor_friction_form.hpp"
 #include "pnet/mpm/grid.hpp"
 #include "pnet/mpm/particle_energy_form.hpp"
 #include "pnet/mpm/particles.hpp"
@@ -56,12 +57,15 @@ public:
     /// Euler, (u / 2 + v) beta for BDF2 (what moves the particles and their F).
     const VecX& displacement_rate(const VecX& v);
 
-    /// The Coulomb floor (BoundaryConditions::floor_friction), after the solve: shrinks the tangential
-    /// velocity of each node held on the floor by mu J / m_i, J the normal impulse the floor gives it
-    /// beyond v*'s (the material's weight and stress on it; dPsi/dv at v), as explicit MPM's grid
-    /// update does with the whole normal impulse. An operator split, as the slip walls' projection
-    /// after the solve. Returns the nodes still sliding. No-op without a Coulomb floor.
-    int apply_floor_friction(VecX& v);
+    /// The Coulomb floor (BoundaryConditions::floor_friction; begin_step() must get v* without the
+    /// floor's projection): the nodes of the floor layer moving into it have their normal velocity
+    /// held at 0, and their friction is a form of the potential (floor_friction_form.hpp) with the
+    /// normal impulse J_k lagged to the start of the step. Call after begin_step() (and use_bdf2()),
+    /// with the reference state set to the particles' F^E (the energy's gradient at F^E is then the
+    /// elastic stress). Returns the nodes in contact. No-op without a Coulomb floor.
+    /// With `v`, J_k is lagged to v instead (the energy's reference as the solve left it): a lag iteration.
+    std::size_t floor_friction_contacts(const VecX* v = nullptr);
+    const FloorFrictionForm<dim>& floor_friction_form() const { return floor_friction_form_; }
 
     /// v* on the unknowns: the starting point of the solve.
     const VecX& v_star() const { return inertia_.target(); }
@@ -131,7 +135,8 @@ private:
     std::vector<int> node_entry_start_, node_entries_;
     double floor_friction_ = -1.0;           // the Coulomb floor's mu (< 0: none)
     std::vector<int> floor_dofs_;            // nodes held on the Coulomb floor (normal component)
-    VecX floor_gradient_;
+    std::vector<double> floor_normal_velocity_;  // their v*_y before it was held at 0
+    FloorFrictionForm<dim> floor_friction_form_;
 };
 
 }  // namespace pnet

@@ -19,6 +19,9 @@ struct MpmSystem {
     std::array<int, dim> cells{};         // per axis
     Vec<dim> gravity = Vec<dim>::Zero();  // m/s^2
     BoundaryConditions boundary;
+    // Transfers: 0, APIC (G2P replaces v_p by the grid's velocity every step). > 0: AFLIP, the part of
+    // v_p the grid does not carry decays as exp(-t / flip_relaxation_time) instead (transfer.hpp).
+    double flip_relaxation_time = 0.0;    // s
     std::vector<Material<dim>> materials; // indexed by Particles::object
     std::vector<double> density;          // kg/m^3, per object
 

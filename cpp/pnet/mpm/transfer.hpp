@@ -1,6 +1,7 @@
 #pragma once
 // APIC transfers between particles and grid (Jiang et al. 2015), shared by
 // every integrator. With quadratic B-splines D_p = dx^2/4 I, so C_p = 4/dx^2 B_p.
+#include <cmath>
 #include <vector>
 
 #include "pnet/mpm/bspline.hpp"
@@ -101,6 +102,39 @@ inline void gather_velocity(const Grid<dim>& grid, const Vec<dim>& x, Vec<dim>& 
     v = sum_v;
     C = (4.0 * grid.inv_dx() * grid.inv_dx()) * B;
     grad_v = G;
+}
+
+/// AFLIP (Fei et al. 2021): the part of each particle's velocity that the grid does not carry,
+/// r_p = v_p - sum w_ip v_i, with v_i = momentum_i / m_i of a force-free P2G of the particles (call
+/// right after particles_to_grid(grid, particles, nullptr)). APIC's G2P drops r_p every step; keeping
+/// alpha r_p (flip_fraction()) makes that loss a rate in time instead of a fraction per step.
+template <int dim>
+void velocity_residual(const Grid<dim>& grid, const Particles<dim>& particles, std::vector<Vec<dim>>& r) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+    r.resize(n);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        const StencilNodes<dim> st(grid, particles.x[p]);
+        Vec<dim> sum = Vec<dim>::Zero();
+        st.for_each([&](std::int64_t node, double w, const Vec<dim>&, const Vec<dim>&) {
+            const typename Grid<dim>::Node& nd = grid.node(node);
+            if (nd.mass > 0.0) sum += (w / nd.mass) * nd.momentum;
+        });
+        r[p] = particles.v[p] - sum;
+    }
+}
+
+/// The fraction of r_p a step of dt keeps: exp(-dt / relaxation_time); 0 (APIC) for a time <= 0.
+inline double flip_fraction(double dt, double relaxation_time) {
+    return relaxation_time > 0.0 ? std::exp(-dt / relaxation_time) : 0.0;
+}
+
+/// v_p += alpha r_p after G2P (AFLIP; positions moved with the grid velocity, as G2P did).
+template <int dim>
+void add_velocity_residual(Particles<dim>& particles, const std::vector<Vec<dim>>& r, double alpha) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) particles.v[p] += alpha * r[p];
 }
 
 }  // namespace pnet

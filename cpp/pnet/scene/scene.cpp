@@ -528,7 +528,8 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
     r.require_object(j, "(top level)");
     r.reject_unknown_keys(j, "",
                           {"name", "description", "dim", "domain", "view", "dx", "gravity", "frame_dt", "frames",
-                           "particles_per_cell", "boundary", "integrator", "objects", "meshes", "ground", "contact"});
+                           "particles_per_cell", "boundary", "transfer", "integrator", "objects", "meshes", "ground",
+                           "contact"});
     Scene scene;
     scene.file = file;
 
@@ -563,6 +564,13 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
         r.fail("particles_per_cell", "expected at most 16 per axis, got " + std::to_string(scene.particles_per_cell));
     if (particles) read_boundary(r, j, scene);
     else if (Reader::find(j, "boundary")) r.fail("boundary", "grid boundary conditions need particle objects");
+    if (const json* transfer = Reader::find(j, "transfer")) {
+        if (!particles) r.fail("transfer", "particle-grid transfers need particle objects");
+        r.require_object(*transfer, "transfer");
+        r.reject_unknown_keys(*transfer, "transfer", {"flip_relaxation_time"});
+        if (const json* v = Reader::find(*transfer, "flip_relaxation_time"))
+            scene.flip_relaxation_time = r.non_negative(*v, "transfer.flip_relaxation_time");
+    }
     read_integrator(r, j, scene);
 
     if (particles) {
@@ -669,6 +677,7 @@ json scene_to_json(const Scene& scene) {
         j["boundary"] = {{"walls", scene.boundary.slip_walls ? "slip" : "none"},
                          {"sticky_floor_cells", scene.boundary.sticky_floor_cells}};
         if (scene.boundary.floor_friction >= 0.0) j["boundary"]["floor_friction"] = scene.boundary.floor_friction;
+        if (scene.flip_relaxation_time > 0.0) j["transfer"] = {{"flip_relaxation_time", scene.flip_relaxation_time}};
         j["objects"] = objects;
     }
     if (scene.has_meshes()) {

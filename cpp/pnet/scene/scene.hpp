@@ -157,6 +157,8 @@ struct Scene {
         int sticky_floor_cells = 3;  // the floor layer: nodes within this many cells of the floor (docs/methods.md)
         double floor_friction = -1;  // absent (< 0): the layer is sticky; >= 0: a Coulomb floor of this mu
     } boundary;
+    // "transfer": {"flip_relaxation_time": s}: 0 (absent), APIC; > 0, AFLIP (docs/methods.md)
+    double flip_relaxation_time = 0.0;
 
     struct Integrator {
         std::string name = "explicit";                      // "explicit" | "plasticitynet" | "lagged" | "analytic" (FEM)

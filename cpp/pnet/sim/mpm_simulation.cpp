@@ -27,6 +27,7 @@ MpmSystem<dim> make_mpm_system(const Scene& scene) {
     s.boundary.slip_walls = scene.boundary.slip_walls;
     s.boundary.sticky_floor_cells = scene.boundary.sticky_floor_cells;
     s.boundary.floor_friction = scene.boundary.floor_friction;
+    s.flip_relaxation_time = scene.flip_relaxation_time;
     for (const SceneObject& object : scene.objects) {
         s.materials.emplace_back(object.material);
         s.density.push_back(object.material.density);

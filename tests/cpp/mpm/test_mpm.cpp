@@ -4,6 +4,7 @@
 #include <omp.h>
 
 #include <Eigen/Geometry>  // cross()
+#include <iostream>
 
 #include "pnet/mpm/explicit_integrator.hpp"
 #include "pnet/mpm/transfer.hpp"
@@ -133,6 +134,61 @@ TYPED_TEST(MpmTest, TransfersConserveMassMomentumAndAngularMomentum) {
     for (std::size_t p = 0; p < Q.size(); ++p) momentum_q += Q.mass[p] * Q.v[p];
     EXPECT_LE((momentum_q - momentum_g).norm(), 1e-12 * momentum_g.norm());
     EXPECT_LE((angular_momentum(Q, dx) - L_g).norm(), 1e-12 * L_g.norm());
+}
+
+// AFLIP (MpmSystem::flip_relaxation_time): the residual r_p = v_p - sum w_ip v_i vanishes on an affine
+// velocity field (APIC carries it exactly), and what the transfers take from a rough velocity field is
+// a rate in time: two explicit runs of a free cloud (no gravity, E 1 Pa: no forces to speak of) at steps
+// 4x apart keep the same kinetic energy, where APIC keeps less with more steps.
+TYPED_TEST(MpmTest, AflipResidualVanishesOnAffineFieldsAndTransfersLoseEnergyPerTimeNotPerStep) {
+    constexpr int dim = TypeParam::value;
+    const double dx = 1.0 / 32;
+    test::Random random(5);
+    Particles<dim> P = make_box<dim>(Vec<dim>::Constant(0.3), Vec<dim>::Constant(0.55), dx, 1000.0);
+    Mat<dim> B;
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j) B(i, j) = random.uniform(-2.0, 2.0);
+    const Vec<dim> a = random.uniform_vec<dim>(-1.0, 1.0);
+    for (std::size_t p = 0; p < P.size(); ++p) {
+        P.x[p] += random.uniform_vec<dim>(-0.2 * dx, 0.2 * dx);
+        P.v[p] = a + B * P.x[p];
+        P.C[p] = B;
+    }
+    Grid<dim> grid(Vec<dim>::Zero(), dx, [] { std::array<int, dim> c; c.fill(32); return c; }());
+    particles_to_grid<dim>(grid, P, nullptr);
+    std::vector<Vec<dim>> r;
+    velocity_residual(grid, P, r);
+    double worst = 0.0;
+    for (const Vec<dim>& rp : r) worst = std::max(worst, rp.norm());
+    EXPECT_LT(worst, 1e-12);
+
+    MaterialDescription soft;
+    soft.name = "elastic";
+    soft.density = 1000.0;
+    soft.elastic = {1.0, 0.3};
+    soft.elasticity = ElasticityModel::StvkHencky;
+    MpmSystem<dim> system = make_system<dim>(32, soft, 0.0);
+    for (std::size_t p = 0; p < P.size(); ++p) {
+        P.v[p] = random.uniform_vec<dim>(-0.1, 0.1);
+        P.C[p].setZero();
+    }
+    auto kinetic_after = [&](double tau, double dt) {
+        system.flip_relaxation_time = tau;
+        Particles<dim> Q = P;
+        ExplicitIntegrator<dim> integrator(system);
+        const int steps = static_cast<int>(std::lround(0.02 / dt));
+        for (int s = 0; s < steps; ++s) integrator.step(Q, dt, s);
+        double e = 0.0;
+        for (std::size_t p = 0; p < Q.size(); ++p) e += 0.5 * Q.mass[p] * Q.v[p].squaredNorm();
+        return e;
+    };
+    const double apic_coarse = kinetic_after(0.0, 1e-3), apic_fine = kinetic_after(0.0, 2.5e-4);
+    const double aflip_coarse = kinetic_after(0.01, 1e-3), aflip_fine = kinetic_after(0.01, 2.5e-4);
+    std::cout << "kinetic energy after 0.02 s (J): APIC " << apic_coarse << " / " << apic_fine << ", AFLIP "
+              << aflip_coarse << " / " << aflip_fine << " (steps 1e-3 / 2.5e-4 s)\n";
+    EXPECT_LT(apic_fine, 0.8 * apic_coarse) << "APIC: a loss per step";
+    EXPECT_NEAR(aflip_fine, aflip_coarse, 0.05 * aflip_coarse) << "AFLIP: a loss per unit time";
+    EXPECT_GT(aflip_fine, apic_fine);
 }
 
 // The floor layer's boundary conditions on one node's velocity: sticky zeroes it; Coulomb (mu 0.5) removes

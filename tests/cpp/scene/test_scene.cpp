@@ -456,7 +456,14 @@ TEST(SceneJson, OptionalFieldsAndDefaults) {
     const Scene on_coulomb = scene_from_json(coulomb, "<dict>", "");
     EXPECT_EQ(on_coulomb.boundary.floor_friction, 0.4);
     EXPECT_EQ(on_coulomb.boundary.sticky_floor_cells, 2);
+    EXPECT_EQ(on_coulomb.flip_relaxation_time, 0.0) << "APIC unless transfer is given";
     expect_round_trip(on_coulomb);
+
+    json aflip = example_3d();
+    aflip["transfer"] = {{"flip_relaxation_time", 0.01}};
+    const Scene with_aflip = scene_from_json(aflip, "<dict>", "");
+    EXPECT_EQ(with_aflip.flip_relaxation_time, 0.01);
+    expect_round_trip(with_aflip);
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -573,6 +580,10 @@ const std::vector<MalformedCase> kMalformedCases = {
     {"FloorFrictionWithoutAFloor", 2,
      [](json& j) { j["boundary"] = {{"sticky_floor_cells", 0}, {"floor_friction", 0.3}}; },
      {"scenes/x.json: boundary.floor_friction: needs a floor layer (boundary.sticky_floor_cells > 0)"}},
+    {"NegativeFlipRelaxationTime", 2, [](json& j) { j["transfer"] = {{"flip_relaxation_time", -1}}; },
+     {"scenes/x.json: transfer.flip_relaxation_time: expected a number >= 0, got -1"}},
+    {"UnknownTransferKey", 2, [](json& j) { j["transfer"] = {{"flip", 0.95}}; },
+     {"scenes/x.json: transfer", "flip"}},
     {"UnknownIntegrator", 2, [](json& j) { j["integrator"]["name"] = "implicit_euler"; },
      {"scenes/x.json: integrator.name: unknown integrator 'implicit_euler'",
       "(expected explicit, plasticitynet, lagged or analytic)"}},
