@@ -2,7 +2,9 @@
 """The granular column collapse swept over friction angle and aspect ratio with one parametric sand model
 (models/sand_param_2d.pt; docs/physics.md), against the explicit ground truth at each angle.
 
-A column of half-width L0 and height H = a L0 stands on a rough floor and collapses on both sides (the
+A column of half-width L0 and height H = a L0 stands on a rough floor (by default a Coulomb floor of the
+sand's own friction, mu = tan(angle), with AFLIP transfers, so that the explicit runs converge as the
+step shrinks: docs/methods.md) and collapses on both sides (the
 symmetric 2D collapse: each half is the classic column against a wall). Its final half-extent L_inf gives
 the normalised run-out (L_inf - L0) / L0, which experiments find to grow as ~lambda a for small a and as
 ~a^(2/3) beyond a ~ 2-3 (Lajeunesse et al. 2004, Lube et al. 2005); the coefficients depend on the
@@ -24,6 +26,7 @@ It writes
 Runs are kept in --work (a finished run of the same scene, integrator and step is not run again).
 
     .venv/bin/python scripts/granular_collapse.py [--angles 20 30 40] [--aspects 0.5 1 2 4 8]
+        [--floor tan|sticky|MU] [--flip-relaxation-time 0.01] [--dt-study]
         [--jobs 2] [--frames 50] [--dx 0.0078125] [--work out/granular_collapse]
         [--out notebooks/results/granular_collapse]
 """
@@ -55,10 +58,12 @@ MODEL = ROOT / "models" / "sand_param_2d.pt"
 PERCENTILE = 99.5
 
 
-def scene_for(angle: float, aspect: float, dx: float, frames: int, sticky_cells: int = 3) -> dict:
+def scene_for(angle: float, aspect: float, dx: float, frames: int, sticky_cells: int = 3,
+              floor_friction: float | None = None, flip_relaxation_time: float = 0.0) -> dict:
     """scenes/sand_column_2d.json with a column of half-width L0 and height a L0 centred in a domain wide
     enough for its run-out (walls at L0 (2 + 2.5 a) from the centre: 20 deg sand at a = 8 stops at ~0.7 of it),
-    sand at `angle` degrees, the parametric model."""
+    sand at `angle` degrees, the parametric model; a Coulomb floor of `floor_friction` (None: the sticky
+    floor layer) and AFLIP transfers of `flip_relaxation_time` s (0: APIC), docs/methods.md."""
     scene = json.loads((ROOT / "scenes" / "sand_column_2d.json").read_text())
     scene = copy.deepcopy(scene)
     floor = sticky_cells * dx
@@ -74,6 +79,10 @@ def scene_for(angle: float, aspect: float, dx: float, frames: int, sticky_cells:
     scene["dx"] = dx
     scene["frames"] = frames
     scene["boundary"]["sticky_floor_cells"] = sticky_cells
+    if floor_friction is not None:
+        scene["boundary"]["floor_friction"] = floor_friction
+    if flip_relaxation_time > 0.0:
+        scene["transfer"] = {"flip_relaxation_time": flip_relaxation_time}
     obj = scene["objects"][0]
     obj["min"] = [centre - HALF_WIDTH, floor]
     obj["max"] = [centre + HALF_WIDTH, floor + height]
@@ -115,6 +124,80 @@ def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float
     return wall
 
 
+def floor_friction(floor: str, angle: float) -> float | None:
+    """--floor's mu at `angle` degrees (None: sticky)."""
+    if floor == "sticky":
+        return None
+    if floor == "tan":
+        return math.tan(math.radians(angle))
+    try:
+        mu = float(floor)
+    except ValueError:
+        raise SystemExit(f"--floor: expected 'tan', 'sticky' or a friction coefficient >= 0, got {floor!r}")
+    if not mu >= 0.0:
+        raise SystemExit(f"--floor: a friction coefficient must be >= 0, got {floor!r}")
+    return mu
+
+
+def floor_description(floor: str) -> str:
+    if floor == "sticky":
+        return "the sticky floor layer"
+    if floor == "tan":
+        return "Coulomb, mu = tan(friction angle)"
+    return f"Coulomb, mu = {float(floor):g}"
+
+
+# --dt-study: each variant's run-out against the step, explicit and plasticitynet (docs/methods.md).
+STUDY_VARIANTS = {  # name: (floor, flip relaxation time)
+    "APIC, sticky floor": ("sticky", 0.0),
+    "APIC, Coulomb floor": ("tan", 0.0),
+    "AFLIP 0.01 s, sticky floor": ("sticky", 0.01),
+    "AFLIP 0.01 s, Coulomb floor": ("tan", 0.01),
+}
+STUDY_STEPS = [("explicit", None), ("explicit", 1e-4), ("explicit", 2e-5), ("explicit", 1e-5),
+               ("plasticitynet", 1e-3), ("plasticitynet", 2.5e-4)]
+
+
+def dt_study(args, pnet: Path) -> int:
+    """Runs every variant at every step for each (angle, aspect) and writes OUT/dt_study.md."""
+    jobs = []
+    for angle in args.angles:
+        for aspect in args.aspects:
+            for variant, (floor, tau) in STUDY_VARIANTS.items():
+                folder = args.work / f"phi{angle:g}_a{aspect:g}" / variant.replace(" ", "_").replace(",", "")
+                folder.mkdir(parents=True, exist_ok=True)
+                scene_file = folder / "scene.json"
+                scene = scene_for(angle, aspect, args.dx, args.frames, args.sticky_floor_cells,
+                                  floor_friction(floor, angle), tau)
+                scene_file.write_text(json.dumps(scene, indent=2))
+                for integrator, dt in STUDY_STEPS:
+                    name = f"{integrator}_{'cfl' if dt is None else f'{dt:g}'}"
+                    jobs.append(((angle, aspect, variant, integrator, dt), scene_file, folder / name, integrator, dt))
+    results = {}
+    with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
+        futures = {pool.submit(simulate, pnet, j[1], j[2], j[3], j[4]): j for j in jobs}
+        for done, future in enumerate(concurrent.futures.as_completed(futures), 1):
+            key, _, out, _, _ = futures[future]
+            wall = future.result()
+            results[key] = ((runout(out) - HALF_WIDTH) / HALF_WIDTH, wall)
+            print(f"[{done}/{len(jobs)}] {key}: run-out {results[key][0]:.3f} ({wall:.0f} s)", flush=True)
+    heads = [f"{i} {'CFL' if dt is None else f'{dt:g} s'}" for i, dt in STUDY_STEPS]
+    lines = ["# Granular collapse run-out against the step (scripts/granular_collapse.py --dt-study)", "",
+             f"Run-out (L_inf - L0) / L0 as in runout.md, {args.frames} frames of 0.02 s, dx = {args.dx:g} m; Coulomb "
+             "floor mu = tan(friction angle); plasticitynet with the parametric sand model. A run-out that does "
+             "not settle as the explicit step shrinks means the explicit ground truth depends on its step.", "",
+             "| angle | a | variant | " + " | ".join(heads) + " |", "|---|---|---|" + "---|" * len(heads)]
+    for angle in args.angles:
+        for aspect in args.aspects:
+            for variant in STUDY_VARIANTS:
+                cells = [f"{results[(angle, aspect, variant, i, dt)][0]:.3f}" for i, dt in STUDY_STEPS]
+                lines.append(f"| {angle:g} | {aspect:g} | {variant} | " + " | ".join(cells) + " |")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "dt_study.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--angles", type=float, nargs="+", default=[20, 25, 30, 35, 40], help="friction angles, deg")
@@ -123,16 +206,28 @@ def main() -> int:
     p.add_argument("--frames", type=int, default=50, help="frames of 0.02 s (50: 1 s)")
     p.add_argument("--sticky-floor-cells", type=int, default=3,
                    help="grid rows of the sticky floor the column stands on (3, as scenes/sand_column_2d.json)")
+    p.add_argument("--floor", default="tan",
+                   help="the floor: 'tan' (default), a Coulomb floor of mu = tan(friction angle), a rough bed of the "
+                        "sand's own friction; a number, that mu at every angle; 'sticky', the sticky floor layer")
+    p.add_argument("--flip-relaxation-time", type=float, default=0.01,
+                   help="AFLIP transfers' relaxation time, s (0.01; 0: APIC). With APIC and the sticky floor the "
+                        "explicit run-out does not converge as dt shrinks (docs/methods.md)")
     p.add_argument("--ground-truth-dt", type=float, default=2e-5, help="explicit ground-truth step, s (2e-5)")
     p.add_argument("--jobs", type=int, default=2, help="simulations at once (one thread each)")
-    p.add_argument("--work", type=Path, default=ROOT / "out" / "granular_collapse")
+    p.add_argument("--dt-study", action="store_true",
+                   help="instead of the sweep: the run-out of APIC / AFLIP transfers on a sticky / Coulomb floor, "
+                        "explicit at CFL, 1e-4, 2e-5, 1e-5 s and plasticitynet at 1e-3, 2.5e-4 s (OUT/dt_study.md)")
+    p.add_argument("--work", type=Path, default=ROOT / "out" / "granular_collapse")  # runs keyed by their scene
     p.add_argument("--out", type=Path, default=ROOT / "notebooks" / "results" / "granular_collapse")
     args = p.parse_args()
+    floor_friction(args.floor, 30.0)  # a bad --floor fails before any run
     pnet = ROOT / os.environ.get("PNET_BUILD_DIR", "build") / "cpp" / "pnet"
     if not pnet.exists():
         p.error(f"{pnet}: not built (./scripts/setup.sh)")
     if not MODEL.exists():
         p.error(f"{MODEL}: no parametric sand model (python train.py --material sand --dim 2 --parametric)")
+    if args.dt_study:
+        return dt_study(args, pnet)
     runs = {
         "ground_truth": ("explicit", args.ground_truth_dt),
         "explicit_cfl": ("explicit", None),
@@ -144,7 +239,9 @@ def main() -> int:
             folder = args.work / f"phi{angle:g}_a{aspect:g}"
             folder.mkdir(parents=True, exist_ok=True)
             scene_file = folder / "scene.json"
-            scene_file.write_text(json.dumps(scene_for(angle, aspect, args.dx, args.frames, args.sticky_floor_cells), indent=2))
+            mu = floor_friction(args.floor, angle)
+            scene_file.write_text(json.dumps(scene_for(angle, aspect, args.dx, args.frames, args.sticky_floor_cells, mu,
+                                                       args.flip_relaxation_time), indent=2))
             for name, (integrator, dt) in runs.items():
                 jobs.append((angle, aspect, name, scene_file, folder / name, integrator, dt))
     # The longest first (tall columns, small steps), so that the pool ends together.
@@ -172,7 +269,9 @@ def main() -> int:
         f"Run-out (L_inf - L0) / L0, L0 = {HALF_WIDTH} m, L_inf = L0 + e(last) - e(first), e the {PERCENTILE}th "
         f"percentile of |x - x_c| on a frame ({args.frames} frames of 0.02 s), dx = {args.dx:g} m. Ground truth: explicit at "
         f"{args.ground_truth_dt:g} s; floor: |explicit at CFL - ground truth|; plasticitynet at 1e-3 s with "
-        f"{MODEL.name} bound to each angle.", "",
+        f"{MODEL.name} bound to each angle. Floor: {floor_description(args.floor)}; transfers: "
+        f"{'AFLIP, relaxation time %g s' % args.flip_relaxation_time if args.flip_relaxation_time > 0 else 'APIC'} "
+        f"(docs/methods.md).", "",
         "| friction angle | a = H / L0 | ground truth | explicit CFL | plasticitynet | plasticitynet error | floor | "
         "within floor | plasticitynet vs explicit CFL | wall s (GT / CFL / pnet) |",
         "|---|---|---|---|---|---|---|---|---|---|",

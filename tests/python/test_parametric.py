@@ -536,8 +536,35 @@ def test_granular_collapse_sweep_end_to_end(tmp_path):
     scene = json.loads((tmp_path / "work" / "phi35_a2" / "scene.json").read_text())
     assert scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] == 35
     assert scene["objects"][0]["max"][1] - scene["objects"][0]["min"][1] == pytest.approx(0.1)  # H = a L0
+    # By default a Coulomb floor of the sand's own friction and AFLIP transfers (docs/methods.md).
+    assert scene["boundary"]["floor_friction"] == pytest.approx(math.tan(math.radians(35)))
+    assert scene["transfer"] == {"flip_relaxation_time": 0.01}
+    assert "Floor: Coulomb, mu = tan(friction angle); transfers: AFLIP, relaxation time 0.01 s" in table
     frame = tmp_path / "work" / "phi35_a2" / "ground_truth" / "frame_00002.ply"
     written = frame.stat().st_mtime_ns
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0 and frame.stat().st_mtime_ns == written, r.stderr  # the finished runs are reused
     assert (tmp_path / "out" / "runout.csv").read_text().splitlines() == rows
+
+
+def test_granular_collapse_dt_study_end_to_end(tmp_path):
+    """scripts/granular_collapse.py --dt-study at one case, 2 coarse frames: each of the four variants (APIC or
+    AFLIP transfers, sticky or Coulomb floor) at every step, in one table row each."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    cmd = [sys.executable, str(root / "scripts" / "granular_collapse.py"), "--dt-study", "--angles", "30",
+           "--aspects", "1", "--frames", "2", "--dx", "0.015625", "--jobs", "2", "--work", str(tmp_path / "work"),
+           "--out", str(tmp_path / "out")]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    table = (tmp_path / "out" / "dt_study.md").read_text()
+    rows = [line for line in table.splitlines() if line.startswith("| 30 | 1 |")]
+    assert [row.split(" | ")[2] for row in rows] == ["APIC, sticky floor", "APIC, Coulomb floor",
+                                                      "AFLIP 0.01 s, sticky floor", "AFLIP 0.01 s, Coulomb floor"]
+    assert all(len(row.strip("|").split("|")) == 3 + 6 for row in rows)
+    scenes = sorted((tmp_path / "work" / "phi30_a1").glob("*/scene.json"))
+    kinds = {(json.loads(p.read_text())["boundary"].get("floor_friction") is not None,
+              "transfer" in json.loads(p.read_text())) for p in scenes}
+    assert kinds == {(False, False), (True, False), (False, True), (True, True)}

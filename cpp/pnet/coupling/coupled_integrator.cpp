@@ -93,8 +93,8 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
     solve.work_line_search = mpm_energy_->tangent_hessian();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
-    // The Coulomb floor's friction is lagged as in ImplicitIntegrator: kFloorLagSolves more solves.
-    const int solves = mpm_system_.boundary.coulomb_floor() ? 1 + kFloorLagSolves : 1;
+    // The Coulomb floor's friction: majorize-minimize passes, as in ImplicitIntegrator.
+    const int solves = mpm_system_.boundary.coulomb_floor() ? floor_friction_solves() : 1;
     int fixed_point_solves = 0;
     for (int pass = 0; pass < solves; ++pass) {
         if (pass > 0) {

@@ -1,14 +1,20 @@
 #pragma once
 // The Coulomb floor's friction inside an implicit MPM solve (BoundaryConditions::floor_friction,
-// docs/methods.md): IPC's smoothed, lagged Coulomb friction (friction.hpp) on the grid nodes that
-// press into the floor,
+// docs/methods.md): IPC's smoothed Coulomb friction on the grid nodes that press into the floor,
 //
 //   D(v) = sum_k mu J_k f0(|u_k|),   u_k the tangential components of v at node k,
 //
-// with J_k the normal impulse the floor gives node k over the step, lagged: found at v* from the
-// start-of-step stress (IncrementalPotential::begin_step). -dD/du_k = -mu J_k f1(|u_k|) u_k / |u_k| is
-// a Coulomb impulse of magnitude mu J_k once the node slides faster than eps_v, smoothed below it
-// (static friction as a stiff drag); the Hessian is one PSD (dim-1) x (dim-1) block per node.
+// J_k the normal impulse the floor gives node k over the step and f0 (friction.hpp) |u| smoothed below
+// eps_v, minimized by majorize-minimize: each solve sees the quadratic that touches D at the last slip
+// s_k = |u_k|,
+//
+//   D_s(v) = sum_k mu J_k f1(s_k) / (2 s_k) |u_k|^2   (+ a constant),
+//
+// which lies above D (f0(sqrt(q)) is concave in q) and has its gradient there, so every pass lowers
+// D plus the rest of the potential, and Newton sees a smooth quadratic instead of friction's kink (with
+// D itself Newton stalled on stick-slip switches: most steps of a granular collapse ran out of
+// iterations). The passes, each with the J_k and s_k of the last solution, are the implicit
+// integrators' (IncrementalPotential::floor_friction_contacts, kFloorFrictionSolves).
 #include <vector>
 
 #include "pnet/solver/triplet_hessian.hpp"
@@ -19,20 +25,18 @@ template <int dim>
 class FloorFrictionForm final : public TripletHessianForm {
 public:
     struct Contact {
-        int dof;        // the node's unknown index (components dim dof + a)
-        double weight;  // mu J_k, kg m/s
+        int dof;           // the node's unknown index (components dim dof + a)
+        double stiffness;  // mu J_k f1(s_k) / s_k, kg/s: the quadratic's curvature
     };
 
     FloorFrictionForm() : TripletHessianForm(dim) {}
 
-    /// This step's contacts, eps_v (m/s) and the problem's 1 / 0 mask of free components (referenced).
-    void begin_step(std::vector<Contact> contacts, double eps_v, const VecX& free) {
+    /// This pass's contacts and the problem's 1 / 0 mask of free components (referenced).
+    void begin_step(std::vector<Contact> contacts, const VecX& free) {
         contacts_ = std::move(contacts);
-        eps_v_ = eps_v;
         free_ = &free;
     }
     const std::vector<Contact>& contacts() const { return contacts_; }
-    double eps_v() const { return eps_v_; }
 
     double value(const VecX& v) override;
     double add_gradient(const VecX& v, VecX& g) override;
@@ -40,7 +44,6 @@ public:
 
 private:
     std::vector<Contact> contacts_;
-    double eps_v_ = 1.0;
     const VecX* free_ = nullptr;
 };
 

@@ -11,7 +11,9 @@
 // of a colour in parallel, and the particles of a block in index order. Every
 // node thus sums its contributions in the same order whatever the thread count.
 #include <array>
+#include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstdint>
 #include <vector>
 
@@ -35,10 +37,13 @@ struct BoundaryConditions {
     bool in_floor(int y) const { return sticky_floor_cells > 0 && y <= sticky_floor_cells; }
 };
 
-/// Solves after the first in an implicit step on a Coulomb floor, each with the floor's normal impulses
-/// of the last solution (IncrementalPotential::floor_friction_contacts). One brings granular run-outs at
-/// 1e-3 s within a few percent of explicit MPM's; without it they fall 9% short (docs/methods.md).
-inline constexpr int kFloorLagSolves = 1;
+/// Solves of an implicit step on a Coulomb floor: each a majorize-minimize pass of the floor's friction
+/// with the normal impulses and slips of the last solution (floor_friction_form.hpp). PNET_FLOOR_SOLVES
+/// overrides it (a diagnostic).
+inline int floor_friction_solves() {
+    const char* s = std::getenv("PNET_FLOOR_SOLVES");
+    return s ? std::max(1, std::atoi(s)) : 3;
+}
 
 /// `bc` without the Coulomb floor's projection (its floor layer off; the sticky one kept): the v* an
 /// implicit solve starts from, which holds the pressing nodes' normal component itself and has the

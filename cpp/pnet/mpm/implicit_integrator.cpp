@@ -108,9 +108,9 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
-    // The Coulomb floor's friction is lagged (IPC): a solve with the normal impulses of the start-of-step
-    // stress, then kFloorLagSolves more, each with those of the last solution (the backward-Euler ones).
-    const int solves = system_.boundary.coulomb_floor() ? 1 + kFloorLagSolves : 1;
+    // The Coulomb floor's friction: majorize-minimize passes (floor_friction_form.hpp), the first with the
+    // normal impulses of the start-of-step stress, the next ones with those of the last solution.
+    const int solves = system_.boundary.coulomb_floor() ? floor_friction_solves() : 1;
     int fixed_point_solves = 0;
     for (int pass = 0; pass < solves; ++pass) {
         if (pass > 0) potential_.floor_friction_contacts(&v_);

@@ -2,6 +2,10 @@
 
 #include "pnet/mpm/transfer.hpp"
 
+#include <cmath>
+
+#include "pnet/contact/friction.hpp"
+
 namespace pnet {
 
 template <int dim>
@@ -107,7 +111,7 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
                 floor_normal_velocity_.push_back(node.momentum[1]);
             }
         }
-    floor_friction_form_.begin_step({}, 1.0, free);
+    floor_friction_form_.begin_step({}, free);
     if (bc.coulomb_floor()) this->set_forms({&inertia_, &particle_energy_, &floor_friction_form_});
     else this->set_forms({&inertia_, &particle_energy_});
     particle_energy_.begin_step(particles.size());
@@ -117,26 +121,31 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
 template <int dim>
 std::size_t IncrementalPotential<dim>::floor_friction_contacts(const VecX* v) {
     if (floor_dofs_.empty()) return 0;
-    // J_k = m_k (0 - v*_k,y) + dPsi/dv_k,y at the start-of-step deformation (v = 0 gives F = F^E, where
-    // every energy's gradient is the elastic stress of F^E): the impulse the floor gives node k against
-    // the material's inertia, gravity and stress, the one explicit MPM's grid update sees.
-    VecX zero = VecX::Zero(this->size());
-    if (bdf2_) zero = -offset_;  // F_p(v) about G_p(offset + v)
+    // J_k = m_k (0 - v*_k,y) + dPsi/dv_k,y: the impulse the floor gives node k against the material's
+    // inertia, gravity and stress. The first pass takes the start-of-step stress (v = 0 gives F = F^E,
+    // where every energy's gradient is the elastic stress of F^E: the impulse explicit MPM's grid update
+    // sees) and the slip of v*; the next ones those of the last solution v.
+    VecX at = VecX::Zero(this->size());
+    if (bdf2_) at = -offset_;  // F_p(v) about G_p(offset + v)
     VecX gradient = VecX::Zero(this->size());
-    particle_energy_.add_gradient(v ? *v : zero, gradient);
+    particle_energy_.add_gradient(v ? *v : at, gradient);
+    const VecX& slip_from = v ? *v : inertia_.target();
     const VecX& mass = inertia_.mass();
+    // Below eps_v the friction is a stiff drag (static friction): a node held by it creeps at most
+    // eps_v / 2, a twentieth of a cell per second, whatever the step.
+    const double eps_v = 0.1 * grid_->dx();  // m/s
     std::vector<typename FloorFrictionForm<dim>::Contact> contacts;
     for (std::size_t c = 0; c < floor_dofs_.size(); ++c) {
-        const Eigen::Index normal = dim * floor_dofs_[c] + 1;
-        const double impulse = -mass[normal] * floor_normal_velocity_[c] + gradient[normal];
-        if (impulse > 0.0) contacts.push_back({floor_dofs_[c], floor_friction_ * impulse});
+        const int k = floor_dofs_[c];
+        const double impulse = -mass[dim * k + 1] * floor_normal_velocity_[c] + gradient[dim * k + 1];
+        if (!(impulse > 0.0)) continue;
+        double slip = 0.0;
+        for (int a = 0; a < dim; ++a)
+            if (a != 1) slip += slip_from[dim * k + a] * slip_from[dim * k + a];
+        contacts.push_back({k, floor_friction_ * impulse * friction_f1_over_x(std::sqrt(slip), eps_v)});
     }
-    // Below eps_v the friction is a stiff drag (static friction): a node held by it creeps at most
-    // eps_v / 2, a twentieth of a cell per second, whatever the step. Ten times smaller costs twice
-    // the Newton iterations again for a granular collapse (docs/methods.md).
-    const double eps_v = 0.1 * grid_->dx();  // m/s
     const std::size_t count = contacts.size();
-    floor_friction_form_.begin_step(std::move(contacts), eps_v, this->free_);
+    floor_friction_form_.begin_step(std::move(contacts), this->free_);
     return count;
 }
 

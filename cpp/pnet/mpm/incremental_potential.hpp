@@ -59,11 +59,11 @@ public:
 
     /// The Coulomb floor (BoundaryConditions::floor_friction; begin_step() must get v* without the
     /// floor's projection): the nodes of the floor layer moving into it have their normal velocity
-    /// held at 0, and their friction is a form of the potential (floor_friction_form.hpp) with the
-    /// normal impulse J_k lagged to the start of the step. Call after begin_step() (and use_bdf2()),
-    /// with the reference state set to the particles' F^E (the energy's gradient at F^E is then the
-    /// elastic stress). Returns the nodes in contact. No-op without a Coulomb floor.
-    /// With `v`, J_k is lagged to v instead (the energy's reference as the solve left it): a lag iteration.
+    /// held at 0, and their friction is a form of the potential (floor_friction_form.hpp), one
+    /// majorize-minimize pass per solve. Without `v`, the first pass: the normal impulses J_k of the
+    /// start-of-step stress (set the reference state to the particles' F^E first, so that the energy's
+    /// gradient there is the elastic stress) and the slips of v*; with `v`, those of that solution.
+    /// Returns the nodes in contact. No-op without a Coulomb floor.
     std::size_t floor_friction_contacts(const VecX* v = nullptr);
     const FloorFrictionForm<dim>& floor_friction_form() const { return floor_friction_form_; }
 
