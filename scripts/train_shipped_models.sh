@@ -43,9 +43,9 @@ models=("$@")
 finetune() {
   local lr=$1 warmup=$2; shift 2
   echo "=== $model: fine-tuning at lr $lr ($(date -u +%H:%M:%S))"
-  $py train.py --material "$material" --dim "$dim" "${parametric[@]}" "$@" --schedule cosine --warmup "$warmup" \
+  $py train.py --material "$material" --dim "$dim" "${parametric[@]}" --schedule cosine --warmup "$warmup" \
       --sampling mixed --representation principal --checkpoint-every 500 --hessian-weight 0 \
-      --init-from "models/$model.pt" --lr "$lr" "${run[@]}"
+      --init-from "models/$model.pt" --lr "$lr" "${run[@]}" "$@"  # "$@" last: a stage may set its own seed
 }
 for model in "${models[@]}"; do
   material=${model%_*d}; dim=${model##*_}; dim=${dim%d}
@@ -76,12 +76,15 @@ for model in "${models[@]}"; do
   # Fine-tuning stages, each from the weights the previous stage wrote: lr, warm-up steps, shape.
   case "$model" in
     metal_2d)       finetune 0.001 300 --batch 2048 --epochs 15000 --eval-every 2500 ;;
-    sand_2d)        finetune 0.001 300 --hidden 64 64 64 --batch 4096 --epochs 4500 --eval-every 500 ;;
-    metal_param_2d) finetune 0.001 300 --hidden 64 64 64 --batch 2048 --epochs 10000 --eval-every 2500 ;;
+    sand_2d)        finetune 0.001 300 --hidden 64 64 64 --batch 4096 --epochs 4500 --eval-every 500
+                    finetune 0.0005 200 --hidden 64 64 64 --batch 4096 --epochs 18200 --eval-every 2000 --seed 1 ;;
+    metal_param_2d) finetune 0.001 300 --hidden 64 64 64 --batch 2048 --epochs 10000 --eval-every 2500
+                    finetune 0.0005 200 --hidden 64 64 64 --batch 2048 --epochs 24200 --eval-every 5000 --seed 1 ;;
     metal_3d)       finetune 0.001 300 --hidden 128 128 128 --batch 2048 --epochs 5500 --eval-every 1000 ;;
     snow_3d)        finetune 0.001 300 --hidden 128 128 128 --batch 2048 --epochs 6000 --eval-every 1000
                     finetune 0.0005 200 --hidden 128 128 128 --batch 2048 --epochs 2900 --eval-every 2900 ;;
     sand_param_3d)  finetune 0.001 300 --hidden 128 128 128 --batch 512 --epochs 12000 --eval-every 2000
-                    finetune 0.0005 200 --hidden 128 128 128 --batch 512 --epochs 5000 --eval-every 5000 ;;
+                    finetune 0.0005 200 --hidden 128 128 128 --batch 512 --epochs 5000 --eval-every 5000
+                    finetune 0.0003 200 --hidden 128 128 128 --batch 1024 --epochs 15700 --eval-every 5000 --seed 1 ;;
   esac
 done
