@@ -32,6 +32,8 @@ constexpr const char* kUsage =
     "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
     "                     [--advection-cfl C] (MPM: cap a step so no particle moves more than C cells; 0: off)\n"
+    "  MPM scenes, overriding the scene: [--flip-relaxation-time S] (AFLIP transfers, transfer.flip_relaxation_time;\n"
+    "                     0: APIC) [--floor-friction MU] (a Coulomb floor, boundary.floor_friction; docs/methods.md)\n"
     "                     [--fixed-point-inexact FORCING]\n"
     "                     [--fail-on-unconverged]\n"
     "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
@@ -50,6 +52,7 @@ struct Options {
     // Implicit solver overrides (unset: the scene's value).
     std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
     std::optional<double> advection_cfl;
+    std::optional<double> flip_relaxation_time, floor_friction;  // scene overrides (MPM)
     std::optional<double> analytic_regularizer;
     std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, kinematic_start, time_integrator;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
@@ -110,6 +113,10 @@ Options parse(int argc, char** argv) {
             o.lazy_hessian = number(value());
         else if (arg == "--advection-cfl")
             o.advection_cfl = number(value());
+        else if (arg == "--flip-relaxation-time")
+            o.flip_relaxation_time = number(value());
+        else if (arg == "--floor-friction")
+            o.floor_friction = number(value());
         else if (arg == "--preconditioner")
             o.preconditioner = value();
         else if (arg == "--time-integrator") {
@@ -188,6 +195,10 @@ Options parse(int argc, char** argv) {
         throw UsageError("--lazy-hessian must be in [0, 1)");
     if (o.advection_cfl && !(*o.advection_cfl >= 0.0 && *o.advection_cfl <= 1.0))
         throw UsageError("--advection-cfl must be in [0, 1]");
+    if (o.flip_relaxation_time && !(std::isfinite(*o.flip_relaxation_time) && *o.flip_relaxation_time >= 0.0))
+        throw UsageError("--flip-relaxation-time must be a finite number >= 0 (seconds; 0: APIC)");
+    if (o.floor_friction && !(std::isfinite(*o.floor_friction) && *o.floor_friction >= 0.0))
+        throw UsageError("--floor-friction must be a finite number >= 0 (a Coulomb friction coefficient)");
     if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi" &&
         *o.preconditioner != "ichol")
         throw UsageError("--preconditioner: expected jacobi, block_jacobi or ichol, got \"" + *o.preconditioner + "\"");
@@ -228,6 +239,15 @@ int simulate_command(int argc, char** argv) {
     try {
         Scene scene = load_scene(o.scene);
         if (o.model) use_model(scene, *o.model);
+        if ((o.flip_relaxation_time || o.floor_friction) && !scene.has_particles())
+            throw UsageError(std::string(o.flip_relaxation_time ? "--flip-relaxation-time" : "--floor-friction") +
+                             ": " + scene.file + " has no particles (an MPM option)");
+        if (o.flip_relaxation_time) scene.flip_relaxation_time = *o.flip_relaxation_time;
+        if (o.floor_friction) {
+            if (scene.boundary.sticky_floor_cells == 0)
+                throw UsageError("--floor-friction: " + scene.file + " has no floor layer (boundary.sticky_floor_cells 0)");
+            scene.boundary.floor_friction = *o.floor_friction;
+        }
         IntegratorSettings settings;
         try {
             settings = integrator_settings(scene, o.integrator);

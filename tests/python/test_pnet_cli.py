@@ -381,10 +381,30 @@ def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
     (["--analytic-regularizer", -1], "--analytic-regularizer must be a finite number >= 0"),
     (["--kinematic-start", "warm"], '--kinematic-start: expected scaled or last_velocity, got "warm"'),
     (["--time-integrator", "euler"], '--time-integrator: expected backward_euler or bdf2, got "euler"'),
+    (["--flip-relaxation-time", -1], "--flip-relaxation-time must be a finite number >= 0"),
+    (["--floor-friction", -0.5], "--floor-friction must be a finite number >= 0"),
 ])
 def test_implicit_usage_errors(tmp_path, args, expected):
     r = pnet("simulate", TINY / "sand_column_2d.json", "--out", tmp_path / "o", *args)
     assert r.returncode == 2 and expected in r.stderr, r.stderr
+
+
+def test_transfer_and_floor_overrides_reach_the_run(tmp_path):
+    """--flip-relaxation-time and --floor-friction override the scene's transfer and floor: the run differs
+    from the scene's own, its checkpoint belongs to the overridden scene (a resume without them is refused,
+    naming the checkpoint), and a scene without particles refuses them."""
+    out, plain = tmp_path / "o", tmp_path / "plain"
+    base = ["simulate", TINY / "sand_column_2d.json", "--frames", 1, "--checkpoint-every", 1]
+    overrides = ["--flip-relaxation-time", 0.01, "--floor-friction", 0.5]
+    assert pnet(*base, "--out", out, *overrides).returncode == 0
+    assert pnet(*base, "--out", plain).returncode == 0
+    assert (out / "frame_00001.ply").read_bytes() != (plain / "frame_00001.ply").read_bytes()
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 2, "--out", out, "--resume")
+    assert r.returncode != 0 and "checkpoint.bin: written for a different scene" in r.stderr, r.stderr
+    r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 2, "--out", out, "--resume", *overrides)
+    assert r.returncode == 0 and (out / "frame_00002.ply").exists(), r.stderr
+    r = pnet("simulate", TINY / "metal_frame_2d.json", "--out", tmp_path / "m", "--floor-friction", 0.5)
+    assert r.returncode == 2 and "--floor-friction: " in r.stderr and "has no particles" in r.stderr, r.stderr
 
 
 def test_plasticitynet_without_a_model_names_the_object(tmp_path):
