@@ -94,7 +94,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     solve.work_line_search = mpm_energy_->tangent_hessian();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     // The Coulomb floor's friction: majorize-minimize passes, as in ImplicitIntegrator.
-    const int solves = mpm_system_.boundary.coulomb_floor() ? floor_friction_solves() : 1;
+    const int solves = mpm_system_.boundary.coulomb_floor() ? kFloorFrictionSolves : 1;
     int fixed_point_solves = 0;
     for (int pass = 0; pass < solves; ++pass) {
         if (pass > 0) {

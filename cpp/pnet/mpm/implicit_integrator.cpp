@@ -110,7 +110,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
     // The Coulomb floor's friction: majorize-minimize passes (floor_friction_form.hpp), the first with the
     // normal impulses of the start-of-step stress, the next ones with those of the last solution.
-    const int solves = system_.boundary.coulomb_floor() ? floor_friction_solves() : 1;
+    const int solves = system_.boundary.coulomb_floor() ? kFloorFrictionSolves : 1;
     int fixed_point_solves = 0;
     for (int pass = 0; pass < solves; ++pass) {
         if (pass > 0) potential_.floor_friction_contacts(&v_);
