@@ -86,5 +86,6 @@ for model in "${models[@]}"; do
     sand_param_3d)  finetune 0.001 300 --hidden 128 128 128 --batch 512 --epochs 12000 --eval-every 2000
                     finetune 0.0005 200 --hidden 128 128 128 --batch 512 --epochs 5000 --eval-every 5000
                     finetune 0.0003 200 --hidden 128 128 128 --batch 1024 --epochs 15700 --eval-every 5000 --seed 1 ;;
+    snow_param_3d)  finetune 0.0005 200 --hidden 128 128 128 --batch 1024 --epochs 13600 --eval-every 5000 --seed 1 ;;
   esac
 done
