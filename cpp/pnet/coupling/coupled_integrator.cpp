@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 
+#include "pnet/mpm/floor_friction_passes.hpp"
 #include "pnet/mpm/grid_to_particles.hpp"
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/solver/newton.hpp"
@@ -93,26 +94,13 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
     solve.work_line_search = mpm_energy_->tangent_hessian();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
-    // The Coulomb floor's friction: majorize-minimize passes, as in ImplicitIntegrator.
-    const int solves = mpm_system_.boundary.coulomb_floor() ? kFloorFrictionSolves : 1;
-    int fixed_point_solves = 0;
-    for (int pass = 0; pass < solves; ++pass) {
-        if (pass > 0) {
-            const VecX grid_v = v_.head(coupled_.grid_size());
+    solve_floor_friction_passes<dim>(
+        coupled_, v_, newton, solve, context, work_, mpm_system_.boundary.coulomb_floor(),
+        [&](const VecX& v) {
+            const VecX grid_v = v.head(coupled_.grid_size());
             mpm_.floor_friction_contacts(&grid_v);
-        }
-        ReferenceSolveStats s;
-        try {
-            s = solve_with_reference<dim>(coupled_, v_, newton, solve, context, work_, [&] {
-                stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped());
-            });
-        } catch (const NewtonError& e) {
-            throw SimulationError(e.what());
-        }
-        record_solve(s, stats);
-        fixed_point_solves += s.solves;
-    }
-    stats.fixed_point_iterations = fixed_point_solves;
+        },
+        [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped()); }, stats);
     stats.ccd_queries = coupled_.ccd_queries();
     stats.ccd_limited = coupled_.ccd_limited() + (alpha < 1.0);
     stats.energy_seconds = mpm_.energy_seconds();

@@ -35,11 +35,6 @@ struct BoundaryConditions {
     bool in_floor(int y) const { return sticky_floor_cells > 0 && y <= sticky_floor_cells; }
 };
 
-/// Solves of an implicit step on a Coulomb floor: each a majorize-minimize pass of the floor's friction
-/// with the normal impulses and slips of the last solution (floor_friction_form.hpp). On a granular
-/// collapse at 1e-3 s, 2 and 5 passes end within 2% and 0.1% of 3 (docs/methods.md).
-inline constexpr int kFloorFrictionSolves = 3;
-
 /// `bc` without the Coulomb floor's projection (its floor layer off; the sticky one kept): the v* an
 /// implicit solve starts from, which holds the pressing nodes' normal component itself and has the
 /// floor's friction as a form (IncrementalPotential::floor_friction_contacts).

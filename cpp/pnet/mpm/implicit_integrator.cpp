@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "pnet/mpm/explicit_integrator.hpp"  // clamp_to_grid
+#include "pnet/mpm/floor_friction_passes.hpp"
 #include "pnet/mpm/grid_to_particles.hpp"
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/solver/newton.hpp"
@@ -108,24 +109,11 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
-    // The Coulomb floor's friction: majorize-minimize passes (floor_friction_form.hpp), the first with the
-    // normal impulses of the start-of-step stress, the next ones with those of the last solution.
-    const int solves = system_.boundary.coulomb_floor() ? kFloorFrictionSolves : 1;
-    int fixed_point_solves = 0;
-    for (int pass = 0; pass < solves; ++pass) {
-        if (pass > 0) potential_.floor_friction_contacts(&v_);
-        ReferenceSolveStats s;
-        try {
-            s = solve_with_reference<dim>(potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, [&] {
-                stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped());
-            });
-        } catch (const NewtonError& e) {
-            throw SimulationError(e.what());
-        }
-        record_solve(s, stats);
-        fixed_point_solves += s.solves;
-    }
-    stats.fixed_point_iterations = fixed_point_solves;
+    // On a Coulomb floor, the first pass has the contacts of the start-of-step stress (above).
+    solve_floor_friction_passes<dim>(
+        potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, system_.boundary.coulomb_floor(),
+        [&](const VecX& v) { potential_.floor_friction_contacts(&v); },
+        [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped()); }, stats);
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).
     potential_.write_velocity(potential_.displacement_rate(v_), grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM
