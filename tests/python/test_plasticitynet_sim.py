@@ -664,6 +664,7 @@ def test_fem_analytic_is_refused_for_neo_hookean_metal():
     (dict(cfl=float("nan")), "cfl"), (dict(cfl=0.0), "cfl"), (dict(cfl=[0.5]), "cfl"),
     (dict(integrator="implicit"), "integrator"), (dict(integrator=3), "integrator"),
     (dict(solver={"newton_tolerance": float("nan")}), "newton_tolerance"),
+    (dict(solver={"newton_acceleration_tolerance": -1.0}), "newton_acceleration_tolerance"),
     (dict(solver={"cg_tolerance": float("inf")}), "cg_tolerance"),
     (dict(solver={"regularizer_weight": float("-inf")}), "regularizer_weight"),
     (dict(solver={"fixed_point_tolerance": float("nan")}), "fixed_point_tolerance"),

@@ -434,15 +434,21 @@ void run(Sim& sim, const Scene& scene, Output o, const IntegratorSettings& setti
     }
     std::fprintf(stderr, "\n");
     if (implicit) {
+        const ImplicitOptions& o = settings.implicit;
+        char tolerance[96];
+        if (o.newton_acceleration_tolerance > 0.0)
+            std::snprintf(tolerance, sizeof tolerance, "min(%.3g m/s, %.3g m/s^2 x dt)", o.newton_tolerance,
+                          o.newton_acceleration_tolerance);
+        else
+            std::snprintf(tolerance, sizeof tolerance, "%.3g m/s", o.newton_tolerance);
         if (run_unconverged > 0)
             std::printf(
                 "warning: %ld of %ld steps ended with the Newton solve unconverged (largest residual %.3g m/s, "
-                "tolerance %.3g m/s); they are marked converged = 0 in steps.csv "
+                "tolerance %s); they are marked converged = 0 in steps.csv "
                 "(--fail-on-unconverged stops at the first)\n",
-                run_unconverged, run_steps, run_worst_residual, settings.implicit.newton_tolerance);
+                run_unconverged, run_steps, run_worst_residual, tolerance);
         else
-            std::printf("all %ld steps converged (Newton residual <= %.3g m/s)\n", run_steps,
-                        settings.implicit.newton_tolerance);
+            std::printf("all %ld steps converged (Newton residual <= %s)\n", run_steps, tolerance);
         if (run_fixed_point_capped > 0)
             std::printf(
                 "note: in %ld of %ld steps the fixed point on F0 stopped above its tolerance %.3g "

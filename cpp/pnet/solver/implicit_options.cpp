@@ -1,5 +1,6 @@
 #include "pnet/solver/implicit_options.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <type_traits>
@@ -28,6 +29,9 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     if (!block.is_object()) return o;
     o.newton_tolerance =
         read_option(block, "newton_tolerance", o.newton_tolerance, context, 1e-300, "a positive number (m/s)");
+    o.newton_acceleration_tolerance = read_option(block, "newton_acceleration_tolerance",
+                                                  o.newton_acceleration_tolerance, context, 0.0,
+                                                  "a number >= 0 (m/s^2; 0: newton_tolerance alone)");
     o.max_newton_iterations =
         read_option(block, "max_newton_iterations", o.max_newton_iterations, context, 1, "an integer >= 1");
     o.max_cg_iterations = read_option(block, "max_cg_iterations", o.max_cg_iterations, context, 1, "an integer >= 1");
@@ -130,9 +134,14 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     return o;
 }
 
-NewtonOptions ImplicitOptions::newton_options() const {
+double ImplicitOptions::newton_tolerance_at(double dt) const {
+    return newton_acceleration_tolerance > 0.0 ? std::min(newton_tolerance, newton_acceleration_tolerance * dt)
+                                               : newton_tolerance;
+}
+
+NewtonOptions ImplicitOptions::newton_options(double dt) const {
     NewtonOptions newton;
-    newton.tolerance = newton_tolerance;
+    newton.tolerance = newton_tolerance_at(dt);
     newton.max_iterations = max_newton_iterations;
     newton.max_cg_iterations = max_cg_iterations;
     newton.cg_tolerance = cg_tolerance;
@@ -155,6 +164,7 @@ ReferenceSolveOptions ImplicitOptions::reference_solve_options(bool fixed_point)
 
 nlohmann::json ImplicitOptions::to_json() const {
     return {{"newton_tolerance", newton_tolerance},
+            {"newton_acceleration_tolerance", newton_acceleration_tolerance},
             {"max_newton_iterations", max_newton_iterations},
             {"max_cg_iterations", max_cg_iterations},
             {"cg_tolerance", cg_tolerance},

@@ -17,8 +17,14 @@ namespace pnet {
 /// "integrator" block (same names); the command line can override some.
 struct ImplicitOptions {
     // m/s: the mass-weighted velocity residual sqrt(sum_i g_i^2 / H_ii / sum_i m_i) over the free
-    // components (NewtonOptions::residual_mass; E - min E ~ M r^2 / 2).
+    // components (NewtonOptions::residual_mass; E - min E ~ M r^2 / 2) a step may leave, and
+    // m/s^2: that residual per unit of step. A step of dt stops at min(newton_tolerance,
+    // newton_acceleration_tolerance dt) (newton_tolerance_at()): the same 1e-3 m/s as a fixed velocity
+    // from 1e-3 s up, and a force balanced to 1 m/s^2 below. A fixed velocity alone let the solve of a
+    // short step stop before it began: at 1e-5 s the forces change a velocity by about g dt = 1e-4 m/s,
+    // and most steps took no Newton step at all (docs/solver.md). 0: the fixed velocity alone.
     double newton_tolerance = 1e-3;
+    double newton_acceleration_tolerance = 1.0;
     int max_newton_iterations = 50;
     int max_cg_iterations = 500;
     double cg_tolerance = 0.1;            // largest relative PCG residual (inexact Newton)
@@ -112,9 +118,13 @@ struct ImplicitOptions {
     /// block also holds name, dt and cfl). Throws std::invalid_argument
     /// "<context>: integrator.<key>: <problem>" for a wrong type or range.
     static ImplicitOptions from_json(const nlohmann::json& block, const std::string& context);
-    /// The Newton loop's settings from these (tolerance, iteration caps, CG tolerance, lazy
-    /// Hessian); the caller adds its residual masses and linear solver.
-    NewtonOptions newton_options() const;
+    /// The Newton loop's settings from these for a step of dt s (tolerance newton_tolerance_at(dt),
+    /// iteration caps, CG tolerance, lazy Hessian); the caller adds its residual masses and linear
+    /// solver.
+    NewtonOptions newton_options(double dt) const;
+    /// m/s: min(newton_tolerance, newton_acceleration_tolerance dt), or newton_tolerance where the
+    /// acceleration tolerance is 0.
+    double newton_tolerance_at(double dt) const;
     /// The step's solve settings from these: the fixed point on F0 when `fixed_point`, its cap,
     /// tolerance, acceleration, Hessian reuse and inexact inner solves.
     ReferenceSolveOptions reference_solve_options(bool fixed_point) const;

@@ -166,7 +166,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     const double target = std::max(options.tolerance, options.relative_tolerance * residual);
 
     for (int it = 0; it < options.max_iterations; ++it) {
-        if (residual <= target) {
+        if (residual <= target && (it >= options.min_iterations || !(residual > 0.0))) {
             stats.converged = true;
             break;
         }

@@ -74,6 +74,10 @@ struct NewtonOptions {
     /// Inexact solve: also stop once the residual is at most this fraction of the starting one
     /// (0: only the absolute tolerance). converged then means the looser of the two was met.
     double relative_tolerance = 0.0;
+    /// Newton steps taken even when the start already meets the tolerance (while the gradient is not
+    /// zero): a solve that follows a change of the objective too local for the residual, which weighs
+    /// every unknown, to see (a Coulomb floor's next friction pass, floor_friction_passes.hpp).
+    int min_iterations = 0;
     /// Rebase the objective (Objective::rebase) at the start and at every accepted iterate: the
     /// learned energy's reference F0 follows F(v), so every gradient Newton tests and steps on is
     /// the exact one (the true residual of the elastoplastic step), the energy is only ever
