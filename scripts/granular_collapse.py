@@ -79,6 +79,9 @@ def scene_for(angle: float, aspect: float, dx: float, frames: int, sticky_cells:
     scene["dx"] = dx
     scene["frames"] = frames
     scene["boundary"]["sticky_floor_cells"] = sticky_cells
+    # Both set or removed here, whatever scenes/sand_column_2d.json says (it has a Coulomb floor and AFLIP).
+    scene["boundary"].pop("floor_friction", None)
+    scene.pop("transfer", None)
     if floor_friction is not None:
         scene["boundary"]["floor_friction"] = floor_friction
     if flip_relaxation_time > 0.0:
