@@ -27,7 +27,7 @@ Runs are kept in --work (a finished run of the same scene, integrator and step i
 
     .venv/bin/python scripts/granular_collapse.py [--angles 20 30 40] [--aspects 0.5 1 2 4 8]
         [--floor tan|sticky|MU] [--flip-relaxation-time 0.01] [--dt-study]
-        [--jobs 2] [--frames 50] [--dx 0.0078125] [--work out/granular_collapse]
+        [--newton-tolerance M_PER_S] [--jobs 2] [--frames 50] [--dx 0.0078125] [--work out/granular_collapse]
         [--out notebooks/results/granular_collapse]
 """
 
@@ -107,10 +107,12 @@ def runout(run: Path) -> float:
     return HALF_WIDTH + extent(frames[-1]) - extent(frames[0])
 
 
-def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float | None) -> float:
-    """Runs one simulation unless `out` holds a finished one of the same scene, integrator and step; the wall
-    seconds (the recorded ones if reused)."""
-    key = hashlib.sha256(f"{scene_file.read_text()}\n{integrator}\n{dt}".encode()).hexdigest()
+def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float | None,
+             newton_tolerance: float | None = None) -> float:
+    """Runs one simulation unless `out` holds a finished one of the same scene, integrator, step and Newton
+    tolerance (implicit runs; None: the scene's); the wall seconds (the recorded ones if reused)."""
+    tolerance = f"\n{newton_tolerance}" if newton_tolerance is not None else ""
+    key = hashlib.sha256(f"{scene_file.read_text()}\n{integrator}\n{dt}{tolerance}".encode()).hexdigest()
     done = out / "done"
     if done.exists() and done.read_text().split()[1:] == [key]:
         return float(done.read_text().split()[0])
@@ -118,6 +120,8 @@ def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float
            "--overwrite"]
     if dt is not None:
         cmd += ["--dt", f"{dt:g}"]
+    if newton_tolerance is not None:
+        cmd += ["--newton-tol", f"{newton_tolerance:g}"]
     t0 = time.perf_counter()
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
@@ -216,6 +220,9 @@ def main() -> int:
                    help="AFLIP transfers' relaxation time, s (0.01; 0: APIC). With APIC and the sticky floor the "
                         "explicit run-out does not converge as dt shrinks (docs/methods.md)")
     p.add_argument("--ground-truth-dt", type=float, default=2e-5, help="explicit ground-truth step, s (2e-5)")
+    p.add_argument("--newton-tolerance", type=float, default=None,
+                   help="plasticitynet's Newton tolerance, m/s (default: the scene's, 1e-3 with 1 m/s^2 x dt below "
+                        "1e-3 s; docs/solver.md: a tall column's run-out needs ~1e-4 to converge)")
     p.add_argument("--jobs", type=int, default=2, help="simulations at once (one thread each)")
     p.add_argument("--dt-study", action="store_true",
                    help="instead of the sweep: the run-out of APIC / AFLIP transfers on a sticky / Coulomb floor, "
@@ -251,7 +258,8 @@ def main() -> int:
     jobs.sort(key=lambda j: -(j[1] * (50.0 if j[2] == "ground_truth" else 1.0)))
     rows = []
     with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
-        futures = {pool.submit(simulate, pnet, j[3], j[4], j[5], j[6]): j for j in jobs}
+        futures = {pool.submit(simulate, pnet, j[3], j[4], j[5], j[6],
+                               args.newton_tolerance if j[5] == "plasticitynet" else None): j for j in jobs}
         for done, future in enumerate(concurrent.futures.as_completed(futures), 1):
             angle, aspect, name, _, out, _, _ = futures[future]
             wall = future.result()
@@ -267,12 +275,14 @@ def main() -> int:
         w.writeheader()
         w.writerows(rows)
     table = {(r["angle"], r["aspect"], r["integrator"]): r for r in rows}
+    tolerance = "the default (1e-3 m/s)" if args.newton_tolerance is None else f"{args.newton_tolerance:g} m/s"
     lines = [
         "# Granular column collapse with one parametric model (scripts/granular_collapse.py)", "",
         f"Run-out (L_inf - L0) / L0, L0 = {HALF_WIDTH} m, L_inf = L0 + e(last) - e(first), e the {PERCENTILE}th "
         f"percentile of |x - x_c| on a frame ({args.frames} frames of 0.02 s), dx = {args.dx:g} m. Ground truth: explicit at "
         f"{args.ground_truth_dt:g} s; floor: |explicit at CFL - ground truth|; plasticitynet at 1e-3 s with "
-        f"{MODEL.name} bound to each angle. Floor: {floor_description(args.floor)}; transfers: "
+        f"{MODEL.name} bound to each angle, Newton tolerance {tolerance}. Floor: {floor_description(args.floor)}; "
+        "transfers: "
         f"{'AFLIP, relaxation time %g s' % args.flip_relaxation_time if args.flip_relaxation_time > 0 else 'APIC'} "
         f"(docs/methods.md).", "",
         "| friction angle | a = H / L0 | ground truth | explicit CFL | plasticitynet | plasticitynet error | floor | "

@@ -29,7 +29,8 @@ constexpr const char* kUsage =
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--outer-iteration newton|fixed_point]\n"
     "                     [--time-integrator backward_euler|bdf2]\n"
     "                     [--hessian auto|network|tangent] [--fixed-point-iterations N]\n"
-    "                     [--fixed-point-tol T] [--regularizer W] [--preconditioner jacobi|block_jacobi|ichol]\n"
+    "                     [--fixed-point-tol T] [--regularizer W] [--tangent-damping W]\n"
+    "                     [--preconditioner jacobi|block_jacobi|ichol]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
     "                     [--advection-cfl C] (MPM: cap a step so no particle moves more than C cells; 0: off)\n"
     "  MPM scenes, overriding the scene: [--flip-relaxation-time S] (AFLIP transfers, transfer.flip_relaxation_time;\n"
@@ -50,7 +51,8 @@ struct Options {
     int threads = 0;
     bool trust_model = false, fail_on_unconverged = false;
     // Implicit solver overrides (unset: the scene's value).
-    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, lazy_hessian, fixed_point_inexact;
+    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, tangent_damping, lazy_hessian,
+        fixed_point_inexact;
     std::optional<double> advection_cfl;
     std::optional<double> flip_relaxation_time, floor_friction;  // scene overrides (MPM)
     std::optional<double> analytic_regularizer;
@@ -107,6 +109,8 @@ Options parse(int argc, char** argv) {
             o.fixed_point_tol = number(value());
         else if (arg == "--regularizer")
             o.regularizer = number(value());
+        else if (arg == "--tangent-damping")
+            o.tangent_damping = number(value());
         else if (arg == "--analytic-regularizer")
             o.analytic_regularizer = number(value());
         else if (arg == "--lazy-hessian")
@@ -189,6 +193,8 @@ Options parse(int argc, char** argv) {
         throw UsageError("--fixed-point-tol must be a finite number >= 0");
     if (o.regularizer && !(std::isfinite(*o.regularizer) && *o.regularizer >= 0.0))
         throw UsageError("--regularizer must be a finite number >= 0");
+    if (o.tangent_damping && !(std::isfinite(*o.tangent_damping) && *o.tangent_damping >= 0.0))
+        throw UsageError("--tangent-damping must be a finite number >= 0");
     if (o.analytic_regularizer && !(std::isfinite(*o.analytic_regularizer) && *o.analytic_regularizer >= 0.0))
         throw UsageError("--analytic-regularizer must be a finite number >= 0");
     if (o.lazy_hessian && !(*o.lazy_hessian >= 0.0 && *o.lazy_hessian < 1.0))
@@ -262,6 +268,7 @@ int simulate_command(int argc, char** argv) {
         if (o.cg_tol) settings.implicit.cg_tolerance = *o.cg_tol;
         if (o.fixed_point_tol) settings.implicit.fixed_point_tolerance = *o.fixed_point_tol;
         if (o.regularizer) settings.implicit.regularizer_weight = *o.regularizer;
+        if (o.tangent_damping) settings.implicit.tangent_damping = *o.tangent_damping;
         if (o.analytic_regularizer) settings.implicit.analytic_regularizer = *o.analytic_regularizer;
         if (o.preconditioner) settings.implicit.preconditioner = *o.preconditioner;
         if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;

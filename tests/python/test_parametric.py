@@ -545,6 +545,15 @@ def test_granular_collapse_sweep_end_to_end(tmp_path):
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0 and frame.stat().st_mtime_ns == written, r.stderr  # the finished runs are reused
     assert (tmp_path / "out" / "runout.csv").read_text().splitlines() == rows
+    assert "Newton tolerance the default (1e-3 m/s)" in table
+    # --newton-tolerance reruns plasticitynet alone, with that tolerance.
+    implicit = tmp_path / "work" / "phi35_a2" / "plasticitynet"
+    implicit_written = (implicit / "frame_00002.ply").stat().st_mtime_ns
+    r = subprocess.run(cmd + ["--newton-tolerance", "1e-4"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert frame.stat().st_mtime_ns == written and (implicit / "frame_00002.ply").stat().st_mtime_ns != implicit_written
+    assert json.loads((implicit / "run.json").read_text())["solver"]["newton_tolerance"] == pytest.approx(1e-4)
+    assert "Newton tolerance 0.0001 m/s" in (tmp_path / "out" / "runout.md").read_text()
 
 
 def test_granular_collapse_dt_study_end_to_end(tmp_path):

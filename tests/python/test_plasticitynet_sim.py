@@ -667,6 +667,7 @@ def test_fem_analytic_is_refused_for_neo_hookean_metal():
     (dict(solver={"newton_acceleration_tolerance": -1.0}), "newton_acceleration_tolerance"),
     (dict(solver={"cg_tolerance": float("inf")}), "cg_tolerance"),
     (dict(solver={"regularizer_weight": float("-inf")}), "regularizer_weight"),
+    (dict(solver={"tangent_damping": -1.0}), "tangent_damping"),
     (dict(solver={"fixed_point_tolerance": float("nan")}), "fixed_point_tolerance"),
     (dict(solver={"max_newton_iterations": 2.5}), "max_newton_iterations"),
     (dict(solver={"preconditioner": "ilu"}), "preconditioner"),

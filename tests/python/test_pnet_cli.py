@@ -335,10 +335,12 @@ def test_implicit_integrators_run_every_tiny_scene(tmp_path, name, integrator):
 def test_implicit_options_override_the_scene(tmp_path):
     out = tmp_path / "run"
     r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--fixed-point-iterations", 1,
-             "--regularizer", 0, "--newton-tol", 1e-4, "--dt", 2e-3, "--preconditioner", "block_jacobi", "--lazy-hessian", 0, "--out", out)
+             "--regularizer", 0, "--newton-tol", 1e-4, "--dt", 2e-3, "--preconditioner", "block_jacobi", "--lazy-hessian", 0,
+             "--tangent-damping", 0.1, "--out", out)
     assert r.returncode == 0, r.stderr
     run = json.loads((out / "run.json").read_text())
     assert run["integrator"] == "plasticitynet" and run["dt"] == 2e-3
+    assert run["solver"]["tangent_damping"] == 0.1
     assert run["solver"]["max_fixed_point_iterations"] == 1 and run["solver"]["regularizer_weight"] == 0
     assert run["solver"]["newton_tolerance"] == 1e-4 and run["solver"]["preconditioner"] == "block_jacobi"
     assert run["solver"]["lazy_hessian"] == 0
@@ -370,6 +372,7 @@ def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
     (["--fixed-point-iterations", 0], "--fixed-point-iterations must be a whole number in [1, 100000]"),
     (["--cg-tol", 1.5], "--cg-tol must be in (0, 1)"),
     (["--regularizer", -1], "--regularizer must be a finite number >= 0"),
+    (["--tangent-damping", -1], "--tangent-damping must be a finite number >= 0"),
     (["--integrator", "implicit"], "--integrator: expected explicit, plasticitynet or lagged"),
     (["--preconditioner", "ilu"], '--preconditioner: expected jacobi, block_jacobi or ichol, got "ilu"'),
     (["--lazy-hessian", 1], "--lazy-hessian must be in [0, 1)"),
@@ -577,6 +580,7 @@ _BAD_OPTIONS = [
     ("--cg-tol", ["0", "1", "nan", "inf"]),
     ("--fixed-point-tol", ["-1", "nan", "inf"]),
     ("--regularizer", ["-1", "nan", "inf"]),
+    ("--tangent-damping", ["-1", "nan", "inf"]),
     ("--lazy-hessian", ["-0.1", "1", "nan"]),
     ("--advection-cfl", ["-0.1", "1.5", "nan"]),
     ("--fixed-point-iterations", ["0", "-2", "1.5", "nan", "1e12"]),

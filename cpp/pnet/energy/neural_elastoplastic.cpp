@@ -36,15 +36,16 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
       hessian_kind_(options.hessian) {
     if (hessian_kind_ == Options::Hessian::Auto) {
         // The tangent for every material (docs/solver.md, measured); w = 0 for associative flow,
-        // where the tangent is the exact Jacobian, and the scene's w as a damping otherwise.
+        // where the tangent is the exact Jacobian, and a damping otherwise.
         hessian_kind_ = Options::Hessian::Tangent;
-        if (model.metadata.material.plasticity == PlasticityModel::VonMises) w_ = 0.0;
+        w_ = model.metadata.material.plasticity == PlasticityModel::VonMises ? 0.0 : options.tangent_damping;
     }
     if (!(std::isfinite(options.youngs_modulus) && options.youngs_modulus > 0.0))
         throw std::invalid_argument(model.path + ": Young's modulus must be a positive number of Pa, got " +
                                     std::to_string(options.youngs_modulus));
     if (!(std::isfinite(w_) && w_ >= 0.0))
-        throw std::invalid_argument("regularizer weight w must be >= 0, got " + std::to_string(w_));
+        throw std::invalid_argument("regularizer weight w (or the tangent's damping) must be >= 0, got " +
+                                    std::to_string(w_));
     if (model.metadata.learned_return_map()) {
         if (!model.return_map)
             throw std::invalid_argument(model.path + ": trained with the learned return mapping " +

@@ -37,6 +37,10 @@
 
 namespace pnet {
 
+/// The damping w of the symmetrized tangent under the Auto Hessian for non-associative flow
+/// (NeuralElastoplasticEnergy::Options::tangent_damping, ImplicitOptions::tangent_damping).
+inline constexpr double kDefaultTangentDamping = 0.3;
+
 template <int dim>
 class NeuralElastoplasticEnergy {
 public:
@@ -55,14 +59,19 @@ public:
         /// (material/elastoplastic_tangent.hpp), the Jacobian of the true residual when F = F0.
         /// Auto: the tangent, with w = 0 for associative plasticity (von Mises: the tangent is the
         /// symmetric Jacobian, and w mu would only slow Newton on plastic flow, where the true
-        /// stiffness is near zero) and the scene's w otherwise (non-associative Drucker-Prager and
-        /// Cam-Clay, whose symmetrized tangent is not the Jacobian: measured to converge in the
-        /// same Newton iterations as the network's Hessian at half the cost; docs/solver.md).
+        /// stiffness is near zero) and w = tangent_damping otherwise (non-associative Drucker-Prager
+        /// and Cam-Clay, whose symmetrized tangent is not the Jacobian; docs/solver.md).
         enum class Hessian { Auto, Network, Tangent } hessian = Hessian::Network;
         /// The object's material (E aside), checked against the model (material_for_object: a model
         /// of one material needs the same constitutive model; a parametric one takes its parameters
         /// from it, within their trained ranges). Unset: the model's own material.
         std::optional<MaterialDescription> material = std::nullopt;
+        /// Auto's w for non-associative flow (Drucker-Prager, Cam-Clay), in units of the shear
+        /// modulus: the damping of their symmetrized tangent, which is not the residual's Jacobian.
+        /// It only shapes Newton's steps (the energy is evaluated at its reference, where the w term
+        /// vanishes); the paper's w = 1 damped the steps so much that a solve stopped by its tolerance
+        /// was still biased toward v* (docs/solver.md, measured).
+        double tangent_damping = kDefaultTangentDamping;
     };
 
     /// Throws std::invalid_argument (naming the model file) unless `model` is a

@@ -32,7 +32,8 @@ template <int dim>
 NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
                                                 const std::vector<Material<dim>>& materials,
                                                 const std::vector<std::string>& context, double regularizer_weight,
-                                                typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian) {
+                                                typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian,
+                                                double tangent_damping) {
     if (models.size() != materials.size() || context.size() != materials.size())
         throw std::invalid_argument("NeuralParticleEnergy: one model and one context per object are needed");
     for (std::size_t k = 0; k < materials.size(); ++k) {
@@ -48,7 +49,7 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
             group.energy = std::make_unique<NeuralElastoplasticEnergy<dim>>(
                 model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight,
                                                                         /*relative_to_reference=*/true, hessian,
-                                                                        scene});
+                                                                        scene, tangent_damping});
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(context[k] + ": " + e.what());
         }

@@ -89,7 +89,8 @@ public:
                          const std::vector<Material<dim>>& materials, const std::vector<std::string>& context,
                          double regularizer_weight,
                          typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian =
-                             NeuralElastoplasticEnergy<dim>::Options::Hessian::Network);
+                             NeuralElastoplasticEnergy<dim>::Options::Hessian::Network,
+                         double tangent_damping = kDefaultTangentDamping);
 
     void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
                        const std::vector<int>& object) override;

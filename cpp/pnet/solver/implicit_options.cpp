@@ -52,6 +52,7 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                                     nlohmann::json(o.fixed_point_inexact).dump());
     o.regularizer_weight =
         read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
+    o.tangent_damping = read_option(block, "tangent_damping", o.tangent_damping, context, 0.0, "a number >= 0");
     o.analytic_regularizer =
         read_option(block, "analytic_regularizer", o.analytic_regularizer, context, 0.0, "a number >= 0");
     o.lazy_hessian = read_option(block, "lazy_hessian", o.lazy_hessian, context, 0.0, "a number in [0, 1)");
@@ -176,6 +177,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"fixed_point_keep_hessian", fixed_point_keep_hessian},
             {"fixed_point_inexact", fixed_point_inexact},
             {"regularizer_weight", regularizer_weight},
+            {"tangent_damping", tangent_damping},
             {"analytic_regularizer", analytic_regularizer},
             {"hessian", hessian},
             {"preconditioner", preconditioner},

@@ -61,6 +61,12 @@ struct ImplicitOptions {
     // solves; ReferenceSolveOptions::inexact_forcing). MPM and MPM-FEM coupling.
     double fixed_point_inexact = 0.0;
     double regularizer_weight = 1.0;  // w of eq. 11 (plasticitynet; 0: the ablation)
+    // plasticitynet, hessian "auto" on non-associative flow (Drucker-Prager sand, Cam-Clay snow): the w
+    // that damps their symmetrized tangent (which is not the residual's Jacobian), in units of the
+    // shear modulus; it shapes Newton's steps only. With the paper's w = 1 Newton converged at ~0.7
+    // per iteration and a solve stopped by its tolerance was biased toward v*: a tall granular column
+    // ran out 4% short (docs/solver.md, "Which Hessian").
+    double tangent_damping = kDefaultTangentDamping;
     // plasticitynet: the Hessian of Newton's steps, "network" (Hess N + w mu, the paper's), "tangent"
     // (the return mapping's consistent tangent + w mu) or "auto" (the tangent, with w = 0 for von
     // Mises, and the network's under the fixed point;
