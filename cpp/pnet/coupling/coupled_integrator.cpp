@@ -80,7 +80,6 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
 
     NewtonOptions newton = options_.newton_options(dt);
     newton.residual_mass = coupled_.residual_mass();
-    newton.part_residual_mass = coupled_.floor_residual_mass();  // and on the Coulomb floor's own nodes
     const bool cholesky = options_.coupled_solver == "cholesky";
     coupled_.set_linear_solve(cholesky ? CoupledPotential<dim>::LinearSolve::Assembled
                                        : CoupledPotential<dim>::LinearSolve::BlockPreconditioned);

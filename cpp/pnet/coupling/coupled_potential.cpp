@@ -38,8 +38,6 @@ void CoupledPotential<dim>::begin_step() {
     v_star_ << mpm_.v_star(), fem_.v_star();
     residual_mass_.resize(ng + nf);
     residual_mass_ << mpm_.residual_mass(), fem_.residual_mass();
-    floor_residual_mass_.resize(mpm_.floor_residual_mass().size() != 0 ? ng + nf : 0);
-    if (floor_residual_mass_.size() != 0) floor_residual_mass_ << mpm_.floor_residual_mass(), VecX::Zero(nf);
     this->free_.resize(ng + nf);
     this->free_ << mpm_.free_components(), fem_.free_components();
     fem_form_.set_offset(ng);

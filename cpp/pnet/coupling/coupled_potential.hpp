@@ -69,9 +69,6 @@ public:
     const VecX& v_star() const { return v_star_; }
     /// m_i on free components, 0 on fixed ones (NewtonOptions::residual_mass).
     const VecX& residual_mass() const { return residual_mass_; }
-    /// The grid's Coulomb-floor nodes (IncrementalPotential::floor_residual_mass), 0 on the mesh; empty
-    /// without a Coulomb floor (NewtonOptions::part_residual_mass).
-    const VecX& floor_residual_mass() const { return floor_residual_mass_; }
     Eigen::Index grid_size() const { return mpm_.size(); }
 
     /// The particles' and the mesh's positions at v.
@@ -105,7 +102,7 @@ private:
     ParticleBarrierForm<dim> barrier_;
     ParticleFrictionForm<dim> friction_;
     FormSum contact_;  // barrier + friction
-    VecX v_star_, residual_mass_, floor_residual_mass_;
+    VecX v_star_, residual_mass_;
     mutable VecX vg_, vf_;
     std::vector<Eigen::Triplet<double>> triplets_;
     SparseMatrix fem_block_, pair_block_;

@@ -99,7 +99,6 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
 
     NewtonOptions newton = options_.newton_options(dt);
     newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
-    newton.part_residual_mass = potential_.floor_residual_mass();  // and on the Coulomb floor's own nodes
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
     newton.incomplete_cholesky = options_.preconditioner == "ichol";
     if (options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;

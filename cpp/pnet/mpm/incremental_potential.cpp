@@ -111,13 +111,6 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
                 floor_normal_velocity_.push_back(node.momentum[1]);
             }
         }
-    floor_residual_mass_.resize(bc.coulomb_floor() ? dim * dofs : 0);
-    if (bc.coulomb_floor()) {
-        floor_residual_mass_.setZero();
-        for (const int k : floor_dofs_)
-            for (int a = 0; a < dim; ++a)
-                if (a != 1) floor_residual_mass_[dim * k + a] = residual_mass_[dim * k + a];
-    }
     floor_friction_form_.begin_step({}, free);
     if (bc.coulomb_floor()) this->set_forms({&inertia_, &particle_energy_, &floor_friction_form_});
     else this->set_forms({&inertia_, &particle_energy_});

@@ -74,10 +74,6 @@ public:
     /// m_i on free components, 0 on fixed ones: Newton's mass-weighted
     /// velocity residual (NewtonOptions::residual_mass), m/s.
     const VecX& residual_mass() const { return residual_mass_; }
-    /// m_i on the tangential components of the nodes the Coulomb floor holds, 0 elsewhere (empty
-    /// without a Coulomb floor): the part of the system whose residual Newton also tests on its own
-    /// (NewtonOptions::part_residual_mass), since their friction decides how far a flow runs out.
-    const VecX& floor_residual_mass() const { return floor_residual_mass_; }
     /// Nodes that are unknowns.
     std::size_t nodes() const { return dof_node_.size(); }
 
@@ -132,7 +128,7 @@ private:
 
     std::vector<int> node_dof_;              // grid storage index -> dof (-1: not an unknown)
     std::vector<std::int64_t> dof_node_;     // dof -> grid storage index
-    VecX residual_scale_, residual_mass_, floor_residual_mass_;
+    VecX residual_scale_, residual_mass_;
     std::vector<int> stencil_dof_;           // particle p, node s: dof of node s of p's stencil
     std::vector<Vec<dim>> stencil_grad_;     // grad w_ip, 1/m
     std::vector<double> stencil_weight_;     // w_ip

@@ -18,8 +18,8 @@ namespace {
 /// The residual of NewtonOptions at a point with gradient g; `diagonal` is
 /// diag(H) of the Hessian prepared last.
 double residual_of(const VecX& g, const NewtonOptions& options, const VecX& diagonal) {
-    // sqrt(sum_i g_i^2 / H_ii / sum_i m_i) over the components with m_i > 0.
-    const auto mass_weighted = [&](const VecX& mass) {
+    const VecX& mass = options.residual_mass;
+    if (mass.size() != 0) {
         double energy = 0.0, total_mass = 0.0;
         for (Eigen::Index i = 0; i < g.size(); ++i)
             if (mass[i] > 0.0) {
@@ -27,11 +27,6 @@ double residual_of(const VecX& g, const NewtonOptions& options, const VecX& diag
                 total_mass += mass[i];
             }
         return total_mass > 0.0 ? std::sqrt(energy / total_mass) : 0.0;
-    };
-    if (options.residual_mass.size() != 0) {
-        const double whole = mass_weighted(options.residual_mass);
-        if (options.part_residual_mass.size() == 0) return whole;
-        return std::max(whole, mass_weighted(options.part_residual_mass));
     }
     const VecX& scale = options.residual_scale;
     if (scale.size() == 0) return g.lpNorm<Eigen::Infinity>();
@@ -131,8 +126,6 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         throw std::invalid_argument("minimize: residual_scale has the wrong size");
     if (options.residual_mass.size() != 0 && options.residual_mass.size() != n)
         throw std::invalid_argument("minimize: residual_mass has the wrong size");
-    if (options.part_residual_mass.size() != 0 && options.part_residual_mass.size() != n)
-        throw std::invalid_argument("minimize: part_residual_mass has the wrong size");
     NewtonStats stats;
     // Work vectors: sized once per solve; PCG keeps its own between calls.
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;

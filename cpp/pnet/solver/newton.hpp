@@ -17,8 +17,7 @@
 // the energy norm of the Jacobi correction g_i / H_ii per unit mass: E(x) - min E ~ M r^2 / 2 with
 // M = sum m_i, so r measures what the energy can still gain, and nodes that hold little mass (a
 // body's rim) weigh little. Where inertia dominates H it is the rms velocity error sqrt(sum m_i
-// (g_i / m_i)^2 / M). With part_residual_mass, the same residual over one part of the system (a Coulomb
-// floor's contacts) must meet the tolerance too.
+// (g_i / m_i)^2 / M).
 // Lazy Hessian (lazy_hessian > 0): an iterate reached by a full step that cut the residual by that
 // factor keeps the previous Hessian (a chord / Shamanskii step: its trial point was evaluated by
 // value_gradient(), about half the cost of a Hessian pass for a learned energy); any other iterate
@@ -45,12 +44,6 @@ struct NewtonOptions {
     /// Per-component masses (kg; 0 on fixed components): the residual is then
     /// the mass-weighted velocity residual sqrt(sum g_i^2 / H_ii / sum m_i), m/s.
     VecX residual_mass;
-    /// With residual_mass: the masses of one part of the system (0 elsewhere; empty: none) whose own
-    /// residual, the same sum over that part alone, must meet the tolerance too: the residual is then
-    /// the larger of the two. A part that holds little of the mass but decides the motion (a Coulomb
-    /// floor's contact nodes, whose friction sets how far a granular flow runs out) is otherwise
-    /// averaged below the tolerance by the rest of the body.
-    VecX part_residual_mass;
     /// A failed line search throws NewtonError instead of ending the solve
     /// unconverged.
     bool throw_on_line_search_failure = false;

@@ -394,48 +394,6 @@ TEST(Newton, MassWeightedResidualIsTheEnergyNormOfTheJacobiCorrection) {
     EXPECT_THROW(minimize(chain, x0, options), std::invalid_argument);
 }
 
-// part_residual_mass: the same residual over one part of the system must meet the tolerance too. A
-// part holding 1% of the mass with all of the error is averaged below the tolerance by the rest (the
-// whole-system residual is a tenth of the part's), so without the part's own test the solve would
-// not start; with it, it goes on until the part's residual is below the tolerance.
-TEST(Newton, APartsOwnResidualMustMeetTheToleranceToo) {
-    Chain chain(10, 5);
-    VecX x = VecX::Zero(10), g, diagonal;
-    chain.value_gradient(x, g);
-    chain.prepare_hessian(x);
-    chain.hessian_diagonal(diagonal);
-    VecX mass = VecX::Constant(10, 99.0), part = VecX::Zero(10);
-    mass[4] = part[4] = 1.0;  // the part: component 4, 1% of the mass
-    NewtonOptions options;
-    options.residual_mass = mass;
-    options.max_iterations = 0;
-    const double whole = minimize(chain, x, options).initial_residual;
-    options.part_residual_mass = part;
-    VecX x0 = x;
-    const NewtonStats at_start = minimize(chain, x0, options);
-    const double part_residual = std::abs(g[4]) / std::sqrt(diagonal[4]);
-    EXPECT_NEAR(at_start.initial_residual, std::max(whole, part_residual), 1e-14 * part_residual);
-    EXPECT_GT(part_residual, whole) << "the part's residual is the larger";
-
-    // A tolerance between the two: met by the whole at the start, not by the part.
-    options.max_iterations = 50;
-    options.tolerance = 0.5 * (whole + part_residual);
-    options.part_residual_mass.resize(0);
-    x0 = x;
-    EXPECT_EQ(minimize(chain, x0, options).iterations, 0) << "the whole alone: met at the start";
-    options.part_residual_mass = part;
-    x0 = x;
-    const NewtonStats s = minimize(chain, x0, options);
-    EXPECT_GT(s.iterations, 0);
-    EXPECT_TRUE(s.converged);
-    chain.value_gradient(x0, g);
-    chain.prepare_hessian(x0);
-    chain.hessian_diagonal(diagonal);
-    EXPECT_LE(std::abs(g[4]) / std::sqrt(diagonal[4]), options.tolerance);
-    options.part_residual_mass = VecX::Ones(3);
-    EXPECT_THROW(minimize(chain, x0, options), std::invalid_argument);
-}
-
 /// An objective whose gradient has the wrong sign: every Newton direction goes uphill.
 class WrongGradient : public Chain {
 public:
