@@ -956,8 +956,8 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionPassesEndWhereATightSolveDoes) 
 // the all-zero network (the step is then the exact elastoplastic one). With the Auto Hessian's
 // non-associative tangent damped by the paper's w = 1, Newton converged at ~0.7 per iteration and the
 // solves its tolerance stopped were biased toward v*, a bias the momentum carries over the flow
-// (ImplicitOptions::tangent_damping, docs/solver.md). Measured (growth of the rms spread): 0.114223 m
-// at 1e-5 m/s, 0.114277 m (+0.05%) by default, 0.112214 m (-1.8%) with w = 1.
+// (ImplicitOptions::tangent_damping, docs/solver.md). Measured (growth of the rms spread): 0.114221 m
+// at 1e-5 m/s, 0.114392 m (+0.15%) by default, 0.112284 m (-1.7%) with w = 1.
 TEST(ImplicitTangentDamping, AFlowingColumnStoppedByTheToleranceEndsWhereATightSolveDoes) {
     constexpr int dim = 2;
     Scene scene = tiny_scene(scene_name<dim>("sand_column"));
