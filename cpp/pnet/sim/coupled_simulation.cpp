@@ -79,7 +79,8 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
                 context.push_back(scene.file + ": " + object.json_path + ".model");
             auto neural = std::make_unique<NeuralParticleEnergy<dim>>(models, mpm_.materials, context,
                                                                       settings.implicit.regularizer_weight,
-                                                                      settings.implicit.template neural_hessian<dim>(), settings.implicit.tangent_damping);
+                                                                      settings.implicit.template neural_hessian<dim>(),
+                                                                      settings.implicit.tangent_damping);
             for (std::size_t k = 0; k < scene.objects.size(); ++k)
                 return_maps.push_back(
                     settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);

@@ -250,7 +250,8 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
                 }
             auto neural = std::make_unique<NeuralParticleEnergy<dim>>(models, s.materials, context,
                                                                     settings.implicit.regularizer_weight,
-                                                 settings.implicit.neural_hessian<dim>(), settings.implicit.tangent_damping);
+                                                 settings.implicit.neural_hessian<dim>(),
+                                                 settings.implicit.tangent_damping);
             built_.system.return_maps.clear();
             for (std::size_t k = 0; k < scene.meshes.size(); ++k)
                 built_.system.return_maps.push_back(

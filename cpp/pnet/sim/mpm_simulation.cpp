@@ -60,7 +60,8 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
         for (const SceneObject& object : scene.objects) context.push_back(scene.file + ": " + object.json_path + ".model");
         auto energy = std::make_unique<NeuralParticleEnergy<dim>>(models, system_.materials, context,
                                                                   settings.implicit.regularizer_weight,
-                                                 settings.implicit.neural_hessian<dim>(), settings.implicit.tangent_damping);
+                                                 settings.implicit.neural_hessian<dim>(),
+                                                 settings.implicit.tangent_damping);
         std::vector<const LearnedReturnMap<dim>*> return_maps;
         for (std::size_t k = 0; k < scene.objects.size(); ++k)
             return_maps.push_back(settings.implicit.learned_return_map ? energy->object_energy(k).learned_return_map()
