@@ -62,13 +62,12 @@ def test_shipped_model_matches_manifest_and_is_exact_at_F0(name):
 
 def test_parametric_model_beside_its_dedicated_one():
     """Issue 36's targets, on MANIFEST's figures (1e5 held-out samples): at the dedicated model's material the
-    parametric models' errors are within 1.5x of the dedicated models' where that target is met (since
-    metal_2d's fine-tuning, metal_param_2d's 1.6x is not: issue 36; it is held to 2x), and
-    no bin of any parametric model's parameter box is worse than 2x the box's mean."""
+    parametric models' errors are within 1.5x of the dedicated models', and no bin of any parametric
+    model's parameter box is worse than 2x the box's mean."""
     entries = manifest()
     for name, dedicated, reference, ratio in (("sand_param_2d", "sand_2d", [30.0, 0.3], 1.5),
                                               ("snow_param_2d", "snow_2d", [45.0, 0.5, 0.3, 0.2], 1.5),
-                                              ("metal_param_2d", "metal_2d", [0.1, 0.3], 2.0),
+                                              ("metal_param_2d", "metal_2d", [0.1, 0.3], 1.5),
                                               ("snow_param_3d", "snow_3d", [45.0, 0.5, 0.3, 0.2], 1.5),
                                               ("sand_param_3d", "sand_3d", [30.0, 0.3], 1.5)):
         errors = entries[f"{name}.pt"]["errors"]
