@@ -38,7 +38,9 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
         // The tangent for every material (docs/solver.md, measured); w = 0 for associative flow,
         // where the tangent is the exact Jacobian, and a damping otherwise.
         hessian_kind_ = Options::Hessian::Tangent;
-        w_ = model.metadata.material.plasticity == PlasticityModel::VonMises ? 0.0 : options.tangent_damping;
+        const bool associative = model.metadata.material.plasticity == PlasticityModel::VonMises;
+        w_ = associative ? 0.0 : options.tangent_damping;
+        keep_skew_ = !associative && options.nonsymmetric_tangent;
     }
     if (!(std::isfinite(options.youngs_modulus) && options.youngs_modulus > 0.0))
         throw std::invalid_argument(model.path + ": Young's modulus must be a positive number of Pa, got " +
@@ -234,8 +236,8 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
             for (std::ptrdiff_t p = 0; p < count; ++p) {
                 Vec<dim> Z[k];
                 for (int j = 0; j < k; ++j) Z[j] = returned[p * k + j].Sigma;
-                Tensor4<dim> H =
-                    elastoplastic_tangent_from<dim>(svd[p], training_material_.elasticity(), Z, project_psd);
+                Tensor4<dim> H = elastoplastic_tangent_from<dim>(svd[p], training_material_.elasticity(), Z,
+                                                                 project_psd, keep_skew_);
                 H.diagonal().array() += wmu;
                 hessian[p] = E_ * H;
             }
@@ -245,8 +247,8 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
 #pragma omp parallel for schedule(static) if (count >= 64)
         for (std::ptrdiff_t p = 0; p < count; ++p) {
             const PolarSVD<dim> svd = at_F0 ? svd0_[p] : clamped_svd<dim>(F[p]);
-            Tensor4<dim> H = training_material_.elastoplastic_tangent(svd, hardening_[p], project_psd);
-            H.diagonal().array() += wmu;  // PSD plus w mu I stays PSD
+            Tensor4<dim> H = training_material_.elastoplastic_tangent(svd, hardening_[p], project_psd, keep_skew_);
+            H.diagonal().array() += wmu;  // PSD plus w mu I stays PSD (the skew part adds nothing to x.Hx)
             hessian[p] = E_ * H;
         }
         return;

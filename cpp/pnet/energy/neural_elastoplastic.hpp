@@ -72,6 +72,12 @@ public:
         /// vanishes); the paper's w = 1 damped the steps so much that a solve stopped by its tolerance
         /// was still biased toward v* (docs/solver.md, measured).
         double tangent_damping = kDefaultTangentDamping;
+        /// Auto, non-associative flow: keep the tangent's skew part (elastoplastic_tangent.hpp), so
+        /// that the Hessian is the residual's Jacobian (its symmetric part projected to PSD) and no
+        /// longer symmetric: for solvers that take one (Objective::hessian_symmetric(); the MPM
+        /// particle energies). The symmetrized tangent made Newton chatter on stiff granular flow
+        /// (docs/solver.md, measured).
+        bool nonsymmetric_tangent = false;
     };
 
     /// Throws std::invalid_argument (naming the model file) unless `model` is a
@@ -91,7 +97,7 @@ public:
     void value(const Mat<dim>* F, double* psi) const;
     /// Psi and grad_F Psi per particle.
     void value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const;
-    /// Psi, grad_F Psi and the d^2 x d^2 Hessian per particle (symmetric),
+    /// Psi, grad_F Psi and the d^2 x d^2 Hessian per particle (symmetric unless symmetric_hessian() is false),
     /// projected to PSD when project_psd.
     void value_gradient_hessian(const Mat<dim>* F, double* psi, Mat<dim>* gradient, Tensor4<dim>* hessian,
                                 bool project_psd) const;
@@ -106,6 +112,9 @@ public:
     double mu() const { return E_ * mu_train_; }
     /// The Hessian Newton gets (Options::hessian, Auto resolved) and the regularizer weight w.
     typename Options::Hessian hessian_kind() const { return hessian_kind_; }
+    /// Whether the Hessian is symmetric: false only for the tangent with its skew part
+    /// (Options::nonsymmetric_tangent).
+    bool symmetric_hessian() const { return !keep_skew_; }
     /// An extra proximal weight added to w (value, gradient and Hessian), Newton's damping
     /// (Objective::set_damping); 0 by default.
     void set_damping(double lambda) { damping_ = lambda; }
@@ -127,6 +136,7 @@ private:
     double damping_ = 0.0;  // set_damping(): added to w_
     double mu_train_;  // shear modulus at the training E
     typename Options::Hessian hessian_kind_;  // Network or Tangent (Auto resolved)
+    bool keep_skew_ = false;                  // the tangent keeps its skew part
 
     std::vector<double> hardening_;  // per particle, the state (not the network's clamped input)
 

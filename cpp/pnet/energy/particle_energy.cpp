@@ -46,10 +46,13 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
         const MaterialDescription& scene = materials[k].description();
         Group group;
         try {
+            // The forms that sum these energies (MPM particles, FEM elements) take non-symmetric
+            // Hessians, so the tangent of non-associative flow keeps its skew part.
             group.energy = std::make_unique<NeuralElastoplasticEnergy<dim>>(
                 model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight,
                                                                         /*relative_to_reference=*/true, hessian,
-                                                                        scene, tangent_damping});
+                                                                        scene, tangent_damping,
+                                                                        /*nonsymmetric_tangent=*/true});
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(context[k] + ": " + e.what());
         }

@@ -53,6 +53,12 @@ public:
     /// Whether the Hessian is the consistent tangent of the elastoplastic stress for every point
     /// (NeuralElastoplasticEnergy::Options::Hessian::Tangent) rather than the energy's own.
     virtual bool tangent_hessian() const { return false; }
+
+    /// Whether evaluate()'s Hessians are symmetric. The learned energies' tangent keeps its skew part
+    /// for non-associative flow (NeuralElastoplasticEnergy::Options::nonsymmetric_tangent), so that
+    /// Newton steps with the residual's Jacobian: the forms that sum these Hessians report it
+    /// (Form::symmetric_hessian()), and Newton then solves with BiCGSTAB.
+    virtual bool symmetric_hessian() const { return true; }
 };
 
 /// psi(F) of the elasticity model of each particle's material.
@@ -108,6 +114,11 @@ public:
         for (const Group& g : objects_)
             if (g.energy->hessian_kind() != NeuralElastoplasticEnergy<dim>::Options::Hessian::Tangent) return false;
         return !objects_.empty();
+    }
+    bool symmetric_hessian() const override {
+        for (const Group& g : objects_)
+            if (!g.energy->symmetric_hessian()) return false;
+        return true;
     }
 
 private:

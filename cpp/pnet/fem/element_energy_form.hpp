@@ -44,6 +44,7 @@ public:
     void add_hessian_diagonal(VecX& diagonal) const override;
     void add_hessian_block_diagonal(VecX& blocks) const override;
     void add_hessian_triplets(std::vector<Triplet>& triplets) const override;
+    bool symmetric_hessian() const override { return energy_.symmetric_hessian(); }
     void add_hessian_values(double* values, const int* slots) const override;
 
     /// Project the element Hessians to PSD (default; false: the exact Hessian, for derivative checks).

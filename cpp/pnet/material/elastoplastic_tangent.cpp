@@ -39,49 +39,64 @@ void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil) {
 }
 
 template <int dim>
-Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd) {
+Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd,
+                                             bool keep_skew) {
     const Vec<dim>& S = svd.Sigma;
     const Vec<dim> eps = S.array().log().matrix();
     const Vec<dim>& t = tau[0];
     Mat<dim> dtau;
     for (int j = 0; j < dim; ++j) dtau.col(j) = (tau[1 + 2 * j] - tau[2 + 2 * j]) / (2.0 * kDelta);
+    const Mat<dim> skew = 0.5 * (dtau - dtau.transpose());
     dtau = 0.5 * (dtau + dtau.transpose()).eval();
     auto quotient = [&](int i, int j) {
         if (std::abs(eps[i] - eps[j]) > kCloseLog) return (t[i] - t[j]) / (S[i] - S[j]);
         // The limit Sigma_i -> Sigma_j: d(tau_i - tau_j)/d eps_i / Sigma_i.
         return (dtau(i, i) - dtau(j, i)) / (0.5 * (S[i] + S[j]));
     };
-    return isotropic_dPdF<dim>(svd, t, dtau, quotient, project_psd);
+    Tensor4<dim> T = isotropic_dPdF<dim>(svd, t, dtau, quotient, project_psd);
+    if (keep_skew) {
+        // The skew part of d^2 psi / d Sigma_i d Sigma_j (the -delta_ij tau_i term is symmetric), on the
+        // Sigma block in the rotated basis (isotropic_dPdF's), and back to F space: still skew.
+        Tensor4<dim> A = Tensor4<dim>::Zero();
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) A(i * dim + i, j * dim + j) = skew(i, j) / (S[i] * S[j]);
+        Tensor4<dim> W;
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j)
+                W.col(i * dim + j) = flatten<dim>(Mat<dim>(svd.U.col(i) * svd.V.col(j).transpose()));
+        T.noalias() += W * A * W.transpose();
+    }
+    return T;
 }
 
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity, const Vec<dim>* Z,
-                                        bool project_psd) {
+                                        bool project_psd, bool keep_skew) {
     Vec<dim> tau[kTangentStencil<dim>];
     for (int k = 0; k < kTangentStencil<dim>; ++k) tau[k] = elasticity.tau(Z[k]);
-    return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd);
+    return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd, keep_skew);
 }
 
 template <int dim>
 Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity,
-                                   const PrincipalReturnMap<dim>& return_map, bool project_psd) {
+                                   const PrincipalReturnMap<dim>& return_map, bool project_psd, bool keep_skew) {
     Vec<dim> stencil[kTangentStencil<dim>], Z[kTangentStencil<dim>];
     tangent_stencil<dim>(svd.Sigma, stencil);
     for (int k = 0; k < kTangentStencil<dim>; ++k) Z[k] = return_map(stencil[k]);
-    return elastoplastic_tangent_from<dim>(svd, elasticity, Z, project_psd);
+    return elastoplastic_tangent_from<dim>(svd, elasticity, Z, project_psd, keep_skew);
 }
 
 template Tensor4<2> elastoplastic_tangent<2>(const PolarSVD<2>&, const Elasticity<2>&, const PrincipalReturnMap<2>&,
-                                             bool);
+                                             bool, bool);
 template Tensor4<3> elastoplastic_tangent<3>(const PolarSVD<3>&, const Elasticity<3>&, const PrincipalReturnMap<3>&,
-                                             bool);
+                                             bool, bool);
 template void tangent_stencil<2>(const Vec<2>&, Vec<2>*);
 template void tangent_stencil<3>(const Vec<3>&, Vec<3>*);
 template void tangent_strain_stencil<2>(const Vec<2>&, Vec<2>*);
 template void tangent_strain_stencil<3>(const Vec<3>&, Vec<3>*);
-template Tensor4<2> elastoplastic_tangent_of_stress<2>(const PolarSVD<2>&, const Vec<2>*, bool);
-template Tensor4<3> elastoplastic_tangent_of_stress<3>(const PolarSVD<3>&, const Vec<3>*, bool);
-template Tensor4<2> elastoplastic_tangent_from<2>(const PolarSVD<2>&, const Elasticity<2>&, const Vec<2>*, bool);
-template Tensor4<3> elastoplastic_tangent_from<3>(const PolarSVD<3>&, const Elasticity<3>&, const Vec<3>*, bool);
+template Tensor4<2> elastoplastic_tangent_of_stress<2>(const PolarSVD<2>&, const Vec<2>*, bool, bool);
+template Tensor4<3> elastoplastic_tangent_of_stress<3>(const PolarSVD<3>&, const Vec<3>*, bool, bool);
+template Tensor4<2> elastoplastic_tangent_from<2>(const PolarSVD<2>&, const Elasticity<2>&, const Vec<2>*, bool, bool);
+template Tensor4<3> elastoplastic_tangent_from<3>(const PolarSVD<3>&, const Elasticity<3>&, const Vec<3>*, bool, bool);
 
 }  // namespace pnet

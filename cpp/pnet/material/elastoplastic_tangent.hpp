@@ -9,7 +9,14 @@
 // in general: Cam-Clay's scalar solve, a network); the rotational part comes from the difference
 // quotients (tau_i - tau_j) / (Sigma_i - Sigma_j), exactly as for a hyperelastic energy
 // (isotropic_dPdF). Non-associative flow (Drucker-Prager, Cam-Clay) makes dtau_Z/deps
-// non-symmetric: it is symmetrized. For StVK-Hencky with von Mises this is the Hessian of the ECI
+// non-symmetric. Its symmetric part gives the tangent (projected to PSD on request); with keep_skew
+// its skew part is added back, unprojected:
+//
+//   T = S + K,   S = [the tangent of sym(dtau_Z/deps)] (PSD when projected),   K = -K^T,
+//
+// which is the full Jacobian wherever the projection changed nothing, and positive real when S is
+// PSD (x . T x = x . S x >= 0), so that a Newton direction solved with it still descends
+// (docs/solver.md, "Which Hessian"). For StVK-Hencky with von Mises this is the Hessian of the ECI
 // energy (AnalyticElastoplasticEnergy) up to the differencing error.
 //
 // It is what Newton needs on the true residual R(v) of an elastoplastic step (the learned energy's
@@ -28,11 +35,12 @@ namespace pnet {
 template <int dim>
 using PrincipalReturnMap = std::function<Vec<dim>(const Vec<dim>& Sigma)>;
 
-/// dPtilde/dF (row-major vec(F) basis) at the clamped polar SVD `svd`, projected to positive
-/// semi-definite when project_psd. Costs 2d + 1 return mappings.
+/// dPtilde/dF (row-major vec(F) basis) at the clamped polar SVD `svd`: its symmetric part,
+/// projected to positive semi-definite when project_psd, plus its skew part when keep_skew. Costs
+/// 2d + 1 return mappings.
 template <int dim>
 Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity,
-                                   const PrincipalReturnMap<dim>& return_map, bool project_psd);
+                                   const PrincipalReturnMap<dim>& return_map, bool project_psd, bool keep_skew = false);
 
 /// The same in two halves, for return mappings evaluated in batches (a learned one): the 2d + 1
 /// singular values at which the return mapping is needed (Sigma, then Sigma e^{+-delta} along each
@@ -43,7 +51,7 @@ template <int dim>
 void tangent_stencil(const Vec<dim>& Sigma, Vec<dim>* stencil);
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elasticity<dim>& elasticity, const Vec<dim>* Z,
-                                        bool project_psd);
+                                        bool project_psd, bool keep_skew = false);
 
 /// The same stencil in Hencky strain, log Sigma + (0, +-delta e_j), for return mappings that work
 /// in strain (Material::elastoplastic_tangent: no log or exp per evaluation), and the tangent from
@@ -51,6 +59,7 @@ Tensor4<dim> elastoplastic_tangent_from(const PolarSVD<dim>& svd, const Elastici
 template <int dim>
 void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil);
 template <int dim>
-Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd);
+Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd,
+                                             bool keep_skew = false);
 
 }  // namespace pnet

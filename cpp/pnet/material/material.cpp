@@ -237,8 +237,8 @@ Mat<dim> Material<dim>::elastoplastic_stress(const PolarSVD<dim>& svd, double ha
 }
 
 template <int dim>
-Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening,
-                                                  bool project_psd) const {
+Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening, bool project_psd,
+                                                  bool keep_skew) const {
     constexpr int k = kTangentStencil<dim>;
     Vec<dim> strain[k], tau[k];
     tangent_strain_stencil<dim>(svd.Sigma.array().log().matrix(), strain);
@@ -259,7 +259,7 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
             }
         },
         plasticity_);
-    return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd);
+    return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd, keep_skew);
 }
 
 template <int dim>

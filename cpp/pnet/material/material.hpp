@@ -86,7 +86,8 @@ public:
     Mat<dim> elastoplastic_stress(const PolarSVD<dim>& svd, double hardening) const;
     /// Its consistent tangent dPtilde/dF at the clamped SVD of F, the hardening held at h
     /// (material/elastoplastic_tangent.hpp), the return mapping evaluated in Hencky strain.
-    Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening, bool project_psd) const;
+    Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening, bool project_psd,
+                                       bool keep_skew = false) const;
 
     /// The return mapping in F space: F_elastic = U diag(Z) V^T.
     struct Projection {

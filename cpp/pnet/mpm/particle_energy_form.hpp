@@ -49,6 +49,7 @@ public:
     /// Node-pair blocks summed first (in the colour order, so the result does not depend on the
     /// thread count): (2 dx + 1)^d neighbours per node, one triplet per entry between free components.
     void add_hessian_triplets(std::vector<Triplet>& triplets) const override;
+    bool symmetric_hessian() const override { return energy_.symmetric_hessian(); }
 
     /// Project the particles' Hessians to PSD (default; false gives the exact Hessian of E, for
     /// derivative checks).

@@ -63,6 +63,7 @@ public:
     bool has_preconditioner() const override { return objective_.has_preconditioner(); }
     void apply_preconditioner(const VecX& r, VecX& z) const override { objective_.apply_preconditioner(r, z); }
     const SparseMatrix* hessian_matrix() const override { return objective_.hessian_matrix(); }
+    bool hessian_symmetric() const override { return objective_.hessian_symmetric(); }
     double max_step(const VecX& x, const VecX& d) override { return objective_.max_step(x, d); }
     bool set_damping(double lambda) override { return objective_.set_damping(lambda); }
 

@@ -5,8 +5,9 @@
 // minimizes; MPM, FEM and coupling are problems that differ only in which forms they hold.
 //
 // A form sees the problem's whole vector of unknowns x and adds its share: its value, its
-// gradient, its Hessian (PSD-projected) as a matrix-free product, a diagonal, d x d node blocks
-// and triplets for an assembled solve, and the largest step its own constraints allow (CCD).
+// gradient, its Hessian (PSD-projected, or with a PSD symmetric part where symmetric_hessian() is
+// false) as a matrix-free product, a diagonal, d x d node blocks and triplets for an assembled
+// solve, and the largest step its own constraints allow (CCD).
 // Components the problem holds fixed (Dirichlet) get no gradient (the problem masks it); each
 // form leaves their Hessian rows and columns out itself, except inertia, which keeps its mass
 // there, so that a fixed component's row is m_i d_i and Newton never moves it.
@@ -53,6 +54,9 @@ public:
         add_hessian_triplets(triplets);
         for (std::size_t k = 0; k < triplets.size(); ++k) values[slots[k]] += triplets[k].value();
     }
+    /// Whether H is symmetric (a learned energy's tangent of non-associative flow is not:
+    /// ParticleEnergy::symmetric_hessian()). Its symmetric part is always PSD.
+    virtual bool symmetric_hessian() const { return true; }
     /// Whether the triplets' pattern changes from one Newton iterate to the next (contact pairs
     /// come and go): the problem keeps a fixed pattern for the others and adds these apart.
     virtual bool changing_pattern() const { return false; }

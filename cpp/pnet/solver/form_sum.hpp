@@ -44,6 +44,9 @@ public:
     void add_hessian_triplets(std::vector<Triplet>& triplets) const override {
         for (const Form* f : forms_) f->add_hessian_triplets(triplets);
     }
+    bool symmetric_hessian() const override {
+        return std::all_of(forms_.begin(), forms_.end(), [](const Form* f) { return f->symmetric_hessian(); });
+    }
     bool changing_pattern() const override {
         return std::any_of(forms_.begin(), forms_.end(), [](const Form* f) { return f->changing_pattern(); });
     }

@@ -102,6 +102,18 @@ std::string where(const std::string& context, int iteration, double residual) {
     return text;
 }
 
+/// The symmetric parts of consecutive b x b row-major blocks, in place: the block-Jacobi
+/// preconditioner of a Hessian with a skew part (its diagonal blocks' symmetric parts are those of
+/// the PSD part S plus inertia).
+void symmetrize_blocks(VecX& blocks, int b) {
+    for (Eigen::Index k = 0; k + b * b <= blocks.size(); k += b * b)
+        for (int i = 0; i < b; ++i)
+            for (int j = i + 1; j < b; ++j) {
+                const double mean = 0.5 * (blocks[k + i * b + j] + blocks[k + j * b + i]);
+                blocks[k + i * b + j] = blocks[k + j * b + i] = mean;
+            }
+}
+
 }  // namespace
 
 double newton_residual(const Objective& objective, const VecX& g, const NewtonOptions& options) {
@@ -130,12 +142,14 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     // Work vectors: sized once per solve; PCG keeps its own between calls.
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;
     PcgWorkspace pcg;
+    BicgstabWorkspace bicgstab;
     Preconditioner preconditioner;
     std::unique_ptr<NewtonWorkspace> local;
     if (!workspace) workspace = (local = std::make_unique<NewtonWorkspace>()).get();
     DirectSolver& direct = workspace->impl().direct;
     const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
     const bool lazy = options.lazy_hessian > 0.0;
+    const bool symmetric = objective.hessian_symmetric();
     int ichol_hessians = -1;  // the Hessian count at the incomplete Cholesky factorization
     // Every iterate's Hessian is prepared before its direction is computed:
     // at the start by value_gradient_hessian (or kept, keep_prepared_hessian),
@@ -170,8 +184,11 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             stats.converged = true;
             break;
         }
-        const SparseMatrix* H =
-            options.linear_solver == NewtonOptions::LinearSolver::Cholesky ? objective.hessian_matrix() : nullptr;
+        // A Hessian with a skew part (Objective::hessian_symmetric) has no Cholesky factorization and
+        // no CG: BiCGSTAB with the same preconditioners.
+        const SparseMatrix* H = options.linear_solver == NewtonOptions::LinearSolver::Cholesky && symmetric
+                                    ? objective.hessian_matrix()
+                                    : nullptr;
         if (H && direct.factorize(*H, stats)) {
             direct.solve(-g, d);
         } else {
@@ -185,13 +202,23 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 }
             } else if (block > 1) {
                 objective.hessian_block_diagonal(blocks);
+                if (!symmetric) symmetrize_blocks(blocks, block);  // M must stay symmetric positive definite
                 preconditioner.set_block_jacobi(blocks, block);
             } else {
                 preconditioner.set_jacobi(diagonal);
             }
             const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
-            const PcgResult cg = solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, pcg);
+            const PcgResult cg =
+                symmetric ? solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, pcg)
+                          : solve_bicgstab(objective, -g, preconditioner, d, forcing, options.max_cg_iterations,
+                                           bicgstab);
             stats.cg_iterations += cg.iterations;
+            if (!symmetric && !(g.dot(d) < 0.0)) {
+                // The exact solution descends (Objective::hessian_symmetric); an inexact one may not:
+                // the preconditioned gradient step instead (M is symmetric positive definite).
+                preconditioner.apply(-g, d);
+                ++stats.nonsymmetric_fallbacks;
+            }
         }
         const double slope = g.dot(d);
         if (!(slope < 0.0))

@@ -3,7 +3,8 @@
 // search on E: the one optimization loop of every implicit integrator
 // (docs/methods.md; Gast et al. 2015, Li et al. 2020). Per iteration:
 //   g = grad E(x); stop if the residual (below) <= tolerance;
-//   H d = -g by PCG (Jacobi, block Jacobi, or the objective's own preconditioner) to the relative tolerance
+//   H d = -g by PCG (Jacobi, block Jacobi, or the objective's own preconditioner; BiCGSTAB where H has a
+//   skew part, Objective::hessian_symmetric) to the relative tolerance
 //   min(cg_tolerance, sqrt(|g| / |g0|)) (inexact Newton: loose far from the solution, tighter as it converges); alpha =
 //   1, halved (at most max_line_search times) until E(x + alpha d) <= E(x) + c alpha g.d (Armijo). The full step is
 //   evaluated with value_gradient_hessian(), so an accepted full step costs one energy pass and arrives with its
@@ -114,6 +115,9 @@ struct NewtonStats {
     int factorizations = 0, analyses = 0;  // Cholesky: numeric factorizations, symbolic analyses
     int rebases = 0;                       // Objective::rebase calls that changed the objective
     int dampings = 0;                      // rebased solves: iterates where the damping grew
+    /// Non-symmetric Hessians (Objective::hessian_symmetric): iterations whose inexact BiCGSTAB
+    /// direction did not descend and took the preconditioned gradient step instead.
+    int nonsymmetric_fallbacks = 0;
 };
 
 /// A solve that cannot go on: non-finite energy or gradient at the start or

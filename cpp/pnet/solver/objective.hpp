@@ -40,8 +40,15 @@ public:
         return e;
     }
 
-    /// out = H d with H the PSD Hessian prepared at the last prepare_hessian().
+    /// out = H d with H the PSD Hessian prepared at the last prepare_hessian() (where
+    /// hessian_symmetric() is false: H = S + K with S symmetric PSD and K skew).
     virtual void hessian_multiply(const VecX& d, VecX& out) const = 0;
+
+    /// Whether H is symmetric. An objective whose H keeps a skew part (the Jacobian of a residual
+    /// that is not a gradient: non-associative plastic flow) says false; Newton then solves H d = -g
+    /// with BiCGSTAB instead of PCG or Cholesky. d . H d = d . S d >= 0 still, so the exact solution
+    /// is a descent direction (g . d = -y . S y with y = H^-1 g).
+    virtual bool hessian_symmetric() const { return true; }
 
     /// diag(H), for the Jacobi preconditioner; entries must be > 0.
     virtual void hessian_diagonal(VecX& diagonal) const = 0;

@@ -1,7 +1,9 @@
 #include "pnet/solver/pcg.hpp"
 
-#include <Eigen/Cholesky>
+#include <algorithm>
 #include <cmath>
+
+#include <Eigen/Cholesky>
 #include <stdexcept>
 
 namespace pnet {
@@ -154,6 +156,63 @@ PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditio
                     double relative_tolerance, int max_iterations) {
     PcgWorkspace work;
     return solve_pcg(objective, b, preconditioner, d, relative_tolerance, max_iterations, work);
+}
+
+PcgResult solve_bicgstab(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
+                         double relative_tolerance, int max_iterations, BicgstabWorkspace& work) {
+    PcgResult result;
+    const Eigen::Index n = b.size();
+    d.setZero(n);
+    const double b_norm = b.norm();
+    if (b_norm == 0.0) {
+        result.converged = true;
+        return result;
+    }
+    VecX &r = work.r, &r0 = work.r0, &p = work.p, &v = work.v, &s = work.s, &t = work.t, &y = work.y, &z = work.z;
+    r = b;
+    r0 = b;
+    p.setZero(n);
+    v.setZero(n);
+    s.resize(n);
+    t.resize(n);
+    y.resize(n);
+    z.resize(n);
+    double rho = 1.0, alpha = 1.0, omega = 1.0;
+    int products = 0;
+    while (products + 2 <= std::max(max_iterations, 2)) {
+        const double rho_next = r0.dot(r);
+        if (rho_next == 0.0 || omega == 0.0) break;  // breakdown
+        p = r + (rho_next / rho) * (alpha / omega) * (p - omega * v);
+        rho = rho_next;
+        preconditioner.apply(p, y);
+        objective.hessian_multiply(y, v);
+        const double r0v = r0.dot(v);
+        if (r0v == 0.0) break;
+        alpha = rho / r0v;
+        s = r - alpha * v;
+        preconditioner.apply(s, z);
+        objective.hessian_multiply(z, t);
+        products += 2;
+        const double tt = t.squaredNorm();
+        omega = tt > 0.0 ? t.dot(s) / tt : 0.0;
+        d += alpha * y + omega * z;
+        r = s - omega * t;
+        result.iterations = products;
+        result.relative_residual = r.norm() / b_norm;
+        if (!std::isfinite(result.relative_residual)) {
+            d.setZero(n);
+            break;
+        }
+        if (result.relative_residual <= relative_tolerance) {
+            result.converged = true;
+            break;
+        }
+    }
+    if (d.squaredNorm() == 0.0) {  // never return a zero step
+        preconditioner.apply(b, z);
+        d = z * (b.dot(z) / std::max(z.squaredNorm(), 1e-300));
+    }
+    return result;
 }
 
 }  // namespace pnet

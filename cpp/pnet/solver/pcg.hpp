@@ -1,6 +1,7 @@
 #pragma once
 // Matrix-free preconditioned conjugate gradients for H d = b with H symmetric
-// positive semi-definite (Objective::hessian_multiply), preconditioned by the
+// positive semi-definite (Objective::hessian_multiply), and BiCGSTAB for an H with a
+// skew part (Objective::hessian_symmetric()), preconditioned by the
 // inverse of diag(H) (Jacobi) or of its b x b diagonal blocks (block Jacobi:
 // for MPM the d x d coupling of a node's velocity components), or an
 // incomplete Cholesky factorization of the assembled Hessian.
@@ -67,5 +68,19 @@ PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditio
                     double relative_tolerance, int max_iterations, PcgWorkspace& work);
 PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
                     double relative_tolerance, int max_iterations);
+
+/// BiCGSTAB's work vectors (van der Vorst 1992), kept between solves.
+struct BicgstabWorkspace {
+    VecX r, r0, p, v, s, t, y, z;
+};
+
+/// Solves H d = b for an H that is not symmetric (Objective::hessian_symmetric() false: S + K, S
+/// symmetric PSD, K skew) by right-preconditioned BiCGSTAB, from d = 0 until |b - H d| <=
+/// relative_tolerance |b| or max_iterations. Each iteration costs two products with H, and
+/// PcgResult::iterations counts the products, so that the statistics compare with PCG's. A breakdown
+/// (a vanishing inner product) stops it with the last iterate (the first iterate, if none, is the
+/// preconditioned residual step M^-1 b scaled as PCG's first one).
+PcgResult solve_bicgstab(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
+                         double relative_tolerance, int max_iterations, BicgstabWorkspace& work);
 
 }  // namespace pnet

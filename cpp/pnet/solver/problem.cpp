@@ -59,6 +59,11 @@ void Problem<dim>::hessian_diagonal(VecX& diagonal) const {
 }
 
 template <int dim>
+bool Problem<dim>::hessian_symmetric() const {
+    return std::all_of(forms_.begin(), forms_.end(), [](const Form* f) { return f->symmetric_hessian(); });
+}
+
+template <int dim>
 void Problem<dim>::hessian_block_diagonal(VecX& blocks) const {
     const Eigen::Index nodes = size() / dim;
     blocks.setZero(nodes * dim * dim);

@@ -35,6 +35,7 @@ public:
     int hessian_block_size() const override { return dim; }
     void hessian_block_diagonal(VecX& blocks) const override;
     const SparseMatrix* hessian_matrix() const override { return assemble_ ? hessian_ : nullptr; }
+    bool hessian_symmetric() const override;
     double max_step(const VecX& x, const VecX& d) override;
 
     /// The Hessian prepared last as triplets, rows and columns shifted by `offset` (this problem
@@ -93,6 +94,7 @@ public:
     void add_hessian_diagonal(VecX& diagonal) const override;
     void add_hessian_block_diagonal(VecX& blocks) const override;
     void add_hessian_triplets(std::vector<Triplet>& triplets) const override;
+    bool symmetric_hessian() const override { return problem_.hessian_symmetric(); }
     double max_step(const VecX& x, const VecX& d) override;
 
 private:

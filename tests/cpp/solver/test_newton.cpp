@@ -125,6 +125,41 @@ TEST(Pcg, SolvesASymmetricPositiveDefiniteSystem) {
     }
 }
 
+// BiCGSTAB (Objective::hessian_symmetric false): H = S + K with S symmetric positive definite and K
+// skew, the shape of a tangent that keeps the skew part of non-associative flow; the products it
+// counts are two per iteration.
+TEST(Bicgstab, SolvesAPositiveRealNonSymmetricSystem) {
+    test::Random rng(5);
+    const int n = 40;
+    Eigen::MatrixXd M(n, n), N(n, n);
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            M(i, j) = rng.uniform(-1.0, 1.0);
+            N(i, j) = rng.uniform(-1.0, 1.0);
+        }
+    const Eigen::MatrixXd S = M * M.transpose() + n * Eigen::MatrixXd::Identity(n, n);
+    const Eigen::MatrixXd K = 4.0 * (N - N.transpose());
+    const Eigen::MatrixXd A = S + K;
+    ASSERT_GT((A - A.transpose()).norm(), 0.5 * A.norm()) << "a strongly non-symmetric test matrix";
+    VecX b(n);
+    for (int i = 0; i < n; ++i) b[i] = rng.uniform(-1.0, 1.0);
+    Quadratic q(A, b);
+    VecX d;
+    BicgstabWorkspace work;
+    const PcgResult r = solve_bicgstab(q, b, Preconditioner::jacobi(A.diagonal()), d, 1e-12, 400, work);
+    EXPECT_TRUE(r.converged);
+    EXPECT_EQ(r.iterations % 2, 0) << "two products per iteration";
+    EXPECT_LT((A * d - b).norm(), 1e-11 * b.norm());
+    EXPECT_NEAR(r.relative_residual, (A * d - b).norm() / b.norm(), 1e-11);
+    // PCG, which assumes symmetry, does not solve it.
+    VecX e;
+    solve_pcg(q, b, Preconditioner::jacobi(A.diagonal()), e, 1e-12, 400);
+    EXPECT_GT((A * e - b).norm(), 1e-6 * b.norm());
+    // With b = -g the solution descends: g . d = -(A d) . d = -d . S d < 0.
+    EXPECT_NEAR(b.dot(d), d.dot(S * d), 1e-9 * d.dot(S * d));
+    EXPECT_GT(b.dot(d), 0.0);
+}
+
 TEST(Pcg, BlockJacobiSolvesABlockDiagonalSystemInOneIteration) {
     test::Random rng(5);
     const int n = 12;
