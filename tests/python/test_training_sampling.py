@@ -172,3 +172,28 @@ def test_mixed_batches_are_half_paper_half_near():
     assert sampling_spec(m, "mixed").to_dict()["near_max_angle"] is not None
     with pytest.raises(ValueError, match="sampling"):
         sampling_spec(m, "fancy")
+
+
+def test_a_wide_share_draws_twice_the_perturbation_from_its_own_stream():
+    """wide_fraction f: the first n - round(f n) samples are the batch f = 0 draws with that size, the rest
+    have deps in WIDE_SCALE x the range (and reach beyond 1x); the model file's distribution records it."""
+    from plasticitynet.training import nondimensional_material, sample_batch, sampling_spec
+    from plasticitynet.training.sampling import WIDE_SCALE
+
+    m = nondimensional_material("snow", 3)
+    spec = sampling_spec(m, "mixed")
+    wide = spec.with_(wide_fraction=0.25)
+    b = sample_batch(wide, 400, seed=3, step=5)
+    base = sample_batch(spec, 300, seed=3, step=5)
+    assert len(b) == 400 and torch.equal(b.F[:300], base.F) and torch.equal(b.F0[:300], base.F0)
+    assert torch.equal(b.F, sample_batch(wide, 400, seed=3, step=5).F)
+    deps = (torch.log(b.Sigma) - torch.log(b.Sigma0)).abs().amax(dim=1)
+    r = spec.deps
+    assert float(deps[:300].max()) <= r
+    assert float(deps[300:].max()) <= WIDE_SCALE * r and float((deps[300:] > r).float().mean()) > 0.5
+    d = wide.to_dict()
+    assert d["wide_fraction"] == 0.25 and d["wide_deps_range"] == [-WIDE_SCALE * r, WIDE_SCALE * r]
+    assert "wide_fraction" not in spec.to_dict()
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match="wide_fraction"):
+            spec.with_(wide_fraction=bad)

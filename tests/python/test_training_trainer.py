@@ -203,6 +203,8 @@ def test_train_py_end_to_end(tmp_path):
         (["--material", "metal_nh_rm", "--dim", "2", "--energy-form", "global"], "--energy-form applies to energies"),
         (["--material", "sand", "--dim", "2", "--hidden", "64", "0"], "--hidden: 0 must be > 0"),
         (["--material", "sand", "--dim", "2", "--precision", "float16"], "invalid choice: 'float16'"),
+        (["--material", "sand", "--dim", "2", "--wide-fraction", "1"], "--wide-fraction: 1.0 must be in [0, 1)"),
+        (["--material", "metal_nh_rm", "--dim", "2", "--wide-fraction", "0.2"], "wide_fraction applies to energies"),
     ],
 )
 def test_bad_arguments_exit_2(args, message, capsys):

@@ -101,16 +101,20 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     stats.dt = dt;
     const std::size_t n = system_.mesh.nodes();
     // The potential is over v with x(v) = x^ + h v (fem_integrator.hpp): backward Euler x^ = x^n, h = dt;
-    // BDF2, once the state has history, x^ = (4 x^n - x^{n-1}) / 3, h = 2/3 dt.
+    // BDF2, once the state has history, x^ = ((1 + w)^2 x^n - w^2 x^{n-1}) / (1 + 2 w), h = beta dt with
+    // w = dt / dt_prev and beta = (1 + w) / (1 + 2 w): (4 x^n - x^{n-1}) / 3 and 2/3 dt at constant steps.
     const bool bdf2 = options_.time_integrator == "bdf2" && state.x_previous.size() == n;
-    const double h = bdf2 ? 2.0 / 3.0 * dt : dt;
+    const double omega = bdf2 && state.dt_previous > 0.0 ? dt / state.dt_previous : 1.0;
+    const double beta = (1.0 + omega) / (1.0 + 2.0 * omega);
+    const double a = (1.0 + omega) * (1.0 + omega) / (1.0 + 2.0 * omega), b = omega * omega / (1.0 + 2.0 * omega);
+    const double h = bdf2 ? beta * dt : dt;
     std::vector<Vec<dim>> x_hat = state.x;
     VecX at_start(dim * n), v_star(dim * n);  // at_start: the v that leaves x at x^n (0 for backward Euler)
     for (std::size_t i = 0; i < n; ++i) {
         Vec<dim> v_hat = state.v[i];
         if (bdf2) {
-            x_hat[i] = (4.0 * state.x[i] - state.x_previous[i]) / 3.0;
-            v_hat = (4.0 * state.v[i] - state.v_previous[i]) / 3.0;
+            x_hat[i] = a * state.x[i] - b * state.x_previous[i];
+            v_hat = a * state.v[i] - b * state.v_previous[i];
         }
         const Vec<dim> rest = bdf2 ? Vec<dim>((state.x[i] - x_hat[i]) / h) : Vec<dim>::Zero();
         at_start.template segment<dim>(dim * i) = rest;
@@ -242,6 +246,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     double max_speed = 0.0;
     state.x_previous = state.x;  // the history of the next step (BDF2)
     state.v_previous = state.v;
+    state.dt_previous = dt;
     for (std::size_t i = 0; i < n; ++i) {
         state.v[i] = v.template segment<dim>(dim * i);
         state.x[i] = x_hat[i] + h * state.v[i];

@@ -19,7 +19,9 @@
 // with v* = (4 v^n - v^{n-1}) / 3 + beta dt g and the step beta dt, beta = 2/3: its minimizer satisfies
 // v^{n+1} = v^ + beta dt a(x^{n+1}), x^{n+1} = x^ + beta dt v^{n+1}. A kinematic node's unknown is then
 // the v that puts it on its target; the intersection-free start is the v that leaves x at x^n. A step
-// without history (the first) is backward Euler.
+// without history (the first) is backward Euler. When dt differs from the last step's (a frame's
+// clipped last step), the variable-step coefficients: with omega = dt / dt_prev,
+// x^ = ((1 + omega)^2 x^n - omega^2 x^{n-1}) / (1 + 2 omega), the same for v^, beta = (1 + omega) / (1 + 2 omega).
 // Explicit (the ground truth): symplectic Euler with the elastic stress of the
 // admissible F^E and the same contact potential's force, then the same return
 // mapping; a step whose motion CCD finds intersecting is a blow-up.
@@ -70,6 +72,7 @@ struct FemState {
     // The previous step's start (BDF2's history; ImplicitOptions::time_integrator): written by every
     // implicit step, empty before the first one.
     std::vector<Vec<dim>> x_previous, v_previous;
+    double dt_previous = 0.0;  // that step's dt (0: unknown, read as the next step's)
 
     /// At rest in the mesh's rest shape, with each element's material's initial hardening.
     static FemState at_rest(const FemSystem<dim>& system);

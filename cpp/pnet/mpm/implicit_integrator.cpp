@@ -35,6 +35,7 @@ void ImplicitIntegrator<dim>::reset(const Particles<dim>&) {
     rate_.clear();
     previous_C_.clear();
     rate_C_.clear();
+    history_dt_ = 0.0;
 }
 
 template <int dim>
@@ -42,7 +43,7 @@ std::vector<Mat<dim>> ImplicitIntegrator<dim>::checkpoint_state() const {
     const std::size_t n = rate_.size();
     std::vector<Mat<dim>> state;
     if (n == 0) return state;
-    state.reserve(3 * n);
+    state.reserve(3 * n + 1);
     state.insert(state.end(), previous_C_.begin(), previous_C_.end());
     state.insert(state.end(), rate_C_.begin(), rate_C_.end());
     for (std::size_t p = 0; p < n; ++p) {
@@ -51,6 +52,9 @@ std::vector<Mat<dim>> ImplicitIntegrator<dim>::checkpoint_state() const {
         m.col(1) = rate_[p];
         state.push_back(m);
     }
+    Mat<dim> step = Mat<dim>::Zero();
+    step(0, 0) = history_dt_;
+    state.push_back(step);
     return state;
 }
 
@@ -58,7 +62,16 @@ template <int dim>
 void ImplicitIntegrator<dim>::restore_checkpoint_state(std::vector<Mat<dim>> state) {
     reset({});
     if (state.empty()) return;
-    if (state.size() % 3 != 0) throw std::invalid_argument("implicit integrator state: expected 3 n matrices (BDF2 history)");
+    // 3 n + 1 matrices; 3 n from before the last step's dt was kept (taken as the next step's then).
+    if (state.size() % 3 == 1) {
+        history_dt_ = state.back()(0, 0);
+        state.pop_back();
+        if (!(history_dt_ > 0.0) || !std::isfinite(history_dt_))
+            throw std::invalid_argument("implicit integrator state: the last step's dt is " +
+                                        std::to_string(history_dt_) + ", expected a number > 0 (BDF2 history)");
+    }
+    if (state.size() % 3 != 0)
+        throw std::invalid_argument("implicit integrator state: expected 3 n + 1 matrices (BDF2 history)");
     const std::size_t n = state.size() / 3;
     previous_C_.assign(state.begin(), state.begin() + n);
     rate_C_.assign(state.begin() + n, state.begin() + 2 * n);
@@ -89,7 +102,10 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         potential_.grid_field(history_grid_, history_u_);
         field_to_grid<dim>(history_grid_, particles, previous_v_, previous_C_, nullptr);
         potential_.grid_field(history_grid_, history_v_);
-        potential_.use_bdf2(history_u_, history_v_, system_.gravity);
+        // Variable steps (the advection limit, a frame's clipped last step) use BDF2's variable-step
+        // coefficients; a history restored without its step takes this one's.
+        const double omega = history_dt_ > 0.0 ? dt / history_dt_ : 1.0;
+        potential_.use_bdf2(history_u_, history_v_, system_.gravity, omega);
     }
 
     if (system_.boundary.coulomb_floor()) {  // its friction, lagged to the start-of-step stress
@@ -130,6 +146,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         return system_.materials[object].return_map(Sigma, hardening);
     };
     if (bdf2) {  // the next step's history
+        history_dt_ = dt;
         previous_v_ = particles.v;
         previous_C_ = particles.C;
         start_x_ = particles.x;

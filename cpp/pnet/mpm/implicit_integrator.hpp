@@ -19,7 +19,8 @@
 //
 // BDF2 (ImplicitOptions::time_integrator "bdf2"): the particles carry the last step's velocity (v^{n-1})
 // and displacement rate u = (x^n - x^{n-1}) / dt, each with an APIC affine matrix, transferred to the
-// grid with the current step's weights; the potential is then BDF2's (IncrementalPotential::use_bdf2),
+// grid with the current step's weights; the potential is then BDF2's (IncrementalPotential::use_bdf2,
+// with the variable-step coefficients when dt differs from the last step's),
 // and G2P moves the particles and their F by the displacement rate while v_p, C_p come from the grid
 // velocity at the start-of-step positions. The first step (no history) is backward Euler.
 //
@@ -72,8 +73,9 @@ public:
 
     /// The history resets with the particles (the next step is backward Euler's start-up).
     void reset(const Particles<dim>& particles) override;
-    /// BDF2's history (empty before a BDF2 run's first step): 3 n matrices, the previous velocities'
-    /// affine parts, the displacement rates' affine parts, then (v^{n-1}_p, u_p) as the first two columns.
+    /// BDF2's history (empty before a BDF2 run's first step): 3 n + 1 matrices, the previous velocities'
+    /// affine parts, the displacement rates' affine parts, (v^{n-1}_p, u_p) as the first two columns, and
+    /// the last step's dt in (0, 0) (a state of 3 n matrices, written before it was kept, still loads).
     std::vector<Mat<dim>> checkpoint_state() const override;
     void restore_checkpoint_state(std::vector<Mat<dim>> state) override;
 
@@ -100,6 +102,7 @@ private:
     Grid<dim> history_grid_;  // the P2G of a history field
     VecX history_u_, history_v_;
     std::vector<Vec<dim>> start_x_;
+    double history_dt_ = 0.0;  // the last BDF2 step's dt (0: none, or restored without it)
 };
 
 }  // namespace pnet

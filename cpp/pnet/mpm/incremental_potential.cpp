@@ -3,6 +3,8 @@
 #include "pnet/mpm/transfer.hpp"
 
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 #include "pnet/contact/friction.hpp"
 
@@ -150,15 +152,20 @@ std::size_t IncrementalPotential<dim>::floor_friction_contacts(const VecX* v) {
 }
 
 template <int dim>
-void IncrementalPotential<dim>::use_bdf2(const VecX& u, const VecX& v_previous, const Vec<dim>& gravity) {
-    const double beta = 2.0 / 3.0, dt = step_dt_;
+void IncrementalPotential<dim>::use_bdf2(const VecX& u, const VecX& v_previous, const Vec<dim>& gravity, double omega) {
+    if (!(omega > 0.0) || !std::isfinite(omega))
+        throw std::invalid_argument("IncrementalPotential::use_bdf2: step ratio " + std::to_string(omega) +
+                                    ", expected a finite number > 0");
+    const double dt = step_dt_, beta = (1.0 + omega) / (1.0 + 2.0 * omega);
+    const double a = (1.0 + omega) * (1.0 + omega) / (1.0 + 2.0 * omega), b = omega * omega / (1.0 + 2.0 * omega);
+    const double extrapolate = omega / (1.0 + omega);
     VecX& v_star = inertia_.target();
     const VecX& free = this->free_;
     offset_.resize(v_star.size());
     for (Eigen::Index i = 0; i < v_star.size(); ++i) {
         const double g = gravity[i % dim];
-        if (free[i] > 0.0) v_star[i] = (4.0 * (v_star[i] - dt * g) - v_previous[i]) / 3.0 + beta * dt * g;
-        offset_[i] = free[i] * 0.5 * u[i];
+        if (free[i] > 0.0) v_star[i] = a * (v_star[i] - dt * g) - b * v_previous[i] + beta * dt * g;
+        offset_[i] = free[i] * extrapolate * u[i];
     }
     dt_ = beta * dt;
     bdf2_ = true;

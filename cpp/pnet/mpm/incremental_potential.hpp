@@ -46,15 +46,19 @@ public:
     void begin_step(const Grid<dim>& grid, const Particles<dim>& particles, double dt, const BoundaryConditions& bc);
 
     /// BDF2 (ImplicitOptions::time_integrator), after begin_step(): `u` the last step's grid displacement
-    /// rate (x^n - x^{n-1}) / dt and `v_previous` v^{n-1}, on the unknowns (grid_field()). Then
-    ///   v* = (4 v^n - v^{n-1}) / 3 + beta dt g,  F_p(v) = (I + beta dt G_p(u / 2 + v)) F^E_p,  beta = 2/3,
+    /// rate (x^n - x^{n-1}) / dt_prev and `v_previous` v^{n-1}, on the unknowns (grid_field()); `omega`
+    /// the step ratio dt / dt_prev (1: constant steps). The variable-step BDF2 formulas, with
+    /// beta = (1 + omega) / (1 + 2 omega) (2/3 at omega = 1):
+    ///   v* = ((1 + omega)^2 v^n - omega^2 v^{n-1}) / (1 + 2 omega) + beta dt g,
+    ///   F_p(v) = (I + beta dt G_p(omega u / (1 + omega) + v)) F^E_p
     /// on the free components (v^n = v*_BE - dt g; fixed ones keep their v* and move by beta dt v): the
-    /// same potential with the step beta dt about the displacement BDF2 extrapolates, dt u / 3.
-    void use_bdf2(const VecX& u, const VecX& v_previous, const Vec<dim>& gravity);
+    /// same potential with the step beta dt about the displacement BDF2 extrapolates,
+    /// omega dt u / (1 + 2 omega) (dt u / 3 at constant steps).
+    void use_bdf2(const VecX& u, const VecX& v_previous, const Vec<dim>& gravity, double omega = 1.0);
     /// momentum / mass of `grid`'s nodes on the unknowns (0 on massless ones): a P2G'd history field.
     void grid_field(const Grid<dim>& grid, VecX& out) const;
     /// The grid's displacement rate over the step, (x^{n+1} - x^n) / dt on the nodes: v for backward
-    /// Euler, (u / 2 + v) beta for BDF2 (what moves the particles and their F).
+    /// Euler, (omega u / (1 + omega) + v) beta for BDF2 (what moves the particles and their F).
     const VecX& displacement_rate(const VecX& v);
 
     /// The Coulomb floor (BoundaryConditions::floor_friction; begin_step() must get v* without the
@@ -101,7 +105,7 @@ public:
     /// order in which a node's terms are summed, the same for every thread count.
     const int* node_entry_start() const { return node_entry_start_.data(); }
     const int* node_entries() const { return node_entries_.data(); }
-    /// The potential's step: dt (backward Euler), 2/3 dt (BDF2).
+    /// The potential's step: dt (backward Euler), beta dt (BDF2; 2/3 dt at constant steps).
     double dt() const { return dt_; }
     const Grid<dim>& grid() const { return *grid_; }
     const Particles<dim>& particles() const { return *particles_; }
@@ -120,10 +124,10 @@ private:
     ParticleEnergyForm<dim> particle_energy_;
     const Grid<dim>* grid_ = nullptr;
     const Particles<dim>* particles_ = nullptr;
-    double dt_ = 0.0;       // the potential's step: dt (backward Euler), 2/3 dt (BDF2)
+    double dt_ = 0.0;       // the potential's step: dt (backward Euler), beta dt (BDF2)
     double step_dt_ = 0.0;  // the time step
     bool bdf2_ = false;
-    VecX offset_;           // BDF2: u / 2 on the free components (F_p(v) about G_p(offset + v))
+    VecX offset_;           // BDF2: omega u / (1 + omega) on the free components (F_p(v) about G_p(offset + v))
     VecX rate_;             // displacement_rate()'s
 
     std::vector<int> node_dof_;              // grid storage index -> dof (-1: not an unknown)

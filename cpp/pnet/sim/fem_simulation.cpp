@@ -316,12 +316,14 @@ void FemSimulation<dim>::save_checkpoint(const std::string& path) const {
         write_array(out, state_.v);
         write_array(out, state_.plastic_inverse);
         write_array(out, state_.hardening);
-        const std::int64_t history = state_.x_previous.size() == state_.x.size() ? 1 : 0;
+        // The history flag: 0 none; 1 x^{n-1}, v^{n-1}; 2 those and the last step's dt (BDF2's variable steps).
+        const std::int64_t history = state_.x_previous.size() != state_.x.size() ? 0 : state_.dt_previous > 0.0 ? 2 : 1;
         out.write(reinterpret_cast<const char*>(&history), sizeof history);
         if (history) {
             write_array(out, state_.x_previous);
             write_array(out, state_.v_previous);
         }
+        if (history == 2) out.write(reinterpret_cast<const char*>(&state_.dt_previous), sizeof state_.dt_previous);
     });
 }
 
@@ -345,11 +347,15 @@ void FemSimulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, s.hardening, state_.hardening.size(), path);
     std::int64_t history = 0;
     if (!version1) in.read(reinterpret_cast<char*>(&history), sizeof history);
-    if (!in || (history != 0 && history != 1))
-        throw std::invalid_argument(path + ": corrupt checkpoint (the history flag)");
+    if (!in || history < 0 || history > 2) throw std::invalid_argument(path + ": corrupt checkpoint (the history flag)");
     if (history) {
         read_array(in, s.x_previous, state_.x.size(), path);
         read_array(in, s.v_previous, state_.x.size(), path);
+    }
+    if (history == 2) {
+        in.read(reinterpret_cast<char*>(&s.dt_previous), sizeof s.dt_previous);
+        if (!in || !(s.dt_previous > 0.0) || !std::isfinite(s.dt_previous))
+            throw std::invalid_argument(path + ": corrupt checkpoint (the last step's dt is not a number > 0)");
     }
     in.peek();
     if (!in.eof()) throw std::invalid_argument(path + ": longer than its header says (corrupt checkpoint)");

@@ -135,8 +135,8 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     in.read(reinterpret_cast<char*>(&state_size), sizeof state_size);
     if (!in) throw std::invalid_argument(path + ": not a PlasticityNet checkpoint");
     if (header[0] != dim) throw std::invalid_argument(path + ": a " + std::to_string(header[0]) + "D checkpoint");
-    // The integrator's state: explicit's n stresses, or the implicit BDF2 history's 3 n matrices.
-    if (state_size < 0 || state_size > 3 * header[1]) throw std::invalid_argument(path + ": corrupt checkpoint header");
+    // The integrator's state: explicit's n stresses, or the implicit BDF2 history's 3 n + 1 matrices.
+    if (state_size < 0 || state_size > 3 * header[1] + 1) throw std::invalid_argument(path + ": corrupt checkpoint header");
     const std::size_t n = static_cast<std::size_t>(header[1]);
     if (n != particles_.size())
         throw std::invalid_argument(path + ": holds " + std::to_string(n) + " particles, the scene has " +

@@ -28,7 +28,7 @@ from .energy import ENERGY_FORMS
 from .evaluate import format_errors
 from .nets import REPRESENTATIONS
 from .return_map_net import RESIDUALS
-from .sampling import TRAINING_SAMPLINGS
+from .sampling import TRAINING_SAMPLINGS, WIDE_SCALE
 from .trainer import MATERIALS, PRECISIONS, RETURN_MAP_MATERIAL, SCHEDULES, TrainConfig, Trainer
 
 
@@ -79,6 +79,16 @@ def _decay(text: str) -> float:
     return value
 
 
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0 <= value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be in [0, 1)")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="train.py",
@@ -91,6 +101,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lr", type=_positive_float, default=0.01, help="Adam learning rate (0.01)")
     p.add_argument("--lr-decay", type=_decay, default=0.95, help="learning-rate factor per decay period (0.95)")
     p.add_argument("--decay-steps", type=_positive_int, default=1000, help="steps per decay period (1000)")
+    p.add_argument(
+        "--wide-fraction", type=_fraction, default=0.0,
+        help="share of each batch drawn with twice the perturbation range deps, where a large step's iterates go "
+        "(energies; 0)",
+    )
     p.add_argument(
         "--schedule",
         choices=SCHEDULES,
@@ -233,6 +248,7 @@ def main(argv=None, root: str | Path | None = None) -> int:
             warmup=args.warmup,
             seed=args.seed,
             sampling=args.sampling,
+            wide_fraction=args.wide_fraction,
             rm_loss=args.rm_loss,
             representation=args.representation,
             hessian_weight=args.hessian_weight,
@@ -272,7 +288,9 @@ def main(argv=None, root: str | Path | None = None) -> int:
         + (f"lr {config.lr} x{config.lr_decay} every {config.decay_steps}" if config.schedule == "step"
            else f"lr {config.lr} {config.schedule}")
         + (f" after {config.warmup} warm-up steps" if config.warmup else "")
-        + f", sampling {config.sampling}, seed {config.seed}"
+        + f", sampling {config.sampling}"
+        + (f" ({config.wide_fraction:g} of it at {WIDE_SCALE:g}x the perturbation)" if config.wide_fraction else "")
+        + f", seed {config.seed}"
         + (" (parametric: " + ", ".join(f"{r.field} in [{r.lo:g}, {r.hi:g}]" for r in trainer.task.parameters.ranges)
            + ")" if config.parametric else "")
         + (

@@ -14,6 +14,11 @@ with Qa, Qb small random rotations of angle <= 0.1 rad.
 Hardening h ~ U[h_lo, h_hi] (appendix A.2): Cam-Clay (snow) h = min(a, 0) in [-0.5, 0] (2D) or
 [-1, 0] (3D); von Mises (metal) h = tau_Y / (2 mu) in [0, 1]; Drucker-Prager (sand) has none.
 
+A batch may draw a share `wide_fraction` of its samples with WIDE_SCALE times the deps range (beyond the
+paper): the states a large step's Newton iterates pass through lie beyond the trained perturbation, and
+a network trained only within it can extrapolate to stresses thousands of times too large there
+(docs/training.md, "Wide perturbations").
+
 A parametric model's batches also carry material parameters p (parameters.py): uniform in the family's
 box, one vector per group of parameters.GROUP_SIZE consecutive samples (fewer, larger groups beyond
 parameters.MAX_GROUPS per part), from a stream of their own.
@@ -43,6 +48,10 @@ SAMPLINGS = ("paper", "near")
 TRAINING_SAMPLINGS = (*SAMPLINGS, "mixed")
 #: Step offset of the "near" half of a mixed batch (its own stream of random numbers).
 _MIXED_NEAR_STEP = 1 << 40
+#: Step offset of a batch's wide share (SamplingSpec.wide_fraction), and how much wider its deps range is
+#: (the "near 2x" held-out error's range).
+_WIDE_STEP = 1 << 41
+WIDE_SCALE = 2.0
 
 #: Independent random streams: training batches never share a seed with evaluation samples.
 STREAMS = {"train": 0, "eval": 1, "test": 2, "hessian": 3}
@@ -68,12 +77,15 @@ class SamplingSpec:
     sampling: str = "paper"
     deps_scale: float = 1.0
     parameters: tuple[ParameterRange, ...] = ()
+    wide_fraction: float = 0.0  # share of each batch drawn with WIDE_SCALE x the deps range
 
     def __post_init__(self):
         if self.sampling not in TRAINING_SAMPLINGS:
             raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(TRAINING_SAMPLINGS)}")
         if not (self.deps_scale > 0 and math.isfinite(self.deps_scale)):
             raise ValueError(f"deps_scale = {self.deps_scale!r}: must be finite and > 0")
+        if not 0.0 <= self.wide_fraction < 1.0:
+            raise ValueError(f"wide_fraction = {self.wide_fraction!r}: must be in [0, 1)")
 
     @property
     def has_hardening(self) -> bool:
@@ -89,6 +101,9 @@ class SamplingSpec:
             "deps_range": [-self.deps * self.deps_scale, self.deps * self.deps_scale],
             "h_range": None if self.h_range is None else list(self.h_range),
             "near_max_angle": NEAR_MAX_ANGLE if self.sampling in ("near", "mixed") else None,
+            **({"wide_fraction": self.wide_fraction,
+                "wide_deps_range": [-self.deps * self.deps_scale * WIDE_SCALE, self.deps * self.deps_scale * WIDE_SCALE]}
+               if self.wide_fraction > 0.0 else {}),
             **({"parameters": [r.to_dict() for r in self.parameters], "parameter_group_size": GROUP_SIZE}
                if self.parameters else {}),
         }
@@ -245,6 +260,15 @@ def sample_batch(
 
 
 def _sample_part(spec, n, seed, step, stream, dtype, device, shard) -> DeformationBatch:
+    if spec.wide_fraction > 0.0:
+        # The first n - n_wide samples are the batch wide_fraction = 0 would draw with that size; the wide
+        # share has a stream of its own.
+        n_wide = int(round(n * spec.wide_fraction))
+        base = _sample_part(spec.with_(wide_fraction=0.0), n - n_wide, seed, step, stream, dtype, device, shard)
+        if n_wide == 0:
+            return base
+        wide = spec.with_(wide_fraction=0.0, deps_scale=spec.deps_scale * WIDE_SCALE)
+        return DeformationBatch.cat([base, _sample_part(wide, n_wide, seed, step + _WIDE_STEP, stream, dtype, device, shard)])
     if spec.sampling == "mixed":
         paper = _sample_part(spec.with_(sampling="paper"), n - n // 2, seed, step, stream, dtype, device, shard)
         if n < 2:

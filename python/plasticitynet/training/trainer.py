@@ -60,13 +60,13 @@ RETURN_MAP_MATERIAL = "metal_nh_rm"
 _RESUME_FIELDS = (
     "material", "dim", "batch", "lr", "lr_decay", "decay_steps", "seed", "sampling", "rm_loss",
     "representation", "hessian_weight", "energy_form", "device_type", "shards", "schedule", "warmup", "precision",
-    "hidden", "parametric", "init_from",
+    "hidden", "parametric", "init_from", "wide_fraction",
 )
 
 #: What checkpoints written before a field existed were trained with.
 _LEGACY_FIELDS = {"representation": "raw", "hessian_weight": 0.0, "energy_form": "eq8", "device_type": "cpu", "shards": 1,
                   "schedule": "step", "warmup": 0, "precision": "float32",
-                  "hidden": [], "parametric": False, "init_from": ""}
+                  "hidden": [], "parametric": False, "init_from": "", "wide_fraction": 0.0}
 
 #: Learning-rate schedules (--schedule): the paper's step decay (lr x lr_decay every decay_steps), cosine
 #: annealing from lr to lr_min_fraction x lr over the run, and one-cycle (up to lr and down, torch's
@@ -102,6 +102,7 @@ class TrainConfig:
     lr_min_fraction: float = 0.01  # cosine: the last step's lr / lr
     seed: int = 0
     sampling: str = "paper"
+    wide_fraction: float = 0.0  # energies: share of each batch at twice the deps range (sampling.WIDE_SCALE)
     rm_loss: str = "radius"  # metal_nh_rm: residual of eq. 13 (return_map_net.RESIDUALS)
     representation: str = "principal"  # energies: nets.REPRESENTATIONS
     hessian_weight: float = 0.0  # energies: weight of the Hessian loss (energy.hessian_loss); 0: eq. 9 only
@@ -148,6 +149,10 @@ class TrainConfig:
             raise ValueError(f"lr_min_fraction = {self.lr_min_fraction!r}: must be in [0, 1]")
         if self.sampling not in TRAINING_SAMPLINGS:
             raise ValueError(f"sampling = {self.sampling!r}: expected one of {', '.join(TRAINING_SAMPLINGS)}")
+        if not 0 <= self.wide_fraction < 1:
+            raise ValueError(f"wide_fraction = {self.wide_fraction!r}: must be in [0, 1)")
+        if self.wide_fraction and self.material == RETURN_MAP_MATERIAL:
+            raise ValueError(f"wide_fraction applies to energies, not {RETURN_MAP_MATERIAL}")
         if self.rm_loss not in return_map_net.RESIDUALS:
             raise ValueError(f"rm_loss = {self.rm_loss!r}: expected one of {', '.join(return_map_net.RESIDUALS)}")
         if self.representation not in REPRESENTATIONS:
@@ -251,7 +256,7 @@ class EnergyTask:
         self.config = config
         self.device = device
         self.material = nondimensional_material(config.material, config.dim)
-        self.spec = sampling_spec(self.material, config.sampling)
+        self.spec = sampling_spec(self.material, config.sampling).with_(wide_fraction=config.wide_fraction)
         self.return_map = None
         self.return_map_info = None
         if config.material == "metal_nh":

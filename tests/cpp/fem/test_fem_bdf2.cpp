@@ -4,6 +4,7 @@
 // elastic problem the error falls ~4x per halving of dt against ~2x for backward Euler.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <memory>
 #include <sstream>
@@ -62,14 +63,20 @@ TEST(FemBdf2, TheFirstStepIsBackwardEulersAndLaterStepsDiffer) {
     EXPECT_GT(distance(be, bdf2), 1e-7) << "m: the second step uses the history";
 }
 
-TEST(FemBdf2, AStepSatisfiesTheBdf2Equations) {
+/// After three steps of 2 ms, one of `dt_last`: the largest momentum residual of the (variable-step) BDF2
+/// equations against the momentum change, and the largest position residual (m). With w = dt_last / 2 ms:
+/// v^ = ((1 + w)^2 v^n - w^2 v^{n-1}) / (1 + 2 w), x^ likewise, beta = (1 + w) / (1 + 2 w).
+std::array<double, 3> bdf2_residuals(double dt_last) {
     const FemSystem<2> system = swaying_bar();
     auto integrator = integrator_for(system, "bdf2");
     FemState<2> state = FemState<2>::at_rest(system);
-    const double dt = 2e-3, beta = 2.0 / 3.0;
+    const double dt = 2e-3, omega = dt_last / dt;
+    const double beta = (1.0 + omega) / (1.0 + 2.0 * omega);
+    const double a = (1.0 + omega) * (1.0 + omega) / (1.0 + 2.0 * omega), b = omega * omega / (1.0 + 2.0 * omega);
     for (int s = 0; s < 3; ++s) integrator.step(state, dt, s);
     const FemState<2> before = state;
-    integrator.step(state, dt, 3);
+    integrator.step(state, dt_last, 3);
+    EXPECT_EQ(state.dt_previous, dt_last);
     // grad Psi(x^{n+1}): the potential about x^{n+1} with v* = 0 and a unit step, at v = 0.
     AnalyticElastoplasticEnergy<2> energy(system.materials, {"bar"});
     FemPotential<2> potential(system.mesh, system.rest, energy);
@@ -83,15 +90,30 @@ TEST(FemBdf2, AStepSatisfiesTheBdf2Equations) {
     for (std::size_t i = 0; i < n; ++i) {
         if (system.fixed_node[i]) continue;
         const double m = system.rest.node_mass[i];
-        const Vec<2> v_hat = (4.0 * before.v[i] - before.v_previous[i]) / 3.0;
-        const Vec<2> x_hat = (4.0 * before.x[i] - before.x_previous[i]) / 3.0;
-        const Vec<2> r = m * (state.v[i] - v_hat) - beta * dt * (m * system.gravity - grad_psi.segment<2>(2 * i));
+        const Vec<2> v_hat = a * before.v[i] - b * before.v_previous[i];
+        const Vec<2> x_hat = a * before.x[i] - b * before.x_previous[i];
+        const Vec<2> r = m * (state.v[i] - v_hat) - beta * dt_last * (m * system.gravity - grad_psi.segment<2>(2 * i));
         worst = std::max(worst, r.norm());
         scale = std::max(scale, (m * (state.v[i] - v_hat)).norm());
-        position = std::max(position, (state.x[i] - x_hat - beta * dt * state.v[i]).norm());
+        position = std::max(position, (state.x[i] - x_hat - beta * dt_last * state.v[i]).norm());
     }
+    return {worst, scale, position};
+}
+
+TEST(FemBdf2, AStepSatisfiesTheBdf2Equations) {
+    const auto [worst, scale, position] = bdf2_residuals(2e-3);
     EXPECT_LT(worst, 1e-6 * scale) << "momentum residual (kg m/s) against the momentum change " << scale;
     EXPECT_LT(position, 1e-15) << "m";
+}
+
+// A step of another size than the last (a frame's clipped last step) takes BDF2's variable-step
+// coefficients; the constant-step ones left a momentum residual of the order of the change itself.
+TEST(FemBdf2, AChangedStepSatisfiesTheVariableStepBdf2Equations) {
+    for (const double dt_last : {1e-3, 3e-3}) {
+        const auto [worst, scale, position] = bdf2_residuals(dt_last);
+        EXPECT_LT(worst, 1e-6 * scale) << "dt " << dt_last << ": momentum residual (kg m/s) against " << scale;
+        EXPECT_LT(position, 1e-15) << "dt " << dt_last << ": m";
+    }
 }
 
 // The convergence table of issue 34: error at T = 20 ms against a BDF2 run at dt = T / 2560. Measured
