@@ -13,7 +13,7 @@ the domain and the material changed), runs
 
     explicit at the ground-truth step (--ground-truth-dt, default 2e-5 s),
     explicit at its CFL step (the noise floor: what a valid explicit run differs by),
-    plasticitynet at 1e-3 s with the parametric model,
+    plasticitynet at 1e-3 s (--implicit-dt; --time-integrator bdf2) with the parametric model,
 
 with `pnet simulate`, and measures L_inf = L0 + e(last frame) - e(first frame), e the 99.5th mass
 percentile of |x - x_c| (the outermost particle alone swings between two valid runs; docs/metrics.md).
@@ -27,7 +27,7 @@ Runs are kept in --work (a finished run of the same scene, integrator and step i
 
     .venv/bin/python scripts/granular_collapse.py [--angles 20 30 40] [--aspects 0.5 1 2 4 8]
         [--floor tan|sticky|MU] [--flip-relaxation-time 0.01] [--dt-study]
-        [--newton-tolerance M_PER_S] [--jobs 2] [--frames 50] [--dx 0.0078125] [--work out/granular_collapse]
+        [--newton-tolerance M_PER_S] [--implicit-dt 1e-3] [--time-integrator bdf2] [--jobs 2] [--frames 50] [--dx 0.0078125] [--work out/granular_collapse]
         [--out notebooks/results/granular_collapse]
 """
 
@@ -108,10 +108,12 @@ def runout(run: Path) -> float:
 
 
 def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float | None,
-             newton_tolerance: float | None = None) -> float:
-    """Runs one simulation unless `out` holds a finished one of the same scene, integrator, step and Newton
-    tolerance (implicit runs; None: the scene's); the wall seconds (the recorded ones if reused)."""
+             newton_tolerance: float | None = None, time_integrator: str | None = None) -> float:
+    """Runs one simulation unless `out` holds a finished one of the same scene, integrator, step, Newton
+    tolerance and time integrator (implicit runs; None: the scene's); the wall seconds (the recorded ones if
+    reused)."""
     tolerance = f"\n{newton_tolerance}" if newton_tolerance is not None else ""
+    tolerance += f"\n{time_integrator}" if time_integrator is not None else ""
     key = hashlib.sha256(f"{scene_file.read_text()}\n{integrator}\n{dt}{tolerance}".encode()).hexdigest()
     done = out / "done"
     if done.exists() and done.read_text().split()[1:] == [key]:
@@ -122,6 +124,8 @@ def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float
         cmd += ["--dt", f"{dt:g}"]
     if newton_tolerance is not None:
         cmd += ["--newton-tol", f"{newton_tolerance:g}"]
+    if time_integrator is not None:
+        cmd += ["--time-integrator", time_integrator]
     t0 = time.perf_counter()
     result = subprocess.run(cmd, capture_output=True, text=True)
     if result.returncode != 0:
@@ -223,6 +227,9 @@ def main() -> int:
     p.add_argument("--newton-tolerance", type=float, default=None,
                    help="plasticitynet's Newton tolerance, m/s (default: the scene's, 1e-3 with 1 m/s^2 x dt below "
                         "1e-3 s; docs/solver.md: a tall column's run-out needs ~1e-4 to converge)")
+    p.add_argument("--implicit-dt", type=float, default=1e-3, help="plasticitynet's step, s (1e-3)")
+    p.add_argument("--time-integrator", choices=("backward_euler", "bdf2"), default=None,
+                   help="plasticitynet's time integrator (default: the scene's, backward_euler)")
     p.add_argument("--jobs", type=int, default=2, help="simulations at once (one thread each)")
     p.add_argument("--dt-study", action="store_true",
                    help="instead of the sweep: the run-out of APIC / AFLIP transfers on a sticky / Coulomb floor, "
@@ -241,7 +248,7 @@ def main() -> int:
     runs = {
         "ground_truth": ("explicit", args.ground_truth_dt),
         "explicit_cfl": ("explicit", None),
-        "plasticitynet": ("plasticitynet", 1e-3),
+        "plasticitynet": ("plasticitynet", args.implicit_dt),
     }
     jobs = []
     for angle in args.angles:
@@ -259,7 +266,8 @@ def main() -> int:
     rows = []
     with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
         futures = {pool.submit(simulate, pnet, j[3], j[4], j[5], j[6],
-                               args.newton_tolerance if j[5] == "plasticitynet" else None): j for j in jobs}
+                               *((args.newton_tolerance, args.time_integrator) if j[5] == "plasticitynet" else ())): j
+                   for j in jobs}
         for done, future in enumerate(concurrent.futures.as_completed(futures), 1):
             angle, aspect, name, _, out, _, _ = futures[future]
             wall = future.result()
@@ -280,7 +288,8 @@ def main() -> int:
         "# Granular column collapse with one parametric model (scripts/granular_collapse.py)", "",
         f"Run-out (L_inf - L0) / L0, L0 = {HALF_WIDTH} m, L_inf = L0 + e(last) - e(first), e the {PERCENTILE}th "
         f"percentile of |x - x_c| on a frame ({args.frames} frames of 0.02 s), dx = {args.dx:g} m. Ground truth: explicit at "
-        f"{args.ground_truth_dt:g} s; floor: |explicit at CFL - ground truth|; plasticitynet at 1e-3 s with "
+        f"{args.ground_truth_dt:g} s; floor: |explicit at CFL - ground truth|; plasticitynet at {args.implicit_dt:g} s "
+        f"({args.time_integrator or 'backward_euler'}) with "
         f"{MODEL.name} bound to each angle, Newton tolerance {tolerance}. Floor: {floor_description(args.floor)}; "
         "transfers: "
         f"{'AFLIP, relaxation time %g s' % args.flip_relaxation_time if args.flip_relaxation_time > 0 else 'APIC'} "
@@ -313,7 +322,7 @@ def main() -> int:
     for k, angle in enumerate(args.angles):
         color = plt.cm.viridis(k / max(1, len(args.angles) - 1))
         labels = {"ground_truth": f"explicit {args.ground_truth_dt:g}", "explicit_cfl": "explicit CFL",
-                  "plasticitynet": "plasticitynet 1e-3"}
+                  "plasticitynet": f"plasticitynet {args.implicit_dt:g}"}
         for name, style in (("ground_truth", "-o"), ("explicit_cfl", ":+"), ("plasticitynet", "--x")):
             ax.plot(args.aspects, [table[(angle, a, name)]["runout"] for a in args.aspects], style, color=color,
                     label=f"{angle:g} deg, {labels[name]}")
