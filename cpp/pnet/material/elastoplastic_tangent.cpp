@@ -55,16 +55,16 @@ Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec
     };
     Tensor4<dim> T = isotropic_dPdF<dim>(svd, t, dtau, quotient, project_psd);
     if (keep_skew) {
-        // The skew part of d^2 psi / d Sigma_i d Sigma_j (the -delta_ij tau_i term is symmetric), on the
-        // Sigma block in the rotated basis (isotropic_dPdF's), and back to F space: still skew.
-        Tensor4<dim> A = Tensor4<dim>::Zero();
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j) A(i * dim + i, j * dim + j) = skew(i, j) / (S[i] * S[j]);
-        Tensor4<dim> W;
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j)
-                W.col(i * dim + j) = flatten<dim>(Mat<dim>(svd.U.col(i) * svd.V.col(j).transpose()));
-        T.noalias() += W * A * W.transpose();
+        // The skew part of d^2 psi / d Sigma_i d Sigma_j (the -delta_ij tau_i term is symmetric) acts on the
+        // Sigma block only, whose basis vectors are vec(u_i v_i^T): sum_ij A_ij vec(u_i v_i^T) vec(u_j v_j^T)^T,
+        // still skew.
+        Eigen::Matrix<double, dim * dim, dim> D;
+        Mat<dim> A;
+        for (int i = 0; i < dim; ++i) {
+            D.col(i) = flatten<dim>(Mat<dim>(svd.U.col(i) * svd.V.col(i).transpose()));
+            for (int j = 0; j < dim; ++j) A(i, j) = skew(i, j) / (S[i] * S[j]);
+        }
+        T.noalias() += D * A * D.transpose();
     }
     return T;
 }
