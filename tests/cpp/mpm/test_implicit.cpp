@@ -98,13 +98,14 @@ struct PotentialFixture {
         grid->update_velocity(dt, system.gravity, system.boundary);
         potential = std::make_unique<IncrementalPotential<dim>>(*energy);
         potential->begin_step(*grid, particles, dt, system.boundary);
-        if (bdf2) {  // BDF2's potential about random history fields (IncrementalPotential::use_bdf2)
+        if (bdf2) {  // BDF2's potential about random history fields (IncrementalPotential::use_bdf2), after a
+                     // longer step (the variable-step coefficients, step ratio 0.7)
             VecX u(potential->size()), v_previous(potential->size());
             for (Eigen::Index i = 0; i < u.size(); ++i) {
                 u[i] = random.uniform(-0.1, 0.1);
                 v_previous[i] = random.uniform(-0.5, 0.5);
             }
-            potential->use_bdf2(u, v_previous, system.gravity);
+            potential->use_bdf2(u, v_previous, system.gravity, 0.7);
         }
         v = potential->v_star();
         for (Eigen::Index i = 0; i < v.size(); ++i)
