@@ -17,7 +17,7 @@ Hardening h ~ U[h_lo, h_hi] (appendix A.2): Cam-Clay (snow) h = min(a, 0) in [-0
 A batch may draw a share `wide_fraction` of its samples with WIDE_SCALE times the deps range (beyond the
 paper): the states a large step's Newton iterates pass through lie beyond the trained perturbation, and
 a network trained only within it can extrapolate to stresses thousands of times too large there
-(docs/training.md, "Wide perturbations").
+(docs/physics.md, "Sampling").
 
 A parametric model's batches also carry material parameters p (parameters.py): uniform in the family's
 box, one vector per group of parameters.GROUP_SIZE consecutive samples (fewer, larger groups beyond
