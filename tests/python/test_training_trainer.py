@@ -143,6 +143,23 @@ def test_resume_equals_uninterrupted(tmp_path):
     # A checkpoint of another recipe is refused.
     with pytest.raises(ValueError, match="batch"):
         Trainer(_config(tmp_path / "b", resume=True, **{**kw, "batch": 32}))
+    with pytest.raises(ValueError, match="wide_fraction"):
+        Trainer(_config(tmp_path / "b", resume=True, **{**kw, "wide_fraction": 0.25}))
+
+
+def test_a_wide_share_trains_on_twice_the_perturbation_and_is_recorded(tmp_path):
+    """--wide-fraction: the batches' last share has deps beyond the trained range, the run differs from one
+    without it, and the exported model's recipe records the share and its range."""
+    kw = dict(epochs=3, batch=64, checkpoint_every=10)
+    plain = Trainer(_config(tmp_path / "plain", **kw))
+    plain.run()
+    wide = Trainer(_config(tmp_path / "wide", wide_fraction=0.25, **kw))
+    wide.run()
+    assert wide.task.spec.wide_fraction == 0.25
+    assert [r[1] for r in plain.log_rows] != [r[1] for r in wide.log_rows]
+    distribution = wide.recipe()["distribution"]
+    assert distribution["wide_fraction"] == 0.25
+    assert distribution["wide_deps_range"] == [-2 * distribution["deps_range"][1], 2 * distribution["deps_range"][1]]
 
 
 def test_train_py_end_to_end(tmp_path):
