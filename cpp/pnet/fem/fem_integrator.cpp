@@ -1,6 +1,7 @@
 #include "pnet/fem/fem_integrator.hpp"
 
 #include "pnet/math/clock.hpp"
+#include "pnet/solver/bdf2.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -104,17 +105,15 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     // BDF2, once the state has history, x^ = ((1 + w)^2 x^n - w^2 x^{n-1}) / (1 + 2 w), h = beta dt with
     // w = dt / dt_prev and beta = (1 + w) / (1 + 2 w): (4 x^n - x^{n-1}) / 3 and 2/3 dt at constant steps.
     const bool bdf2 = options_.time_integrator == "bdf2" && state.x_previous.size() == n;
-    const double omega = bdf2 && state.dt_previous > 0.0 ? dt / state.dt_previous : 1.0;
-    const double beta = (1.0 + omega) / (1.0 + 2.0 * omega);
-    const double a = (1.0 + omega) * (1.0 + omega) / (1.0 + 2.0 * omega), b = omega * omega / (1.0 + 2.0 * omega);
-    const double h = bdf2 ? beta * dt : dt;
+    const Bdf2Weights w = bdf2_weights(bdf2 && state.dt_previous > 0.0 ? dt / state.dt_previous : 1.0);
+    const double h = bdf2 ? w.beta * dt : dt;
     std::vector<Vec<dim>> x_hat = state.x;
     VecX at_start(dim * n), v_star(dim * n);  // at_start: the v that leaves x at x^n (0 for backward Euler)
     for (std::size_t i = 0; i < n; ++i) {
         Vec<dim> v_hat = state.v[i];
         if (bdf2) {
-            x_hat[i] = a * state.x[i] - b * state.x_previous[i];
-            v_hat = a * state.v[i] - b * state.v_previous[i];
+            x_hat[i] = w.current * state.x[i] - w.previous * state.x_previous[i];
+            v_hat = w.current * state.v[i] - w.previous * state.v_previous[i];
         }
         const Vec<dim> rest = bdf2 ? Vec<dim>((state.x[i] - x_hat[i]) / h) : Vec<dim>::Zero();
         at_start.template segment<dim>(dim * i) = rest;

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "pnet/contact/friction.hpp"
+#include "pnet/solver/bdf2.hpp"
 
 namespace pnet {
 
@@ -156,18 +157,18 @@ void IncrementalPotential<dim>::use_bdf2(const VecX& u, const VecX& v_previous, 
     if (!(omega > 0.0) || !std::isfinite(omega))
         throw std::invalid_argument("IncrementalPotential::use_bdf2: step ratio " + std::to_string(omega) +
                                     ", expected a finite number > 0");
-    const double dt = step_dt_, beta = (1.0 + omega) / (1.0 + 2.0 * omega);
-    const double a = (1.0 + omega) * (1.0 + omega) / (1.0 + 2.0 * omega), b = omega * omega / (1.0 + 2.0 * omega);
+    const double dt = step_dt_;
+    const Bdf2Weights w = bdf2_weights(omega);
     const double extrapolate = omega / (1.0 + omega);
     VecX& v_star = inertia_.target();
     const VecX& free = this->free_;
     offset_.resize(v_star.size());
     for (Eigen::Index i = 0; i < v_star.size(); ++i) {
         const double g = gravity[i % dim];
-        if (free[i] > 0.0) v_star[i] = a * (v_star[i] - dt * g) - b * v_previous[i] + beta * dt * g;
+        if (free[i] > 0.0) v_star[i] = w.current * (v_star[i] - dt * g) - w.previous * v_previous[i] + w.beta * dt * g;
         offset_[i] = free[i] * extrapolate * u[i];
     }
-    dt_ = beta * dt;
+    dt_ = w.beta * dt;
     bdf2_ = true;
 }
 
