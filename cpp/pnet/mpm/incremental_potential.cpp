@@ -77,10 +77,6 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
     free.resize(dim * dofs);
     residual_scale_.resize(dim * dofs);
     residual_mass_.resize(dim * dofs);
-    double heaviest = 0.0;
-    for (const double m : particles.mass) heaviest = std::max(heaviest, m);
-    negligible_mass_ = kNegligibleNodeMass * heaviest;
-    const double negligible = negligible_mass_;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t k = 0; k < dofs; ++k) {
         const typename Grid<dim>::Node& node = grid.node(dof_node_[k]);
@@ -98,7 +94,7 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
             mass[i] = massless ? 1.0 : node.mass;
             v_star[i] = massless ? 0.0 : node.momentum[a];
             if (on_floor && a == 1 && fixed[1]) v_star[i] = 0.0;
-            free[i] = (fixed[a] || massless || node.mass < negligible) ? 0.0 : 1.0;
+            free[i] = (fixed[a] || massless) ? 0.0 : 1.0;
             residual_scale_[i] = free[i] / mass[i];
             residual_mass_[i] = free[i] * mass[i];
         }
@@ -113,7 +109,7 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
             int coord[dim];
             grid.coordinates(dof_node_[k], coord);
             const typename Grid<dim>::Node& node = grid.node(dof_node_[k]);
-            if (bc.in_floor(coord[1]) && node.mass >= negligible_mass_ && node.mass > 0.0 && free[dim * k + 1] == 0.0) {
+            if (bc.in_floor(coord[1]) && node.mass > 0.0 && free[dim * k + 1] == 0.0) {
                 floor_dofs_.push_back(static_cast<int>(k));
                 floor_normal_velocity_.push_back(node.momentum[1]);
             }

@@ -28,13 +28,6 @@
 
 namespace pnet {
 
-/// A grid node whose mass is below this fraction of the heaviest particle's (one that only the far
-/// corner of some stencil reaches) is not an unknown: it keeps v*, its P2G velocity plus gravity, as in
-/// explicit MPM. As an unknown its velocity costs almost no inertia while it still strains the particles
-/// it touches, so Newton used such nodes to relieve stress: on snowball_2d at 1e-3 s they moved at up to
-/// 3000 m/s (masses 1e-11-1e-8 kg beside particles of 3e-3 kg) and cost 15% more Newton iterations.
-inline constexpr double kNegligibleNodeMass = 1e-4;
-
 template <int dim>
 class IncrementalPotential final : public Problem<dim> {
 public:
@@ -145,7 +138,6 @@ private:
     std::vector<double> stencil_weight_;     // w_ip
     std::vector<int> node_entry_start_, node_entries_;
     double floor_friction_ = -1.0;           // the Coulomb floor's mu (< 0: none)
-    double negligible_mass_ = 0.0;           // kNegligibleNodeMass x the heaviest particle's mass, kg
     std::vector<int> floor_dofs_;            // nodes held on the Coulomb floor (normal component)
     std::vector<double> floor_normal_velocity_;  // their v*_y before it was held at 0
     FloorFrictionForm<dim> floor_friction_form_;
