@@ -5,7 +5,8 @@ dropped onto a slip floor, run with explicit MPM at its CFL step and with the im
 BDF2 at several steps. Per frame: the centre of mass's vertical velocity and the mechanical energy
 sum m (|v|^2 / 2 + g y) (per metre of depth; the elastic energy is left out, small away from the floor).
 
-    .venv/bin/python scripts/elastic_ball.py [--dts 1e-4 1e-3 1e-2] [--out notebooks/results/time_integrator]
+    .venv/bin/python scripts/elastic_ball.py [--dts 1e-4 1e-3 1e-2] [--capped-dts 1e-2 --advection-cfl 0.2]
+        [--out notebooks/results/time_integrator]
 
 Writes OUT/elastic_ball.csv (run, frame, time, com_vy, energy), OUT/elastic_ball.md (the coefficient of
 restitution: the largest upward centre-of-mass velocity after the impact over the largest downward one
@@ -26,11 +27,14 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "scenes" / "elastic_ball_2d.json"
 
 
-def run(integrator: str, dt: float, time_integrator: str | None, frames: int, threads: int) -> dict:
+def run(integrator: str, dt: float, time_integrator: str | None, frames: int, threads: int,
+        advection_cfl: float = 0.0) -> dict:
     import plasticitynet_sim as pns
 
     pns.set_threads(threads)
     solver = {"time_integrator": time_integrator, "newton_tolerance": 1e-6} if time_integrator else None
+    if solver and advection_cfl > 0.0:
+        solver["advection_cfl"] = advection_cfl
     sim = pns.Simulation(str(SCENE), integrator=integrator, dt=dt, **({"solver": solver} if solver else {}))
     g = 9.8
     rows = []
@@ -64,16 +68,22 @@ def main() -> int:
     p.add_argument("--dts", type=float, nargs="+", default=[1e-4, 1e-3, 1e-2])
     p.add_argument("--frames", type=int, default=40)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--capped-dts", type=float, nargs="*", default=[1e-2],
+                   help="steps run again with the advection limit (docs/solver.md)")
+    p.add_argument("--advection-cfl", type=float, default=0.2, help="the limit of those runs (0.2)")
     p.add_argument("--out", type=Path, default=ROOT / "notebooks" / "results" / "time_integrator")
     args = p.parse_args()
-    runs = {"explicit (CFL)": ("explicit", 0.0, None)}
+    runs = {"explicit (CFL)": ("explicit", 0.0, None, 0.0)}
     for dt in args.dts:
         for ti in ("backward_euler", "bdf2"):
-            runs[f"{ti} {dt:g}"] = ("lagged", dt, ti)
+            runs[f"{ti} {dt:g}"] = ("lagged", dt, ti, 0.0)
+    for dt in args.capped_dts:
+        for ti in ("backward_euler", "bdf2"):
+            runs[f"{ti} {dt:g}, advection_cfl {args.advection_cfl:g}"] = ("lagged", dt, ti, args.advection_cfl)
     args.out.mkdir(parents=True, exist_ok=True)
     results = {}
-    for name, (integrator, dt, ti) in runs.items():
-        results[name] = run(integrator, dt, ti, args.frames, args.threads)
+    for name, (integrator, dt, ti, cap) in runs.items():
+        results[name] = run(integrator, dt, ti, args.frames, args.threads, cap)
         r = results[name]
         if "error" in r:
             print(f"{name:>22}: {r['error']}", flush=True)

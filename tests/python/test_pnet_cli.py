@@ -269,6 +269,20 @@ def test_parametric_model_runs_a_scene_of_its_family_and_refuses_a_value_outside
     assert not list((tmp_path / "s50").glob("frame_*"))
 
 
+def test_an_uncapped_implicit_mpm_blow_up_names_the_advection_limit(tmp_path):
+    # scenes/elastic_ball_2d.json at 1e-2 s: the ball falls 2.6 cells a step, its impact's Newton solves
+    # stop at the iteration cap and the run blows up (step 38). The error names the cure a user has
+    # (docs/solver.md, "The advection limit"), with which the same run completes.
+    scene = ROOT / "scenes" / "elastic_ball_2d.json"
+    r = pnet("simulate", scene, "--integrator", "lagged", "--dt", 0.01, "--out", tmp_path / "uncapped")
+    assert r.returncode == 1, r.stderr
+    assert "blew up" in r.stderr and "--advection-cfl" in r.stderr and "integrator.advection_cfl" in r.stderr
+    r = pnet("simulate", scene, "--integrator", "lagged", "--dt", 0.01, "--advection-cfl", 0.2,
+             "--out", tmp_path / "capped")
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "capped" / "frame_00040.ply").exists()
+
+
 def test_missing_scene_file_and_usage_errors(tmp_path):
     r = pnet("simulate", tmp_path / "nope.json", "--out", tmp_path / "o")
     assert r.returncode == 2 and "nope.json" in r.stderr

@@ -171,7 +171,12 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     // domain in one step only happens after a blow-up.
     double extent = 1e300;
     for (int a = 0; a < dim; ++a) extent = std::min(extent, system_.cells[a] * system_.dx);
-    stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
+    try {
+        stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
+    } catch (const SimulationError& e) {
+        if (options_.advection_cfl > 0.0) throw;
+        throw SimulationError(std::string(e.what()) + advection_limit_hint);
+    }
 
     const auto end = std::chrono::steady_clock::now();
     record_phases(stats, start, after_p2g, after_solve, end);
