@@ -122,15 +122,8 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     };
     grid_to_particles(grid_, particles, dt, return_map,
                       [](std::ptrdiff_t, const PolarSVD<dim>&, const ReturnResult<dim>&) {});
-    double extent = 1e300;
-    for (int a = 0; a < dim; ++a) extent = std::min(extent, mpm_system_.cells[a] * mpm_system_.dx);
     if (flip_alpha > 0.0) add_velocity_residual(particles, residual_, flip_alpha);
-    try {
-        stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
-    } catch (const SimulationError& e) {
-        if (options_.advection_cfl > 0.0) throw;
-        throw SimulationError(std::string(e.what()) + advection_limit_hint);
-    }
+    stats.clamped = clamp_implicit_step(particles, mpm_system_, grid_, step_index, dt, options_.advection_cfl);
 
     // FEM: positions and the return mapping (identity for elastic bodies).
     for (std::size_t i = 0; i < nodes; ++i) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <string>
 
 #include "pnet/math/svd.hpp"
 #include "pnet/mpm/grid_to_particles.hpp"
@@ -79,6 +80,22 @@ std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long
 }
 
 template <int dim>
+std::size_t clamp_implicit_step(Particles<dim>& particles, const MpmSystem<dim>& system, const Grid<dim>& grid,
+                                long step_index, double dt, double advection_cfl) {
+    double extent = 1e300;
+    for (int a = 0; a < dim; ++a) extent = std::min(extent, system.cells[a] * system.dx);
+    try {
+        return clamp_to_grid(particles, grid, step_index, 0.25 * extent / dt);
+    } catch (const SimulationError& e) {
+        if (advection_cfl > 0.0) throw;
+        throw SimulationError(std::string(e.what()) +
+                              "; an implicit step whose particles cross a cell or more also stops converging: "
+                              "--advection-cfl 0.2 (integrator.advection_cfl) cuts the steps so that no particle "
+                              "crosses more than 0.2 cells (docs/solver.md, \"The advection limit\")");
+    }
+}
+
+template <int dim>
 StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
     StepStats stats;
@@ -134,5 +151,7 @@ template double cfl_time_step<2>(const MpmSystem<2>&, const Particles<2>&, doubl
 template double cfl_time_step<3>(const MpmSystem<3>&, const Particles<3>&, double);
 template std::size_t clamp_to_grid<2>(Particles<2>&, const Grid<2>&, long, double);
 template std::size_t clamp_to_grid<3>(Particles<3>&, const Grid<3>&, long, double);
+template std::size_t clamp_implicit_step<2>(Particles<2>&, const MpmSystem<2>&, const Grid<2>&, long, double, double);
+template std::size_t clamp_implicit_step<3>(Particles<3>&, const MpmSystem<3>&, const Grid<3>&, long, double, double);
 
 }  // namespace pnet

@@ -83,12 +83,13 @@ double advection_time_step(const MpmSystem<dim>& system, const Particles<dim>& p
 template <int dim>
 std::size_t clamp_to_grid(Particles<dim>& particles, const Grid<dim>& grid, long step_index, double speed_limit);
 
-/// What an implicit MPM step adds to clamp_to_grid()'s error when its step is not capped by the
-/// particles' motion (ImplicitOptions::advection_cfl = 0): particles that cross a cell or more per step
-/// cost the solve its convergence and the step its accuracy (docs/solver.md, "The advection limit").
-inline constexpr const char* advection_limit_hint =
-    "; an implicit step whose particles cross a cell or more also stops converging: --advection-cfl 0.2 "
-    "(integrator.advection_cfl) cuts the steps so that no particle crosses more than 0.2 cells "
-    "(docs/solver.md, \"The advection limit\")";
+/// clamp_to_grid() after an implicit MPM step of dt (ImplicitIntegrator, CoupledImplicitIntegrator): large
+/// steps legitimately move particles several cells, a quarter of the domain in one step only after a
+/// blow-up. Where the step is not capped by the particles' motion (advection_cfl = 0) the error also names
+/// that cap: particles that cross a cell or more per step cost the solve its convergence and the step
+/// its accuracy (docs/solver.md, "The advection limit").
+template <int dim>
+std::size_t clamp_implicit_step(Particles<dim>& particles, const MpmSystem<dim>& system, const Grid<dim>& grid,
+                                long step_index, double dt, double advection_cfl);
 
 }  // namespace pnet

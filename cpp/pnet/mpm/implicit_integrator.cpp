@@ -5,7 +5,7 @@
 #include <cmath>
 #include <limits>
 
-#include "pnet/mpm/explicit_integrator.hpp"  // clamp_to_grid
+#include "pnet/mpm/explicit_integrator.hpp"  // clamp_implicit_step
 #include "pnet/mpm/floor_friction_passes.hpp"
 #include "pnet/mpm/grid_to_particles.hpp"
 #include "pnet/mpm/transfer.hpp"
@@ -167,16 +167,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         }
     }
     if (alpha > 0.0) add_velocity_residual(particles, residual_, alpha);
-    // Large steps legitimately move particles several cells; a quarter of the
-    // domain in one step only happens after a blow-up.
-    double extent = 1e300;
-    for (int a = 0; a < dim; ++a) extent = std::min(extent, system_.cells[a] * system_.dx);
-    try {
-        stats.clamped = clamp_to_grid(particles, grid_, step_index, 0.25 * extent / dt);
-    } catch (const SimulationError& e) {
-        if (options_.advection_cfl > 0.0) throw;
-        throw SimulationError(std::string(e.what()) + advection_limit_hint);
-    }
+    stats.clamped = clamp_implicit_step(particles, system_, grid_, step_index, dt, options_.advection_cfl);
 
     const auto end = std::chrono::steady_clock::now();
     record_phases(stats, start, after_p2g, after_solve, end);
