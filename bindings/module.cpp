@@ -2,8 +2,9 @@
 #include "common.hpp"
 
 PYBIND11_MODULE(plasticitynet_sim, m) {
-    m.doc() = R"doc(PlasticityNet simulator: MPM scenes with the explicit, plasticitynet and lagged
-integrators, trained energy models and the analytic materials, from Python and numpy.
+    m.doc() = R"doc(PlasticityNet simulator: MPM, FEM and coupled scenes with the integrators of
+integrators() (plasticitynet, the learned energy; return_map, the classical solver; lagged;
+explicit; analytic), trained energy models and the analytic materials, from Python and numpy.
 
     import plasticitynet_sim as pns
     sim = pns.Simulation("scenes/sand_column_2d.json", integrator="plasticitynet")

@@ -337,17 +337,22 @@ snapshot. grid_mass() and step_stats() return new arrays.)doc")
              py::arg("cfl") = py::none(), py::arg("solver") = py::none(), py::arg("trust_models") = false,
              R"doc(scene: a Scene, a scene file path, or a scene dict (relative model paths
 resolved against the working directory).
-integrator: "explicit", "plasticitynet", "lagged" or (FEM) "analytic" (default: the
-scene's); another integrator than the scene's starts from its own default dt
-(explicit: the CFL step; implicit: 1e-3 s for MPM, 1e-2 s for FEM).
+integrator: one of plasticitynet_sim.integrators() (default: the scene's):
+"plasticitynet" (the learned energy on every Newton iteration), "return_map" (the
+classical solver: the return mapping's stress and consistent tangent, no model),
+"lagged", "explicit" or (FEM) "analytic". Another integrator than the scene's
+starts from its own default dt (explicit: the CFL step; implicit: 1e-3 s for MPM,
+1e-2 s for FEM).
 dt: time step, s (0: the CFL step); cfl: the CFL number of that step.
 solver: implicit solver options overriding the scene's integrator block, e.g.
 {"newton_tolerance": 1e-3, "max_fixed_point_iterations": 2, "regularizer_weight": 1}.
 trust_models: load model files that no MANIFEST pins (they are code to LibTorch).
-Every model the scene names is loaded and checked.)doc")
+Every model the scene names is loaded and checked when the integrator reads models
+(plasticitynet); the others open none.)doc")
         .def_property_readonly("scene", &PySimulation::scene)
         .def_property_readonly("dim", &PySimulation::dim)
-        .def_property_readonly("integrator", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.settings().name; }); })
+        .def_property_readonly("integrator", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.settings().name; }); },
+                               "The integrator's name (plasticitynet_sim.integrators()).")
         .def_property_readonly("dt", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.settings().dt; }); },
                                "Time step, s (0: the CFL step).")
         .def_property_readonly("solver", [](const PySimulation& s) {
@@ -482,6 +487,22 @@ naming the frames that are complete; Ctrl-C raises KeyboardInterrupt between two
     // Every core the process may use by default, set before any model loads (LibTorch would
     // otherwise impose its own, smaller, intra-op count on OpenMP; sim/threads.hpp).
     use_threads();
+    m.def("integrators", [] {
+        py::list out;
+        for (const IntegratorInfo& info : integrators()) {
+            py::dict d;
+            d["name"] = info.name;
+            d["solves"] = info.solves;
+            d["implicit"] = info.implicit;
+            d["reads_models"] = info.reads_models;
+            d["particles"] = info.particles;
+            d["meshes"] = info.meshes;
+            d["options"] = info.options;
+            out.append(d);
+        }
+        return out;
+    }, "The integrators (solver/integrators.hpp): a list of dicts with name, what a step solves, whether it is "
+       "implicit, reads the objects' models, runs particles and meshes, and the options that apply.");
     m.def("set_threads", [](int n) {
         if (n < 1) throw py::value_error("threads: expected a number >= 1, got " + std::to_string(n));
         use_threads(n);

@@ -14,6 +14,7 @@
 #include "pnet/sim/run.hpp"
 #include "pnet/sim/scene_models.hpp"
 #include "pnet/sim/threads.hpp"
+#include "pnet/solver/integrators.hpp"
 
 namespace pnet::apps {
 
@@ -22,11 +23,11 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kUsage =
-    "usage: pnet simulate SCENE.json --out DIR [--integrator explicit|plasticitynet|lagged|analytic] [--dt SECONDS]\n"
+    "usage: pnet simulate SCENE.json --out DIR [--integrator NAME] [--dt SECONDS]\n"
     "                     [--cfl C] [--frames N] [--threads T] [--checkpoint-every N] [--resume | --overwrite]\n"
     "                     [--color speed|hardening] [--model FILE.pt] [--trust-model] [--vtu]\n"
-    "  implicit solver (plasticitynet, lagged; defaults from the scene's integrator block):\n"
-    "                     [--newton-tol M_PER_S] [--cg-tol R] [--outer-iteration newton|fixed_point]\n"
+    "  implicit solver (every integrator but explicit; defaults from the scene's integrator block):\n"
+    "                     [--newton-tol M_PER_S] [--cg-tol R] [--outer-iteration auto|newton|fixed_point]\n"
     "                     [--time-integrator backward_euler|bdf2]\n"
     "                     [--hessian auto|network|tangent] [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--tangent-damping W]\n"
@@ -42,6 +43,23 @@ constexpr const char* kUsage =
     "                     iteration: the learned solve without learning error, a diagnostic)\n"
     "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
     "                     material's exact one) [--kinematic-start scaled|last_velocity]\n";
+
+/// The usage, then each integrator of solver/integrators.hpp with what a step solves.
+std::string usage() {
+    std::string text = kUsage;
+    text += "  integrators (--integrator; the scene's by default):\n";
+    for (const IntegratorInfo& info : integrators()) {
+        text += "    " + std::string(info.name) + std::string(16 - std::string(info.name).size(), ' ') + info.solves;
+        text += std::string(" [") + (info.particles && info.meshes ? "particles, meshes"
+                                     : info.particles            ? "particles"
+                                                                 : "meshes") +
+                (info.reads_models ? "; reads the objects' models" : "; reads no model") + "]\n";
+    }
+    return text;
+}
+
+/// --help, -h: the usage on stdout, exit 0.
+struct HelpRequested {};
 
 struct Options {
     std::string scene, integrator;
@@ -87,7 +105,9 @@ Options parse(int argc, char** argv) {
                                  "]" + meaning + ", got \"" + text + "\"");
             return static_cast<int>(v);
         };
-        if (arg == "--out")
+        if (arg == "--help" || arg == "-h")
+            throw HelpRequested{};
+        else if (arg == "--out")
             o.run.out = value();
         else if (arg == "--integrator")
             o.integrator = value();
@@ -130,8 +150,8 @@ Options parse(int argc, char** argv) {
             o.time_integrator = text;
         } else if (arg == "--outer-iteration") {
             const std::string text = value();
-            if (text != "newton" && text != "fixed_point")
-                throw UsageError("--outer-iteration: expected newton or fixed_point, got \"" + text + "\"");
+            if (text != "auto" && text != "newton" && text != "fixed_point")
+                throw UsageError("--outer-iteration: expected auto, newton or fixed_point, got \"" + text + "\"");
             o.outer_iteration = text;
         } else if (arg == "--kinematic-start") {
             const std::string text = value();
@@ -235,8 +255,11 @@ int simulate_command(int argc, char** argv) {
     Options o;
     try {
         o = parse(argc, argv);
+    } catch (const HelpRequested&) {
+        std::fputs(usage().c_str(), stdout);
+        return 0;
     } catch (const UsageError& e) {
-        std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
+        std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), usage().c_str());
         return 2;
     }
     // --threads, or every core the process may use; set in LibTorch too, whose first operation
@@ -289,7 +312,7 @@ int simulate_command(int argc, char** argv) {
         run_to_folder(sim, scene, settings, o.run);
         return 0;
     } catch (const UsageError& e) {
-        std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), kUsage);
+        std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), usage().c_str());
         return 2;
     } catch (const SimulationError& e) {  // a blow-up or a failed solve: the frames before it are valid
         std::fprintf(stderr, "error: %s\n", e.what());

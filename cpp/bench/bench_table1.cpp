@@ -68,6 +68,7 @@ struct Row {
     double seconds_per_frame = 0.0, mean_dt = 0.0;
     double newton = 0.0, cg = 0.0, fixed_point = 0.0;  // per step (fixed_point: Newton solves)
     double reference_updates = 0.0;  // per step: F0 set to F(v) (plasticitynet's outer iterations)
+    double network = 0.0;            // per step: passes of the energy network (plasticitynet)
     double max_true_residual = 0.0;  // the largest |R(v)| of a step's end, m/s (plasticitynet)
     double energy_share = 0.0, cg_share = 0.0;
     double contact_share = -1.0;  // broad phase + CCD (3D FEM); < 0: not measured
@@ -101,6 +102,7 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
         fixed_point += s.fixed_point_iterations;
         for (const pnet::StepStats& step : sim.last_frame_steps()) {
             row.reference_updates += step.reference_updates;
+            row.network += static_cast<double>(step.network_evaluations);
             row.max_true_residual = std::max(row.max_true_residual, step.true_residual);
             energy += step.energy_seconds;
             cg += step.cg_seconds;
@@ -118,20 +120,36 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
     row.cg = static_cast<double>(cg_iterations) / steps;
     row.fixed_point = static_cast<double>(fixed_point) / steps;
     row.reference_updates /= steps;
+    row.network /= steps;
     row.energy_share = energy / wall;
     row.cg_share = cg / wall;
     if (contact > 0.0) row.contact_share = contact / wall;
     return row;
 }
 
-/// plasticitynet with the paper's outer iteration (eq. 10: a full solve per F0, the network's Hessian
-/// with w mu), the default before issue 31, beside the default.
+/// plasticitynet with an explicit outer iteration (docs/solver.md): "fixed_point", the paper's eq. 10
+/// (a full solve per F0), or "newton", the reference following every iterate; both with the
+/// network's Hessian, beside the default's choice.
 template <class Sim>
-Row fixed_point_row(const pnet::Scene& scene, pnet::IntegratorSettings settings, int frames) {
-    settings.implicit.outer_iteration = "fixed_point";
+Row outer_row(const pnet::Scene& scene, pnet::IntegratorSettings settings, int frames, const char* outer) {
+    settings.name = "plasticitynet";
+    settings.implicit.outer_iteration = outer;
     Row row = measure<Sim>(scene, settings, frames);
-    row.integrator = "plasticitynet, fixed point";
+    row.integrator = std::string("plasticitynet, outer ") + outer;
     return row;
+}
+
+/// What --with-* adds beside plasticitynet and return_map.
+struct Extras {
+    bool lagged = false, one_solve = false, fixed_point = false, newton = false, last_velocity = false;
+};
+
+/// plasticitynet's outer-iteration rows asked for.
+template <class Sim>
+void add_outer_rows(std::vector<Row>& rows, const pnet::Scene& scene, const pnet::IntegratorSettings& base, int frames,
+                    const Extras& extras) {
+    if (extras.fixed_point) rows.push_back(outer_row<Sim>(scene, base, frames, "fixed_point"));
+    if (extras.newton) rows.push_back(outer_row<Sim>(scene, base, frames, "newton"));
 }
 
 /// The explicit step the rows of a scene are compared with: the paper's 1e-5 s; 1e-6 s where the CFL
@@ -143,7 +161,7 @@ double reference_step(const std::string& name) {
 
 template <int dim>
 std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_implicit, double reference_dt,
-                             bool with_lagged, bool with_one_solve, bool with_fixed_point) {
+                             const Extras& extras) {
     pnet::IntegratorSettings base = pnet::IntegratorSettings::from_scene(scene);
     for (const pnet::SceneObject& object : scene.objects) {
         pnet::LoadOptions load;
@@ -162,14 +180,16 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
     };
     using Sim = pnet::Simulation<dim>;
     rows.push_back(measure<Sim>(scene, with("plasticitynet", dt_implicit), frames));
-    if (with_one_solve) {  // the fixed point on F0 not converged: F0 = F(v*) only (the default before issue 14)
+    rows.push_back(measure<Sim>(scene, with("return_map", dt_implicit), frames));
+    if (extras.one_solve) {  // the paper's cheapest mode: one solve per step about F0 = F(v*), not converged
         pnet::IntegratorSettings one = with("plasticitynet", dt_implicit);
+        one.implicit.outer_iteration = "fixed_point";
         one.implicit.max_fixed_point_iterations = 1;
         rows.push_back(measure<Sim>(scene, one, frames));
         rows.back().integrator = "plasticitynet, 1 solve";
     }
-    if (with_fixed_point) rows.push_back(fixed_point_row<Sim>(scene, with("plasticitynet", dt_implicit), frames));
-    if (with_lagged) rows.push_back(measure<Sim>(scene, with("lagged", dt_implicit), frames));
+    add_outer_rows<Sim>(rows, scene, with("plasticitynet", dt_implicit), frames, extras);
+    if (extras.lagged) rows.push_back(measure<Sim>(scene, with("lagged", dt_implicit), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", reference_dt), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
     return rows;
@@ -177,8 +197,7 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
 
 /// The metal rows: the scene's own implicit settings (dt 1e-2) against explicit at 1e-5 and CFL.
 template <int dim>
-std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with_lagged, bool with_fixed_point,
-                                 bool with_last_velocity) {
+std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, const Extras& extras) {
     using Sim = pnet::FemSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
@@ -190,14 +209,15 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with
     };
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
-    if (with_fixed_point) rows.push_back(fixed_point_row<Sim>(scene, base, frames));
-    if (with_last_velocity) {  // each step from the last velocities with the plate on its target
+    rows.push_back(measure<Sim>(scene, with("return_map", base.dt), frames));
+    add_outer_rows<Sim>(rows, scene, base, frames, extras);
+    if (extras.last_velocity) {  // each step from the last velocities with the plate on its target
         pnet::IntegratorSettings last = base;
         last.implicit.kinematic_start = "last_velocity";
         rows.push_back(measure<Sim>(scene, last, frames));
         rows.back().integrator = "plasticitynet, last-velocity start";
     }
-    if (with_lagged) {
+    if (extras.lagged) {
         if (scene.meshes[0].material.name == "metal")
             rows.push_back(measure<Sim>(scene, with("analytic", base.dt), frames));
         rows.push_back(measure<Sim>(scene, with("lagged", base.dt), frames));
@@ -210,7 +230,7 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, bool with
 /// The MPM-FEM coupling row: plasticitynet (the sand's learned energy) at the scene's step against
 /// explicit coupling at 1e-6 s and at its CFL step.
 template <int dim>
-std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool with_lagged, bool with_fixed_point) {
+std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, const Extras& extras) {
     using Sim = pnet::CoupledSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
@@ -222,8 +242,9 @@ std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool 
     };
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
-    if (with_fixed_point) rows.push_back(fixed_point_row<Sim>(scene, base, frames));
-    if (with_lagged) rows.push_back(measure<Sim>(scene, with("lagged", base.dt), frames));
+    rows.push_back(measure<Sim>(scene, with("return_map", base.dt), frames));
+    add_outer_rows<Sim>(rows, scene, base, frames, extras);
+    if (extras.lagged) rows.push_back(measure<Sim>(scene, with("lagged", base.dt), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", reference_step(scene.name)), frames));
     rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
     return rows;
@@ -234,8 +255,8 @@ std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, bool 
 int main(int argc, char** argv) {
     int frames = 10, fem_frames = 0, coupling_frames = 10, stiff_frames = 0, threads = 0;
     double dt_implicit = 1e-3;
-    bool with_lagged = false, with_one_solve = false, with_fixed_point = false, with_last_velocity = false,
-         three_d = false, fem = true, stiff = true;
+    Extras extras;
+    bool three_d = false, fem = true, stiff = true;
     std::string scenes_dir = PNET_SCENES_DIR, only;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
@@ -267,20 +288,23 @@ int main(int argc, char** argv) {
         else if (arg == "--only")
             only = value();
         else if (arg == "--with-lagged")
-            with_lagged = true;
+            extras.lagged = true;
         else if (arg == "--with-one-solve")
-            with_one_solve = true;
+            extras.one_solve = true;
         else if (arg == "--with-fixed-point")
-            with_fixed_point = true;
+            extras.fixed_point = true;
+        else if (arg == "--with-newton-outer")
+            extras.newton = true;
         else if (arg == "--with-last-velocity")
-            with_last_velocity = true;
+            extras.last_velocity = true;
         else if (arg == "--3d")
             three_d = true;
         else {
             std::fprintf(stderr,
                          "usage: bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] "
                          "[--threads T] [--dt-implicit S] [--scenes DIR] [--only NAME] [--with-lagged] "
-                         "[--with-one-solve] [--with-fixed-point] [--with-last-velocity] [--3d] [--no-fem] "
+                         "[--with-one-solve] [--with-fixed-point] [--with-newton-outer] [--with-last-velocity] [--3d] "
+                         "[--no-fem] "
                          "[--no-stiff]\n");
             return 2;
         }
@@ -311,11 +335,11 @@ int main(int argc, char** argv) {
         frames, fem_frames > 0 ? ("0-" + std::to_string(fem_frames)).c_str() : "all the scene's frames",
         omp_get_max_threads());
     std::printf(
-        "| scene | integrator | dt (s) | s/frame | Newton/step | CG/step | solves/step | F0 updates/step |"
-        " max |R| (m/s) | energy %% | CG %% |"
+        "| scene | integrator | dt (s) | s/frame | x return_map | Newton/step | CG/step | network passes/step |"
+        " solves/step | F0 updates/step | max |R| (m/s) | energy %% | CG %% |"
         " contact %% | speed-up vs explicit 1e-5 (2D coupling, stiff: 1e-6) | speed-up vs explicit at CFL |"
         " paper s/frame | paper speed-up |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const std::string& name : names) {
         if (!only.empty() && only != name) continue;
         std::vector<Row> rows;
@@ -325,23 +349,17 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "%s:\n", name.c_str());
             if (scene.has_meshes() && scene.has_particles()) {
                 scene_frames = coupling_frames;
-                rows = scene.dim == 2 ? bench_coupled_scene<2>(scene, scene_frames, with_lagged, with_fixed_point)
-                                      : bench_coupled_scene<3>(scene, scene_frames, with_lagged, with_fixed_point);
+                rows = scene.dim == 2 ? bench_coupled_scene<2>(scene, scene_frames, extras)
+                                      : bench_coupled_scene<3>(scene, scene_frames, extras);
             } else if (scene.has_meshes()) {
                 scene_frames = fem_frames > 0 ? fem_frames : scene.frames;
-                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, with_lagged, with_fixed_point,
-                                                                           with_last_velocity)
-                                      : bench_fem_scene<3>(scene, scene_frames, with_lagged, with_fixed_point,
-                                                           with_last_velocity);
+                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, extras)
+                                      : bench_fem_scene<3>(scene, scene_frames, extras);
             } else {
                 if (name.rfind("stiff/", 0) == 0) scene_frames = stiff_frames;
                 const double reference_dt = reference_step(name);
-                rows =
-                    scene.dim == 2
-                        ? bench_scene<2>(scene, scene_frames, dt_implicit, reference_dt, with_lagged, with_one_solve,
-                                         with_fixed_point)
-                        : bench_scene<3>(scene, scene_frames, dt_implicit, reference_dt, with_lagged, with_one_solve,
-                                         with_fixed_point);
+                rows = scene.dim == 2 ? bench_scene<2>(scene, scene_frames, dt_implicit, reference_dt, extras)
+                                      : bench_scene<3>(scene, scene_frames, dt_implicit, reference_dt, extras);
             }
         } catch (const std::exception& e) {
             std::fprintf(stderr, "bench_table1: %s: %s\n", name.c_str(), e.what());
@@ -350,8 +368,9 @@ int main(int argc, char** argv) {
         // The references: explicit at the paper's ground-truth step (1e-5 s; the coupling and the stiff
         // variants: 1e-6 s), and explicit at its CFL step (if it ran through the interval).
         const double reference_dt = reference_step(name);
-        double explicit_1e5 = 0.0, explicit_cfl = 0.0;
+        double explicit_1e5 = 0.0, explicit_cfl = 0.0, return_map = 0.0;
         for (const Row& r : rows) {
+            if (r.integrator == "return_map" && r.failure.empty()) return_map = r.seconds_per_frame;
             if (r.integrator == "explicit" && r.dt == reference_dt) explicit_1e5 = r.seconds_per_frame;
             if (r.integrator == "explicit" && r.dt == 0.0 && r.failure.empty()) explicit_cfl = r.seconds_per_frame;
         }
@@ -383,14 +402,17 @@ int main(int argc, char** argv) {
                 std::snprintf(speedup_cfl, sizeof speedup_cfl, "(explicit at CFL failed)");
             const std::string contact =
                 r.contact_share >= 0.0 ? std::to_string(static_cast<int>(100 * r.contact_share + 0.5)) : "-";
-            char residual[32] = "-";
+            char residual[32] = "-", versus_classical[32] = "-", network[32] = "-";
+            if (implicit && r.failure.empty() && return_map > 0.0)
+                std::snprintf(versus_classical, sizeof versus_classical, "%.2f", r.seconds_per_frame / return_map);
+            if (implicit) std::snprintf(network, sizeof network, "%.2f", r.network);
             if (implicit && r.reference_updates > 0.0)
                 std::snprintf(residual, sizeof residual, "%.2e", r.max_true_residual);
-            std::printf("| %s | %s | %s | %s | %s | %s | %s | %.2f | %s | %s | %s | %s | %s | %s | %s |\n",
+            std::printf("| %s | %s | %s | %s | %s | %s | %s | %s | %s | %.2f | %s | %s | %s | %s | %s | %s | %s |\n",
                         name.c_str(),
-                        r.integrator.c_str(), dt, seconds.c_str(),
+                        r.integrator.c_str(), dt, seconds.c_str(), versus_classical,
                         implicit ? std::to_string(r.newton).substr(0, 4).c_str() : "-",
-                        implicit ? std::to_string(static_cast<int>(r.cg + 0.5)).c_str() : "-",
+                        implicit ? std::to_string(static_cast<int>(r.cg + 0.5)).c_str() : "-", network,
                         implicit ? std::to_string(r.fixed_point).substr(0, 4).c_str() : "-", r.reference_updates,
                         residual,
                         implicit ? std::to_string(static_cast<int>(100 * r.energy_share + 0.5)).c_str() : "-",

@@ -91,8 +91,9 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     const double alpha = coupled_.max_step(VecX::Zero(v_.size()), v_);
     if (alpha < 1.0) v_ *= alpha;
 
-    ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
+    ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
     solve.work_line_search = mpm_energy_->tangent_hessian();
+    const long network_before = mpm_energy_->network_evaluations();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     solve_floor_friction_passes<dim>(
         coupled_, v_, newton, solve, context, work_, mpm_system_.boundary.coulomb_floor(),
@@ -101,6 +102,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
             mpm_.floor_friction_contacts(&grid_v);
         },
         [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped()); }, stats);
+    stats.network_evaluations = mpm_energy_->network_evaluations() - network_before;
     stats.ccd_queries = coupled_.ccd_queries();
     stats.ccd_limited = coupled_.ccd_limited() + (alpha < 1.0);
     stats.energy_seconds = mpm_.energy_seconds();

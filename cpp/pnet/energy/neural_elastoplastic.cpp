@@ -65,6 +65,13 @@ Mat<dim> NeuralElastoplasticEnergy<dim>::elastoplastic_stress(const Mat<dim>& F,
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const double* hardening, std::size_t n) {
+    // The same reference again (a Coulomb floor's next friction pass starts where the last one ended):
+    // c, the offset and the buffers stand, and no network pass is repeated.
+    if (n > 0 && n == F0_.size() && std::memcmp(F0, F0_.data(), n * sizeof(Mat<dim>)) == 0 &&
+        (hardening ? std::memcmp(hardening, hardening_.data(), n * sizeof(double)) == 0
+                   : std::all_of(hardening_.begin(), hardening_.end(),
+                                 [&](double h) { return h == training_material_.description().initial_hardening; })))
+        return;
     F0_.assign(F0, F0 + n);
     const double initial = training_material_.description().initial_hardening;
     if (hardening)
@@ -109,7 +116,7 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
 }
 
 template <int dim>
-void NeuralElastoplasticEnergy<dim>::ensure_correction() const {
+void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
     if (correction_ready_) return;
     const std::size_t n = F0_.size();
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
@@ -118,13 +125,17 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction() const {
     // evaluation since set_reference.
     const bool global = form == EnergyForm::GlobalIdentity || form == EnergyForm::Global;
     net_.set_reference(global ? identity_.data() : F0_.data(), has_hardening_ ? network_h_.data() : nullptr, n);
-    // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next evaluation at F0.
-    net_.evaluate(F0_.data(), FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
+    // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next evaluation at F0 (with
+    // Hess N too when the caller asks: Newton's Hessian at its iterate, in the same pass).
+    ++network_passes_;
+    net_.evaluate(F0_.data(), hessian ? FusedMlp::Order::Hessian : FusedMlp::Order::Gradient, net_value_.data(),
+                  net_gradient_.data(), hessian);
     if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {
         // c = grad_F N(I, slot, h), the rejected forms' correction at the identity.
         identity_value_.resize(n);
         identity_gradient_.resize(n * kM);
-        net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
+        ++network_passes_;
+    net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
     }
 #pragma omp parallel for schedule(static) if (count >= 64)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
@@ -192,6 +203,7 @@ void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const
     ensure_correction();
     if (at_reference(F)) return finish(F, psi, nullptr);
     buffers_at_reference_ = false;
+    ++network_passes_;
     net_.evaluate(F, FusedMlp::Order::Value, net_value_.data());
     finish(F, psi, nullptr);
 }
@@ -206,6 +218,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* p
     ensure_correction();
     if (at_reference(F)) return finish(F, psi, gradient);
     buffers_at_reference_ = false;
+    ++network_passes_;
     net_.evaluate(F, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
     finish(F, psi, gradient);
 }
@@ -253,12 +266,20 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
         }
         return;
     }
-    ensure_correction();
-    buffers_at_reference_ = false;
     // Hess_F N is symmetric, so the row-major output is also the column-major
     // Eigen matrix.
-    net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
-                  reinterpret_cast<double*>(hessian));
+    if (!correction_ready_ && F0_.size() > 0 && std::memcmp(F, F0_.data(), F0_.size() * sizeof(Mat<dim>)) == 0 &&
+        metadata_.energy_form == EnergyForm::Eq8) {
+        // At the reference before its correction: N, grad N and Hess N at F0 in one pass, which gives
+        // c and the offset too (the Newton outer iteration's iterates).
+        ensure_correction(reinterpret_cast<double*>(hessian));
+    } else {
+        ensure_correction();
+        buffers_at_reference_ = false;
+        ++network_passes_;
+        net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
+                      reinterpret_cast<double*>(hessian));
+    }
     finish(F, psi, gradient);
     const double wmu = (w_ + damping_) * mu_train_;
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());

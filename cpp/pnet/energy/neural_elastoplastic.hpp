@@ -119,6 +119,9 @@ public:
     /// (Objective::set_damping); 0 by default.
     void set_damping(double lambda) { damping_ = lambda; }
     double regularizer_weight() const { return w_; }
+    /// Passes of the network over the points since construction (each a value, gradient or Hessian
+    /// evaluation of every point of the batch): what the integrator's network counter reports.
+    long network_passes() const { return network_passes_; }
     bool has_hardening() const { return has_hardening_; }
     const LearnedReturnMap<dim>* learned_return_map() const { return return_map_.get(); }
 
@@ -153,6 +156,7 @@ private:
     std::vector<Mat<dim>> identity_;
     mutable std::vector<double> identity_value_, identity_gradient_;
     std::size_t hardening_clamped_ = 0;
+    mutable long network_passes_ = 0;
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> net_value_, net_gradient_;
@@ -164,8 +168,9 @@ private:
     /// Eq. 8 relative to the reference, evaluated at F = F0 exactly: psi = 0 and grad = E Ptilde(F0)
     /// by construction, so no network pass is needed (the Newton outer iteration's every point).
     bool exactly_at_reference(const Mat<dim>* F) const;
-    /// Evaluates the network at F0 for c and the offset (once per set_reference()).
-    void ensure_correction() const;
+    /// Evaluates the network at F0 for c and the offset (once per set_reference()); with `hessian`
+    /// (n d^2 x d^2, row-major) also Hess N at F0, in the same pass.
+    void ensure_correction(double* hessian = nullptr) const;
 };
 
 }  // namespace pnet

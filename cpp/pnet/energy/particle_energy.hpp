@@ -59,6 +59,10 @@ public:
     /// Newton steps with the residual's Jacobian: the forms that sum these Hessians report it
     /// (Form::symmetric_hessian()), and Newton then solves with BiCGSTAB.
     virtual bool symmetric_hessian() const { return true; }
+
+    /// Passes of a learned energy's network over the points since construction (0 for energies
+    /// without one): the integrators report its change per step (StepStats::network_evaluations).
+    virtual long network_evaluations() const { return 0; }
 };
 
 /// psi(F) of the elasticity model of each particle's material.
@@ -119,6 +123,11 @@ public:
         for (const Group& g : objects_)
             if (!g.energy->symmetric_hessian()) return false;
         return true;
+    }
+    long network_evaluations() const override {
+        long passes = 0;
+        for (const Group& g : objects_) passes += g.energy->network_passes();
+        return passes;
     }
 
 private:

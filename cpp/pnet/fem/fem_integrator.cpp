@@ -68,7 +68,7 @@ FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, 
     : system_(system),
       method_(method),
       options_(options),
-      iterates_reference_(method == FemMethod::PlasticityNet ||
+      iterates_reference_(integrator_info(method).references ||
                           (method == FemMethod::Analytic && options.analytic_regularizer > 0.0)),
       energy_(std::move(energy)),
       potential_(system_.mesh, system_.rest, *energy_),
@@ -100,6 +100,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
     StepStats stats;
     stats.dt = dt;
+    const long network_before = energy_->network_evaluations();
     const std::size_t n = system_.mesh.nodes();
     // The potential is over v with x(v) = x^ + h v (fem_integrator.hpp): backward Euler x^ = x^n, h = dt;
     // BDF2, once the state has history, x^ = ((1 + w)^2 x^n - w^2 x^{n-1}) / (1 + 2 w), h = beta dt with
@@ -156,7 +157,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     // The elastic predictor keeps the paper's fixed point's first F0 near the solution; the Newton
     // outer iteration evaluates the energy only within a step of its reference and needs none
     // (ImplicitOptions::fem_predictor).
-    const bool predictor = iterates_reference_ && (options_.outer_iteration == "fixed_point" || options_.fem_predictor);
+    const bool predictor = iterates_reference_ && (options_.resolved_outer_iteration() == "fixed_point" || options_.fem_predictor);
     if (predictor) {
         predictor_.begin_step(x_hat, v_star, h, state.plastic_inverse, fixed_components_);
         predictor_.set_material_state(system_.element_object, state.hardening);
@@ -165,6 +166,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
             const NewtonStats p =
                 minimize(predictor_, v, newton, "step " + std::to_string(step_index) + ", predictor", &work_.newton);
             stats.newton_iterations += p.iterations;
+            stats.predictor_iterations += p.iterations;
             stats.line_search_steps += p.line_search_steps;
         } catch (const NewtonError& e) {
             throw SimulationError(e.what());
@@ -255,6 +257,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
         max_speed = std::max(max_speed, state.v[i].norm());
     }
     stats.max_grid_speed = max_speed;
+    stats.network_evaluations = energy_->network_evaluations() - network_before;
     fem_return_mapping(system_, state);
     stats.grid_seconds = std::chrono::duration<double>(after_solve - start).count();
     stats.g2p_seconds = seconds_since(after_solve);

@@ -39,6 +39,7 @@
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/implicit_options.hpp"
+#include "pnet/solver/integrators.hpp"
 #include "pnet/solver/step_stats.hpp"
 
 namespace pnet {
@@ -78,7 +79,8 @@ struct FemState {
     static FemState at_rest(const FemSystem<dim>& system);
 };
 
-enum class FemMethod { PlasticityNet, Lagged, Analytic };
+/// The implicit FEM methods: plasticitynet, return_map, lagged, analytic (solver/integrators.hpp).
+using FemMethod = Method;
 
 template <int dim>
 class FemImplicitIntegrator {

@@ -121,7 +121,8 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     potential_.set_assemble(options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();
-    ReferenceSolveOptions solve = options_.reference_solve_options(method_ == ImplicitMethod::PlasticityNet);
+    const long network_before = energy_->network_evaluations();
+    ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
@@ -136,6 +137,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     double max_speed = 0.0;
     for (Eigen::Index k = 0; k < v_.size() / dim; ++k) max_speed = std::max(max_speed, v_.segment<dim>(dim * k).norm());
     stats.max_grid_speed = max_speed;
+    stats.network_evaluations = energy_->network_evaluations() - network_before;
     stats.energy_seconds = potential_.energy_seconds();
     stats.cg_seconds = potential_.multiply_seconds();
     const auto after_solve = std::chrono::steady_clock::now();

@@ -47,24 +47,26 @@
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/implicit_options.hpp"
+#include "pnet/solver/integrators.hpp"
 #include "pnet/solver/newton.hpp"
 
 namespace pnet {
 
-enum class ImplicitMethod { PlasticityNet, Lagged };
+/// The implicit MPM methods: plasticitynet, return_map, lagged (solver/integrators.hpp).
+using ImplicitMethod = Method;
 
 template <int dim>
 class ImplicitIntegrator final : public MpmIntegrator<dim> {
 public:
-    /// `energy`: the per-particle energy (NeuralParticleEnergy for
-    /// plasticitynet, ElasticParticleEnergy for lagged). `return_maps[k]`:
+    /// `energy`: the per-particle energy (NeuralParticleEnergy for plasticitynet,
+    /// ReturnMappingEnergy for return_map, ElasticParticleEnergy for lagged). `return_maps[k]`:
     /// object k's learned return mapping, or null for its material's analytic
     /// one (empty: analytic for all).
     ImplicitIntegrator(const MpmSystem<dim>& system, ImplicitMethod method, const ImplicitOptions& options,
                        std::unique_ptr<ParticleEnergy<dim>> energy,
                        std::vector<const LearnedReturnMap<dim>*> return_maps = {});
 
-    std::string name() const override { return method_ == ImplicitMethod::PlasticityNet ? "plasticitynet" : "lagged"; }
+    std::string name() const override { return to_string(method_); }
 
     /// Throws SimulationError ("step N: ...") when a Newton solve fails (NaN,
     /// non-descent direction, line-search stall: the particles are left as they

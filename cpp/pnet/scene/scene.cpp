@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "pnet/material/material_json.hpp"
+#include "pnet/solver/integrators.hpp"
 
 namespace pnet {
 
@@ -212,12 +213,11 @@ void read_integrator(const Reader& r, const json& j, Scene& scene) {
     if (!integrator) return;
     r.require_object(*integrator, "integrator");
     // A block without a name would silently mean "explicit", whose stable step is far below the implicit ones'.
-    const json& name = r.require(*integrator, "name", "integrator", "explicit, plasticitynet, lagged or analytic");
+    const json& name = r.require(*integrator, "name", "integrator", integrator_names());
     scene.integrator.name = r.text(name, "integrator.name");
-    if (scene.integrator.name != "explicit" && scene.integrator.name != "plasticitynet" &&
-        scene.integrator.name != "lagged" && scene.integrator.name != "analytic")
-        r.fail("integrator.name", "unknown integrator '" + scene.integrator.name +
-                                      "' (expected explicit, plasticitynet, lagged or analytic)");
+    if (!is_integrator(scene.integrator.name))
+        r.fail("integrator.name",
+               "unknown integrator '" + scene.integrator.name + "' (expected " + integrator_names() + ")");
     scene.integrator.options = json::object();
     for (const auto& item : integrator->items()) {
         const std::string path = join("integrator", item.key());
@@ -600,9 +600,9 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
         for (const char* key : {"ground", "contact"})
             if (Reader::find(j, key)) r.fail(key, "applies to FEM meshes; this scene has none (particles meet the "
                                                   "domain's walls and floor, see boundary)");
-        if (scene.integrator.name == "analytic")
-            r.fail("integrator.name", "'analytic' is the closed-form FEM energy; particle scenes use explicit, "
-                                      "plasticitynet or lagged");
+        if (!integrator_info(parse_integrator(scene.integrator.name)).particles)
+            r.fail("integrator.name", "'" + scene.integrator.name + "' is for FEM meshes; particle scenes use " +
+                                          integrator_names(true, false));
     } else {
         read_contact(r, j, scene);
     }

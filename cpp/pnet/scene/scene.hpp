@@ -161,7 +161,7 @@ struct Scene {
     double flip_relaxation_time = 0.0;
 
     struct Integrator {
-        std::string name = "explicit";                      // "explicit" | "plasticitynet" | "lagged" | "analytic" (FEM)
+        std::string name = "explicit";                      // an integrator of solver/integrators.hpp
         double dt = 0.0;                                    // s; 0: the CFL step
         double cfl = 0.5;                                   // dt = cfl dx / (max wave speed + max |v|) when dt = 0
         nlohmann::json options = nlohmann::json::object();  // the block's other keys, for the implicit solvers

@@ -10,6 +10,7 @@
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/sampler.hpp"
+#include "pnet/sim/method_energy.hpp"
 
 namespace pnet {
 
@@ -56,7 +57,7 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
         for (int i = fem_.first_node[k]; i < fem_.first_node[k + 1]; ++i)
             state_.v[i] = scene.meshes[k].velocity.template head<dim>();
 
-    if (settings.name == "explicit") {
+    if (settings.method() == Method::Explicit) {
         explicit_ = std::make_unique<CoupledExplicitIntegrator<dim>>(mpm_, s, fem_contact_.get(), *coupling_, friction);
         explicit_->mpm().reset(particles_);
         dt_ = settings.dt;
@@ -65,30 +66,16 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
             throw std::invalid_argument("dt must be > 0 for the implicit integrator " + settings.name +
                                         " (the CFL step is explicit's)");
         dt_ = settings.dt;
-        std::unique_ptr<ParticleEnergy<dim>> energy;
-        std::vector<const LearnedReturnMap<dim>*> return_maps;
-        ImplicitMethod method = ImplicitMethod::Lagged;
-        if (settings.name == "lagged") {
-            energy = std::make_unique<ElasticParticleEnergy<dim>>(mpm_.materials);
-        } else if (settings.name == "plasticitynet") {
-            method = ImplicitMethod::PlasticityNet;
-            std::vector<std::shared_ptr<const ModelFile>> models = settings.models;
-            models.resize(scene.objects.size());  // objects first, then meshes: the meshes are elastic
-            std::vector<std::string> context;
-            for (const SceneObject& object : scene.objects)
-                context.push_back(scene.file + ": " + object.json_path + ".model");
-            auto neural = std::make_unique<NeuralParticleEnergy<dim>>(models, mpm_.materials, context,
-                                                                      settings.implicit.regularizer_weight,
-                                                                      settings.implicit.template neural_hessian<dim>(),
-                                                                      settings.implicit.tangent_damping);
-            for (std::size_t k = 0; k < scene.objects.size(); ++k)
-                return_maps.push_back(
-                    settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);
-            energy = std::move(neural);
-        } else {
-            throw std::invalid_argument("unknown integrator \"" + settings.name +
-                                        "\" (expected explicit, plasticitynet or lagged for particles with meshes)");
-        }
+        const Method method = settings.method();
+        if (!integrator_info(method).particles || !integrator_info(method).meshes)
+            throw std::invalid_argument("the " + settings.name + " integrator is not for particles beside meshes "
+                                        "(expected explicit, plasticitynet, return_map or lagged)");
+        // settings.models: objects first, then meshes; the meshes are elastic.
+        std::vector<std::string> where;
+        for (const SceneObject& object : scene.objects) where.push_back(scene.file + ": " + object.json_path);
+        MethodEnergy<dim> made = make_method_energy<dim>(settings, mpm_.materials, settings.models, where);
+        std::unique_ptr<ParticleEnergy<dim>> energy = std::move(made.energy);
+        std::vector<const LearnedReturnMap<dim>*> return_maps = std::move(made.return_maps);
         implicit_ = std::make_unique<CoupledImplicitIntegrator<dim>>(mpm_, s, method, settings.implicit,
                                                                      std::move(energy), std::move(return_maps),
                                                                      fem_contact_.get(), *coupling_, friction);

@@ -12,6 +12,7 @@
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
+#include "pnet/sim/method_energy.hpp"
 
 namespace pnet {
 
@@ -214,7 +215,7 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
             for (int e = built_.first_element[k]; e < built_.first_element[k + 1]; ++e) state_.hardening[e] = *m.hardening;
     }
 
-    if (settings.name == "explicit") {
+    if (settings.method() == Method::Explicit) {
         explicit_ = std::make_unique<FemExplicitIntegrator<dim>>(s, contact_.get());
         if (frictional) explicit_->set_friction(friction_.get(), contact_.get());
         dt_ = settings.dt > 0.0 ? settings.dt : explicit_->cfl_time_step(settings.cfl);
@@ -223,44 +224,29 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
             throw std::invalid_argument("dt must be > 0 for the implicit integrator " + settings.name +
                                         " (the CFL step is explicit's)");
         dt_ = settings.dt;
-        std::vector<std::string> context;
-        for (const SceneMesh& m : scene.meshes) context.push_back(scene.file + ": " + m.json_path + ".model");
-        std::unique_ptr<ParticleEnergy<dim>> energy;
-        FemMethod method = FemMethod::Lagged;
-        if (settings.name == "lagged") {
-            energy = std::make_unique<ElasticParticleEnergy<dim>>(s.materials);
-        } else if (settings.name == "analytic") {
-            method = FemMethod::Analytic;
-            for (auto& c : context) c = c.substr(0, c.size() - 6) + ".material";
-            energy = std::make_unique<AnalyticElastoplasticEnergy<dim>>(s.materials, context,
-                                                                      settings.implicit.analytic_regularizer);
-        } else if (settings.name == "plasticitynet") {
-            method = FemMethod::PlasticityNet;
-            std::vector<std::shared_ptr<const ModelFile>> models(scene.meshes.size());
-            const std::size_t offset = scene.objects.size();  // settings.models: objects first, then meshes
-            int deformable = -1;
-            for (std::size_t k = 0; k < scene.meshes.size(); ++k) {
-                if (offset + k < settings.models.size()) models[k] = settings.models[offset + k];
-                if (deformable < 0 && !scene.meshes[k].kinematic) deformable = static_cast<int>(k);
-            }
-            for (std::size_t k = 0; k < scene.meshes.size(); ++k)
-                if (scene.meshes[k].kinematic) {
-                    models[k] = models[deformable];
-                    context[k] = context[deformable];
-                }
-            auto neural = std::make_unique<NeuralParticleEnergy<dim>>(models, s.materials, context,
-                                                                    settings.implicit.regularizer_weight,
-                                                 settings.implicit.neural_hessian<dim>(),
-                                                 settings.implicit.tangent_damping);
-            built_.system.return_maps.clear();
-            for (std::size_t k = 0; k < scene.meshes.size(); ++k)
-                built_.system.return_maps.push_back(
-                    settings.implicit.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);
-            energy = std::move(neural);
-        } else {
-            throw std::invalid_argument("unknown integrator \"" + settings.name +
-                                        "\" (expected explicit, plasticitynet, lagged or analytic)");
+        const Method method = settings.method();
+        if (!integrator_info(method).meshes)
+            throw std::invalid_argument("the " + settings.name + " integrator is not for meshes (expected " +
+                                        integrator_names(false, true) + ")");
+        std::vector<std::string> where;
+        for (const SceneMesh& m : scene.meshes) where.push_back(scene.file + ": " + m.json_path);
+        // settings.models: objects first, then meshes; under plasticitynet a kinematic mesh (the plate)
+        // takes the first deformable mesh's model, which it never evaluates (its nodes are fixed).
+        std::vector<std::shared_ptr<const ModelFile>> models(scene.meshes.size());
+        const std::size_t offset = scene.objects.size();
+        int deformable = -1;
+        for (std::size_t k = 0; k < scene.meshes.size(); ++k) {
+            if (offset + k < settings.models.size()) models[k] = settings.models[offset + k];
+            if (deformable < 0 && !scene.meshes[k].kinematic) deformable = static_cast<int>(k);
         }
+        for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+            if (method == Method::PlasticityNet && scene.meshes[k].kinematic && deformable >= 0) {
+                models[k] = models[deformable];
+                where[k] = where[deformable];
+            }
+        MethodEnergy<dim> made = make_method_energy<dim>(settings, s.materials, models, where);
+        std::unique_ptr<ParticleEnergy<dim>> energy = std::move(made.energy);
+        built_.system.return_maps = made.return_maps;
         implicit_ = std::make_unique<FemImplicitIntegrator<dim>>(s, method, settings.implicit, std::move(energy),
                                                                contact_.get());
         if (frictional) implicit_->set_friction(friction_.get(), contact_.get());

@@ -7,6 +7,7 @@
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/scene/sampler.hpp"
+#include "pnet/sim/method_energy.hpp"
 
 namespace pnet {
 
@@ -47,30 +48,18 @@ Simulation<dim>::Simulation(const Scene& scene, double dt, double cfl)
 template <int dim>
 Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settings)
     : SimulationBase(scene, settings), system_(make_mpm_system<dim>(scene)), particles_(sample_particles<dim>(scene)) {
-    if (settings.name == "explicit") {
+    const Method method = settings.method();
+    if (method == Method::Explicit) {
         integrator_ = std::make_unique<ExplicitIntegrator<dim>>(system_);
-    } else if (settings.name == "lagged") {
-        integrator_ = std::make_unique<ImplicitIntegrator<dim>>(
-            system_, ImplicitMethod::Lagged, settings.implicit,
-            std::make_unique<ElasticParticleEnergy<dim>>(system_.materials));
-    } else if (settings.name == "plasticitynet") {
-        std::vector<std::shared_ptr<const ModelFile>> models = settings.models;
-        models.resize(scene.objects.size());
-        std::vector<std::string> context;
-        for (const SceneObject& object : scene.objects) context.push_back(scene.file + ": " + object.json_path + ".model");
-        auto energy = std::make_unique<NeuralParticleEnergy<dim>>(models, system_.materials, context,
-                                                                  settings.implicit.regularizer_weight,
-                                                 settings.implicit.neural_hessian<dim>(),
-                                                 settings.implicit.tangent_damping);
-        std::vector<const LearnedReturnMap<dim>*> return_maps;
-        for (std::size_t k = 0; k < scene.objects.size(); ++k)
-            return_maps.push_back(settings.implicit.learned_return_map ? energy->object_energy(k).learned_return_map()
-                                                                       : nullptr);
-        integrator_ = std::make_unique<ImplicitIntegrator<dim>>(system_, ImplicitMethod::PlasticityNet,
-                                                                settings.implicit, std::move(energy), return_maps);
     } else {
-        throw std::invalid_argument("unknown integrator \"" + settings.name +
-                                    "\" (expected explicit, plasticitynet or lagged)");
+        if (!integrator_info(method).particles)
+            throw std::invalid_argument("the " + settings.name + " integrator is not for particles (expected " +
+                                        integrator_names(true, false) + ")");
+        std::vector<std::string> where;
+        for (const SceneObject& object : scene.objects) where.push_back(scene.file + ": " + object.json_path);
+        MethodEnergy<dim> energy = make_method_energy<dim>(settings, system_.materials, settings.models, where);
+        integrator_ = std::make_unique<ImplicitIntegrator<dim>>(system_, method, settings.implicit,
+                                                                std::move(energy.energy), energy.return_maps);
     }
     integrator_->reset(particles_);
 }
@@ -79,7 +68,7 @@ template <int dim>
 StepStats Simulation<dim>::step() {
     const double dt = clip_to_frame(
         settings_.dt > 0.0
-            ? (settings_.name == "explicit"
+            ? (settings_.method() == Method::Explicit
                    ? settings_.dt
                    : advection_time_step(system_, particles_, settings_.dt, settings_.implicit.advection_cfl))
             : cfl_time_step(system_, particles_, settings_.cfl));

@@ -331,7 +331,8 @@ void run(Sim& sim, const Scene& scene, Output o, const IntegratorSettings& setti
     // A folder holding another run is refused before any work, and cleared only once the run is set up.
     if (!o.resume) check_run_folder(out, o.overwrite);
     const int frames = o.frames > 0 ? o.frames : scene.frames;
-    const bool implicit = settings.name != "explicit";
+    const IntegratorInfo& integrator = integrator_info(settings.method());
+    const bool implicit = integrator.implicit;
     const fs::path checkpoint = out / "checkpoint.bin";
     const fs::path stats_path = out / "stats.csv";
     if (o.resume) {
@@ -356,6 +357,7 @@ void run(Sim& sim, const Scene& scene, Output o, const IntegratorSettings& setti
         {"run_id", o.run_id},
         {"dim", dim},
         {"integrator", settings.name},
+        {"integrator_solves", integrator.solves},
         {"dt", settings.dt},
         {"cfl", settings.cfl},
         {"frame_dt", scene.frame_dt},
@@ -366,13 +368,18 @@ void run(Sim& sim, const Scene& scene, Output o, const IntegratorSettings& setti
         {"view_min", std::vector<double>(scene.view_min.data(), scene.view_min.data() + dim)},
         {"view_max", std::vector<double>(scene.view_max.data(), scene.view_max.data() + dim)}};
     run_json.update(describe_run(sim));
-    run_json["models"] = scene_models(scene);
-    if (implicit) run_json["solver"] = settings.implicit.to_json();
+    // The models the run read: none unless its integrator reads them (solver/integrators.hpp).
+    run_json["models"] = integrator.reads_models ? scene_models(scene) : nlohmann::json::array();
+    if (implicit) {
+        run_json["solver"] = settings.implicit.to_json();
+        if (settings.method() == Method::PlasticityNet)
+            run_json["solver"]["outer_iteration_resolved"] = settings.implicit.resolved_outer_iteration();
+    }
     write_text_atomically((out / "run.json").string(), run_json.dump(2) + "\n");
 
     // stats.csv: one row per frame; steps.csv: one row per step (implicit
     // solver figures included). On resume, rows after the checkpoint's frame are dropped.
-    const RunColumns columns{dim, fem};
+    const RunColumns columns{dim, fem, settings.name};
     std::string stats = stats_csv_header(columns);
     std::string steps_csv = steps_csv_header(columns);
     const fs::path steps_path = out / "steps.csv";

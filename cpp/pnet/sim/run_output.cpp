@@ -58,7 +58,7 @@ std::string steps_csv_header(const RunColumns& columns) {
     for_each_step_field([&](const StepField& field, auto) {
         if (shown(field, columns)) header += std::string(",") + field.column;
     });
-    return header + "\n";
+    return header + ",integrator\n";
 }
 
 std::string steps_csv_row(int frame, long step, double time, const StepStats& stats, const RunColumns& columns) {
@@ -69,7 +69,7 @@ std::string steps_csv_row(int frame, long step, double time, const StepStats& st
     for_each_step_field([&](const StepField& field, auto member) {
         if (shown(field, columns)) append_cell(row, stats.*member, field.format);
     });
-    return row + "\n";
+    return row + "," + columns.integrator + "\n";
 }
 
 std::vector<std::string> csv_column(const std::string& csv, const std::string& name) {

@@ -15,6 +15,7 @@ namespace pnet {
 struct RunColumns {
     int dim = 2;
     bool fem = false;
+    std::string integrator;  // steps.csv's last column, the same in every row (solver/integrators.hpp)
 };
 
 /// stats.csv's header line (with its newline) and the row of one frame.
@@ -22,7 +23,7 @@ std::string stats_csv_header(const RunColumns& columns);
 std::string stats_csv_row(const FrameStats& frame, const RunColumns& columns);
 
 /// steps.csv's header line and the row of one step: its frame, its number in the run and the time
-/// at its end (s), then its statistics.
+/// at its end (s), then its statistics, then the integrator that took it.
 std::string steps_csv_header(const RunColumns& columns);
 std::string steps_csv_row(int frame, long step, double time, const StepStats& stats, const RunColumns& columns);
 

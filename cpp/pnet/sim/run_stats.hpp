@@ -10,13 +10,16 @@
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/solver/implicit_options.hpp"
+#include "pnet/solver/integrators.hpp"
 #include "pnet/solver/step_stats.hpp"
 
 namespace pnet {
 
 /// Which integrator a Simulation runs and how.
 struct IntegratorSettings {
-    std::string name = "explicit";  // "explicit" | "plasticitynet" | "lagged" | "analytic" (FEM)
+    std::string name = "explicit";  // an integrator of solver/integrators.hpp
+    /// The integrator's method (std::invalid_argument for a name not in the list).
+    Method method() const { return parse_integrator(name); }
     double dt = 0.0;                // s; 0: the CFL step before every step
     double cfl = 0.5;
     ImplicitOptions implicit;       // plasticitynet, lagged
@@ -44,6 +47,7 @@ struct FrameStats {
     // Implicit integrators: totals over the frame's steps, the largest final
     // Newton residual (m/s), and whether every solve converged.
     long newton_iterations = 0, cg_iterations = 0, line_search_steps = 0, fixed_point_iterations = 0;
+    long network_evaluations = 0;  // plasticitynet: passes of the energy network (StepStats)
     double max_residual = 0.0;
     bool converged = true;
     long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
@@ -67,6 +71,7 @@ struct FrameStats {
         cg_iterations += s.cg_iterations;
         line_search_steps += s.line_search_steps;
         fixed_point_iterations += s.fixed_point_iterations;
+        network_evaluations += s.network_evaluations;
         max_residual = std::max(max_residual, s.residual);
         converged = converged && s.converged;
         unconverged_steps += !s.converged;
@@ -113,6 +118,8 @@ void for_each_frame_field(F&& f) {
       [](const FrameStats& s) { return s.line_search_steps; });
     f(FrameField{"fixed_point_iterations", "fixed_point_iterations", "%ld"},
       [](const FrameStats& s) { return s.fixed_point_iterations; });
+    f(FrameField{"network_evaluations", "network_evaluations", "%ld"},
+      [](const FrameStats& s) { return s.network_evaluations; });
     f(FrameField{"max_residual_m_per_s", "max_residual", "%.6g"}, [](const FrameStats& s) { return s.max_residual; });
     f(FrameField{"converged", "converged", "%d"}, [](const FrameStats& s) { return s.converged; });
     f(FrameField{"unconverged_steps", "unconverged_steps", "%ld"},

@@ -12,18 +12,16 @@ IntegratorSettings integrator_settings(const Scene& scene, const std::string& in
         // The scene's dt belongs to the scene's integrator.
         settings.name = integrator;
         // docs/scenes.md: implicit MPM at 1e-3 s, implicit FEM at 1e-2 s (the paper's).
-        settings.dt = integrator == "explicit" ? 0.0 : scene.has_meshes() ? 1e-2 : 1e-3;
+        settings.dt = integrator_info(parse_integrator(integrator, "integrator")).implicit
+                          ? (scene.has_meshes() ? 1e-2 : 1e-3)
+                          : 0.0;
     }
-    if (scene.has_meshes()) {
-        if (settings.name != "explicit" && settings.name != "plasticitynet" && settings.name != "lagged" &&
-            settings.name != "analytic")
-            throw std::invalid_argument("integrator: expected explicit, plasticitynet, lagged or analytic, got \"" +
-                                        settings.name + "\"");
-    } else if (settings.name != "explicit" && settings.name != "plasticitynet" && settings.name != "lagged") {
-        throw std::invalid_argument("integrator: expected explicit, plasticitynet or lagged" +
-                                    std::string(settings.name == "analytic" ? " ('analytic' is for FEM meshes)" : "") +
-                                    ", got \"" + settings.name + "\"");
-    }
+    const IntegratorInfo& info = integrator_info(parse_integrator(settings.name, "integrator"));
+    const bool particles = scene.has_particles(), meshes = scene.has_meshes();
+    if ((particles && !info.particles) || (meshes && !info.meshes))
+        throw std::invalid_argument("integrator: \"" + settings.name + "\" is for " +
+                                    (info.meshes ? "FEM meshes" : "particles") + "; this scene takes " +
+                                    integrator_names(particles, meshes && !particles));
     return settings;
 }
 
@@ -32,9 +30,12 @@ void load_scene_models(const Scene& scene, bool trusted_models, IntegratorSettin
     std::vector<std::pair<std::string, std::string>> models;  // (file, json path) per object or mesh
     for (const SceneObject& object : scene.objects) models.emplace_back(object.model, object.json_path);
     for (const SceneMesh& mesh : scene.meshes) models.emplace_back(mesh.model, mesh.json_path);
+    // Only an integrator that reads models opens them (solver/integrators.hpp: plasticitynet);
+    // return_map, lagged, analytic and explicit compute the same with any model file or none.
+    const bool reads = integrator_info(settings.method()).reads_models;
     for (const auto& [model, json_path] : models) {
         settings.models.emplace_back();
-        if (model.empty()) continue;
+        if (model.empty() || !reads) continue;
         LoadOptions load;
         load.expected_dim = scene.dim;
         load.expected_kind = ModelKind::Energy;

@@ -13,13 +13,14 @@ namespace pnet {
 
 /// The scene's integrator settings; when `integrator` is not empty and differs
 /// from the scene's, that integrator with its own default step (explicit: the
-/// CFL step; plasticitynet and lagged: 1e-3 s, docs/scenes.md), keeping the
+/// CFL step; the implicit ones: 1e-3 s for particles, 1e-2 s for meshes, docs/scenes.md), keeping the
 /// scene's implicit options. Throws std::invalid_argument for an unknown
 /// integrator name or a bad option in the scene.
 IntegratorSettings integrator_settings(const Scene& scene, const std::string& integrator = "");
 
 /// Loads every energy model the scene's objects and meshes name into settings.models (one
-/// entry per object, then per mesh; null where none is named), whatever the integrator: each
+/// entry per object, then per mesh; null where none is named, and for every object when the
+/// integrator reads no model: IntegratorInfo::reads_models). Each
 /// must exist, be trusted (pinned by its folder's MANIFEST, or trusted_models)
 /// and be an energy of the scene's dimension. Errors name
 /// "<scene file>: objects[k].model: " (meshes[k].model) and keep their type: FileNotFoundError,

@@ -13,6 +13,10 @@ namespace {
 
 constexpr std::size_t kDigestBytes = 64;  // hexadecimal SHA-256
 constexpr std::size_t kNameBytes = 16;    // integrator name, zero-padded
+// The last two bytes of the name field: the integrators' naming revision. "n2" since plasticitynet
+// evaluates the network on every Newton iteration (2026-11-28); before it, `plasticitynet` named what
+// is now `return_map` (the return mapping's stress and consistent tangent), and the bytes were zero.
+constexpr char kNamingRevision[2] = {'n', '2'};
 
 }  // namespace
 
@@ -21,6 +25,7 @@ SimulationBase::SimulationBase(const Scene& scene, const IntegratorSettings& set
     if (!(settings.dt >= 0.0) || !std::isfinite(settings.dt))
         throw std::invalid_argument("dt must be >= 0 (0: the CFL step)");
     if (!(settings.cfl > 0.0 && settings.cfl <= 1.0)) throw std::invalid_argument("cfl must be in (0, 1]");
+    settings.implicit.check_for(settings.method(), scene.file + ": integrator");
 }
 
 void SimulationBase::write_checkpoint_preamble(std::ostream& out, const char (&magic)[8],
@@ -31,7 +36,10 @@ void SimulationBase::write_checkpoint_preamble(std::ostream& out, const char (&m
     out.write(reinterpret_cast<const char*>(&time_), sizeof time_);
     out.write(scene_digest_.data(), kDigestBytes);
     std::string name = integrator;
+    if (name.size() > kNameBytes - 3) throw std::logic_error("integrator name too long for a checkpoint: " + name);
     name.resize(kNameBytes, '\0');
+    name[kNameBytes - 2] = kNamingRevision[0];
+    name[kNameBytes - 1] = kNamingRevision[1];
     out.write(name.data(), kNameBytes);
 }
 
@@ -53,7 +61,16 @@ int SimulationBase::read_checkpoint_preamble(std::istream& in, const std::string
         throw std::invalid_argument(path + ": not a PlasticityNet " + (kind.empty() ? "" : kind + " ") + "checkpoint");
     if (digest != scene_digest_)
         throw std::invalid_argument(path + ": written for a different scene (or a changed scene file)");
+    const bool revised = name[kNameBytes - 2] == kNamingRevision[0] && name[kNameBytes - 1] == kNamingRevision[1];
     name.resize(name.find('\0') == std::string::npos ? name.size() : name.find('\0'));
+    // Before the revision, "plasticitynet" was the classical solver: it resumes under return_map.
+    if (!revised && name == to_string(Method::PlasticityNet)) {
+        if (integrator == to_string(Method::ReturnMap)) return found;
+        throw std::invalid_argument(path + ": written before 2026-11-28 by the integrator then called plasticitynet, "
+                                           "which solved with the return mapping's consistent tangent and is now "
+                                           "return_map: resume it with the integrator return_map (this run uses " +
+                                    integrator + ")");
+    }
     if (name != integrator)
         throw std::invalid_argument(path + ": written by the " + name + " integrator, this run uses " + integrator);
     return found;

@@ -114,9 +114,9 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
         o.hessian = it->get<std::string>();
     }
     if (const auto it = block.find("outer_iteration"); it != block.end()) {
-        if (!it->is_string() || (*it != "newton" && *it != "fixed_point"))
-            throw std::invalid_argument(
-                context + ": integrator.outer_iteration: expected \"newton\" or \"fixed_point\", got " + it->dump());
+        if (!it->is_string() || (*it != "auto" && *it != "newton" && *it != "fixed_point"))
+            throw std::invalid_argument(context + ": integrator.outer_iteration: expected \"auto\", \"newton\" or "
+                                        "\"fixed_point\", got " + it->dump());
         o.outer_iteration = it->get<std::string>();
     }
     if (const auto it = block.find("time_integrator"); it != block.end()) {
@@ -133,6 +133,25 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
         o.preconditioner = it->get<std::string>();
     }
     return o;
+}
+
+void ImplicitOptions::check_for(Method method, const std::string& context) const {
+    if (method == Method::PlasticityNet && hessian == "tangent")
+        throw std::invalid_argument(context + ".hessian: \"tangent\" is the return mapping's consistent tangent, "
+                                    "the classical integrator's: plasticitynet steps with the network's Hessian "
+                                    "(\"auto\" or \"network\"); for the tangent use the integrator return_map");
+    if (method == Method::ReturnMap && hessian == "network")
+        throw std::invalid_argument(context + ".hessian: \"network\" is the learned energy's, which return_map "
+                                    "does not read: use the integrator plasticitynet, or hessian \"auto\"");
+    if (method == Method::ReturnMap && outer_iteration == "fixed_point")
+        throw std::invalid_argument(context + ".outer_iteration: \"fixed_point\" iterates the learned energy's "
+                                    "reference (paper eq. 10), plasticitynet's: return_map solves the true residual "
+                                    "by Newton (\"auto\" or \"newton\")");
+}
+
+std::string ImplicitOptions::resolved_outer_iteration() const {
+    // plasticitynet's choice, measured (docs/solver.md, "The integrators").
+    return outer_iteration == "auto" ? "newton" : outer_iteration;
 }
 
 double ImplicitOptions::newton_tolerance_at(double dt) const {
@@ -153,7 +172,7 @@ NewtonOptions ImplicitOptions::newton_options(double dt) const {
 ReferenceSolveOptions ImplicitOptions::reference_solve_options(bool fixed_point) const {
     ReferenceSolveOptions solve;
     solve.fixed_point = fixed_point;
-    solve.outer = outer_iteration == "fixed_point" ? OuterIteration::FixedPoint : OuterIteration::Newton;
+    solve.outer = resolved_outer_iteration() == "fixed_point" ? OuterIteration::FixedPoint : OuterIteration::Newton;
     solve.max_solves = max_fixed_point_iterations;
     solve.tolerance = fixed_point_tolerance;
     solve.anderson_depth = fixed_point_anderson;

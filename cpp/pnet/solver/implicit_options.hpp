@@ -9,6 +9,7 @@
 
 #include "pnet/energy/neural_elastoplastic.hpp"
 #include "pnet/solver/fixed_point.hpp"
+#include "pnet/solver/integrators.hpp"
 #include "pnet/solver/newton.hpp"
 
 namespace pnet {
@@ -30,8 +31,10 @@ struct ImplicitOptions {
     double cg_tolerance = 0.1;            // largest relative PCG residual (inexact Newton)
     // plasticitynet: how the reference F0 follows F(v) (solver/fixed_point.hpp, docs/solver.md):
     // "newton", F0 = F(v) at every Newton iterate, one solve converged on the true residual; or
-    // "fixed_point", the paper's eq. 10, a full solve per F0 (the keys fixed_point_* below).
-    std::string outer_iteration = "newton";
+    // "fixed_point", the paper's eq. 10, a full solve per F0 (the keys fixed_point_* below); "auto"
+    // (the default), the one measured faster at the same accuracy (resolved_outer_iteration()).
+    // return_map: always "newton".
+    std::string outer_iteration = "auto";
     // The time discretization of the implicit step: "backward_euler" (first order) or "bdf2" (second
     // order, FEM: x^{n+1} = x^ + beta dt v^{n+1}, v^{n+1} = v^ + beta dt a^{n+1} with beta = 2/3,
     // x^ = (4 x^n - x^{n-1}) / 3, v^ = (4 v^n - v^{n-1}) / 3: the same incremental potential about x^ with
@@ -67,10 +70,10 @@ struct ImplicitOptions {
     // per iteration and a solve stopped by its tolerance was biased toward v*: a tall granular column
     // ran out 4% short (docs/solver.md, "Which Hessian").
     double tangent_damping = kDefaultTangentDamping;
-    // plasticitynet: the Hessian of Newton's steps, "network" (Hess N + w mu, the paper's), "tangent"
-    // (the return mapping's consistent tangent + w mu) or "auto" (the tangent, with w = 0 for von
-    // Mises, and the network's under the fixed point;
-    // NeuralElastoplasticEnergy::Options::Hessian).
+    // The Hessian of Newton's steps, "auto" (the default): the integrator's own, which is the only one
+    // it takes. plasticitynet: "network", E [Hess N + w mu I] projected to PSD (the paper's);
+    // return_map: "tangent", the return mapping's consistent tangent (+ w mu I for non-associative
+    // flow, w = tangent_damping). Each refuses the other's (check_for()).
     std::string hessian = "auto";
     // FEM `analytic` only, a diagnostic: > 0 adds w mu/2 ||F - F0||^2 about a reference to the
     // closed-form energy and solves with plasticitynet's predictor and outer iteration on F0, the
@@ -120,6 +123,13 @@ struct ImplicitOptions {
     // (docs/solver.md, "The advection limit").
     double advection_cfl = 0.0;
 
+    /// Throws std::invalid_argument "<context>.<key>: ..." for a combination `method` does not take:
+    /// plasticitynet with hessian "tangent" (the classical integrator's, return_map), return_map with
+    /// hessian "network" or outer_iteration "fixed_point" (plasticitynet's).
+    void check_for(Method method, const std::string& context) const;
+    /// plasticitynet's outer iteration with "auto" resolved ("newton" or "fixed_point").
+    std::string resolved_outer_iteration() const;
+
     /// Reads the keys above from an integrator block (others are ignored: the
     /// block also holds name, dt and cfl). Throws std::invalid_argument
     /// "<context>: integrator.<key>: <problem>" for a wrong type or range.
@@ -139,10 +149,7 @@ struct ImplicitOptions {
     template <int dim>
     typename NeuralElastoplasticEnergy<dim>::Options::Hessian neural_hessian() const {
         using Hessian = typename NeuralElastoplasticEnergy<dim>::Options::Hessian;
-        if (hessian == "tangent") return Hessian::Tangent;
-        // The paper's fixed point keeps the paper's Hessian: its solves about a fixed F0 need w mu.
-        if (hessian == "network" || outer_iteration == "fixed_point") return Hessian::Network;
-        return Hessian::Auto;
+        return hessian == "tangent" ? Hessian::Tangent : Hessian::Network;
     }
 };
 

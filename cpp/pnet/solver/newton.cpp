@@ -179,10 +179,21 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     const double g0 = std::max(g.norm(), 1e-300);
     const double target = std::max(options.tolerance, options.relative_tolerance * residual);
 
+    // Rebased solves: the fresh Hessian an iterate is owed (below) is prepared only once the iterate
+    // did not already meet the tolerance (tested with the last Hessian's diagonal, as a lazily kept
+    // one is): a converged solve's last iterate costs no Hessian pass.
+    bool hessian_owed = false;
     for (int it = 0; it < options.max_iterations; ++it) {
         if (residual <= target && (it >= options.min_iterations || !(residual > 0.0))) {
             stats.converged = true;
             break;
+        }
+        if (hessian_owed) {
+            objective.prepare_hessian(x);
+            ++stats.hessians;
+            hessian_owed = false;
+            objective.hessian_diagonal(diagonal);
+            residual = residual_of(g, options, diagonal);
         }
         // A Hessian with a skew part (Objective::hessian_symmetric) has no Cholesky factorization and
         // no CG: BiCGSTAB with the same preconditioners.
@@ -283,17 +294,30 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         }
         // The full step first, with its gradient; with its Hessian too unless the
         // last iteration contracted (then this one likely does, and keeps the Hessian).
+        // Rebased: the trial's value alone (Armijo); its gradient and Hessian about this reference
+        // would be replaced at the next one, where the accepted iterate gets its own.
         x_trial = x + d;
-        const bool trial_hessian = !(lazy && contracted);
-        const double e_full = trial_hessian ? objective.value_gradient_hessian(x_trial, g_trial)
-                                            : objective.value_gradient(x_trial, g_trial);
+        const bool trial_hessian = !options.rebase && !(lazy && contracted);
+        bool trial_gradient = !options.rebase;
+        const double e_full = options.rebase  ? objective.value(x_trial)
+                              : trial_hessian ? objective.value_gradient_hessian(x_trial, g_trial)
+                                              : objective.value_gradient(x_trial, g_trial);
         stats.hessians += trial_hessian;
         ++stats.line_search_steps;
-        const bool full_finite = std::isfinite(e_full) && g_trial.allFinite();
+        const bool full_finite = std::isfinite(e_full) && (!trial_gradient || g_trial.allFinite());
         // Near the solution the decrease g.d falls below the round-off of E: the
         // energy cannot rank the step any more, the gradient still can.
         const bool roundoff = -slope_full <= 16.0 * std::numeric_limits<double>::epsilon() * std::abs(energy);
-        const bool lowers_gradient = full_finite && g_trial.norm() < g.norm();
+        // Whether the full step lowers |g| (about this reference), its gradient evaluated when first asked.
+        auto gradient_lowered = [&] {
+            if (!trial_gradient && std::isfinite(e_full)) {
+                objective.value_gradient(x_trial, g_trial);
+                trial_gradient = true;
+            }
+            return trial_gradient && std::isfinite(e_full) && g_trial.allFinite() && g_trial.norm() < g.norm();
+        };
+        const bool lowers_gradient =
+            (roundoff || !(full_finite && e_full <= energy + options.armijo * slope_full)) && gradient_lowered();
         if (roundoff && !lowers_gradient) {
             stats.roundoff_floor = true;  // nothing left to gain in double precision
             break;
@@ -320,7 +344,13 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 }
                 alpha *= 0.5;
             }
-            if (decreased) {
+            if (decreased && options.rebase) {
+                // Rebased: the iterate gets its gradient and Hessian about its own reference below.
+                backtracked = true;
+                x.swap(x_trial);
+                energy = trial;
+                full_step = false;
+            } else if (decreased) {
                 backtracked = true;
                 // A backtracked iterate always gets its own Hessian.
                 x.swap(x_trial);
@@ -351,10 +381,10 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 break;  // x and g are those of the last accepted iterate
             }
         }
-        if (options.rebase && objective.rebase(x)) {
-            // The exact gradient at the new reference; the Hessian prepared last (at x, about the
-            // previous reference) stays unless the lazy rule below asks for a fresh one.
-            ++stats.rebases;
+        if (options.rebase) {
+            // The exact gradient at the new reference; the Hessian prepared last (at the previous
+            // iterate) stays unless the lazy rule below asks for a fresh one, at this reference.
+            if (objective.rebase(x)) ++stats.rebases;
             energy = objective.value_gradient(x, g);
             if (!std::isfinite(energy) || !g.allFinite())
                 throw NewtonError(where(context, it, residual) + "the energy or its gradient is not finite after "
@@ -387,7 +417,9 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             }
         }
         contracted = full_step && residual <= options.lazy_hessian * residual_before;
-        if (!hessian_at_x && !contracted) {
+        if (!hessian_at_x && !contracted && options.rebase) {
+            hessian_owed = true;  // prepared at the next iteration's start, if it has one
+        } else if (!hessian_at_x && !contracted) {
             // The lazy Hessian may be kept only after a contracting full step.
             objective.prepare_hessian(x);
             ++stats.hessians;

@@ -33,6 +33,13 @@ struct StepStats {
     bool line_search_failed = false; // a solve stopped because no step lowered the energy
     bool fixed_point_converged = true;  // plasticitynet: the fixed point on F0 reached its tolerance (not the cap)
     std::size_t hardening_clamped = 0;  // plasticitynet: particles whose hardening input was clamped to the trained range
+    // plasticitynet: passes of the learned energy's network over the points in this step (each one a
+    // value, gradient or Hessian evaluation of every point; ParticleEnergy::network_evaluations). At
+    // least one per Newton iteration: the network is on the path of every iteration. 0 for the others.
+    long network_evaluations = 0;
+    // FEM: the Newton iterations of the elastic predictor (ImplicitOptions::fem_predictor), which are
+    // part of newton_iterations and evaluate no network.
+    int predictor_iterations = 0;
     // FEM with kinematic nodes: extra solves that moved them toward their targets, and whether they got there.
     int kinematic_stages = 0;
     bool kinematic_reached = true;
@@ -72,6 +79,7 @@ void for_each_step_field(F&& f) {
     f(StepField{"newton_iterations", "newton_iterations"}, &StepStats::newton_iterations);
     f(StepField{"cg_iterations", "cg_iterations"}, &StepStats::cg_iterations);
     f(StepField{"line_search_steps", "line_search_steps"}, &StepStats::line_search_steps);
+    f(StepField{"network_evaluations", "network_evaluations"}, &StepStats::network_evaluations);
     f(StepField{"fixed_point_iterations", "fixed_point_iterations"}, &StepStats::fixed_point_iterations);
     f(StepField{"fixed_point_change", "fixed_point_change"}, &StepStats::fixed_point_change);
     f(StepField{"initial_residual_m_per_s", "initial_residual"}, &StepStats::initial_residual);
@@ -84,6 +92,7 @@ void for_each_step_field(F&& f) {
     f(StepField{"fixed_point_converged", "fixed_point_converged"}, &StepStats::fixed_point_converged);
     f(StepField{"reference_updates", "reference_updates"}, &StepStats::reference_updates);
     f(StepField{"true_residual_m_per_s", "true_residual"}, &StepStats::true_residual);
+    f(StepField{"predictor_iterations", "predictor_iterations", true}, &StepStats::predictor_iterations);
     f(StepField{"kinematic_stages", "kinematic_stages", true}, &StepStats::kinematic_stages);
     f(StepField{"kinematic_reached", "kinematic_reached", true}, &StepStats::kinematic_reached);
     f(StepField{"ccd_queries", "ccd_queries", true}, &StepStats::ccd_queries);

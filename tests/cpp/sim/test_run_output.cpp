@@ -18,24 +18,24 @@ std::size_t cells(const std::string& line) {
 // The tables' columns as the evaluation scripts, notebooks and users' tools read them: a change here
 // is a change of the output format.
 TEST(RunOutput, HeadersAreTheDocumentedColumns) {
-    EXPECT_EQ(stats_csv_header({2, false}),
+    EXPECT_EQ(stats_csv_header({2, false, "lagged"}),
               "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
-              "newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,max_residual_m_per_s,"
-              "converged,unconverged_steps,hardening_clamped\n");
-    EXPECT_EQ(stats_csv_header({3, true}),
+              "newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,network_evaluations,"
+              "max_residual_m_per_s,converged,unconverged_steps,hardening_clamped\n");
+    EXPECT_EQ(stats_csv_header({3, true, "lagged"}),
               "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
               "momentum_z,newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
-              "max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,contact_pairs,min_distance_m,"
+              "network_evaluations,max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,contact_pairs,min_distance_m,"
               "ccd_queries,ccd_limited\n");
-    EXPECT_EQ(steps_csv_header({2, false}),
+    EXPECT_EQ(steps_csv_header({2, false, "lagged"}),
               "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
-              "line_search_steps,fixed_point_iterations,fixed_point_change,initial_residual_m_per_s,residual_m_per_s,"
-              "energy_J,converged,clamped,line_search_failed,hardening_clamped,fixed_point_converged,"
-              "reference_updates,true_residual_m_per_s\n");
-    EXPECT_EQ(steps_csv_header({2, true}),
-              steps_csv_header({2, false}).substr(0, steps_csv_header({2, false}).size() - 1) +
-                  ",kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,"
-                  "substeps,broad_phase_s,ccd_s\n");
+              "line_search_steps,network_evaluations,fixed_point_iterations,fixed_point_change,"
+              "initial_residual_m_per_s,residual_m_per_s,energy_J,converged,clamped,line_search_failed,"
+              "hardening_clamped,fixed_point_converged,reference_updates,true_residual_m_per_s,integrator\n");
+    EXPECT_EQ(steps_csv_header({2, true, "lagged"}),
+              steps_csv_header({2, false, "lagged"}).substr(0, steps_csv_header({2, false, "lagged"}).size() - 12) +
+                  ",predictor_iterations,kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,"
+                  "substeps,broad_phase_s,ccd_s,integrator\n");
 }
 
 TEST(RunOutput, RowsMatchTheirHeaders) {
@@ -56,11 +56,11 @@ TEST(RunOutput, RowsMatchTheirHeaders) {
     s.contact_pairs = 4;
     for (int dim : {2, 3})
         for (bool fem : {false, true}) {
-            const RunColumns columns{dim, fem};
+            const RunColumns columns{dim, fem, "plasticitynet"};
             EXPECT_EQ(cells(stats_csv_row(f, columns)), cells(stats_csv_header(columns))) << dim << fem;
             EXPECT_EQ(cells(steps_csv_row(3, 41, 0.061, s, columns)), cells(steps_csv_header(columns))) << dim << fem;
         }
-    const RunColumns fem3{3, true};
+    const RunColumns fem3{3, true, "plasticitynet"};
     const std::string stats = stats_csv_header(fem3) + stats_csv_row(f, fem3);
     EXPECT_EQ(csv_column(stats, "frame"), std::vector<std::string>{"3"});
     EXPECT_EQ(csv_column(stats, "time_s"), std::vector<std::string>{"0.060000"});
@@ -75,6 +75,7 @@ TEST(RunOutput, RowsMatchTheirHeaders) {
     EXPECT_EQ(csv_column(steps, "dt_s"), std::vector<std::string>{"0.001"});
     EXPECT_EQ(csv_column(steps, "energy_J"), std::vector<std::string>{"0.333333333333"});
     EXPECT_EQ(csv_column(steps, "kinematic_reached"), std::vector<std::string>{"0"});
+    EXPECT_EQ(csv_column(steps, "integrator"), std::vector<std::string>{"plasticitynet"});
 
     EXPECT_THROW(csv_column(stats, "no_such_column"), std::invalid_argument);
     EXPECT_THROW(csv_column("a,b\n1\n", "b"), std::invalid_argument);

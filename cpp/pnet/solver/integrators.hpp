@@ -1,0 +1,46 @@
+#pragma once
+// The integrators, one entry each: its name, what a step solves, which options apply and which model
+// files it reads (docs/solver.md, "The integrators"). The scene reader, `pnet simulate --integrator`
+// and its --help, plasticitynet_sim, bench_table1 and the run's outputs all take the names and the
+// checks from this list; no other place compares an integrator's name as a string.
+#include <string>
+#include <vector>
+
+namespace pnet {
+
+/// What a step computes.
+enum class Method {
+    Explicit,       // symplectic Euler with the return mapping's stress: the ground truth
+    PlasticityNet,  // backward Euler on the learned energy (paper eqs. 8, 10, 11): the network on every iteration
+    ReturnMap,      // backward Euler with the return mapping's stress and consistent tangent (classical)
+    Lagged,         // backward Euler on the elastic energy, plasticity applied after the step
+    Analytic,       // FEM: backward Euler on the closed-form StVK-Hencky + von Mises energy (ECI)
+};
+
+/// One integrator: what the docs, the CLI's --help and the error messages say about it.
+struct IntegratorInfo {
+    Method method;
+    const char* name;         // as in scenes, --integrator and run.json
+    const char* solves;       // what one step solves, one line
+    bool implicit;            // takes the implicit options and a fixed dt (1e-3 s MPM, 1e-2 s FEM by default)
+    bool reads_models;        // needs an energy model per object (and deformable mesh)
+    bool particles;           // runs MPM scenes (and coupling's particles)
+    bool meshes;              // runs FEM scenes
+    bool references;          // its energy has a reference F0 that the outer iteration moves to F(v)
+    const char* options;      // the implicit options that apply beyond Newton's and the linear solve's
+};
+
+/// Every integrator, in the order the docs and --help list them.
+const std::vector<IntegratorInfo>& integrators();
+const IntegratorInfo& integrator_info(Method method);
+/// "explicit, plasticitynet, return_map, lagged or analytic" (only those for particles or meshes, when
+/// asked).
+std::string integrator_names(bool particles = true, bool meshes = true);
+/// The integrator called `name`; throws std::invalid_argument "<context>: unknown integrator "x"
+/// (expected ...)" otherwise. `context` may be empty.
+Method parse_integrator(const std::string& name, const std::string& context = "");
+/// Whether `name` is an integrator's name.
+bool is_integrator(const std::string& name);
+inline const char* to_string(Method method) { return integrator_info(method).name; }
+
+}  // namespace pnet
