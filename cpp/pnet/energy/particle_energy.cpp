@@ -33,9 +33,20 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
                                                 const std::vector<Material<dim>>& materials,
                                                 const std::vector<std::string>& context, double regularizer_weight,
                                                 typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian,
+                                                double tangent_damping)
+    : NeuralParticleEnergy(models, materials, context, std::vector<double>(materials.size(), regularizer_weight),
+                           hessian, tangent_damping) {}
+
+template <int dim>
+NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
+                                                const std::vector<Material<dim>>& materials,
+                                                const std::vector<std::string>& context,
+                                                const std::vector<double>& regularizer_weights,
+                                                typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian,
                                                 double tangent_damping) {
-    if (models.size() != materials.size() || context.size() != materials.size())
-        throw std::invalid_argument("NeuralParticleEnergy: one model and one context per object are needed");
+    if (models.size() != materials.size() || context.size() != materials.size() ||
+        regularizer_weights.size() != materials.size())
+        throw std::invalid_argument("NeuralParticleEnergy: one model, context and weight per object are needed");
     for (std::size_t k = 0; k < materials.size(); ++k) {
         if (!models[k])
             throw std::invalid_argument(context[k] + ": the plasticitynet integrator needs an energy model for "
@@ -49,7 +60,7 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
             // The forms that sum these energies (MPM particles, FEM elements) take non-symmetric
             // Hessians, so the tangent of non-associative flow keeps its skew part.
             group.energy = std::make_unique<NeuralElastoplasticEnergy<dim>>(
-                model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weight,
+                model, typename NeuralElastoplasticEnergy<dim>::Options{scene.elastic.E, regularizer_weights[k],
                                                                         /*relative_to_reference=*/true, hessian,
                                                                         scene, tangent_damping,
                                                                         /*nonsymmetric_tangent=*/true});

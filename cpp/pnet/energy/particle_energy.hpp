@@ -101,6 +101,12 @@ public:
                          typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian =
                              NeuralElastoplasticEnergy<dim>::Options::Hessian::Network,
                          double tangent_damping = kDefaultTangentDamping);
+    /// The same with a regularizer weight w per object (regularizer_weights[k], k as materials).
+    NeuralParticleEnergy(const std::vector<std::shared_ptr<const ModelFile>>& models,
+                         const std::vector<Material<dim>>& materials, const std::vector<std::string>& context,
+                         const std::vector<double>& regularizer_weights,
+                         typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian,
+                         double tangent_damping = kDefaultTangentDamping);
 
     void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
                        const std::vector<int>& object) override;

@@ -50,8 +50,9 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
     if (o.fixed_point_inexact >= 1.0)
         throw std::invalid_argument(context + ": integrator.fixed_point_inexact: expected a number in [0, 1), got " +
                                     nlohmann::json(o.fixed_point_inexact).dump());
-    o.regularizer_weight =
-        read_option(block, "regularizer_weight", o.regularizer_weight, context, 0.0, "a number >= 0");
+    if (const auto it = block.find("regularizer_weight"); it != block.end() && !(it->is_string() && *it == "auto"))
+        o.regularizer_weight =
+            read_option(block, "regularizer_weight", 0.0, context, 0.0, "a number >= 0 or \"auto\"");
     o.tangent_damping = read_option(block, "tangent_damping", o.tangent_damping, context, 0.0, "a number >= 0");
     o.analytic_regularizer =
         read_option(block, "analytic_regularizer", o.analytic_regularizer, context, 0.0, "a number >= 0");
@@ -150,8 +151,8 @@ void ImplicitOptions::check_for(Method method, const std::string& context) const
 }
 
 std::string ImplicitOptions::resolved_outer_iteration() const {
-    // plasticitynet's choice, measured (docs/solver.md, "The integrators").
-    return outer_iteration == "auto" ? "newton" : outer_iteration;
+    // plasticitynet's choice, measured (docs/solver.md, "The integrators"): the same for every family.
+    return outer_iteration == "auto" ? plasticitynet_defaults(PlasticityModel::None).outer_iteration : outer_iteration;
 }
 
 double ImplicitOptions::newton_tolerance_at(double dt) const {
@@ -195,7 +196,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"fixed_point_anderson", fixed_point_anderson},
             {"fixed_point_keep_hessian", fixed_point_keep_hessian},
             {"fixed_point_inexact", fixed_point_inexact},
-            {"regularizer_weight", regularizer_weight},
+            {"regularizer_weight", regularizer_weight >= 0.0 ? nlohmann::json(regularizer_weight) : nlohmann::json("auto")},
             {"tangent_damping", tangent_damping},
             {"analytic_regularizer", analytic_regularizer},
             {"hessian", hessian},

@@ -63,7 +63,9 @@ struct ImplicitOptions {
     // more than fixed_point_tolerance stops once its residual has fallen by this factor (0: exact
     // solves; ReferenceSolveOptions::inexact_forcing). MPM and MPM-FEM coupling.
     double fixed_point_inexact = 0.0;
-    double regularizer_weight = 1.0;  // w of eq. 11 (plasticitynet; 0: the ablation)
+    // w of eq. 11 (plasticitynet; 0: the ablation); < 0 (the default, "auto" in a scene): the
+    // material family's measured w (plasticitynet_defaults(), solver/integrators.hpp).
+    double regularizer_weight = -1.0;
     // plasticitynet, hessian "auto" on non-associative flow (Drucker-Prager sand, Cam-Clay snow): the w
     // that damps their symmetrized tangent (which is not the residual's Jacobian), in units of the
     // shear modulus; it shapes Newton's steps only. With the paper's w = 1 Newton converged at ~0.7
@@ -129,6 +131,10 @@ struct ImplicitOptions {
     void check_for(Method method, const std::string& context) const;
     /// plasticitynet's outer iteration with "auto" resolved ("newton" or "fixed_point").
     std::string resolved_outer_iteration() const;
+    /// plasticitynet's w for an object of `family`: regularizer_weight, or the family's when "auto".
+    double resolved_regularizer_weight(PlasticityModel family) const {
+        return regularizer_weight >= 0.0 ? regularizer_weight : plasticitynet_defaults(family).regularizer_weight;
+    }
 
     /// Reads the keys above from an integrator block (others are ignored: the
     /// block also holds name, dt and cfl). Throws std::invalid_argument

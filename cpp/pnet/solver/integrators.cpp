@@ -31,6 +31,16 @@ const std::vector<IntegratorInfo>& integrators() {
     return list;
 }
 
+PlasticityNetDefaults plasticitynet_defaults(PlasticityModel family) {
+    switch (family) {
+        case PlasticityModel::VonMises: return {"newton", 0.05};
+        case PlasticityModel::DruckerPrager:
+        case PlasticityModel::CamClay:
+        case PlasticityModel::None: break;
+    }
+    return {"newton", 1.0};
+}
+
 const IntegratorInfo& integrator_info(Method method) {
     for (const IntegratorInfo& info : integrators())
         if (info.method == method) return info;

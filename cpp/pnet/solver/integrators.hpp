@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "pnet/material/material.hpp"
+
 namespace pnet {
 
 /// What a step computes.
@@ -29,6 +31,17 @@ struct IntegratorInfo {
     bool references;          // its energy has a reference F0 that the outer iteration moves to F(v)
     const char* options;      // the implicit options that apply beyond Newton's and the linear solve's
 };
+
+/// plasticitynet's settings per material family, measured (docs/solver.md, "The integrators"): the
+/// outer iteration and the regularizer weight w of eq. 11 that "auto" stands for. With F0 following
+/// every iterate w only damps Newton's steps (R is exact at the reference whatever w is): von Mises
+/// metal takes w = 0.05 (metal_frame_2d, 3 frames: 28 Newton iterations per step against 130 at the
+/// paper's w = 1); sand and snow keep w = 1 (snow diverged below it, docs/solver.md).
+struct PlasticityNetDefaults {
+    const char* outer_iteration;  // "newton" or "fixed_point"
+    double regularizer_weight;
+};
+PlasticityNetDefaults plasticitynet_defaults(PlasticityModel family);
 
 /// Every integrator, in the order the docs and --help list them.
 const std::vector<IntegratorInfo>& integrators();

@@ -40,6 +40,7 @@ MPM_RUNS: dict[str, Run] = {
     "explicit_cfl": Run("explicit", 0.0),
     "plasticitynet_1e-3": Run("plasticitynet", 1e-3),
     "plasticitynet_1e-4": Run("plasticitynet", 1e-4),
+    "return_map_1e-3": Run("return_map", 1e-3),
     "lagged_1e-3": Run("lagged", 1e-3),
     "plasticitynet_1e-3_bdf2": Run("plasticitynet", 1e-3, ("--time-integrator", "bdf2")),
     "plasticitynet_1e-3_w0": Run("plasticitynet", 1e-3, ("--regularizer", "0")),
@@ -60,14 +61,16 @@ FEM_RUNS: dict[str, Run] = {
     "analytic_1e-2": Run("analytic", 1e-2, scenes=_only("metal_frame_2d", "metal_frame_3d")),
     "plasticitynet_1e-2": Run("plasticitynet", 1e-2),
     "plasticitynet_1e-3": Run("plasticitynet", 1e-3),
+    "return_map_1e-2": Run("return_map", 1e-2),
     "lagged_1e-2": Run("lagged", 1e-2),
     # The regularizer off (paper Fig. 12): ~10x the solves, so 30 frames.
     "plasticitynet_1e-2_w0": Run("plasticitynet", 1e-2, ("--regularizer", "0"), _only("metal_frame_2d"), frames=30),
     "plasticitynet_1e-2_exact_rm": Run("plasticitynet", 1e-2, ("--return-map", "exact"), _only("metal_nh_frame_2d")),
     "plasticitynet_1e-2_bdf2": Run("plasticitynet", 1e-2, ("--time-integrator", "bdf2")),
 }
-#: The same-step reference every implicit FEM run is also compared with.
-FEM_REFERENCE = {"metal_frame_2d": "analytic_1e-2", "metal_nh_frame_2d": "plasticitynet_1e-2_exact_rm",
+#: The same-step reference every implicit FEM run is also compared with: the closed-form energy, or for
+#: metal_nh (no closed form) the classical solver with the exact return mapping.
+FEM_REFERENCE = {"metal_frame_2d": "analytic_1e-2", "metal_nh_frame_2d": "return_map_1e-2",
                  "metal_frame_3d": "analytic_1e-2"}
 
 # --- The coupling family (sand: IoU; body: nodal distance; particles inside the body) ---------------
@@ -75,8 +78,41 @@ COUPLING_RUNS: dict[str, Run] = {
     "gt": Run("explicit", None),
     "explicit_cfl": Run("explicit", 0.0),
     "plasticitynet_1e-3": Run("plasticitynet", 1e-3),
+    "return_map_1e-3": Run("return_map", 1e-3),
     "lagged_1e-3": Run("lagged", 1e-3),
 }
+
+# --- Where does the network pay? (docs/integrators.md) ------------------------------------------------
+#: plasticitynet against return_map: MPM at four steps with and without the advection limit, the
+#: paper's "a few fixed-point iterations" as a budget of 1, 2 and 3 solves per step (not converged:
+#: the network's accuracy decides the result); the metal frames at 1e-2 and 2e-2 s.
+STUDY_MPM_DTS = (1e-3, 2e-3, 5e-3, 1e-2)
+
+
+def _step(dt: float) -> str:
+    """1e-3 -> "1e-3", as the other run keys write a step."""
+    return f"{dt:.0e}".replace("e-0", "e-")
+
+
+for _dt in STUDY_MPM_DTS:
+    for _integrator in ("plasticitynet", "return_map"):
+        MPM_RUNS[f"{_integrator}_{_step(_dt)}_study"] = Run(_integrator, _dt)
+        MPM_RUNS[f"{_integrator}_{_step(_dt)}_capped"] = Run(_integrator, _dt, ("--advection-cfl", "0.2"))
+    for _solves in (1, 2, 3):
+        MPM_RUNS[f"plasticitynet_{_step(_dt)}_budget{_solves}"] = Run(
+            "plasticitynet", _dt, ("--outer-iteration", "fixed_point", "--fixed-point-iterations", str(_solves),
+                                   "--fixed-point-tol", "0"))
+for _dt in (1e-2, 2e-2):
+    for _integrator in ("plasticitynet", "return_map"):
+        FEM_RUNS[f"{_integrator}_{_step(_dt)}_study"] = Run(_integrator, _dt)
+    for _solves in (1, 2, 3):
+        FEM_RUNS[f"plasticitynet_{_step(_dt)}_budget{_solves}"] = Run(
+            "plasticitynet", _dt, ("--outer-iteration", "fixed_point", "--fixed-point-iterations", str(_solves),
+                                   "--fixed-point-tol", "0"))
+STUDY_MPM_RUNS = ("gt", "explicit_2e-5", "explicit_cfl") + tuple(
+    k for k in MPM_RUNS if k.endswith(("_study", "_capped")) or "_budget" in k)
+STUDY_FEM_RUNS = ("gt", "explicit_2e-5", "explicit_cfl") + tuple(
+    k for k in FEM_RUNS if k.endswith("_study") or "_budget" in k)
 
 RUNS = {"mpm": MPM_RUNS, "fem": FEM_RUNS, "coupling": COUPLING_RUNS}
 
@@ -104,7 +140,8 @@ class Study:
         return [r for r in self.runs if table[r].scenes is None or scene in table[r].scenes]
 
 
-MAIN_MPM = ("gt", "explicit_2e-5", "explicit_cfl", "plasticitynet_1e-3", "plasticitynet_1e-4", "lagged_1e-3")
+MAIN_MPM = ("gt", "explicit_2e-5", "explicit_cfl", "plasticitynet_1e-3", "plasticitynet_1e-4", "return_map_1e-3",
+            "lagged_1e-3")
 STUDIES: dict[str, Study] = {s.name: s for s in [
     Study("implicit_eval", "mpm", {"sand_column_2d": 50, "snowball_2d": 50, "sand_column_3d": 25, "snowball_3d": 25,
                                    "stiff/sand_column_2d": 50, "stiff/snowball_2d": 50}, MAIN_MPM),
@@ -117,17 +154,23 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
            "plasticitynet_1e-3_advection")),
     Study("fem_eval", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100, "metal_frame_3d": 25},
           ("gt", "explicit_2e-5", "explicit_cfl", "analytic_1e-2", "plasticitynet_1e-2", "plasticitynet_1e-3",
-           "lagged_1e-2", "plasticitynet_1e-2_w0", "plasticitynet_1e-2_exact_rm")),
+           "return_map_1e-2", "lagged_1e-2", "plasticitynet_1e-2_w0", "plasticitynet_1e-2_exact_rm")),
     Study("coupling_eval", "coupling", {"sand_fem_coupling_2d": 50},
-          ("gt", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3")),
+          ("gt", "explicit_cfl", "plasticitynet_1e-3", "return_map_1e-3", "lagged_1e-3")),
     Study("coupling_eval_3d", "coupling", {"sand_fem_coupling_3d": 3},
-          ("gt", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3")),
+          ("gt", "explicit_cfl", "plasticitynet_1e-3", "return_map_1e-3", "lagged_1e-3")),
+    # Where does the network pay? Every family, 2D and 3D, the stiff variants (docs/integrators.md).
+    Study("integrator_study", "mpm", {"sand_column_2d": 50, "snowball_2d": 50, "sand_column_3d": 25,
+                                      "snowball_3d": 25, "stiff/sand_column_2d": 25, "stiff/snowball_2d": 25},
+          STUDY_MPM_RUNS),
+    Study("integrator_study_fem", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100, "metal_frame_3d": 25},
+          STUDY_FEM_RUNS),
 ]}
 
 # --- Sweeps ------------------------------------------------------------------------------------------
 #: The time-step sweep's steps and integrators (every scene; explicit at CFL and the ground truth beside).
 SWEEP_DTS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
-SWEEP_INTEGRATORS = ("plasticitynet", "lagged")
+SWEEP_INTEGRATORS = ("plasticitynet", "return_map", "lagged")
 #: The resolution sweep's refinements: dx, dx/2, dx/4 (MPM: the grid; FEM: the element size).
 SWEEP_REFINEMENTS = (1, 2, 4)
 
@@ -166,3 +209,5 @@ TARGETS["all"] = Target(
     studies=tuple(dict.fromkeys(s for t in TARGETS.values() for s in t.studies)),
     benchmarks=tuple(BENCHMARKS),
     notebooks=tuple(dict.fromkeys(n for t in TARGETS.values() for n in t.notebooks)))
+#: Where does the network pay? (docs/integrators.md): on its own, not in `all` (44 runs per scene set).
+TARGETS["integrators"] = Target(studies=("integrator_study", "integrator_study_fem"))

@@ -166,10 +166,10 @@ TEST(CoupledPotential, NewtonLowersTheEnergyAndKeepsEveryParticleOutsideTheDisk)
     }
 }
 
-TEST(CoupledSimulation, TinySceneRunsWithExplicitAndLaggedWithoutPenetration) {
+TEST(CoupledSimulation, TinySceneRunsWithExplicitReturnMapAndLaggedWithoutPenetration) {
     const Scene scene = load_scene(kTiny);
-    for (const auto& [integrator, dt] :
-         std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"explicit", 1e-5}}) {
+    for (const auto& [integrator, dt] : std::vector<std::pair<std::string, double>>{
+             {"lagged", 1e-3}, {"return_map", 1e-3}, {"explicit", 1e-5}}) {
         SCOPED_TRACE(integrator);
         CoupledSimulation2d sim(scene, settings_for(scene, integrator, dt));
         std::size_t most_pairs = 0;

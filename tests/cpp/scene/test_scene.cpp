@@ -504,7 +504,7 @@ const std::vector<MalformedCase> kMalformedCases = {
     {"MissingRadius", 3, [](json& j) { j["objects"][0].erase("radius"); },
      {"scenes/x.json: objects[0].radius: missing (expected a positive number)"}},
     {"MissingIntegratorName", 2, [](json& j) { j["integrator"].erase("name"); },
-     {"scenes/x.json: integrator.name: missing (expected explicit, plasticitynet, lagged or analytic)"}},
+     {"scenes/x.json: integrator.name: missing (expected explicit, plasticitynet, return_map, lagged or analytic)"}},
     // Wrong types.
     {"TopLevelNotObject", 2, [](json& j) { j = json::array(); }, {"scenes/x.json: (top level): expected an object"}},
     {"DxString", 2, [](json& j) { j["dx"] = "fine"; }, {"scenes/x.json: dx: expected a positive number, got \"fine\""}},
@@ -586,7 +586,7 @@ const std::vector<MalformedCase> kMalformedCases = {
      {"scenes/x.json: transfer", "flip"}},
     {"UnknownIntegrator", 2, [](json& j) { j["integrator"]["name"] = "implicit_euler"; },
      {"scenes/x.json: integrator.name: unknown integrator 'implicit_euler'",
-      "(expected explicit, plasticitynet, lagged or analytic)"}},
+      "(expected explicit, plasticitynet, return_map, lagged or analytic)"}},
     // Found by the fuzz harness: a dx far below the domain's size made a grid of 1e12 nodes (a hang).
     {"GridTooLarge", 2, [](json& j) { j["dx"] = 1.0 / 65536; },
      {"scenes/x.json: dx: the grid would have", "nodes, more than the 67108864 a run may allocate"}},
@@ -670,7 +670,8 @@ const std::vector<MalformedCase> kMalformedCases = {
     {"GroundWithoutMeshes", 2, [](json& j) { j["ground"] = {{"height", 0}}; },
      {"scenes/x.json: ground: applies to FEM meshes; this scene has none"}},
     {"AnalyticForParticles", 2, [](json& j) { j["integrator"]["name"] = "analytic"; },
-     {"scenes/x.json: integrator.name: 'analytic' is the closed-form FEM energy"}},
+     {"scenes/x.json: integrator.name: 'analytic' is for FEM meshes; particle scenes use explicit, plasticitynet, "
+      "return_map or lagged"}},
     {"ParticlesAndKinematicMesh", 2, [](json& j) { j["meshes"] = example_fem()["meshes"]; },
      {"scenes/x.json: meshes[1].kinematic: kinematic meshes are not supported beside particles (MPM-FEM coupling)"}},
     {"ParticleDhatAboveHalfACell", 2, [](json& j) { j["meshes"] = {example_fem()["meshes"][0]};

@@ -47,7 +47,7 @@ TEST(FemSimulation, TinyFramesRunWithEveryIntegratorAndThePlateFollowsItsPath) {
     for (const char* file : {kTinyFrame, PNET_SCENES_DIR "/tiny/metal_nh_frame_2d.json"}) {
         const Scene scene = load_scene(file);
         for (const auto& [integrator, dt] : std::vector<std::pair<std::string, double>>{
-                 {"explicit", 0.0}, {"lagged", 1e-2}, {"analytic", 1e-2}}) {
+                 {"explicit", 0.0}, {"return_map", 1e-2}, {"lagged", 1e-2}, {"analytic", 1e-2}}) {
             if (integrator == "analytic" && scene.meshes[0].material.name != "metal") continue;
             SCOPED_TRACE(std::string(file) + " " + integrator);
             FemSimulation<2> sim(scene, settings_for(scene, integrator, dt));
@@ -71,7 +71,7 @@ TEST(FemSimulation, TinyFramesRunWithEveryIntegratorAndThePlateFollowsItsPath) {
             ++ran;
         }
     }
-    EXPECT_EQ(ran, 5);
+    EXPECT_EQ(ran, 7);
 }
 
 double mean_frame_distance(const FemSimulation<2>& a, const FemSimulation<2>& b) {
@@ -230,7 +230,8 @@ TEST(FemSimulation3d, TinyFrameRunsWithEveryIntegratorWithoutIntersection) {
     const Scene scene = load_scene(kTinyFrame3d);
     int ran = 0;
     for (const auto& [integrator, dt] :
-         std::vector<std::pair<std::string, double>>{{"explicit", 0.0}, {"lagged", 1e-2}, {"analytic", 1e-2}}) {
+         std::vector<std::pair<std::string, double>>{
+             {"explicit", 0.0}, {"return_map", 1e-2}, {"lagged", 1e-2}, {"analytic", 1e-2}}) {
         SCOPED_TRACE(integrator);
         FemSimulation<3> sim(scene, settings_for(scene, integrator, dt));
         const FemSceneSystem<3>& s = sim.scene_system();
@@ -252,7 +253,7 @@ TEST(FemSimulation3d, TinyFrameRunsWithEveryIntegratorWithoutIntersection) {
         EXPECT_EQ(sim.contact().first_intersection(sim.state().x), "");
         ++ran;
     }
-    EXPECT_EQ(ran, 3);
+    EXPECT_EQ(ran, 4);
 }
 
 TEST(FemSimulation3d, CheckpointResumesBitIdenticallyAndThreadsDoNotChangeTheResult) {
