@@ -141,7 +141,8 @@ def test_simulation_options_and_errors():
     assert sim.dt == 5e-4
     assert sim.solver["max_fixed_point_iterations"] == 3 and sim.solver["regularizer_weight"] == 0.5
     assert pns.Simulation(pns.load_scene(path)).integrator == pns.load_scene(path).integrator
-    with pytest.raises(ValueError, match='expected explicit, plasticitynet or lagged, got "rk4"'):
+    with pytest.raises(ValueError, match=r'unknown integrator "rk4" \(expected explicit, plasticitynet, return_map, '
+                                         r'lagged or analytic\)'):
         pns.Simulation(path, integrator="rk4")
     with pytest.raises(ValueError, match='solver: unknown option "newton_tol"'):
         pns.Simulation(path, integrator="lagged", solver={"newton_tol": 1e-3})

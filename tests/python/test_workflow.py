@@ -83,8 +83,9 @@ def test_a_model_change_changes_only_the_keys_of_the_runs_that_read_it(tmp_path,
         scene, run = name.rsplit("/", 1)
         assert "sand" in scene and scene != "sand_column_3d", name  # sand_2d's scenes only
         assert not run.startswith("gt") and "explicit" not in run, f"{name}: explicit runs read no model"
-    # The 2D sand scenes' implicit runs all changed, the ground truths did not.
-    assert "sand_column_2d/plasticitynet_1e-3" in changed and "sand_fem_coupling_2d/lagged_1e-3" in changed
+        assert not run.startswith(("return_map", "lagged")), f"{name}: reads no model"
+    # The 2D sand scenes' plasticitynet runs all changed; the ground truths, return_map and lagged did not.
+    assert "sand_column_2d/plasticitynet_1e-3" in changed and "sand_fem_coupling_2d/plasticitynet_1e-3" in changed
 
 
 def test_the_version_and_the_step_are_part_of_the_key_the_threads_are_not(tmp_path, fake_pnet):
@@ -179,7 +180,7 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "[progress] runs:" in r.stderr, "the progress line"
     results = tmp_path / "local" / "results"
-    for study in catalogue.STUDIES:
+    for study in catalogue.TARGETS["all"].studies:
         assert (results / study / "summary.md").is_file(), study
     # The regularizer ablation (MPM) and the FEM evaluation, in the layout the notebooks read.
     summary = (results / "regularizer_ablation" / "summary.md").read_text()
@@ -192,11 +193,12 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     assert all(r["final_mean_pct"] for r in fem if r["run"] != "gt")
     assert (results / "fem_eval" / "metal_frame_2d" / "nodal_error.png").is_file()
     coupling = list(csv.DictReader(open(results / "coupling_eval" / "summary.csv")))
-    assert [r["run"] for r in coupling] == ["explicit_1e-6", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3"]
+    assert [r["run"] for r in coupling] == ["explicit_1e-6", "explicit_cfl", "plasticitynet_1e-3", "return_map_1e-3",
+                                            "lagged_1e-3"]
     assert all(r["penetrations"] in ("0", "") for r in coupling)
     sweep = list(csv.DictReader(open(results / "sweeps" / "sand_column_2d_dt" / "summary.csv")))
-    assert [r["run"] for r in sweep] == ["explicit_cfl", "plasticitynet_0.001", "plasticitynet_0.01", "lagged_0.001",
-                                         "lagged_0.01"]
+    assert [r["run"] for r in sweep] == ["explicit_cfl", "plasticitynet_0.001", "plasticitynet_0.01",
+                                         "return_map_0.001", "return_map_0.01", "lagged_0.001", "lagged_0.01"]
     assert all(0.0 < float(r["accuracy"]) <= 1.0 for r in sweep)
     assert (results / "sweeps" / "sand_column_2d_dt" / "sand_column_2d_dt.png").stat().st_size > 10000
     refined = list(csv.DictReader(open(results / "sweeps" / "sand_column_2d_dx" / "summary.csv")))
@@ -215,9 +217,9 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     assert "ground_truth" not in jobs and "bench" not in jobs, jobs
     simulated = set(re.findall(r"simulate (\S+) (\S+) \(", changed.stdout))
     assert {scene for scene, _ in simulated} == {"sand_column_2d", "stiff/sand_column_2d", "sand_fem_coupling_2d"}
-    assert not any("explicit" in run or run.startswith("form_") for _, run in simulated), simulated
-    assert {("sand_column_2d", "plasticitynet_1e-3"), ("sand_column_2d", "lagged_1e-3"),
-            ("sand_fem_coupling_2d", "plasticitynet_1e-3")} <= simulated
+    # Only the runs that read the model: not explicit, return_map or lagged (nor the ablation's own models).
+    assert not any(run.startswith(("explicit", "return_map", "lagged", "form_")) for _, run in simulated), simulated
+    assert {("sand_column_2d", "plasticitynet_1e-3"), ("sand_fem_coupling_2d", "plasticitynet_1e-3")} <= simulated
     # One comparison per changed run (a resolution sweep's runs have no ground truth to compare with).
     assert jobs["simulate"] == len(simulated), jobs
     assert jobs["metric"] == len([run for _, run in simulated if not run.endswith("_dx2")]), jobs
@@ -225,7 +227,8 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     # A fresh clone: the committed tables are there, the work folder is not; everything runs again.
     shutil.rmtree(tmp_path / "local" / "work")
     fresh = jobs_of(reproduce("all", "--dry-run", "--", "--configfile", config).stdout)
-    assert fresh["ground_truth"] >= 10 and fresh["study"] == len(catalogue.STUDIES) and fresh["bench"] == 3, fresh
+    assert fresh["ground_truth"] >= 10 and fresh["study"] == len(catalogue.TARGETS["all"].studies), fresh
+    assert fresh["bench"] == 3, fresh
 
 
 def test_the_cluster_path_gives_the_local_results(tmp_path):

@@ -69,6 +69,13 @@ def pnet_version(pnet: str) -> str:
     return done.stdout.strip()
 
 
+def _integrators_reading_models() -> frozenset[str]:
+    """The integrators that read the objects' model files, from the simulator's own list."""
+    import plasticitynet_sim
+
+    return frozenset(i["name"] for i in plasticitynet_sim.integrators() if i["reads_models"])
+
+
 def _model_return_map(path: Path) -> Path | None:
     """The learned return-mapping file an energy model names in its metadata (metal_nh), if any."""
     try:
@@ -245,12 +252,13 @@ class Plan:
         dim = int(content.get("dim", 2))
         dt = catalogue.ground_truth_step(family, scene, dim) if run.dt is None else run.dt
         frames = min(frames, run.frames) if run.frames else frames
-        # An explicit run reads no model (the material's own return mapping): a retrained model does not
-        # re-run the ground truth. Every other run is keyed by its models.
+        # Only an integrator that reads models (cpp/pnet/solver/integrators.hpp: plasticitynet) is keyed
+        # by them: a retrained model re-runs neither the ground truth nor return_map, lagged, analytic.
         explicit = run.integrator == "explicit"
+        reads_models = run.integrator in _integrators_reading_models()
         replaced = "--model" in run.options  # `pnet simulate --model M` replaces the scene's models
         options, files = [], {f: h for f, h in base.files.items()
-                              if not ((explicit or replaced) and f.endswith(".pt"))}
+                              if not ((not reads_models or replaced) and f.endswith(".pt"))}
         it = iter(run.options)
         for option in it:  # a model path among the options is absolute, and keyed by its content
             options.append(option)
@@ -263,7 +271,7 @@ class Plan:
         keyed.pop("name", None)
         for group in ("objects", "meshes"):  # files by name: a key does not depend on where the clone is
             for item in keyed.get(group, []):
-                if explicit:
+                if not reads_models:
                     item.pop("model", None)
                 for k in ("model", "file"):
                     if isinstance(item.get(k), str):
