@@ -34,7 +34,7 @@ const std::vector<IntegratorInfo>& integrators() {
 PlasticityNetDefaults plasticitynet_defaults(PlasticityModel family) {
     switch (family) {
         case PlasticityModel::VonMises: return {"newton", 0.05};
-        case PlasticityModel::DruckerPrager:
+        case PlasticityModel::DruckerPrager: return {"newton", 0.1};
         case PlasticityModel::CamClay:
         case PlasticityModel::None: break;
     }
