@@ -1,7 +1,9 @@
 // bench_table1: the paper's Table 1, measured here: seconds per frame of
-// `plasticitynet` (MPM at dt 1e-3 s, FEM metal at 1e-2 s) against `explicit` at
-// 1e-5 s (the paper's ground-truth step) and at its CFL step, on the same
-// scene, in one run. Rows: sand_column_2d, snowball_2d (MPM), metal_frame_2d
+// `plasticitynet` (the learned energy on every Newton iteration; MPM at dt 1e-3 s, FEM metal at 1e-2 s)
+// and of `return_map` (the classical solver, the strong baseline: docs/integrators.md) against
+// `explicit` at 1e-5 s (the paper's ground-truth step) and at its CFL step, on the same
+// scene, in one run; each implicit row gives its time as a multiple of return_map's and its network
+// passes per step. Rows: sand_column_2d, snowball_2d (MPM), metal_frame_2d
 // ("Von-Mises metal") and metal_nh_frame_2d ("Neo-hookean metal", with the
 // learned return mapping), and with --3d the 3D MPM scenes, metal_frame_3d and
 // sand_fem_coupling_3d (the coupling in 3D: a stiff sphere onto a sand bed).
@@ -25,9 +27,9 @@
 // comes late); --with-lagged adds lagged and, on metal_frame_2d, analytic.
 //
 // --with-one-solve adds plasticitynet with one solve per step (F0 = F(v*), the
-// fixed point not converged) beside the default; --with-fixed-point adds
-// plasticitynet with the paper's outer iteration (eq. 10, the default before
-// issue 31); --with-last-velocity adds the metal frames' plasticitynet with
+// fixed point not converged: the paper's cheapest mode) beside the default; --with-fixed-point adds
+// plasticitynet with the paper's outer iteration (eq. 10), --with-newton-outer with the reference
+// following every iterate; --with-last-velocity adds the metal frames' plasticitynet with
 // every step started from the last velocities with the plate on its target
 // (ImplicitOptions::kinematic_start). Implicit rows give the Newton solves, the updates of F0 to F(v)
 // (outer iterations) per step and the largest true residual |R(v)| at a step's

@@ -32,13 +32,16 @@ struct IntegratorInfo {
     const char* options;      // the implicit options that apply beyond Newton's and the linear solve's
 };
 
-/// plasticitynet's settings per material family, measured (docs/solver.md, "The integrators"): the
-/// outer iteration and the regularizer weight w of eq. 11 that "auto" stands for. With F0 following
-/// every iterate w only damps Newton's steps (R is exact at the reference whatever w is): von Mises
-/// metal takes w = 0.05 (metal_frame_2d, 20 frames at 1e-2 s: 75 Newton iterations per step, 89 at
-/// 0.1, 153 at 0.3, 130 at the paper's w = 1 over 3 frames), Drucker-Prager sand w = 0.1
-/// (sand_column_2d, 10 frames: 8.2 per step, 8.6 at 0.3, 9.6 at 1), Cam-Clay snow the paper's w = 1
-/// (snowball_2d at 0.3: 116 of 200 steps unconverged). docs/integrators.md.
+/// plasticitynet's settings per material family, measured (docs/integrators.md): the outer iteration
+/// and the regularizer weight w of eq. 11 that "auto" stands for. With F0 following every iterate w
+/// only damps Newton's steps (R is exact at the reference whatever w is), but w mu also adds to the
+/// Hessian's diagonal, which weighs the residual a solve is stopped by: a larger w stops solves
+/// earlier, biased toward v*. Von Mises metal: w = 0.05 (metal_frame_2d, 20 frames at 1e-2 s: 75
+/// Newton iterations per step, 89 at 0.1, 153 at 0.3). Drucker-Prager sand: w = 0.1 (sand_column_2d,
+/// 50 frames against explicit at 1e-5: deposit spread -0.5%, as return_map's -0.7%, against -2.6% at
+/// w = 1; 8.2 Newton iterations per step over frames 0-10 against 9.6). Not every network converges
+/// there: a 32-wide sand network took over 100 iterations per step at 0.1 and converged at 1 (with
+/// -2.9%). Cam-Clay snow: the paper's w = 1 (snowball_2d at 0.3: 116 of 200 steps unconverged).
 struct PlasticityNetDefaults {
     const char* outer_iteration;  // "newton" or "fixed_point"
     double regularizer_weight;

@@ -165,6 +165,9 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
           STUDY_MPM_RUNS),
     Study("integrator_study_fem", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100, "metal_frame_3d": 25},
           STUDY_FEM_RUNS),
+    # Its sand column alone, the first half of the collapse: what one session measured
+    # (notebooks/results/integrator_study_sand/).
+    Study("integrator_study_sand", "mpm", {"sand_column_2d": 25}, STUDY_MPM_RUNS),
 ]}
 
 # --- Sweeps ------------------------------------------------------------------------------------------
@@ -211,3 +214,4 @@ TARGETS["all"] = Target(
     notebooks=tuple(dict.fromkeys(n for t in TARGETS.values() for n in t.notebooks)))
 #: Where does the network pay? (docs/integrators.md): on its own, not in `all` (44 runs per scene set).
 TARGETS["integrators"] = Target(studies=("integrator_study", "integrator_study_fem"))
+TARGETS["integrators_sand"] = Target(studies=("integrator_study_sand",))
