@@ -172,3 +172,13 @@ def test_a_checkpoint_from_before_the_renaming_resumes_under_return_map(tmp_path
     learned.save_checkpoint(tmp_path / "learned.bin")
     with pytest.raises(ValueError, match="written by the plasticitynet integrator"):
         pns.Simulation(tiny("sand_column_2d"), integrator="return_map").load_checkpoint(tmp_path / "learned.bin")
+
+
+@pytest.mark.parametrize("integrator", ["return_map", "lagged"])
+def test_another_implicit_integrator_on_a_coupled_scene_takes_the_particles_step(integrator):
+    """Particles beside meshes (MPM-FEM coupling) step at implicit MPM's 1e-3 s, not FEM's 1e-2 s: with
+    1e-2 s the sand's particles cross cells per step (the coupling's docs/scenes.md step is 1e-3)."""
+    scene = json.loads((TINY / "sand_fem_coupling_2d.json").read_text())
+    assert scene["integrator"]["name"] == "plasticitynet"
+    sim = pns.Simulation(TINY / "sand_fem_coupling_2d.json", integrator=integrator)
+    assert sim.dt == 1e-3

@@ -11,9 +11,10 @@ IntegratorSettings integrator_settings(const Scene& scene, const std::string& in
     if (!integrator.empty() && integrator != scene.integrator.name) {
         // The scene's dt belongs to the scene's integrator.
         settings.name = integrator;
-        // docs/scenes.md: implicit MPM at 1e-3 s, implicit FEM at 1e-2 s (the paper's).
+        // docs/scenes.md: implicit MPM (and particles beside meshes, the coupling) at 1e-3 s, implicit FEM
+        // at 1e-2 s (the paper's).
         settings.dt = integrator_info(parse_integrator(integrator, "integrator")).implicit
-                          ? (scene.has_meshes() ? 1e-2 : 1e-3)
+                          ? (scene.has_particles() ? 1e-3 : 1e-2)
                           : 0.0;
     }
     const IntegratorInfo& info = integrator_info(parse_integrator(settings.name, "integrator"));

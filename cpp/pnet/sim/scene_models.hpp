@@ -13,7 +13,8 @@ namespace pnet {
 
 /// The scene's integrator settings; when `integrator` is not empty and differs
 /// from the scene's, that integrator with its own default step (explicit: the
-/// CFL step; the implicit ones: 1e-3 s for particles, 1e-2 s for meshes, docs/scenes.md), keeping the
+/// CFL step; the implicit ones: 1e-3 s for particles (with or without meshes), 1e-2 s for meshes
+/// alone, docs/scenes.md), keeping the
 /// scene's implicit options. Throws std::invalid_argument for an unknown
 /// integrator name or a bad option in the scene.
 IntegratorSettings integrator_settings(const Scene& scene, const std::string& integrator = "");
