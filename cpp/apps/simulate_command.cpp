@@ -5,6 +5,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "parse_number.hpp"
 #include "pnet/io/run_folder.hpp"
@@ -44,16 +45,38 @@ constexpr const char* kUsage =
     "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
     "                     material's exact one) [--kinematic-start scaled|last_velocity]\n";
 
+/// `text` (words separated by single spaces) in lines of at most `width` columns.
+std::vector<std::string> wrapped(const std::string& text, std::size_t width) {
+    std::vector<std::string> lines(1);
+    std::size_t start = 0;
+    while (start < text.size()) {
+        std::size_t end = text.find(' ', start);
+        if (end == std::string::npos) end = text.size();
+        const std::string word = text.substr(start, end - start);
+        if (!lines.back().empty() && lines.back().size() + 1 + word.size() > width) lines.emplace_back();
+        lines.back() += (lines.back().empty() ? "" : " ") + word;
+        start = end + 1;
+    }
+    return lines;
+}
+
 /// The usage, then each integrator of solver/integrators.hpp with what a step solves.
 std::string usage() {
+    constexpr std::size_t kIndent = 20, kWidth = 110;
     std::string text = kUsage;
-    text += "  integrators (--integrator; the scene's by default):\n";
+    text += "  integrators (--integrator; the scene's by default; docs/integrators.md):\n";
     for (const IntegratorInfo& info : integrators()) {
-        text += "    " + std::string(info.name) + std::string(16 - std::string(info.name).size(), ' ') + info.solves;
-        text += std::string(" [") + (info.particles && info.meshes ? "particles, meshes"
-                                     : info.particles            ? "particles"
-                                                                 : "meshes") +
-                (info.reads_models ? "; reads the objects' models" : "; reads no model") + "]\n";
+        std::string entry = std::string(info.solves) + " [" +
+                            (info.particles && info.meshes ? "particles, meshes"
+                             : info.particles            ? "particles"
+                                                         : "meshes") +
+                            (info.reads_models ? "; reads the objects' models" : "; reads no model") + "]";
+        const std::string name = std::string("    ") + info.name;
+        const std::vector<std::string> lines = wrapped(entry, kWidth - kIndent);
+        for (std::size_t k = 0; k < lines.size(); ++k) {
+            const std::string lead = k == 0 ? name : "";
+            text += lead + std::string(kIndent > lead.size() ? kIndent - lead.size() : 1, ' ') + lines[k] + "\n";
+        }
     }
     return text;
 }

@@ -182,3 +182,12 @@ def test_another_implicit_integrator_on_a_coupled_scene_takes_the_particles_step
     assert scene["integrator"]["name"] == "plasticitynet"
     sim = pns.Simulation(TINY / "sand_fem_coupling_2d.json", integrator=integrator)
     assert sim.dt == 1e-3
+
+
+def test_pnet_simulate_help_lists_every_integrator():
+    done = subprocess.run([str(PNET), "simulate", "--help"], capture_output=True, text=True)
+    assert done.returncode == 0 and done.stderr == ""
+    assert done.stdout.startswith("usage: pnet simulate")
+    for integrator in pns.integrators():
+        assert f"    {integrator['name']} " in done.stdout
+    assert all(len(line) <= 112 for line in done.stdout.splitlines()[-14:])
