@@ -135,7 +135,7 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
         identity_value_.resize(n);
         identity_gradient_.resize(n * kM);
         ++network_passes_;
-    net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
+        net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
     }
 #pragma omp parallel for schedule(static) if (count >= 64)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
@@ -156,14 +156,18 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
 }
 
 template <int dim>
+bool NeuralElastoplasticEnergy<dim>::is_reference(const Mat<dim>* F) const {
+    return !F0_.empty() && std::memcmp(F, F0_.data(), F0_.size() * sizeof(Mat<dim>)) == 0;
+}
+
+template <int dim>
 bool NeuralElastoplasticEnergy<dim>::exactly_at_reference(const Mat<dim>* F) const {
-    return metadata_.energy_form == EnergyForm::Eq8 && relative_ && !F0_.empty() &&
-           std::memcmp(F, F0_.data(), F0_.size() * sizeof(Mat<dim>)) == 0;
+    return metadata_.energy_form == EnergyForm::Eq8 && relative_ && is_reference(F);
 }
 
 template <int dim>
 bool NeuralElastoplasticEnergy<dim>::at_reference(const Mat<dim>* F) const {
-    return buffers_at_reference_ && !F0_.empty() && std::memcmp(F, F0_.data(), F0_.size() * sizeof(Mat<dim>)) == 0;
+    return buffers_at_reference_ && is_reference(F);
 }
 
 template <int dim>
@@ -268,8 +272,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
     }
     // Hess_F N is symmetric, so the row-major output is also the column-major
     // Eigen matrix.
-    if (!correction_ready_ && F0_.size() > 0 && std::memcmp(F, F0_.data(), F0_.size() * sizeof(Mat<dim>)) == 0 &&
-        metadata_.energy_form == EnergyForm::Eq8) {
+    if (!correction_ready_ && metadata_.energy_form == EnergyForm::Eq8 && is_reference(F)) {
         // At the reference before its correction: N, grad N and Hess N at F0 in one pass, which gives
         // c and the offset too (the Newton outer iteration's iterates).
         ensure_correction(reinterpret_cast<double*>(hessian));

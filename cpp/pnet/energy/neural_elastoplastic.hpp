@@ -163,6 +163,8 @@ private:
     // net_value_ and net_gradient_ hold N and grad N at F0 (ensure_correction()'s pass) until another
     // evaluation: the fixed point's next solve starts at F(v) = F0 and reuses them.
     mutable bool buffers_at_reference_ = false;
+    /// Whether F[0..size()) is bitwise the reference F0.
+    bool is_reference(const Mat<dim>* F) const;
     /// Whether F[0..size()) is bitwise the reference F0 and the buffers still hold its pass.
     bool at_reference(const Mat<dim>* F) const;
     /// Eq. 8 relative to the reference, evaluated at F = F0 exactly: psi = 0 and grad = E Ptilde(F0)

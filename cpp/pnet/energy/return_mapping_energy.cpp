@@ -4,11 +4,10 @@ namespace pnet {
 
 template <int dim>
 ReturnMappingEnergy<dim>::ReturnMappingEnergy(const std::vector<Material<dim>>& materials, double tangent_damping)
-    : materials_(materials) {
+    : materials_(materials), tangent_damping_(tangent_damping) {
     for (const Material<dim>& m : materials) {
         const PlasticityModel plasticity = m.description().plasticity;
         const bool associative = plasticity == PlasticityModel::VonMises || plasticity == PlasticityModel::None;
-        w_.push_back(associative ? 0.0 : tangent_damping);
         keep_skew_.push_back(!associative);
         symmetric_ = symmetric_ && associative;
     }
@@ -47,8 +46,9 @@ void ReturnMappingEnergy<dim>::evaluate(const std::vector<Mat<dim>>& F, typename
         if (order == Order::Value) continue;
         P[p] = stress + damping_ * mu * dF;
         if (order != Order::Hessian) continue;
-        H[p] = material.elastoplastic_tangent(svd, hardening_[p], project_psd, keep_skew_[object_[p]]);
-        H[p].diagonal().array() += (w_[object_[p]] + damping_) * mu;
+        const bool non_associative = keep_skew_[object_[p]];
+        H[p] = material.elastoplastic_tangent(svd, hardening_[p], project_psd, non_associative);
+        H[p].diagonal().array() += ((non_associative ? tangent_damping_ : 0.0) + damping_) * mu;
     }
 }
 

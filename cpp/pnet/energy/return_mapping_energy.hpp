@@ -40,8 +40,8 @@ public:
 
 private:
     const std::vector<Material<dim>>& materials_;
-    std::vector<double> w_;        // per object: the tangent's damping (0 for associative flow)
-    std::vector<bool> keep_skew_;  // per object: non-associative flow, the tangent's skew part kept
+    double tangent_damping_;       // w of the non-associative tangent (0 for associative flow)
+    std::vector<bool> keep_skew_;  // per object: non-associative flow, the tangent's skew part kept and damped
     bool symmetric_ = true;
     double damping_ = 0.0;   // Objective::set_damping, added to w
     std::vector<int> object_;
