@@ -30,7 +30,8 @@ constexpr const char* kUsage =
     "  implicit solver (every integrator but explicit; defaults from the scene's integrator block):\n"
     "                     [--newton-tol M_PER_S] [--cg-tol R] [--outer-iteration auto|newton|fixed_point]\n"
     "                     [--time-integrator backward_euler|bdf2]\n"
-    "                     [--hessian auto|network|tangent] [--fixed-point-iterations N]\n"
+    "                     [--hessian auto|network|tangent] [--hessian-precision single|double]\n"
+    "                     [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--tangent-damping W]\n"
     "                     [--preconditioner jacobi|block_jacobi|ichol]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
@@ -97,7 +98,8 @@ struct Options {
     std::optional<double> advection_cfl;
     std::optional<double> flip_relaxation_time, floor_friction;  // scene overrides (MPM)
     std::optional<double> analytic_regularizer;
-    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, kinematic_start, time_integrator;
+    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, hessian_precision, kinematic_start,
+        time_integrator;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
     std::optional<bool> fixed_point_keep_hessian;
 };
@@ -186,6 +188,11 @@ Options parse(int argc, char** argv) {
             if (text != "auto" && text != "network" && text != "tangent")
                 throw UsageError("--hessian: expected auto, network or tangent, got \"" + text + "\"");
             o.hessian = text;
+        } else if (arg == "--hessian-precision") {
+            const std::string text = value();
+            if (text != "single" && text != "double")
+                throw UsageError("--hessian-precision: expected single or double, got \"" + text + "\"");
+            o.hessian_precision = text;
         } else if (arg == "--fixed-point-iterations")
             o.fixed_point_iterations = integer(value(), 1, 100000, "");
         else if (arg == "--fixed-point-inexact")
@@ -324,6 +331,7 @@ int simulate_command(int argc, char** argv) {
         if (o.outer_iteration) settings.implicit.outer_iteration = *o.outer_iteration;
         if (o.time_integrator) settings.implicit.time_integrator = *o.time_integrator;
         if (o.hessian) settings.implicit.hessian = *o.hessian;
+        if (o.hessian_precision) settings.implicit.hessian_precision = *o.hessian_precision;
         if (o.kinematic_start) settings.implicit.kinematic_start = *o.kinematic_start;
         if (o.fixed_point_inexact) settings.implicit.fixed_point_inexact = *o.fixed_point_inexact;
         if (o.fixed_point_keep_hessian) settings.implicit.fixed_point_keep_hessian = *o.fixed_point_keep_hessian;

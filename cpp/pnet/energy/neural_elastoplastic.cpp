@@ -33,7 +33,8 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
       E_(options.youngs_modulus / model.metadata.training_E),
       w_(options.regularizer_weight),
       mu_train_(training_material_.description().elastic.mu()),
-      hessian_kind_(options.hessian) {
+      hessian_kind_(options.hessian),
+      hessian_precision_(options.hessian_precision) {
     if (hessian_kind_ == Options::Hessian::Auto) {
         // The tangent for every material (docs/solver.md, measured); w = 0 for associative flow,
         // where the tangent is the exact Jacobian, and a damping otherwise.
@@ -127,9 +128,21 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
     net_.set_reference(global ? identity_.data() : F0_.data(), has_hardening_ ? network_h_.data() : nullptr, n);
     // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next evaluation at F0 (with
     // Hess N too when the caller asks: Newton's Hessian at its iterate, in the same pass).
-    ++network_passes_;
-    net_.evaluate(F0_.data(), hessian ? FusedMlp::Order::Hessian : FusedMlp::Order::Gradient, net_value_.data(),
-                  net_gradient_.data(), hessian);
+    if (hessian && hessian_precision_ == FusedMlp::Precision::Single && form == EnergyForm::Eq8 && relative_) {
+        // The Hessian, and c's gradient, in single precision; the offset N(F0) by a double value pass
+        // (Options::hessian_precision). No later evaluation reads these buffers as a double gradient at
+        // F0: exactly_at_reference() answers there.
+        ++network_passes_;
+        net_.evaluate(F0_.data(), FusedMlp::Order::Value, net_value_.data());
+        single_value_.resize(n);
+        ++network_passes_;
+        net_.evaluate(F0_.data(), FusedMlp::Order::Hessian, single_value_.data(), net_gradient_.data(), hessian,
+                      FusedMlp::Precision::Single);
+    } else {
+        ++network_passes_;
+        net_.evaluate(F0_.data(), hessian ? FusedMlp::Order::Hessian : FusedMlp::Order::Gradient, net_value_.data(),
+                      net_gradient_.data(), hessian);
+    }
     if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {
         // c = grad_F N(I, slot, h), the rejected forms' correction at the identity.
         identity_value_.resize(n);

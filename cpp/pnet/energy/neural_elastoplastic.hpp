@@ -78,6 +78,14 @@ public:
         /// particle energies). The symmetrized tangent made Newton chatter on stiff granular flow
         /// (docs/solver.md, measured).
         bool nonsymmetric_tangent = false;
+        /// The arithmetic of the network's Hessian pass at the reference (Newton's Hessian under the
+        /// rebased Newton: eq. 8 relative to its reference, F = F0). Single: the MLP's value, gradient and
+        /// Hessian there in float (twice the particles per instruction); N(F0), which the line search
+        /// compares every trial value with, is then taken by a double value pass, and c's grad N(F0) keeps
+        /// float's 1e-6 relative error, which shifts the line search's slope by that fraction of the stress
+        /// (the gradient Newton solves with is E Ptilde(F0), exact either way). Every other evaluation,
+        /// and every one of the other energy forms, is double.
+        FusedMlp::Precision hessian_precision = FusedMlp::Precision::Double;
     };
 
     /// Throws std::invalid_argument (naming the model file) unless `model` is a
@@ -139,6 +147,7 @@ private:
     double damping_ = 0.0;  // set_damping(): added to w_
     double mu_train_;  // shear modulus at the training E
     typename Options::Hessian hessian_kind_;  // Network or Tangent (Auto resolved)
+    FusedMlp::Precision hessian_precision_;   // of the Hessian pass at the reference (Options)
     bool keep_skew_ = false;                  // the tangent keeps its skew part
 
     std::vector<double> hardening_;  // per particle, the state (not the network's clamped input)
@@ -160,6 +169,7 @@ private:
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> net_value_, net_gradient_;
+    mutable std::vector<double> single_value_;  // the single-precision pass's N(F0), not used
     // net_value_ and net_gradient_ hold N and grad N at F0 (ensure_correction()'s pass) until another
     // evaluation: the fixed point's next solve starts at F(v) = F0 and reuses them.
     mutable bool buffers_at_reference_ = false;

@@ -106,7 +106,8 @@ public:
                          const std::vector<Material<dim>>& materials, const std::vector<std::string>& context,
                          const std::vector<double>& regularizer_weights,
                          typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian,
-                         double tangent_damping = kDefaultTangentDamping);
+                         double tangent_damping = kDefaultTangentDamping,
+                         FusedMlp::Precision hessian_precision = FusedMlp::Precision::Double);
 
     void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
                        const std::vector<int>& object) override;

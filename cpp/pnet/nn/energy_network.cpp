@@ -46,6 +46,7 @@ EnergyNetwork<dim>::EnergyNetwork(const MlpWeights& weights, EnergyRepresentatio
                                           FusedMlp::supported_architectures());
           return FusedMlp(weights, kM);
       }()),
+      mlp_single_(weights, kM, FusedMlp::Precision::Single),
       representation_(representation),
       has_hardening_(has_hardening),
       parameter_inputs_(std::move(parameter_inputs)),
@@ -98,7 +99,8 @@ void EnergyNetwork<dim>::set_reference(const Mat<dim>* F0, const double* h, std:
 
 template <int dim>
 void EnergyNetwork<dim>::evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient,
-                                  double* hessian) const {
+                                  double* hessian, FusedMlp::Precision precision) const {
+    const FusedMlp& mlp = this->mlp(precision);
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size_);
     const bool principal = representation_ == EnergyRepresentation::Principal;
 #pragma omp parallel for schedule(static) if (count >= 1024)
@@ -109,13 +111,13 @@ void EnergyNetwork<dim>::evaluate(const Mat<dim>* F, FusedMlp::Order order, doub
             for (int j = 0; j < dim; ++j) x[i * dim + j] = G(i, j);
     }
     if (!principal || order == FusedMlp::Order::Value) {
-        mlp_.evaluate(inputs_.data(), size_, order, value, gradient, hessian);
+        mlp.evaluate(inputs_.data(), size_, order, value, gradient, hessian);
         return;
     }
     const bool second = order == FusedMlp::Order::Hessian;
     mlp_gradient_.resize(size_ * kM);
     if (second) mlp_hessian_.resize(size_ * kM * kM);
-    mlp_.evaluate(inputs_.data(), size_, order, value, mlp_gradient_.data(), second ? mlp_hessian_.data() : nullptr);
+    mlp.evaluate(inputs_.data(), size_, order, value, mlp_gradient_.data(), second ? mlp_hessian_.data() : nullptr);
     using Map = Eigen::Matrix<double, kM, kM, Eigen::RowMajor>;
 #pragma omp parallel for schedule(static) if (count >= 256)
     for (std::ptrdiff_t p = 0; p < count; ++p) {

@@ -42,9 +42,10 @@ public:
 
     /// N(F_r, F0_r, h_r) per row, and for Order >= Gradient its gradient in F
     /// (gradient[r kM + k], row-major vec), for Order::Hessian its Hessian
-    /// (hessian[(r kM + k) kM + l], symmetric). Threaded like FusedMlp.
+    /// (hessian[(r kM + k) kM + l], symmetric), in the MLP arithmetic of
+    /// `precision` (the change of frame is double either way). Threaded like FusedMlp.
     void evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient = nullptr,
-                  double* hessian = nullptr) const;
+                  double* hessian = nullptr, FusedMlp::Precision precision = FusedMlp::Precision::Double) const;
 
     /// The MLP's input for one forward() row [vec F, vec F0, (h), (u)] of a model
     /// file (`parameters` entries u): what the loader checks forward() against.
@@ -52,10 +53,12 @@ public:
                           double* mlp_row, int parameters = 0);
 
     EnergyRepresentation representation() const { return representation_; }
-    const FusedMlp& mlp() const { return mlp_; }
+    const FusedMlp& mlp(FusedMlp::Precision precision = FusedMlp::Precision::Double) const {
+        return precision == FusedMlp::Precision::Single ? mlp_single_ : mlp_;
+    }
 
 private:
-    FusedMlp mlp_;
+    FusedMlp mlp_, mlp_single_;  // the same weights in double and in single precision
     EnergyRepresentation representation_;
     bool has_hardening_;
     std::vector<double> parameter_inputs_;

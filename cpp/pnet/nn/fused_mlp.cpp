@@ -11,23 +11,27 @@ namespace pnet {
 
 namespace {
 
-using simd::kLanes;
-using simd::Vd;
 
 /// Rows per register block of gemv(): 8 independent accumulators cover the
 /// FMA latency (5 cycles, 2 per cycle); smaller blocks only for short outputs.
 constexpr int row_block(int n) { return n % 8 == 0 ? 8 : n % 4 == 0 ? 4 : n % 3 == 0 ? 3 : n % 2 == 0 ? 2 : 1; }
 
+/// S itself, in a context where template arguments are not deduced (C++17 has no std::type_identity).
+template <class T>
+struct NonDeduced {
+    using type = T;
+};
+
 /// out[j] = bias[j] + sum_i A[j][i] v[i] for j < Rows (bias may be null), with
 /// the rows in register blocks so that each v[i] is loaded once per block.
-template <int Rows, int Cols>
-inline void gemv(const double (&A)[Rows][Cols], const double* bias, const Vd* v, Vd* out) {
+template <int Rows, int Cols, class S, class V>
+inline void gemv(const S (&A)[Rows][Cols], const typename NonDeduced<S>::type* bias, const V* v, V* out) {
     constexpr int R = row_block(Rows);
     for (int j = 0; j < Rows; j += R) {
-        Vd acc[R];
-        for (int r = 0; r < R; ++r) acc[r] = simd::splat(bias ? bias[j + r] : 0.0);
+        V acc[R];
+        for (int r = 0; r < R; ++r) acc[r] = simd::splat<V>(bias ? bias[j + r] : S(0));
         for (int i = 0; i < Cols; ++i) {
-            const Vd vi = v[i];
+            const V vi = v[i];
 #pragma GCC unroll 8
             for (int r = 0; r < R; ++r) acc[r] += A[j + r][i] * vi;
         }
@@ -37,17 +41,17 @@ inline void gemv(const double (&A)[Rows][Cols], const double* bias, const Vd* v,
 
 /// J[j0 + r][c0 + c] = sum_i A[j0 + r][i] T[i][c0 + c] for r < R, c < C: R x C
 /// accumulators in registers, R broadcasts and C loads per i.
-template <int R, int C, int W, int M>
-inline void tangent_tile(const double (&A)[W][W], const Vd (*T)[M], int j0, int c0, Vd (*J)[M]) {
-    Vd acc[R][C];
+template <int R, int C, int W, int M, class S, class V>
+inline void tangent_tile(const S (&A)[W][W], const V (*T)[M], int j0, int c0, V (*J)[M]) {
+    V acc[R][C];
     for (int r = 0; r < R; ++r)
-        for (int c = 0; c < C; ++c) acc[r][c] = simd::splat(0.0);
+        for (int c = 0; c < C; ++c) acc[r][c] = V{};
     for (int i = 0; i < W; ++i) {
-        Vd t[C];
+        V t[C];
         for (int c = 0; c < C; ++c) t[c] = T[i][c0 + c];
 #pragma GCC unroll 8
         for (int r = 0; r < R; ++r) {
-            const Vd a = simd::splat(A[j0 + r][i]);
+            const V a = simd::splat<V>(A[j0 + r][i]);
 #pragma GCC unroll 4
             for (int c = 0; c < C; ++c) acc[r][c] += a * t[c];
         }
@@ -59,8 +63,8 @@ inline void tangent_tile(const double (&A)[W][W], const Vd (*T)[M], int j0, int 
 /// The tangent product J = A T (A: W x W scalars, T: W x M lanes) in tiles of
 /// R rows and C columns: R C accumulators + C loaded tangents + 1 broadcast
 /// must fit the 16 vector registers of AVX2 (5 x 2 for M = 4, 3 x 3 for M = 9).
-template <int W, int M>
-inline void tangent_product(const double (&A)[W][W], const Vd (*T)[M], Vd (*J)[M]) {
+template <int W, int M, class S, class V>
+inline void tangent_product(const S (&A)[W][W], const V (*T)[M], V (*J)[M]) {
     constexpr int C = M % 2 == 0 ? 2 : M % 3 == 0 ? 3 : 1;
     constexpr int R = C == 2 ? 5 : C == 3 ? 3 : 8;
     constexpr int full = W - W % R;
@@ -71,39 +75,43 @@ inline void tangent_product(const double (&A)[W][W], const Vd (*T)[M], Vd (*J)[M
 }
 
 /// H += D J J^T on the upper triangle (pairs c <= e, row by row).
-template <int M>
-inline void add_outer(Vd* H, Vd D, const Vd* J) {
+template <int M, class V>
+inline void add_outer(V* H, V D, const V* J) {
     int p = 0;
     for (int c = 0; c < M; ++c) {
-        const Vd s = D * J[c];
+        const V s = D * J[c];
         for (int e = c; e < M; ++e) H[p++] += s * J[e];
     }
 }
 
 /// Networks [In, W, W, W, 1] (three SiLU hidden layers of width W, Table 2),
-/// derivatives in the first M inputs.
-template <int In, int W, int M>
+/// derivatives in the first M inputs, computed in the precision of S (double
+/// or float: the weights, every product and activation; inputs and results
+/// are converted at the block's edges).
+template <int In, int W, int M, class S>
 class Kernel final : public FusedMlp::Kernel {
 public:
+    using V = typename simd::Pack<S>::V;
+    static constexpr int kLanes = simd::Pack<S>::kLanes;
     static constexpr int kPairs = M * (M + 1) / 2;
     static constexpr int kM = M > 0 ? M : 1;  // array extents must be positive
     static constexpr int kP = kPairs > 0 ? kPairs : 1;
 
     explicit Kernel(const MlpWeights& w) {
         for (int j = 0; j < W; ++j) {
-            for (int i = 0; i < In; ++i) W1[j][i] = w.weight[0][j * In + i];
-            b1[j] = w.bias[0][j];
-            b2[j] = w.bias[1][j];
-            b3[j] = w.bias[2][j];
-            w4[j] = w.weight[3][j];
+            for (int i = 0; i < In; ++i) W1[j][i] = static_cast<S>(w.weight[0][j * In + i]);
+            b1[j] = static_cast<S>(w.bias[0][j]);
+            b2[j] = static_cast<S>(w.bias[1][j]);
+            b3[j] = static_cast<S>(w.bias[2][j]);
+            w4[j] = static_cast<S>(w.weight[3][j]);
             for (int i = 0; i < W; ++i) {
-                W2[j][i] = w.weight[1][j * W + i];
-                W3[j][i] = w.weight[2][j * W + i];
+                W2[j][i] = static_cast<S>(w.weight[1][j * W + i]);
+                W3[j][i] = static_cast<S>(w.weight[2][j * W + i]);
                 W2T[i][j] = W2[j][i];
                 W3T[i][j] = W3[j][i];
             }
         }
-        b4 = w.bias[3][0];
+        b4 = static_cast<S>(w.bias[3][0]);
         for (int j = 0; j < W; ++j)
             for (int c = 0; c < M; ++c) {
                 W1F[j][c] = W1[j][c];
@@ -145,21 +153,21 @@ private:
         const bool need_hessian = M > 0 && order == Order::Hessian;
 
         // Inputs, one row per lane (a short last block repeats its last row).
-        Vd in[In];
+        V in[In];
         for (int l = 0; l < kLanes; ++l) {
             const double* row = x + std::min(l, lanes - 1) * In;
-            for (int i = 0; i < In; ++i) in[i][l] = row[i];
+            for (int i = 0; i < In; ++i) in[i][l] = static_cast<S>(row[i]);
         }
 
         // Forward: z_k, a_k = silu(z_k), d_k = silu'(z_k), dd_k = silu''(z_k).
-        Vd z[W], a1[W], a2[W], a3[W], d1[W], d2[W], d3[W], dd1[W], dd2[W], dd3[W];
-        auto activate = [&](Vd* a, Vd* d, Vd* dd) {
+        V z[W], a1[W], a2[W], a3[W], d1[W], d2[W], d3[W], dd1[W], dd2[W], dd3[W];
+        auto activate = [&](V* a, V* d, V* dd) {
             if (!need_gradient) {
                 for (int j = 0; j < W; ++j) a[j] = simd::silu(z[j]);
                 return;
             }
             for (int j = 0; j < W; ++j) {
-                const simd::Silu s = simd::silu_with_derivatives(z[j]);
+                const simd::Silu<V> s = simd::silu_with_derivatives(z[j]);
                 a[j] = s.value;
                 d[j] = s.d1;
                 dd[j] = s.d2;
@@ -171,13 +179,13 @@ private:
         activate(a2, d2, dd2);
         gemv(W3, b3, a2, z);
         activate(a3, d3, dd3);
-        Vd N = simd::splat(b4);
+        V N = simd::splat<V>(b4);
         for (int j = 0; j < W; ++j) N += w4[j] * a3[j];
         for (int l = 0; l < lanes; ++l) value[l] = N[l];
         if (!need_gradient) return;
 
         // Backward: g_2 = W3^T delta_3, g_1 = W2^T delta_2, grad = W1F^T delta_1.
-        Vd delta[W], g2[W], g1[W], grad[kM];
+        V delta[W], g2[W], g1[W], grad[kM];
         for (int j = 0; j < W; ++j) delta[j] = w4[j] * d3[j];
         gemv(W3T, nullptr, delta, g2);
         for (int j = 0; j < W; ++j) delta[j] = g2[j] * d2[j];
@@ -189,17 +197,17 @@ private:
         if (!need_hessian) return;
 
         // Hessian: sum over layers of J_k^T diag(g_k silu''(z_k)) J_k.
-        Vd H[kP];
-        for (int p = 0; p < kPairs; ++p) H[p] = simd::splat(0.0);
+        V H[kP];
+        for (int p = 0; p < kPairs; ++p) H[p] = V{};
         // Layer 1: J_1 = W1F is the same for every lane; P1 holds its products.
         {
             constexpr int C = 8;  // pairs per register block
             for (int p0 = 0; p0 < kPairs; p0 += C) {
                 const int count = std::min(C, kPairs - p0);
-                Vd acc[C];
-                for (int q = 0; q < C; ++q) acc[q] = simd::splat(0.0);
+                V acc[C];
+                for (int q = 0; q < C; ++q) acc[q] = V{};
                 for (int j = 0; j < W; ++j) {
-                    const Vd D = g1[j] * dd1[j];
+                    const V D = g1[j] * dd1[j];
 #pragma GCC unroll 8
                     for (int q = 0; q < C; ++q)
                         if (q < count) acc[q] += D * P1[j][p0 + q];
@@ -209,7 +217,7 @@ private:
         }
         // Layers 2 and 3: J_2 = W2 T_1 and J_3 = W3 T_2 with the tangents
         // T_k = diag(silu'(z_k)) J_k (T_1 = diag(d1) W1F).
-        Vd T[W][kM], J[W][kM];
+        V T[W][kM], J[W][kM];
         for (int i = 0; i < W; ++i)
             for (int c = 0; c < M; ++c) T[i][c] = d1[i] * W1F[i][c];
         tangent_product<W, kM>(W2, T, J);
@@ -228,12 +236,12 @@ private:
         }
     }
 
-    double W1[W][In], b1[W], W2[W][W], b2[W], W3[W][W], b3[W], w4[W], b4;
-    double W2T[W][W], W3T[W][W];
-    double W1F[W][kM], W1FT[kM][W], P1[W][kP];
+    S W1[W][In], b1[W], W2[W][W], b2[W], W3[W][W], b3[W], w4[W], b4;
+    S W2T[W][W], W3T[W][W];
+    S W1F[W][kM], W1FT[kM][W], P1[W][kP];
 };
 
-using KernelFactory = std::shared_ptr<const FusedMlp::Kernel> (*)(const MlpWeights&);
+using KernelFactory = std::shared_ptr<const FusedMlp::Kernel> (*)(const MlpWeights&, FusedMlp::Precision);
 
 struct Architecture {
     int input_width, hidden_width, derivative_inputs;
@@ -241,8 +249,9 @@ struct Architecture {
 };
 
 template <int In, int W, int M>
-std::shared_ptr<const FusedMlp::Kernel> make_kernel(const MlpWeights& w) {
-    return std::make_shared<const Kernel<In, W, M>>(w);
+std::shared_ptr<const FusedMlp::Kernel> make_kernel(const MlpWeights& w, FusedMlp::Precision precision) {
+    if (precision == FusedMlp::Precision::Single) return std::make_shared<const Kernel<In, W, M, float>>(w);
+    return std::make_shared<const Kernel<In, W, M, double>>(w);
 }
 
 // The shapes of Table 2: energy nets [2d^2 (+1 for h), W, W, W, 1] with
@@ -277,8 +286,11 @@ const Architecture* find_architecture(const std::vector<int>& widths, int deriva
 
 }  // namespace
 
-FusedMlp::FusedMlp(const MlpWeights& weights, int derivative_inputs)
-    : widths_(weights.widths), input_width_(weights.input_width()), derivative_inputs_(derivative_inputs) {
+FusedMlp::FusedMlp(const MlpWeights& weights, int derivative_inputs, Precision precision)
+    : widths_(weights.widths),
+      input_width_(weights.input_width()),
+      derivative_inputs_(derivative_inputs),
+      precision_(precision) {
     weights.validate("FusedMlp");
     const Architecture* a = find_architecture(weights.widths, derivative_inputs);
     if (!a) {
@@ -288,7 +300,7 @@ FusedMlp::FusedMlp(const MlpWeights& weights, int derivative_inputs)
                                     std::to_string(derivative_inputs) + " inputs; compiled: " +
                                     supported_architectures());
     }
-    kernel_ = a->make(weights);
+    kernel_ = a->make(weights, precision);
 }
 
 std::string FusedMlp::supported_architectures() {

@@ -1,6 +1,7 @@
 #pragma once
 // Fused evaluation of a PlasticityNet MLP with its gradient and Hessian with
-// respect to the leading inputs (the entries of F), four rows per SIMD register.
+// respect to the leading inputs (the entries of F), one row per SIMD lane: four
+// per register in double precision, eight in single (Precision).
 //
 // For N(x) = w4 . a3 + b4, a_k = silu(z_k), z_k = W_k a_{k-1} + b_k, a_0 = x, and
 // derivatives in the first m inputs (m = d^2):
@@ -27,11 +28,16 @@ public:
     /// What evaluate() computes: N; N and grad N; N, grad N and Hess N.
     enum class Order { Value = 0, Gradient = 1, Hessian = 2 };
 
+    /// The arithmetic of an evaluation: Double, or Single (the weights rounded
+    /// to float, every product and activation in float, about 1e-6 relative;
+    /// inputs and results stay double arrays): twice the rows per instruction.
+    enum class Precision { Double, Single };
+
     /// Derivatives are taken with respect to inputs [0, derivative_inputs)
     /// (0: value only, as for the return-mapping net). Throws
     /// std::invalid_argument for an architecture without a compiled kernel
     /// (see supported_architectures()).
-    FusedMlp(const MlpWeights& weights, int derivative_inputs);
+    FusedMlp(const MlpWeights& weights, int derivative_inputs, Precision precision = Precision::Double);
 
     /// Human-readable list of the compiled (widths, derivative inputs) pairs.
     static std::string supported_architectures();
@@ -39,12 +45,13 @@ public:
 
     int input_width() const { return input_width_; }
     int derivative_inputs() const { return derivative_inputs_; }
+    Precision precision() const { return precision_; }
     const std::vector<int>& widths() const { return widths_; }
 
     /// Evaluates `rows` inputs x (row-major, rows x input_width()):
     /// value[r] = N(x_r); for Order >= Gradient, gradient[r m + c] = dN/dx_c;
     /// for Order::Hessian, hessian[(r m + c) m + e] = d2N/dx_c dx_e (symmetric).
-    /// Threaded with OpenMP over blocks of four rows when called outside a
+    /// Threaded with OpenMP over blocks of one register's rows when called outside a
     /// parallel region (and serial inside one); the result does not depend on
     /// the thread count.
     void evaluate(const double* x, std::size_t rows, Order order, double* value, double* gradient = nullptr,
@@ -66,6 +73,7 @@ private:
     std::vector<int> widths_;
     int input_width_ = 0;
     int derivative_inputs_ = 0;
+    Precision precision_ = Precision::Double;
     std::shared_ptr<const Kernel> kernel_;
 };
 

@@ -1,41 +1,69 @@
 #pragma once
-// Four double lanes as a GCC/Clang vector type: one AVX2 register with
-// -march=native on x86-64, two SSE2 registers otherwise. The fused MLP kernel
-// evaluates four particles at once, one per lane, so that every weight is
-// loaded once and broadcast to the four of them.
+// Packs of lanes as GCC/Clang vector types, 32 bytes each: four doubles or
+// eight floats, one AVX2 register with -march=native on x86-64 (two SSE2
+// registers otherwise). The fused MLP kernel evaluates one particle per lane,
+// so that every weight is loaded once and broadcast to all of them; in single
+// precision a register holds twice the particles, and the same instructions do
+// twice the work.
 //
 // exp() is our own: glibc's scalar exp costs about three times the rest of a
 // SiLU, and does not vectorize.
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 namespace pnet::simd {
 
-constexpr int kLanes = 4;
+constexpr int kBytes = 32;
 
-typedef double Vd __attribute__((vector_size(kLanes * sizeof(double))));
-typedef std::int64_t Vi __attribute__((vector_size(kLanes * sizeof(std::int64_t))));
+template <class S>
+struct Pack;
 
-inline Vd splat(double x) { return Vd{x, x, x, x}; }
+template <>
+struct Pack<double> {
+    typedef double V __attribute__((vector_size(kBytes)));
+    typedef std::int64_t I __attribute__((vector_size(kBytes)));
+    static constexpr int kLanes = kBytes / sizeof(double);
+};
 
-inline Vd load(const double* p) {
-    Vd v;
-    std::memcpy(&v, p, sizeof(Vd));
+template <>
+struct Pack<float> {
+    typedef float V __attribute__((vector_size(kBytes)));
+    typedef std::int32_t I __attribute__((vector_size(kBytes)));
+    static constexpr int kLanes = kBytes / sizeof(float);
+};
+
+constexpr int kLanes = Pack<double>::kLanes;  // double lanes
+using Vd = Pack<double>::V;
+using Vf = Pack<float>::V;
+
+/// The scalar type of a pack.
+template <class V>
+using Scalar = std::remove_cv_t<std::remove_reference_t<decltype(V{}[0])>>;
+
+template <class V = Vd>
+inline V splat(Scalar<V> x) {
+    return V{} + x;
+}
+
+template <class V = Vd>
+inline V load(const Scalar<V>* p) {
+    V v;
+    std::memcpy(&v, p, sizeof(V));
     return v;
 }
 
-inline void store(double* p, Vd v) { std::memcpy(p, &v, sizeof(Vd)); }
-
-inline Vd bits_to_double(Vi v) {
-    Vd d;
-    std::memcpy(&d, &v, sizeof(Vd));
-    return d;
+template <class V>
+inline void store(Scalar<V>* p, V v) {
+    std::memcpy(p, &v, sizeof(V));
 }
 
-inline Vi double_to_bits(Vd v) {
-    Vi i;
-    std::memcpy(&i, &v, sizeof(Vi));
-    return i;
+template <class To, class From>
+inline To bit_cast(From v) {
+    static_assert(sizeof(To) == sizeof(From));
+    To t;
+    std::memcpy(&t, &v, sizeof(To));
+    return t;
 }
 
 /// e^x per lane, within 2 ulp on [-708, 709]; arguments outside are clamped
@@ -45,6 +73,7 @@ inline Vi double_to_bits(Vd v) {
 /// so n ln2_hi is exact), e^r by its Taylor polynomial of degree 12 (remainder
 /// < 0.347^13/13! ~ 1.7e-16, under an ulp), then 2^n through the exponent bits.
 inline Vd exp(Vd x) {
+    using Vi = Pack<double>::I;
     constexpr double kLog2e = 1.4426950408889634074;
     constexpr double kLn2Hi = 6.93147180369123816490e-01;
     constexpr double kLn2Lo = 1.90821492927058770002e-10;
@@ -73,25 +102,67 @@ inline Vd exp(Vd x) {
     p = p * r + 1.0;
 
     // The low bits of t hold n + bits(kRound); 2^n has exponent field n + 1023.
-    const Vi k = double_to_bits(t) - double_to_bits(splat(kRound));
-    const Vd scale = bits_to_double((k + 1023) << 52);
+    const Vi k = bit_cast<Vi>(t) - bit_cast<Vi>(splat(kRound));
+    const Vd scale = bit_cast<Vd>((k + 1023) << 52);
+    return p * scale;
+}
+
+/// e^x per lane in single precision, within 2 ulp on [-87, 88] (clamped there:
+/// e^-87 ~ 1.6e-38, e^88 ~ 1.7e38), NaN stays NaN: the same reduction with
+/// float constants (ln2_hi = 0.693359375 has 9 significant bits) and a Taylor
+/// polynomial of degree 7 (remainder < 0.347^8/8! ~ 5e-9, under an ulp).
+inline Vf exp(Vf x) {
+    using Vi = Pack<float>::I;
+    constexpr float kLog2e = 1.44269504088896341f;
+    constexpr float kLn2Hi = 0.693359375f;
+    constexpr float kLn2Lo = -2.12194440e-4f;
+    constexpr float kRound = 12582912.0f;  // 1.5 * 2^23
+    const Vf lo = splat<Vf>(-87.0f), hi = splat<Vf>(88.0f);
+    x = hi < x ? hi : x;
+    x = lo > x ? lo : x;
+
+    const Vf t = x * kLog2e + kRound;
+    const Vf n = t - kRound;
+    const Vf r = (x - n * kLn2Hi) - n * kLn2Lo;
+
+    Vf p = splat<Vf>(1.0f / 5040.0f);
+    p = p * r + 1.0f / 720.0f;
+    p = p * r + 1.0f / 120.0f;
+    p = p * r + 1.0f / 24.0f;
+    p = p * r + 1.0f / 6.0f;
+    p = p * r + 0.5f;
+    p = p * r + 1.0f;
+    p = p * r + 1.0f;
+
+    const Vi k = bit_cast<Vi>(t) - bit_cast<Vi>(splat<Vf>(kRound));
+    const Vf scale = bit_cast<Vf>((k + 127) << 23);
     return p * scale;
 }
 
 /// SiLU z sigma(z) and its first two derivatives, per lane (sigma = logistic):
 ///   silu'  = s (1 + z (1 - s)),   silu'' = s (1 - s) (2 + z (1 - 2 s)).
+template <class V>
 struct Silu {
-    Vd value, d1, d2;
+    V value, d1, d2;
 };
 
-inline Vd sigmoid(Vd z) { return 1.0 / (1.0 + exp(-z)); }
+template <class V>
+inline V sigmoid(V z) {
+    using S = Scalar<V>;
+    return S(1) / (S(1) + exp(-z));
+}
 
-inline Vd silu(Vd z) { return z * sigmoid(z); }
+template <class V>
+inline V silu(V z) {
+    return z * sigmoid(z);
+}
 
-inline Silu silu_with_derivatives(Vd z) {
-    const Vd s = sigmoid(z);
-    const Vd one_minus_s = 1.0 - s;
-    return {z * s, s * (1.0 + z * one_minus_s), s * one_minus_s * (2.0 + z * (1.0 - 2.0 * s))};
+template <class V>
+inline Silu<V> silu_with_derivatives(V z) {
+    using S = Scalar<V>;
+    const V s = sigmoid(z);
+    const V one_minus_s = S(1) - s;
+    return {z * s, s * (S(1) + z * one_minus_s), s * one_minus_s * (S(2) + z * (S(1) - S(2) * s))};
 }
 
 }  // namespace pnet::simd

@@ -30,7 +30,8 @@ MethodEnergy<dim> make_method_energy(const IntegratorSettings& settings, const s
             std::vector<double> w;
             for (const Material<dim>& m : materials) w.push_back(o.resolved_regularizer_weight(m.description().plasticity));
             auto neural = std::make_unique<NeuralParticleEnergy<dim>>(per_object, materials, context, w,
-                                                                      o.neural_hessian<dim>(), o.tangent_damping);
+                                                                      o.neural_hessian<dim>(), o.tangent_damping,
+                                                                      o.network_hessian_precision());
             for (std::size_t k = 0; k < materials.size(); ++k)
                 out.return_maps.push_back(o.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);
             out.energy = std::move(neural);

@@ -114,6 +114,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                 context + ": integrator.hessian: expected \"auto\", \"network\" or \"tangent\", got " + it->dump());
         o.hessian = it->get<std::string>();
     }
+    if (const auto it = block.find("hessian_precision"); it != block.end()) {
+        if (!it->is_string() || (*it != "single" && *it != "double"))
+            throw std::invalid_argument(context + ": integrator.hessian_precision: expected \"single\" or "
+                                        "\"double\", got " + it->dump());
+        o.hessian_precision = it->get<std::string>();
+    }
     if (const auto it = block.find("outer_iteration"); it != block.end()) {
         if (!it->is_string() || (*it != "auto" && *it != "newton" && *it != "fixed_point"))
             throw std::invalid_argument(context + ": integrator.outer_iteration: expected \"auto\", \"newton\" or "
@@ -200,6 +206,7 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"tangent_damping", tangent_damping},
             {"analytic_regularizer", analytic_regularizer},
             {"hessian", hessian},
+            {"hessian_precision", hessian_precision},
             {"preconditioner", preconditioner},
             {"linear_solver", linear_solver},
             {"coupled_solver", coupled_solver},

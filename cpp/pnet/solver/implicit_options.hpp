@@ -77,6 +77,11 @@ struct ImplicitOptions {
     // return_map: "tangent", the return mapping's consistent tangent (+ w mu I for non-associative
     // flow, w = tangent_damping). Each refuses the other's (check_for()).
     std::string hessian = "auto";
+    // plasticitynet: the arithmetic of the network's Hessian pass at Newton's iterate, "single" (the
+    // default: float, twice the particles per instruction; measured in docs/integrators.md) or
+    // "double". Values, and the gradient Newton solves with, are double either way
+    // (NeuralElastoplasticEnergy::Options::hessian_precision).
+    std::string hessian_precision = "single";
     // FEM `analytic` only, a diagnostic: > 0 adds w mu/2 ||F - F0||^2 about a reference to the
     // closed-form energy and solves with plasticitynet's predictor and outer iteration on F0, the
     // learned energy's solve without its learning error (AnalyticElastoplasticEnergy).
@@ -156,6 +161,10 @@ struct ImplicitOptions {
     typename NeuralElastoplasticEnergy<dim>::Options::Hessian neural_hessian() const {
         using Hessian = typename NeuralElastoplasticEnergy<dim>::Options::Hessian;
         return hessian == "tangent" ? Hessian::Tangent : Hessian::Network;
+    }
+    /// `hessian_precision` as the fused kernel's.
+    FusedMlp::Precision network_hessian_precision() const {
+        return hessian_precision == "double" ? FusedMlp::Precision::Double : FusedMlp::Precision::Single;
     }
 };
 

@@ -476,6 +476,65 @@ TEST(NeuralElastoplasticEnergy, EvaluationAtTheReferenceEqualsAFreshPass) {
     for (std::size_t p = 0; p < n; ++p) EXPECT_EQ(psi_cached[p], psi_fresh[p]);
 }
 
+// The rebased Newton's pass at its iterate (F = F0, relative to the reference) with the Hessian in
+// single precision: Newton's Hessian within float's rounding of the double one; values off the
+// reference (the line search's) within 1e-6 of the double energy's, the offset N(F0) taken in double;
+// value and gradient at F0 exactly 0 and E Ptilde(F0) (to double's rounding) as before; two network passes (a double value
+// pass and the single one) where the double energy takes one.
+template <int dim>
+void check_single_precision_hessian(const std::string& file) {
+    SCOPED_TRACE(file);
+    constexpr int m = dim * dim;
+    const ModelFile model = load_model_file(kModels + "/" + file);
+    const double E = 3.0e5;
+    using Options = typename NeuralElastoplasticEnergy<dim>::Options;
+    Options exact_options{E, 0.1, true};
+    Options single_options = exact_options;
+    single_options.hessian_precision = FusedMlp::Precision::Single;
+    NeuralElastoplasticEnergy<dim> exact(model, exact_options), single(model, single_options);
+    const std::size_t n = 21;
+    const Batch<dim> b = make_batch<dim>(model.metadata, n, 31);
+    exact.set_reference(b.F0.data(), b.h.data(), n);
+    single.set_reference(b.F0.data(), b.h.data(), n);
+    std::vector<double> psi(n), psi_single(n);
+    std::vector<Mat<dim>> grad(n), grad_single(n);
+    std::vector<Tensor4<dim>> H(n), H_single(n);
+    exact.value_gradient_hessian(b.F0.data(), psi.data(), grad.data(), H.data(), false);
+    single.value_gradient_hessian(b.F0.data(), psi_single.data(), grad_single.data(), H_single.data(), false);
+    EXPECT_EQ(exact.network_passes(), 1);
+    EXPECT_EQ(single.network_passes(), 2);
+    double hessian_difference = 0.0;
+    for (std::size_t p = 0; p < n; ++p) {
+        EXPECT_EQ(psi_single[p], 0.0);
+        // grad N(F0) - c = Ptilde(F0) up to double's rounding, whichever precision grad N(F0) had.
+        const Mat<dim> P = single.elastoplastic_stress(b.F0[p], b.h[p]);
+        EXPECT_LE((grad_single[p] - P).cwiseAbs().maxCoeff(), 1e-12 * E) << "particle " << p;
+        EXPECT_LE((grad[p] - P).cwiseAbs().maxCoeff(), 1e-12 * E) << "particle " << p;
+        hessian_difference = std::max(hessian_difference, (H_single[p] - H[p]).cwiseAbs().maxCoeff() /
+                                                              H[p].cwiseAbs().maxCoeff());
+        EXPECT_FALSE(H_single[p].isApprox(H[p], 1e-12)) << "particle " << p << ": not float arithmetic";
+    }
+    EXPECT_LT(hessian_difference, 1e-4);
+    EXPECT_EQ(static_cast<int>(H[0].rows()), m);
+    // Values along the line search's segment F0 + t (F - F0): the same energy but for the slope.
+    for (double t : {1.0, 0.1, 1e-3}) {
+        std::vector<Mat<dim>> Ft(n);
+        for (std::size_t p = 0; p < n; ++p) Ft[p] = b.F0[p] + t * (b.F[p] - b.F0[p]);
+        exact.value(Ft.data(), psi.data());
+        single.value(Ft.data(), psi_single.data());
+        // c's float gradient shifts the slope: |psi_single - psi| <= |delta c| |F - F0| E, with
+        // |F - F0| <= 0.06 t here and |delta c| of float's rounding of grad N.
+        for (std::size_t p = 0; p < n; ++p)
+            EXPECT_NEAR(psi_single[p], psi[p], 1e-6 * E * t) << "t " << t << ", particle " << p;
+    }
+}
+
+TEST(NeuralElastoplasticEnergy, SinglePrecisionHessianAtTheReference) {
+    check_single_precision_hessian<2>("sand_2d.pt");
+    check_single_precision_hessian<2>("metal_2d.pt");
+    check_single_precision_hessian<3>("snow_3d.pt");
+}
+
 // --- Python cross-check ----------------------------------------------------------
 
 template <int dim>

@@ -128,6 +128,34 @@ TEST_P(FusedMlpDerivativeTest, DerivativesMatchFiniteDifferences) {
     EXPECT_EQ(stats.checks, 3 * (m + m * m));
 }
 
+// Single precision (eight rows per register): the same network within float's rounding, every
+// order, a short last block included (37 rows: four blocks of eight and one of five).
+TEST_P(FusedMlpTest, SinglePrecisionMatchesDouble) {
+    const auto& [arch, scale] = GetParam();
+    const MlpWeights weights = random_mlp(arch.widths, 15, scale);
+    const FusedMlp exact(weights, arch.m);
+    const FusedMlp single(weights, arch.m, FusedMlp::Precision::Single);
+    EXPECT_EQ(single.precision(), FusedMlp::Precision::Single);
+    const std::size_t rows = 37;
+    const int m = arch.m;
+    const std::vector<double> x = random_inputs(arch.widths[0], rows, 9);
+    std::vector<double> v(rows), g(rows * m), H(rows * m * m), sv(rows), sg(rows * m), sH(rows * m * m);
+    exact.evaluate(x.data(), rows, FusedMlp::Order::Hessian, v.data(), g.data(), H.data());
+    single.evaluate(x.data(), rows, FusedMlp::Order::Hessian, sv.data(), sg.data(), sH.data());
+    // Each row against the largest entry of its quantity: float rounds at 6e-8, and the sums of up to
+    // 128 products (weights rounded too) stay within a few 1e-6; a wrong lane or layer is O(1).
+    const double tolerance = scale > 1.0 ? 1e-4 : 2e-5;
+    // The value against the largest value (a row whose N nearly cancels has no relative accuracy).
+    EXPECT_LT(max_relative_difference(sv, v, rows), tolerance);
+    EXPECT_GT(max_relative_difference(sv, v, rows), 0.0);  // it is float arithmetic
+    if (m == 0) return;
+    EXPECT_LT(max_relative_difference(sg, g, m), tolerance);
+    EXPECT_LT(max_relative_difference(sH, H, m * m), tolerance);
+    std::vector<double> v0(rows);
+    single.evaluate(x.data(), rows, FusedMlp::Order::Value, v0.data());
+    EXPECT_EQ(v0, sv);
+}
+
 TEST_P(FusedMlpTest, ThreadCountDoesNotChangeResults) {
     const auto& [arch, scale] = GetParam();
     const MlpWeights weights = random_mlp(arch.widths, 14, scale);
@@ -143,6 +171,14 @@ TEST_P(FusedMlpTest, ThreadCountDoesNotChangeResults) {
         out[1].resize(rows * m);
         out[2].resize(rows * m * m);
         fused.evaluate(x.data(), rows, FusedMlp::Order::Hessian, out[0].data(), out[1].data(), out[2].data());
+    }
+    omp_set_num_threads(omp_get_num_procs());
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(results[0][k], results[1][k]);
+    const FusedMlp single(weights, arch.m, FusedMlp::Precision::Single);
+    for (int threads : {1, 2}) {
+        omp_set_num_threads(threads);
+        auto& out = results[threads - 1];
+        single.evaluate(x.data(), rows, FusedMlp::Order::Hessian, out[0].data(), out[1].data(), out[2].data());
     }
     omp_set_num_threads(omp_get_num_procs());
     for (int k = 0; k < 3; ++k) EXPECT_EQ(results[0][k], results[1][k]);
