@@ -20,7 +20,7 @@
 //
 //   bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] [--threads T]
 //                [--scenes DIR] [--only NAME] [--dt-implicit S] [--with-lagged] [--with-one-solve]
-//                [--with-fixed-point] [--with-last-velocity] [--3d] [--no-fem] [--no-stiff]
+//                [--with-fixed-point] [--with-last-velocity] [--with-uncapped] [--3d] [--no-fem] [--no-stiff]
 //
 // The metal frames run --fem-frames frames (default: all 100 of the scene: the
 // plate's whole travel, since the plastic phase that costs the most solves
@@ -31,7 +31,8 @@
 // plasticitynet with the paper's outer iteration (eq. 10), --with-newton-outer with the reference
 // following every iterate; --with-last-velocity adds the metal frames' plasticitynet with
 // every step started from the last velocities with the plate on its target
-// (ImplicitOptions::kinematic_start). Implicit rows give the Newton solves, the updates of F0 to F(v)
+// (ImplicitOptions::kinematic_start); --with-uncapped adds, on the MPM scenes, plasticitynet and
+// return_map with the advection limit (on by default, 0.2 cells per step) off. Implicit rows give the Newton solves, the updates of F0 to F(v)
 // (outer iterations) per step and the largest true residual |R(v)| at a step's
 // end (docs/solver.md).
 //
@@ -143,7 +144,8 @@ Row outer_row(const pnet::Scene& scene, pnet::IntegratorSettings settings, int f
 
 /// What --with-* adds beside plasticitynet and return_map.
 struct Extras {
-    bool lagged = false, one_solve = false, fixed_point = false, newton = false, last_velocity = false;
+    bool lagged = false, one_solve = false, fixed_point = false, newton = false, last_velocity = false,
+         uncapped = false;
 };
 
 /// plasticitynet's outer-iteration rows asked for.
@@ -183,6 +185,14 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
     using Sim = pnet::Simulation<dim>;
     rows.push_back(measure<Sim>(scene, with("plasticitynet", dt_implicit), frames));
     rows.push_back(measure<Sim>(scene, with("return_map", dt_implicit), frames));
+    if (extras.uncapped) {  // the scene's dt alone, the advection limit (on by default) off
+        for (const char* name : {"plasticitynet", "return_map"}) {
+            pnet::IntegratorSettings s = with(name, dt_implicit);
+            s.implicit.advection_cfl = 0.0;
+            rows.push_back(measure<Sim>(scene, s, frames));
+            rows.back().integrator = std::string(name) + ", uncapped";
+        }
+    }
     if (extras.one_solve) {  // the paper's cheapest mode: one solve per step about F0 = F(v*), not converged
         pnet::IntegratorSettings one = with("plasticitynet", dt_implicit);
         one.implicit.outer_iteration = "fixed_point";
@@ -299,13 +309,16 @@ int main(int argc, char** argv) {
             extras.newton = true;
         else if (arg == "--with-last-velocity")
             extras.last_velocity = true;
+        else if (arg == "--with-uncapped")
+            extras.uncapped = true;
         else if (arg == "--3d")
             three_d = true;
         else {
             std::fprintf(stderr,
                          "usage: bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] "
                          "[--threads T] [--dt-implicit S] [--scenes DIR] [--only NAME] [--with-lagged] "
-                         "[--with-one-solve] [--with-fixed-point] [--with-newton-outer] [--with-last-velocity] [--3d] "
+                         "[--with-one-solve] [--with-fixed-point] [--with-newton-outer] [--with-last-velocity] "
+                         "[--with-uncapped] [--3d] "
                          "[--no-fem] "
                          "[--no-stiff]\n");
             return 2;

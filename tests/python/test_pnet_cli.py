@@ -272,17 +272,19 @@ def test_parametric_model_runs_a_scene_of_its_family_and_refuses_a_value_outside
 
 
 def test_an_uncapped_implicit_mpm_blow_up_names_the_advection_limit(tmp_path):
-    # scenes/elastic_ball_2d.json at 1e-2 s: the ball falls 2.6 cells a step, its impact's Newton solves
-    # stop at the iteration cap and the run blows up (step 38). The error names the cure a user has
-    # (docs/solver.md, "The advection limit"), with which the same run completes.
+    # scenes/elastic_ball_2d.json at 1e-2 s with the advection limit off: the ball falls 2.6 cells a step,
+    # its impact's Newton solves stop at the iteration cap and the run blows up (step 38). The error names
+    # the cure (docs/solver.md, "The advection limit"); the same run as given, with the limit on by
+    # default, completes.
     scene = ROOT / "scenes" / "elastic_ball_2d.json"
-    r = pnet("simulate", scene, "--integrator", "lagged", "--dt", 0.01, "--out", tmp_path / "uncapped")
+    r = pnet("simulate", scene, "--integrator", "lagged", "--dt", 0.01, "--advection-cfl", 0,
+             "--out", tmp_path / "uncapped")
     assert r.returncode == 1, r.stderr
     assert "blew up" in r.stderr and "--advection-cfl" in r.stderr and "integrator.advection_cfl" in r.stderr
-    r = pnet("simulate", scene, "--integrator", "lagged", "--dt", 0.01, "--advection-cfl", 0.2,
-             "--out", tmp_path / "capped")
+    assert "advection limit off" in r.stderr
+    r = pnet("simulate", scene, "--integrator", "lagged", "--dt", 0.01, "--out", tmp_path / "default")
     assert r.returncode == 0, r.stderr
-    assert (tmp_path / "capped" / "frame_00040.ply").exists()
+    assert (tmp_path / "default" / "frame_00040.ply").exists()
 
 
 def test_missing_scene_file_and_usage_errors(tmp_path):
@@ -331,7 +333,7 @@ def test_implicit_integrators_run_every_tiny_scene(tmp_path, name, integrator):
     frames = (out / "stats.csv").read_text().splitlines()
     assert frames[0].endswith(",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
                               "network_evaluations,max_residual_m_per_s,converged,unconverged_steps,"
-                              "hardening_clamped")
+                              "hardening_clamped,advection_capped_steps")
     frame_rows = [dict(zip(frames[0].split(","), row.split(","))) for row in frames[1:]]
     assert len(frames) == 3 and all(r["converged"] == "1" and r["unconverged_steps"] == "0" for r in frame_rows), \
         "every solve converged"
@@ -368,9 +370,10 @@ def test_implicit_options_override_the_scene(tmp_path):
 
 def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
     """--advection-cfl C: a step of 0.02 s would carry the tiny snowball (3 m/s) over several cells;
-    capped, the frame takes several steps, none longer than C dx / max |v|; the run records C."""
+    capped, the frame takes several steps, none longer than C dx / max |v|; the run records C, and
+    steps.csv and stats.csv say which steps the limit cut. 0 turns it off; 0.2 is the default."""
     runs = {}
-    for name, extra in (("whole", []), ("capped", ["--advection-cfl", 0.25])):
+    for name, extra in (("whole", ["--advection-cfl", 0]), ("capped", ["--advection-cfl", 0.25]), ("default", [])):
         out = tmp_path / name
         r = pnet("simulate", TINY / "snowball_2d.json", "--integrator", "lagged", "--dt", 0.02, "--frames", 1,
                  "--out", out, *extra)
@@ -378,6 +381,11 @@ def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
         runs[name] = (json.loads((out / "run.json").read_text()), list(csv.DictReader(open(out / "stats.csv"))))
     (whole_run, whole), (capped_run, capped) = runs["whole"], runs["capped"]
     assert whole_run["solver"]["advection_cfl"] == 0 and capped_run["solver"]["advection_cfl"] == 0.25
+    assert runs["default"][0]["solver"]["advection_cfl"] == 0.2
+    assert int(runs["default"][1][0]["steps"]) > 1 and int(runs["default"][1][0]["advection_capped_steps"]) > 0
+    assert int(whole[0]["advection_capped_steps"]) == 0
+    steps = list(csv.DictReader(open(tmp_path / "capped" / "steps.csv")))
+    assert sum(int(s["advection_capped"]) for s in steps) == int(capped[0]["advection_capped_steps"]) >= len(steps) - 1
     assert int(whole[0]["steps"]) == 1 and float(whole[0]["dt_max_s"]) == 0.02
     dx = json.loads((TINY / "snowball_2d.json").read_text())["dx"]
     assert int(capped[0]["steps"]) > 1

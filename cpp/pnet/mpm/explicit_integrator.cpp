@@ -89,9 +89,10 @@ std::size_t clamp_implicit_step(Particles<dim>& particles, const MpmSystem<dim>&
     } catch (const SimulationError& e) {
         if (advection_cfl > 0.0) throw;
         throw SimulationError(std::string(e.what()) +
-                              "; an implicit step whose particles cross a cell or more also stops converging: "
-                              "--advection-cfl 0.2 (integrator.advection_cfl) cuts the steps so that no particle "
-                              "crosses more than 0.2 cells (docs/solver.md, \"The advection limit\")");
+                              "; an implicit step whose particles cross a cell or more also stops converging, "
+                              "and this run has the advection limit off: the default, --advection-cfl 0.2 "
+                              "(integrator.advection_cfl), cuts the steps so that no particle crosses more than "
+                              "0.2 cells (docs/solver.md, \"The advection limit\")");
     }
 }
 

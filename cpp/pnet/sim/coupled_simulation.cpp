@@ -84,11 +84,13 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
 
 template <int dim>
 StepStats CoupledSimulation<dim>::step() {
-    const double dt = clip_to_frame(
-        dt_ > 0.0 ? (implicit_ ? advection_time_step(mpm_, particles_, dt_, settings_.implicit.advection_cfl) : dt_)
-                  : explicit_->cfl_time_step(particles_, settings_.cfl));
+    const bool limit = dt_ > 0.0 && implicit_;
+    const double limited = limit ? advection_time_step(mpm_, particles_, dt_, settings_.implicit.advection_cfl) : 0.0;
+    const double dt =
+        clip_to_frame(limit ? limited : dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl));
     StepStats s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
+    s.advection_capped = limit && limited < dt_;
     s.contact_pairs = coupling_->active(particles_.x, state_.x).size();
     s.min_distance = coupling_->min_distance(particles_.x, state_.x);
     count_step(dt);

@@ -432,8 +432,11 @@ void run(Sim& sim, const Scene& scene, Output o, const IntegratorSettings& setti
         const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         const double per_frame = elapsed / (sim.frame() - first);
         if (implicit)
-            std::fprintf(stderr, "\rframe %d/%d  steps %ld  Newton %.1f  CG %.0f per step  %.2f s/frame  ETA %.0f s   ",
-                         sim.frame(), frames, f.steps, static_cast<double>(f.newton_iterations) / f.steps,
+            std::fprintf(stderr,
+                         "\rframe %d/%d  steps %ld (%ld cut by the advection limit)  Newton %.1f  CG %.0f per step  "
+                         "%.2f s/frame  ETA %.0f s   ",
+                         sim.frame(), frames, f.steps, f.advection_capped_steps,
+                         static_cast<double>(f.newton_iterations) / f.steps,
                          static_cast<double>(f.cg_iterations) / f.steps, per_frame, per_frame * (frames - sim.frame()));
         else
             std::fprintf(stderr, "\rframe %d/%d  steps %ld  %.2f s/frame  ETA %.0f s   ", sim.frame(), frames, f.steps,

@@ -52,6 +52,7 @@ struct FrameStats {
     bool converged = true;
     long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
     long fixed_point_capped_steps = 0;   // plasticitynet: steps whose fixed point on F0 stopped above its tolerance
+    long advection_capped_steps = 0;     // implicit MPM, coupling: steps the advection limit cut below the scene's dt
     std::size_t hardening_clamped = 0;   // most particles with a clamped hardening input in one step
     // FEM contact: the most contact pairs closer than dhat at the end of a step, the smallest pair
     // distance at the end of any step (m), and CCD queries / those that shortened a step.
@@ -76,6 +77,7 @@ struct FrameStats {
         converged = converged && s.converged;
         unconverged_steps += !s.converged;
         fixed_point_capped_steps += !s.fixed_point_converged;
+        advection_capped_steps += s.advection_capped;
         hardening_clamped = std::max(hardening_clamped, s.hardening_clamped);
         contact_pairs = std::max(contact_pairs, s.contact_pairs);
         min_distance = std::min(min_distance, s.min_distance);
@@ -126,6 +128,8 @@ void for_each_frame_field(F&& f) {
       [](const FrameStats& s) { return s.unconverged_steps; });
     f(FrameField{"hardening_clamped", "hardening_clamped", "%zu"},
       [](const FrameStats& s) { return s.hardening_clamped; });
+    f(FrameField{"advection_capped_steps", "advection_capped_steps", "%ld"},
+      [](const FrameStats& s) { return s.advection_capped_steps; });
     f(FrameField{"contact_pairs", "contact_pairs", "%zu", true}, [](const FrameStats& s) { return s.contact_pairs; });
     f(FrameField{"min_distance_m", "min_distance", "%.6g", true}, [](const FrameStats& s) { return s.min_distance; });
     f(FrameField{"ccd_queries", nullptr, "%ld", true}, [](const FrameStats& s) { return s.ccd_queries; });

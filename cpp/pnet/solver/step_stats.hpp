@@ -13,6 +13,7 @@ namespace pnet {
 /// What one step did (stats.csv, steps.csv, progress).
 struct StepStats {
     double dt = 0.0;
+    bool advection_capped = false;  // implicit MPM, coupling: the advection limit cut dt below the scene's
     std::size_t clamped = 0;  // particles pulled back inside the domain
     double max_grid_speed = 0.0;
     double wall_seconds = 0.0;
@@ -92,6 +93,7 @@ void for_each_step_field(F&& f) {
     f(StepField{"fixed_point_converged", "fixed_point_converged"}, &StepStats::fixed_point_converged);
     f(StepField{"reference_updates", "reference_updates"}, &StepStats::reference_updates);
     f(StepField{"true_residual_m_per_s", "true_residual"}, &StepStats::true_residual);
+    f(StepField{"advection_capped", "advection_capped"}, &StepStats::advection_capped);
     f(StepField{"predictor_iterations", "predictor_iterations", true}, &StepStats::predictor_iterations);
     f(StepField{"kinematic_stages", "kinematic_stages", true}, &StepStats::kinematic_stages);
     f(StepField{"kinematic_reached", "kinematic_reached", true}, &StepStats::kinematic_reached);

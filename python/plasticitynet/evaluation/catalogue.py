@@ -46,6 +46,8 @@ MPM_RUNS: dict[str, Run] = {
     "plasticitynet_1e-3_w0": Run("plasticitynet", 1e-3, ("--regularizer", "0")),
     "plasticitynet_1e-3_fp1": Run("plasticitynet", 1e-3, ("--fixed-point-iterations", "1")),
     "plasticitynet_1e-3_advection": Run("plasticitynet", 1e-3, ("--advection-cfl", "0.2")),
+    # Without the advection limit (on by default since 2026-11-29): the step as the scene's dt alone.
+    "plasticitynet_1e-3_uncapped": Run("plasticitynet", 1e-3, ("--advection-cfl", "0")),
 }
 #: The energy-representation ablation (paper Fig. 11): the 2D sand energy in eq. 8's form and in the three
 #: forms the paper rejected (scripts/train_ablation_models.sh), each replacing the scene's model.
@@ -96,12 +98,12 @@ def _step(dt: float) -> str:
 
 for _dt in STUDY_MPM_DTS:
     for _integrator in ("plasticitynet", "return_map"):
-        MPM_RUNS[f"{_integrator}_{_step(_dt)}_study"] = Run(_integrator, _dt)
+        MPM_RUNS[f"{_integrator}_{_step(_dt)}_study"] = Run(_integrator, _dt, ("--advection-cfl", "0"))
         MPM_RUNS[f"{_integrator}_{_step(_dt)}_capped"] = Run(_integrator, _dt, ("--advection-cfl", "0.2"))
     for _solves in (1, 2, 3):
         MPM_RUNS[f"plasticitynet_{_step(_dt)}_budget{_solves}"] = Run(
             "plasticitynet", _dt, ("--outer-iteration", "fixed_point", "--fixed-point-iterations", str(_solves),
-                                   "--fixed-point-tol", "0"))
+                                   "--fixed-point-tol", "0", "--advection-cfl", "0"))
 for _dt in (1e-2, 2e-2):
     for _integrator in ("plasticitynet", "return_map"):
         FEM_RUNS[f"{_integrator}_{_step(_dt)}_study"] = Run(_integrator, _dt)
@@ -151,7 +153,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
     Study("regularizer_ablation", "mpm", {"sand_column_2d": 50}, ("gt", "plasticitynet_1e-3", "plasticitynet_1e-3_w0")),
     Study("time_integrator_mpm", "mpm", {"sand_column_2d": 50, "snowball_2d": 50, "snowball_3d": 25},
           ("gt", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3", "plasticitynet_1e-3_bdf2",
-           "plasticitynet_1e-3_advection")),
+           "plasticitynet_1e-3_advection", "plasticitynet_1e-3_uncapped")),
     Study("fem_eval", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100, "metal_frame_3d": 25},
           ("gt", "explicit_2e-5", "explicit_cfl", "analytic_1e-2", "plasticitynet_1e-2", "plasticitynet_1e-3",
            "return_map_1e-2", "lagged_1e-2", "plasticitynet_1e-2_w0", "plasticitynet_1e-2_exact_rm")),

@@ -321,6 +321,8 @@ class Plan:
         table = RUNS[family]
         frames = int(self.config["sweep_frames" if kind == "dt" else "sweep_dx_frames"])
         sweep = SweepJob(f"{scene}_{kind}", kind, scene, family)
+        # The sweeps take each step as given: the advection limit (on by default) off for the particles.
+        uncapped = () if family == "fem" else ("--advection-cfl", "0")
         if kind == "dt":
             gt = self.add_run(scene, "gt", table["gt"], frames, family)
             cfl = self.add_run(scene, "explicit_cfl", table["explicit_cfl"], frames, family)
@@ -328,7 +330,8 @@ class Plan:
             for integrator in SWEEP_INTEGRATORS:
                 for dt in self.config["sweep_dts"]:
                     name = f"{integrator}_{dt:g}"
-                    points.append((name, integrator, dt, self.add_run(scene, name, Run(integrator, dt), frames, family)))
+                    points.append((name, integrator, dt,
+                                   self.add_run(scene, name, Run(integrator, dt, uncapped), frames, family)))
             for label, integrator, dt, job in points:
                 sweep.points.append({"label": label, "integrator": integrator, "dt": dt, "refinement": 1,
                                      "run_key": job.key,
@@ -336,7 +339,8 @@ class Plan:
         else:
             for k in self.config["sweep_refinements"]:
                 content = refined(base.content, int(k), f"{base.name}.json")
-                runs = {"explicit_cfl": table["explicit_cfl"], **{f"{i}_1e-3": Run(i, 1e-3) for i in SWEEP_INTEGRATORS}}
+                runs = {"explicit_cfl": table["explicit_cfl"],
+                        **{f"{i}_1e-3": Run(i, 1e-3, uncapped) for i in SWEEP_INTEGRATORS}}
                 for name, run in runs.items():
                     job = self.add_run(scene, name, run, frames, family, content=content, label=f"{name}_dx{k}")
                     sweep.points.append({"label": name, "integrator": run.integrator, "dt": run.dt, "refinement": k,

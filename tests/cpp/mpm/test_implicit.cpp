@@ -584,7 +584,7 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
                                {"advection_cfl", 0.25}};
     const ImplicitOptions o = ImplicitOptions::from_json(ok, "s.json");
     EXPECT_EQ(o.advection_cfl, 0.25);
-    EXPECT_EQ(ImplicitOptions{}.advection_cfl, 0.0) << "off unless asked";
+    EXPECT_EQ(ImplicitOptions{}.advection_cfl, 0.2) << "on by default";
     EXPECT_EQ(o.preconditioner, "block_jacobi");
     EXPECT_EQ(o.lazy_hessian, 0.0);
     EXPECT_EQ(o.max_kinematic_stages, 5);

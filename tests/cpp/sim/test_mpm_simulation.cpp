@@ -88,7 +88,8 @@ void checkpoint_round_trip(const char* file) {
 
 // The advection limit (ImplicitOptions::advection_cfl): the implicit steps of a disk thrown down at
 // 8 m/s are cut to C dx / max_p |v_p| (the velocities at each step's start), frames still land on
-// their times, and with the limit off the scene's dt is kept.
+// their times, each cut step says so (StepStats::advection_capped), and with the limit off the
+// scene's dt is kept.
 TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
     nlohmann::json j = scene_to_json(load_scene(PNET_SCENES_DIR "/tiny/snowball_2d.json"));
     j["objects"][0]["velocity"] = {0.0, -8.0};
@@ -96,10 +97,13 @@ TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
     IntegratorSettings settings = IntegratorSettings::from_scene(scene);
     settings.name = "lagged";
     settings.dt = 2e-3;
+    settings.implicit.advection_cfl = 0.0;
     Simulation<2> off(scene, settings);
     const FrameStats whole = off.advance_frame();
     EXPECT_DOUBLE_EQ(whole.dt_max, 2e-3);
     EXPECT_DOUBLE_EQ(whole.dt_min, 2e-3);
+    EXPECT_EQ(whole.advection_capped_steps, 0);
+    for (const StepStats& s : off.last_frame_steps()) EXPECT_FALSE(s.advection_capped);
 
     const double cfl = 0.25;
     settings.implicit.advection_cfl = cfl;
@@ -123,6 +127,30 @@ TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
     EXPECT_EQ(cut.steps, steps);
     EXPECT_GT(cut.steps, whole.steps);
     EXPECT_DOUBLE_EQ(capped.time(), scene.frame_dt);
+    // Every step but the frame's last (which may be clipped to the frame's end instead) was cut by
+    // the limit below the scene's dt.
+    long flagged = 0;
+    for (const StepStats& s : capped.last_frame_steps()) flagged += s.advection_capped;
+    EXPECT_GE(flagged, cut.steps - 1);
+    EXPECT_EQ(cut.advection_capped_steps, flagged);
+}
+
+// The limit is on by default (0.2 cells: docs/solver.md, "The advection limit"): the shipped scene
+// taken as it is, thrown fast, is cut; an explicit run is not (its own CFL step governs it).
+TEST(Simulation, AdvectionLimitIsOnByDefault) {
+    EXPECT_EQ(ImplicitOptions{}.advection_cfl, kDefaultAdvectionCfl);
+    EXPECT_EQ(kDefaultAdvectionCfl, 0.2);
+    nlohmann::json j = scene_to_json(load_scene(PNET_SCENES_DIR "/tiny/snowball_2d.json"));
+    j["objects"][0]["velocity"] = {0.0, -8.0};
+    const Scene scene = scene_from_json(j, "fast.json", PNET_SCENES_DIR "/tiny");
+    IntegratorSettings settings = IntegratorSettings::from_scene(scene);
+    EXPECT_EQ(settings.implicit.advection_cfl, 0.2);
+    settings.name = "lagged";
+    settings.dt = 2e-3;
+    Simulation<2> sim(scene, settings);
+    const FrameStats frame = sim.advance_frame();
+    EXPECT_GT(frame.advection_capped_steps, 0);
+    EXPECT_LT(frame.dt_min, 2e-3);
 }
 
 TEST(Simulation, CheckpointThenResumeEqualsAnUninterruptedRun2d) {

@@ -21,17 +21,19 @@ TEST(RunOutput, HeadersAreTheDocumentedColumns) {
     EXPECT_EQ(stats_csv_header({2, false, "lagged"}),
               "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
               "newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,network_evaluations,"
-              "max_residual_m_per_s,converged,unconverged_steps,hardening_clamped\n");
+              "max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,advection_capped_steps\n");
     EXPECT_EQ(stats_csv_header({3, true, "lagged"}),
               "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
               "momentum_z,newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
-              "network_evaluations,max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,contact_pairs,min_distance_m,"
+              "network_evaluations,max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,"
+              "advection_capped_steps,contact_pairs,min_distance_m,"
               "ccd_queries,ccd_limited\n");
     EXPECT_EQ(steps_csv_header({2, false, "lagged"}),
               "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
               "line_search_steps,network_evaluations,fixed_point_iterations,fixed_point_change,"
               "initial_residual_m_per_s,residual_m_per_s,energy_J,converged,clamped,line_search_failed,"
-              "hardening_clamped,fixed_point_converged,reference_updates,true_residual_m_per_s,integrator\n");
+              "hardening_clamped,fixed_point_converged,reference_updates,true_residual_m_per_s,advection_capped,"
+              "integrator\n");
     EXPECT_EQ(steps_csv_header({2, true, "lagged"}),
               steps_csv_header({2, false, "lagged"}).substr(0, steps_csv_header({2, false, "lagged"}).size() - 12) +
                   ",predictor_iterations,kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,"
