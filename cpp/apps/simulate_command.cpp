@@ -39,6 +39,8 @@ constexpr const char* kUsage =
     "                     default 0.2, 0: off)\n"
     "  MPM scenes, overriding the scene: [--flip-relaxation-time S] (AFLIP transfers, transfer.flip_relaxation_time;\n"
     "                     0: APIC) [--floor-friction MU] (a Coulomb floor, boundary.floor_friction; docs/methods.md)\n"
+    "                     [--floor-friction-in-solve yes|no] (plasticitynet, return_map: the floor's friction\n"
+    "                     follows the Newton iterates in one solve; no, the default: three passes of solves)\n"
     "                     [--fixed-point-inexact FORCING]\n"
     "                     [--fail-on-unconverged]\n"
     "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
@@ -102,7 +104,7 @@ struct Options {
     std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, hessian_precision, kinematic_start,
         time_integrator;
     std::optional<int> fixed_point_iterations, fixed_point_anderson;
-    std::optional<bool> fixed_point_keep_hessian;
+    std::optional<bool> fixed_point_keep_hessian, floor_friction_in_solve;
 };
 
 class UsageError : public std::invalid_argument {
@@ -194,6 +196,11 @@ Options parse(int argc, char** argv) {
             if (text != "single" && text != "double")
                 throw UsageError("--hessian-precision: expected single or double, got \"" + text + "\"");
             o.hessian_precision = text;
+        } else if (arg == "--floor-friction-in-solve") {
+            const std::string text = value();
+            if (text != "yes" && text != "no")
+                throw UsageError("--floor-friction-in-solve: expected yes or no, got \"" + text + "\"");
+            o.floor_friction_in_solve = text == "yes";
         } else if (arg == "--fixed-point-iterations")
             o.fixed_point_iterations = integer(value(), 1, 100000, "");
         else if (arg == "--fixed-point-inexact")
@@ -336,6 +343,7 @@ int simulate_command(int argc, char** argv) {
         if (o.kinematic_start) settings.implicit.kinematic_start = *o.kinematic_start;
         if (o.fixed_point_inexact) settings.implicit.fixed_point_inexact = *o.fixed_point_inexact;
         if (o.fixed_point_keep_hessian) settings.implicit.fixed_point_keep_hessian = *o.fixed_point_keep_hessian;
+        if (o.floor_friction_in_solve) settings.implicit.floor_friction_in_solve = *o.floor_friction_in_solve;
         if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";
         load_scene_models(scene, o.trust_model, settings);
         // A folder holding another run is refused before the simulation is set up (meshing, models).

@@ -78,6 +78,12 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
                 context + ": integrator.fixed_point_keep_hessian: expected true or false, got " + it->dump());
         o.fixed_point_keep_hessian = it->get<bool>();
     }
+    if (const auto it = block.find("floor_friction_in_solve"); it != block.end()) {
+        if (!it->is_boolean())
+            throw std::invalid_argument(context + ": integrator.floor_friction_in_solve: expected true or false, got " +
+                                        it->dump());
+        o.floor_friction_in_solve = it->get<bool>();
+    }
     if (const auto it = block.find("fem_predictor"); it != block.end()) {
         if (!it->is_boolean())
             throw std::invalid_argument(context + ": integrator.fem_predictor: expected true or false, got " +
@@ -186,6 +192,7 @@ ReferenceSolveOptions ImplicitOptions::reference_solve_options(bool fixed_point)
     solve.keep_hessian = fixed_point_keep_hessian;
     solve.inexact_forcing = fixed_point_inexact;
     solve.fail_on_unconverged = fail_on_unconverged;
+    solve.floor_friction_in_solve = floor_friction_in_solve;
     return solve;
 }
 
@@ -216,7 +223,8 @@ nlohmann::json ImplicitOptions::to_json() const {
             {"kinematic_start", kinematic_start},
             {"fem_predictor", fem_predictor},
             {"learned_return_map", learned_return_map},
-            {"advection_cfl", advection_cfl}};
+            {"advection_cfl", advection_cfl},
+            {"floor_friction_in_solve", floor_friction_in_solve}};
 }
 
 }  // namespace pnet

@@ -134,6 +134,12 @@ struct ImplicitOptions {
     // v dt / dx = 0.99) spreads 54% less than the ground truth, at 5e-4 (0.49) 20% less. On by
     // default at kDefaultAdvectionCfl (docs/solver.md, "The advection limit", measured).
     double advection_cfl = kDefaultAdvectionCfl;
+    // A Coulomb floor (MPM, coupling) under plasticitynet and return_map: true, its friction's contacts
+    // follow the Newton iterates within the step's one solve (ReferenceSolveOptions::
+    // floor_friction_in_solve), at 0.3x the Newton tolerance for the same accuracy; false (the default):
+    // three majorize-minimize passes of whole solves, as lagged always takes. At the same accuracy the
+    // two cost about the same on the sand column (docs/methods.md, measured), so the passes stay.
+    bool floor_friction_in_solve = false;
 
     /// Throws std::invalid_argument "<context>.<key>: ..." for a combination `method` does not take:
     /// plasticitynet with hessian "tangent" (the classical integrator's, return_map), return_map with

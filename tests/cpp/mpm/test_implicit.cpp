@@ -939,6 +939,82 @@ TYPED_TEST(ImplicitTest, ACoulombFloorStopsASlidingBoxAfterTheSameDistanceAtEver
               << ", lagged 1e-3 " << implicit << ", 4e-3 " << large << "\n";
 }
 
+// The Coulomb floor's friction within one solve (ReferenceSolveOptions::floor_friction_in_solve): under
+// return_map the floor's contacts follow every Newton iterate, so a step is one solve, not three passes;
+// the sliding box still stops after v0^2 / (2 mu g), as with the passes and as explicit MPM does.
+TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveStopsASlidingBoxAsThePassesDo) {
+    constexpr int dim = TypeParam::value;
+    const double s = dim == 2 ? 0.2 : 0.12, dx = 1.0 / 32, mu = 0.25, v0 = 0.7, g = 9.8;
+    std::vector<double> lo(dim, 0.5 - s / 2), hi(dim, 0.5 + s / 2), v(dim, 0.0);
+    lo[0] = 0.2;
+    hi[0] = 0.2 + s;
+    lo[1] = 3 * dx;
+    hi[1] = 3 * dx + s;
+    v[0] = v0;
+    const Scene scene = elastic_box<dim>(lo, hi, v, -g, 3, mu, 1e5);
+    struct Slide {
+        double distance;
+        long solves, steps;
+    };
+    auto slide = [&](bool in_solve, double dt) {
+        IntegratorSettings settings;
+        settings.name = "return_map";
+        settings.dt = dt;
+        settings.implicit.newton_tolerance = 1e-7;
+        settings.implicit.floor_friction_in_solve = in_solve;
+        Simulation<dim> sim(scene, settings);
+        auto mean_x = [&] {
+            double x = 0.0;
+            for (const Vec<dim>& p : sim.particles().x) x += p[0];
+            return x / static_cast<double>(sim.particles().size());
+        };
+        const double start = mean_x();
+        Slide out{0.0, 0, 0};
+        for (int f = 0; f < 20; ++f) {
+            const FrameStats frame = sim.advance_frame();
+            out.solves += frame.fixed_point_iterations;
+            out.steps += frame.steps;
+            EXPECT_TRUE(frame.converged) << "frame " << f << (in_solve ? ", in one solve" : ", in passes") << " at "
+                                         << dt << ": residual " << frame.max_residual;
+        }
+        out.distance = mean_x() - start;
+        return out;
+    };
+    const double expected = v0 * v0 / (2.0 * mu * g);  // 0.1 m
+    const Slide one = slide(true, 1e-3), passes = slide(false, 1e-3), large = slide(true, 4e-3);
+    std::cout << "slide (m): expected " << expected << ", return_map in one solve " << one.distance << " ("
+              << static_cast<double>(one.solves) / one.steps << " solves per step), in passes " << passes.distance
+              << " (" << static_cast<double>(passes.solves) / passes.steps << "), one solve at 4e-3 " << large.distance
+              << "\n";
+    EXPECT_EQ(one.solves, one.steps) << "one solve per step";
+    EXPECT_EQ(passes.solves, 3 * passes.steps) << "kFloorFrictionSolves passes";
+    EXPECT_NEAR(one.distance, expected, 0.1 * expected);
+    EXPECT_NEAR(one.distance, passes.distance, 0.03 * expected);
+    EXPECT_NEAR(large.distance, one.distance, 0.1 * expected);
+}
+
+// The sand column collapsing on a floor of its own friction (tan 30 deg), 0.2 s at 1e-3 s under return_map:
+// the friction within one solve at the default Newton tolerance spreads the column as far as the three
+// passes with a tight solve (1e-7 m/s).
+TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveEndsWhereTightPassesDo) {
+    constexpr int dim = TypeParam::value;
+    Scene scene = tiny_scene(scene_name<dim>("sand_column"));
+    scene.boundary.floor_friction = std::tan(30.0 * M_PI / 180.0);
+    scene.flip_relaxation_time = 0.01;
+    auto spread = [&](bool in_solve, double tolerance) {
+        IntegratorSettings settings;
+        settings.name = "return_map";
+        settings.dt = 1e-3;
+        settings.implicit.floor_friction_in_solve = in_solve;
+        if (tolerance > 0.0) settings.implicit.newton_tolerance = tolerance;
+        return spread_growth<dim>(scene, settings, 10);
+    };
+    const double one = spread(true, 0.0), tight = spread(false, 1e-7);
+    std::cout << "spread (m): friction within one solve " << one << ", tight passes " << tight << "\n";
+    EXPECT_GT(tight, 0.005) << "m: the column collapses";
+    EXPECT_NEAR(one, tight, 0.01 * tight);
+}
+
 // The Coulomb floor's friction passes (floor_friction_passes.hpp) end where a tightly converged solve
 // does: the sand column collapsing on a floor of its own friction (tan 30 deg), 0.2 s at 1e-3 s, spreads
 // as far at the default Newton tolerance as at 1e-9 m/s. Each pass after the first changes the friction
