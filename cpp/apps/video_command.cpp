@@ -136,6 +136,10 @@ int run_process(const std::vector<std::string>& args) {
 int video_command(int argc, char** argv) {
     Options o;
     std::map<long, fs::path> frames;
+    if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h")) {
+        std::fputs(kUsage, stdout);
+        return 0;
+    }
     try {
         o = parse(argc, argv);
         if (!fs::is_directory(o.dir)) throw InputError(o.dir.string() + ": not a folder");

@@ -541,6 +541,16 @@ def test_video_usage_errors(tmp_path, args, expected):
     assert r.returncode == 2 and expected in r.stderr, r.stderr
 
 
+@pytest.mark.parametrize("command", ["video", "compare", "simulate"])
+def test_every_command_prints_its_usage_on_help(command):
+    """`pnet COMMAND --help` (and -h), as pnet's own usage tells a newcomer to type: the usage on stdout,
+    exit 0, no error."""
+    for flag in ("--help", "-h"):
+        r = pnet(command, flag)
+        assert r.returncode == 0 and r.stdout.startswith(f"usage: pnet {command}"), (r.returncode, r.stdout, r.stderr)
+        assert "unknown option" not in r.stderr
+
+
 def test_video_without_ffmpeg_says_how_to_get_it(tmp_path):
     out = tmp_path / "run"
     assert pnet("simulate", TINY / "sand_column_2d.json", "--integrator", "explicit", "--frames", 1,
