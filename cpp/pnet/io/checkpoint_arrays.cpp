@@ -6,7 +6,7 @@
 
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/sha256.hpp"
-#include "pnet/nn/model_file.hpp"
+#include "pnet/io/file_errors.hpp"
 
 namespace pnet {
 

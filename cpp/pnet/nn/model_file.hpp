@@ -17,16 +17,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include "pnet/io/file_errors.hpp"
 #include "pnet/material/material.hpp"
 #include "pnet/nn/mlp_weights.hpp"
 
 namespace pnet {
-
-/// A file that does not exist (FileNotFoundError in Python).
-class FileNotFoundError : public std::runtime_error {
-public:
-    using std::runtime_error::runtime_error;
-};
 
 /// A model file neither pinned by a MANIFEST nor trusted by the caller.
 class UntrustedModelError : public std::runtime_error {
