@@ -170,6 +170,8 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
     # Its sand column alone, the first half of the collapse: what one session measured
     # (notebooks/results/integrator_study_sand/).
     Study("integrator_study_sand", "mpm", {"sand_column_2d": 25}, STUDY_MPM_RUNS),
+    # Its snowball, the first half of its fall and impact (notebooks/results/integrator_study_snow/).
+    Study("integrator_study_snow", "mpm", {"snowball_2d": 25}, STUDY_MPM_RUNS),
     # Its 2D metal frames (notebooks/results/integrator_study_metal/).
     Study("integrator_study_metal", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100}, STUDY_FEM_RUNS),
 ]}
@@ -220,3 +222,4 @@ TARGETS["all"] = Target(
 TARGETS["integrators"] = Target(studies=("integrator_study", "integrator_study_fem"))
 TARGETS["integrators_sand"] = Target(studies=("integrator_study_sand",))
 TARGETS["integrators_metal"] = Target(studies=("integrator_study_metal",))
+TARGETS["integrators_snow"] = Target(studies=("integrator_study_snow",))
