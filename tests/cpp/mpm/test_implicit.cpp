@@ -900,30 +900,44 @@ double spread_growth(const Scene& scene, const IntegratorSettings& settings, int
     return spread_of(sim.particles()) - before;
 }
 
-// The Coulomb floor (boundary.floor_friction): a box sliding at v0 on it stops after v0^2 / (2 mu g), the
-// same distance for explicit MPM at two steps and for the implicit solve (the floor's friction a form of
-// the potential, IncrementalPotential::floor_friction_contacts) at steps 10 and 40 times larger.
-TYPED_TEST(ImplicitTest, ACoulombFloorStopsASlidingBoxAfterTheSameDistanceAtEveryStep) {
-    constexpr int dim = TypeParam::value;
-    const double s = dim == 2 ? 0.2 : 0.12, dx = 1.0 / 32, mu = 0.25, v0 = 0.7, g = 9.8;
+/// The Coulomb floor's sliding box: an elastic box (E 1e5 Pa) on the 3-cell floor layer of a dx = 1/32
+/// grid, sliding along x at kSlideSpeed on a floor of friction kSlideFriction under gravity kSlideGravity.
+constexpr double kSlideFriction = 0.25, kSlideSpeed = 0.7, kSlideGravity = 9.8;
+
+template <int dim>
+Scene sliding_box() {
+    const double s = dim == 2 ? 0.2 : 0.12, dx = 1.0 / 32;
     std::vector<double> lo(dim, 0.5 - s / 2), hi(dim, 0.5 + s / 2), v(dim, 0.0);
     lo[0] = 0.2;
     hi[0] = 0.2 + s;
     lo[1] = 3 * dx;  // on the floor layer (3 cells)
     hi[1] = 3 * dx + s;
-    v[0] = v0;
-    const Scene scene = elastic_box<dim>(lo, hi, v, -g, 3, mu, 1e5);
+    v[0] = kSlideSpeed;
+    return elastic_box<dim>(lo, hi, v, -kSlideGravity, 3, kSlideFriction, 1e5);
+}
+
+/// The particles' mean x.
+template <int dim>
+double mean_position_x(const Particles<dim>& particles) {
+    double x = 0.0;
+    for (const Vec<dim>& p : particles.x) x += p[0];
+    return x / static_cast<double>(particles.size());
+}
+
+// The Coulomb floor (boundary.floor_friction): a box sliding at v0 on it stops after v0^2 / (2 mu g), the
+// same distance for explicit MPM at two steps and for the implicit solve (the floor's friction a form of
+// the potential, IncrementalPotential::floor_friction_contacts) at steps 10 and 40 times larger.
+TYPED_TEST(ImplicitTest, ACoulombFloorStopsASlidingBoxAfterTheSameDistanceAtEveryStep) {
+    constexpr int dim = TypeParam::value;
+    constexpr double mu = kSlideFriction, v0 = kSlideSpeed, g = kSlideGravity;
+    const Scene scene = sliding_box<dim>();
     auto slide = [&](const std::string& integrator, double dt) {
         IntegratorSettings settings;
         settings.name = integrator;
         settings.dt = dt;
         settings.implicit.newton_tolerance = 1e-7;
         Simulation<dim> sim(scene, settings);
-        auto mean_x = [&] {
-            double x = 0.0;
-            for (const Vec<dim>& p : sim.particles().x) x += p[0];
-            return x / static_cast<double>(sim.particles().size());
-        };
+        auto mean_x = [&] { return mean_position_x<dim>(sim.particles()); };
         const double start = mean_x();
         for (int f = 0; f < 20; ++f) sim.advance_frame();  // 0.4 s; it stops at v0 / (mu g) = 0.29 s
         return mean_x() - start;
@@ -944,14 +958,8 @@ TYPED_TEST(ImplicitTest, ACoulombFloorStopsASlidingBoxAfterTheSameDistanceAtEver
 // the sliding box still stops after v0^2 / (2 mu g), as with the passes and as explicit MPM does.
 TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveStopsASlidingBoxAsThePassesDo) {
     constexpr int dim = TypeParam::value;
-    const double s = dim == 2 ? 0.2 : 0.12, dx = 1.0 / 32, mu = 0.25, v0 = 0.7, g = 9.8;
-    std::vector<double> lo(dim, 0.5 - s / 2), hi(dim, 0.5 + s / 2), v(dim, 0.0);
-    lo[0] = 0.2;
-    hi[0] = 0.2 + s;
-    lo[1] = 3 * dx;
-    hi[1] = 3 * dx + s;
-    v[0] = v0;
-    const Scene scene = elastic_box<dim>(lo, hi, v, -g, 3, mu, 1e5);
+    constexpr double mu = kSlideFriction, v0 = kSlideSpeed, g = kSlideGravity;
+    const Scene scene = sliding_box<dim>();
     struct Slide {
         double distance;
         long solves, steps;
@@ -963,11 +971,7 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveStopsASlidingBoxA
         settings.implicit.newton_tolerance = 1e-7;
         settings.implicit.floor_friction_in_solve = in_solve;
         Simulation<dim> sim(scene, settings);
-        auto mean_x = [&] {
-            double x = 0.0;
-            for (const Vec<dim>& p : sim.particles().x) x += p[0];
-            return x / static_cast<double>(sim.particles().size());
-        };
+        auto mean_x = [&] { return mean_position_x<dim>(sim.particles()); };
         const double start = mean_x();
         Slide out{0.0, 0, 0};
         for (int f = 0; f < 20; ++f) {
