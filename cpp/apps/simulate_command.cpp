@@ -33,7 +33,7 @@ constexpr const char* kUsage =
     "                     [--hessian auto|network|tangent] [--hessian-precision single|double]\n"
     "                     [--fixed-point-iterations N]\n"
     "                     [--fixed-point-tol T] [--regularizer W] [--tangent-damping W]\n"
-    "                     [--preconditioner jacobi|block_jacobi|ichol]\n"
+    "                     [--preconditioner jacobi|block_jacobi|ichol|multigrid]\n"
     "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
     "                     [--advection-cfl C] (MPM: cap a step so no particle moves more than C cells;\n"
     "                     default 0.2, 0: off)\n"
@@ -264,8 +264,9 @@ Options parse(int argc, char** argv) {
     if (o.floor_friction && !(std::isfinite(*o.floor_friction) && *o.floor_friction >= 0.0))
         throw UsageError("--floor-friction must be a finite number >= 0 (a Coulomb friction coefficient)");
     if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi" &&
-        *o.preconditioner != "ichol")
-        throw UsageError("--preconditioner: expected jacobi, block_jacobi or ichol, got \"" + *o.preconditioner + "\"");
+        *o.preconditioner != "ichol" && *o.preconditioner != "multigrid")
+        throw UsageError("--preconditioner: expected jacobi, block_jacobi, ichol or multigrid, got \"" +
+                         *o.preconditioner + "\"");
     if (o.return_map && *o.return_map != "learned" && *o.return_map != "exact")
         throw UsageError("--return-map: expected learned or exact, got \"" + *o.return_map + "\"");
     if (o.fixed_point_inexact && !(*o.fixed_point_inexact >= 0.0 && *o.fixed_point_inexact < 1.0))

@@ -401,7 +401,7 @@ def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
     (["--tangent-damping", -1], "--tangent-damping must be a finite number >= 0"),
     (["--integrator", "implicit"], '--integrator: unknown integrator "implicit" (expected explicit, plasticitynet, '
                                    'return_map, lagged or analytic)'),
-    (["--preconditioner", "ilu"], '--preconditioner: expected jacobi, block_jacobi or ichol, got "ilu"'),
+    (["--preconditioner", "ilu"], '--preconditioner: expected jacobi, block_jacobi, ichol or multigrid, got "ilu"'),
     (["--lazy-hessian", 1], "--lazy-hessian must be in [0, 1)"),
     (["--dt", -1], "--dt must be a number >= 0"),
     (["--dt", "nan"], "--dt must be a number >= 0"),

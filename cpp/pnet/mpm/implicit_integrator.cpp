@@ -118,6 +118,8 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
     newton.incomplete_cholesky = options_.preconditioner == "ichol";
     if (options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+    const bool multigrid = options_.preconditioner == "multigrid";
+    potential_.set_multigrid(multigrid);
     potential_.set_assemble(options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();

@@ -2,6 +2,9 @@
 
 #include "pnet/mpm/transfer.hpp"
 
+#include <algorithm>
+#include <array>
+#include <chrono>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -119,6 +122,86 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
     else this->set_forms({&inertia_, &particle_energy_});
     particle_energy_.begin_step(particles.size());
     this->invalidate_pattern();  // a new grid
+    multigrid_built_ = false;
+    multigrid_seconds_ = 0.0;
+}
+
+template <int dim>
+void IncrementalPotential<dim>::hessian_prepared(const VecX& /*x*/) {
+    if (!multigrid_on_ || (multigrid_built_ && !multigrid_per_hessian_)) return;
+    const auto start = std::chrono::steady_clock::now();
+    if (!multigrid_built_) {  // this step's grid
+        std::vector<int> coordinates(dim * dof_node_.size());
+        for (std::size_t k = 0; k < dof_node_.size(); ++k) grid_->coordinates(dof_node_[k], &coordinates[dim * k]);
+        multigrid_.set_grid(dim, coordinates, this->free_);
+    }
+    const SparseMatrix* assembled = this->hessian_matrix();
+    if (!assembled) {
+        assemble_by_nodes(multigrid_matrix_);
+        assembled = &multigrid_matrix_;
+    }
+    multigrid_.set_operator(*assembled, this->hessian_symmetric());
+    multigrid_built_ = true;
+    multigrid_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+template <int dim>
+void IncrementalPotential<dim>::assemble_by_nodes(SparseMatrix& out) const {
+    // H^T in column-major storage (H's rows as columns; H itself where it is symmetric): column
+    // d k + a holds row d k + a of H, its entries sorted by the neighbour's dof. Built node by node
+    // from the particle form's pair blocks, without triplets: the inertia's mass and the Coulomb
+    // floor's friction (both on the diagonal) added in place; fixed components keep their mass alone.
+    constexpr int kOffsets = ParticleEnergyForm<dim>::kPairOffsets;
+    particle_energy_.compute_pair_blocks();
+    const std::vector<int>& pair_dof = particle_energy_.pair_dofs();
+    const std::vector<double>& pair_block = particle_energy_.pair_blocks();
+    const std::ptrdiff_t nodes = static_cast<std::ptrdiff_t>(dof_node_.size());
+    const Eigen::Index n = this->size();
+    const VecX& free = this->free_;
+    VecX diagonal = inertia_.mass();  // m_i, and the floor's friction stiffness
+    if (!floor_friction_form_.contacts().empty()) {
+        std::vector<Triplet> floor;
+        floor_friction_form_.add_hessian_triplets(floor);
+        for (const Triplet& t : floor) diagonal[t.row()] += t.value();  // diagonal entries only
+    }
+    std::vector<int>& start = assembly_start_;
+    start.assign(nodes + 1, 0);
+    for (std::ptrdiff_t k = 0; k < nodes; ++k) {
+        int count = 0;
+        for (int o = 0; o < kOffsets; ++o) count += pair_dof[k * kOffsets + o] >= 0;
+        start[k + 1] = start[k] + count;
+    }
+    const Eigen::Index entries = static_cast<Eigen::Index>(start[nodes]) * dim * dim;
+    out.resize(n, n);
+    out.resizeNonZeros(entries);
+    auto* outer = out.outerIndexPtr();
+    auto* inner = out.innerIndexPtr();
+    double* value = out.valuePtr();
+    for (std::ptrdiff_t k = 0; k < nodes; ++k)
+        for (int a = 0; a < dim; ++a) outer[dim * k + a] = dim * dim * start[k] + a * dim * (start[k + 1] - start[k]);
+    outer[n] = static_cast<int>(entries);  // (nonZeros() of a compressed matrix reads outer[n])
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t k = 0; k < nodes; ++k) {
+        std::array<std::pair<int, int>, kOffsets> neighbours;  // (dof, offset), sorted by dof
+        int count = 0;
+        for (int o = 0; o < kOffsets; ++o)
+            if (pair_dof[k * kOffsets + o] >= 0) neighbours[count++] = {pair_dof[k * kOffsets + o], o};
+        std::sort(neighbours.begin(), neighbours.begin() + count);
+        for (int a = 0; a < dim; ++a) {
+            const Eigen::Index row = dim * k + a;
+            int e = outer[row];
+            for (int q = 0; q < count; ++q) {
+                const int j = neighbours[q].first;
+                const double* B = &pair_block[(static_cast<std::size_t>(k) * kOffsets + neighbours[q].second) * dim * dim];
+                for (int b = 0; b < dim; ++b, ++e) {
+                    const Eigen::Index col = dim * j + b;
+                    inner[e] = static_cast<int>(col);
+                    value[e] = free[row] > 0.0 && free[col] > 0.0 ? B[a * dim + b] : 0.0;
+                    if (col == row) value[e] += diagonal[row];
+                }
+            }
+        }
+    }
 }
 
 template <int dim>

@@ -24,6 +24,7 @@
 #include "pnet/mpm/particle_energy_form.hpp"
 #include "pnet/mpm/particles.hpp"
 #include "pnet/solver/inertia_form.hpp"
+#include "pnet/solver/multigrid.hpp"
 #include "pnet/solver/problem.hpp"
 
 namespace pnet {
@@ -114,10 +115,34 @@ public:
     /// Hessian of E, for derivative checks).
     void set_project_psd(bool project) { particle_energy_.set_project_psd(project); }
 
+    /// The linear solve's preconditioner: Galerkin multigrid on the grid's nodes (solver/multigrid.hpp)
+    /// built from the Hessian assembled at the step's first Hessian pass and kept for the step's
+    /// solves (`per_hessian`: rebuilt at every Hessian pass), or none of its own (off: Newton's
+    /// Jacobi or block Jacobi). Hessian products stay matrix-free.
+    void set_multigrid(bool on, bool per_hessian = false, const MultigridOptions& options = {}) {
+        multigrid_on_ = on;
+        multigrid_per_hessian_ = per_hessian;
+        multigrid_built_ = false;
+        multigrid_ = GridMultigrid(options);
+    }
+    bool has_preconditioner() const override { return multigrid_on_; }
+    void apply_preconditioner(const VecX& r, VecX& z) const override { multigrid_.apply(r, z); }
+    const GridMultigrid& multigrid() const { return multigrid_; }
+    /// Seconds spent building the multigrid hierarchy (the assembly included) since the last begin_step().
+    double multigrid_seconds() const { return multigrid_seconds_; }
+
     /// Seconds spent in the particle energies (evaluate) and in Hessian-vector
     /// products since the last begin_step().
     double energy_seconds() const { return particle_energy_.energy_seconds(); }
     double multiply_seconds() const { return particle_energy_.multiply_seconds(); }
+
+    /// The Hessian prepared last, assembled node by node from the particles' pair blocks (no
+    /// triplets): H^T in column-major storage (H's rows as columns; H itself where it is symmetric).
+    void assemble_by_nodes(SparseMatrix& out) const;
+
+protected:
+    void hessian_prepared(const VecX& x) override;
+
 
 private:
     InertiaForm inertia_;
@@ -141,6 +166,12 @@ private:
     std::vector<int> floor_dofs_;            // nodes held on the Coulomb floor (normal component)
     std::vector<double> floor_normal_velocity_;  // their v*_y before it was held at 0
     FloorFrictionForm<dim> floor_friction_form_;
+    bool multigrid_on_ = false, multigrid_per_hessian_ = false;
+    bool multigrid_built_ = false;  // this step's hierarchy is built
+    GridMultigrid multigrid_;
+    SparseMatrix multigrid_matrix_;
+    mutable std::vector<int> assembly_start_;
+    double multigrid_seconds_ = 0.0;
 };
 
 }  // namespace pnet

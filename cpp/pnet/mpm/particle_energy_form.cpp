@@ -199,11 +199,10 @@ constexpr int stencil_offset(int s, int t) {
 }  // namespace
 
 template <int dim>
-void ParticleEnergyForm<dim>::add_hessian_triplets(std::vector<Triplet>& triplets) const {
-    constexpr int kOffsets = dim == 2 ? 25 : 125;
+void ParticleEnergyForm<dim>::compute_pair_blocks() const {
+    constexpr int kOffsets = kPairOffsets;
     constexpr int kB = dim * dim;
     const std::size_t nodes = problem_.nodes();
-    const VecX& free = problem_.free_components();
     pair_dof_.assign(nodes * kOffsets, -1);
     pair_block_.assign(nodes * kOffsets * kB, 0.0);
     problem_.grid().for_each_particle_coloured([&](int p) {
@@ -223,6 +222,15 @@ void ParticleEnergyForm<dim>::add_hessian_triplets(std::vector<Triplet>& triplet
             }
         }
     });
+}
+
+template <int dim>
+void ParticleEnergyForm<dim>::add_hessian_triplets(std::vector<Triplet>& triplets) const {
+    constexpr int kOffsets = kPairOffsets;
+    constexpr int kB = dim * dim;
+    const std::size_t nodes = problem_.nodes();
+    const VecX& free = problem_.free_components();
+    compute_pair_blocks();
     triplets.reserve(triplets.size() + nodes * kOffsets * kB / 2);
     for (std::size_t k = 0; k < nodes; ++k)
         for (int o = 0; o < kOffsets; ++o) {

@@ -60,6 +60,16 @@ public:
     double energy_seconds() const { return energy_seconds_; }
     double multiply_seconds() const { return multiply_seconds_; }
 
+    /// The nodes within two of a node along each axis: 5^d offsets.
+    static constexpr int kPairOffsets = dim == 2 ? 25 : 125;
+    /// The Hessian prepared last by node pairs (fixed components included; what add_hessian_triplets
+    /// emits without them): for node k and offset o, pair_dofs()[k kPairOffsets + o] is the other
+    /// node (-1: none) and pair_blocks() holds the d x d block H(node k, that node) at
+    /// (k kPairOffsets + o) d^2, row-major. Valid until the next call.
+    void compute_pair_blocks() const;
+    const std::vector<int>& pair_dofs() const { return pair_dof_; }
+    const std::vector<double>& pair_blocks() const { return pair_block_; }
+
 private:
     /// sum_p V0_p psi_p, in particle order, serially: the sum must not depend on the thread count.
     double potential_sum() const;
@@ -78,7 +88,7 @@ private:
     std::vector<Tensor4<dim>> K_;  // the Hessian of psi, then K_p (prepare_hessian)
     mutable VecX masked_, scratch_;
     mutable std::vector<Eigen::Matrix<double, kM, 1>> particle_product_;  // K_p dG_p
-    // add_hessian_triplets(): per node and neighbour offset, the neighbour's dof and the d x d block.
+    // compute_pair_blocks(): per node and neighbour offset, the neighbour's dof and the d x d block.
     mutable std::vector<int> pair_dof_;
     mutable std::vector<double> pair_block_;
     bool project_psd_ = true;

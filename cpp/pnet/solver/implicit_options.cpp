@@ -139,9 +139,9 @@ ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const st
         o.time_integrator = it->get<std::string>();
     }
     if (const auto it = block.find("preconditioner"); it != block.end()) {
-        if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi" && *it != "ichol"))
+        if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi" && *it != "ichol" && *it != "multigrid"))
             throw std::invalid_argument(
-                context + ": integrator.preconditioner: expected \"jacobi\", \"block_jacobi\" or \"ichol\", got " +
+                context + ": integrator.preconditioner: expected \"jacobi\", \"block_jacobi\", \"ichol\" or \"multigrid\", got " +
                 it->dump());
         o.preconditioner = it->get<std::string>();
     }
