@@ -92,8 +92,10 @@ struct ImplicitOptions {
     // learned energy's solve without its learning error (AnalyticElastoplasticEnergy).
     double analytic_regularizer = 0.0;
     // PCG preconditioner: "jacobi", "block_jacobi" (the d x d block of each
-    // node) or "ichol" (incomplete Cholesky of the assembled grid Hessian; MPM only). Jacobi is the default: block
-    // Jacobi saved 2-3% of the CG iterations on sand_column_2d and snowball_2d (measured), not its cost.
+    // node), "ichol" (incomplete Cholesky of the assembled grid Hessian; MPM only) or "multigrid" (Galerkin
+    // multigrid on the grid, built once per step; MPM only; solver/multigrid.hpp). Jacobi is the default: block
+    // Jacobi saved 2-3% of the CG iterations on sand_column_2d and snowball_2d (measured), not its cost; the
+    // multigrid cuts the Krylov iterations 1.2-3.6x and costs 2-4x the step at today's sizes (docs/solver.md).
     std::string preconditioner = "jacobi";
     // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the preconditioner above)
     // or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept while the

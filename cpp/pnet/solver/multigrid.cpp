@@ -52,6 +52,7 @@ struct GridMultigrid::Level {
     VecX free;                                   // 1 / 0 per component
     RowMatrix A;                                 // the operator (symmetric)
     VecX inverse_blocks;                         // dim x dim inverse diagonal blocks, row-major
+    std::vector<int> own_begin, own_end;         // per row: the entries of its own node's block (sorted rows)
     // To the next coarser level: P (this level's unknowns x the coarser one's) by rows, and P^T by rows.
     RowMatrix P, Pt;
     mutable VecX x, b, r;                        // the cycle's work vectors (levels > 0: x and b)
@@ -196,12 +197,18 @@ void GridMultigrid::set_operator(const SparseMatrix& A, bool symmetric) {
         const auto* outer = level.A.outerIndexPtr();
         const auto* inner = level.A.innerIndexPtr();
         const double* value = level.A.valuePtr();
+        level.own_begin.assign(level.A.rows(), 0);
+        level.own_end.assign(level.A.rows(), 0);
         for (Eigen::Index i = 0; i < level.A.rows(); ++i) {
             const Eigen::Index k = i / dim;
+            level.own_begin[i] = level.own_end[i] = outer[i];
             for (auto e = outer[i]; e < outer[i + 1]; ++e) {
                 const Eigen::Index j = inner[e], m = j / dim;
-                if (m == k)
+                if (m < k) level.own_begin[i] = level.own_end[i] = e + 1;
+                if (m == k) {
                     level.inverse_blocks[k * dim * dim + (i % dim) * dim + j % dim] = value[e];
+                    level.own_end[i] = e + 1;
+                }
                 else if (colour[m] == colour[k] && value[e] != 0.0)
                     throw std::invalid_argument("GridMultigrid::set_operator: level " + std::to_string(l) +
                                                 " couples nodes " + std::to_string(k) + " and " + std::to_string(m) +
@@ -287,10 +294,8 @@ void gauss_seidel(const GridMultigrid::Level& level, const VecX& b, VecX& x, boo
             for (int a = 0; a < dim; ++a) {
                 const Eigen::Index i = dim * k + a;
                 double sum = b[i];
-                for (auto e = outer[i]; e < outer[i + 1]; ++e) {
-                    const Eigen::Index j = inner[e];
-                    if (j / dim != k) sum -= value[e] * x[j];
-                }
+                for (auto e = outer[i]; e < level.own_begin[i]; ++e) sum -= value[e] * x[inner[e]];
+                for (auto e = level.own_end[i]; e < outer[i + 1]; ++e) sum -= value[e] * x[inner[e]];
                 s[a] = sum;
             }
             const Eigen::Map<const Eigen::Matrix<double, dim, dim, Eigen::RowMajor>> inverse(
