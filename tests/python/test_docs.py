@@ -53,3 +53,15 @@ def test_the_readme_layout_names_every_top_level_folder():
     folders = {name.split("/")[0] for name in out.splitlines() if "/" in name}
     unnamed = sorted(f for f in folders if not re.search(rf"(^|\s|`){re.escape(f)}/", layout))
     assert not unnamed, f"README's layout does not name: {unnamed}"
+
+
+def test_the_readme_is_a_five_minute_read():
+    """The README gets a newcomer to a first simulation, its video and the docs: the two commands, what
+    they write, the Python example, the integrators' table, and at most 250 lines (the rest is in docs/)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(readme.splitlines()) <= 250
+    for must in ("./scripts/run.sh", "./scripts/test.sh", "sand_column_2d.mp4", "pnet video", "## From Python",
+                 "## The integrators, measured", "docs/simulating.md", "docs/training.md"):
+        assert must in readme, must
+    image = re.search(r"!\[[^\]]*\]\(([^)]+)\)", readme)
+    assert image and (ROOT / image.group(1)).is_file(), "the README's picture is missing"

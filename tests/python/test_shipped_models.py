@@ -64,7 +64,7 @@ def test_shipped_model_matches_manifest_and_is_exact_at_F0(name):
 #: of the RMS stress, over EXTRAPOLATION_SAMPLES samples (such samples are rare: 8192 missed the first
 #: snow_param_2d's). The shipped energies measure 0.04-3.7; a snow_3d fine-tuned without samples beyond the
 #: trained perturbation measured 141 (about 100 of 100000 samples wild), and the first snow_param_2d and
-#: snow_param_3d 31.9 and 54.6 (`--wide-fraction`, README).
+#: snow_param_3d 31.9 and 54.6 (`--wide-fraction`, docs/training.md).
 WORST_SAMPLE_BOUND = 6.0
 EXTRAPOLATION_SAMPLES = 1 << 15
 

@@ -3,7 +3,7 @@
 // inserted and deleted runs; for JSON also type swaps, huge numbers, removed keys and deep
 // nesting) with a fixed seed. Every case must end in a valid load or the loader's documented
 // error, never a crash, a hang or another exception. The counts per outcome are printed (the
-// README's "what we guarantee" table). PNET_FUZZ_CASES=N runs N cases per loader instead of the
+// "what we guarantee" table of docs/development.md). PNET_FUZZ_CASES=N runs N cases per loader instead of the
 // suite's default (a few thousand in all, seconds).
 #include <gtest/gtest.h>
 
