@@ -14,6 +14,7 @@
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/ply.hpp"
 #include "pnet/io/png.hpp"
+#include "pnet/io/plot.hpp"
 #include "pnet/io/render.hpp"
 #include "pnet/metrics/run_comparison.hpp"
 #include "parse_number.hpp"

@@ -1,20 +1,15 @@
 #pragma once
-// Software rendering of particle frames and line plots to an Image (png.hpp),
-// for previews, videos and the reports of `pnet compare`, with no graphics
-// library: disks (2D), shaded sphere impostors (3D), polylines and a built-in
-// 5x7 bitmap font.
+// Software rendering of particle and mesh frames to an Image (png.hpp), for previews and videos,
+// with no graphics library: partition-of-unity splats and disks (2D), shaded sphere impostors and
+// z-buffered triangles (3D), a caption and a legend (raster.hpp draws; plot.hpp makes line plots).
 #include <limits>
 #include <string>
 #include <vector>
 
 #include "pnet/io/png.hpp"
+#include "pnet/io/raster.hpp"
 
 namespace pnet {
-
-/// The viridis colormap (van der Walt and Smith, matplotlib 1.5): perceptually uniform and
-/// readable in greyscale and by colour-blind viewers. t is clamped to [0, 1]; NaN gives grey.
-/// Piecewise linear through the 9 colours viridis(k / 8), k = 0..8.
-Rgb viridis(double t);
 
 /// What to draw and how; shared by the 2D and 3D particle renderers.
 struct ParticleRenderOptions {
@@ -98,33 +93,5 @@ Image render_mesh_2d(const std::vector<double>& position, const std::vector<int>
 /// colour). Same errors as render_mesh_2d.
 Image render_mesh_3d(const std::vector<double>& position, const std::vector<int>& triangles,
                      const std::vector<double>& value, const ParticleRenderOptions& options);
-
-/// One polyline of a line plot; points with a non-finite coordinate break the line.
-struct PlotSeries {
-    std::string label;  // legend entry; a plot whose labels are all empty has no legend
-    std::vector<double> x, y;
-};
-
-struct LinePlot {
-    std::string title, x_label, y_label;
-    std::vector<PlotSeries> series;  // coloured in turn from a 10-colour palette (matplotlib tab10)
-    int width_px = 800;
-    int height_px = 500;
-    // Fixed axis ranges (e.g. [0, 1] for IoU); NaN takes the range of the data.
-    double x_min = std::numeric_limits<double>::quiet_NaN(), x_max = std::numeric_limits<double>::quiet_NaN();
-    double y_min = std::numeric_limits<double>::quiet_NaN(), y_max = std::numeric_limits<double>::quiet_NaN();
-};
-
-/// A line plot: axes with "nice" (1, 2, 5 x 10^k) ticks and grid, title, axis labels, a legend
-/// and one anti-aliased polyline per series. Throws std::invalid_argument naming the series if
-/// its x and y differ in length, or if the size is outside [64, 8192] pixels.
-Image render_line_plot(const LinePlot& plot);
-
-/// Draws ASCII text (32..126; other bytes as '?') in the built-in 5x7 font, each font pixel a
-/// scale x scale block, with (x, y) the top-left corner of the first 6 x 8 character cell.
-void draw_text(Image& img, int x, int y, const std::string& text, Rgb colour, int scale = 1);
-
-/// Width in pixels of text drawn by draw_text() (6 x scale per character, no trailing gap).
-int text_width(const std::string& text, int scale = 1);
 
 }  // namespace pnet

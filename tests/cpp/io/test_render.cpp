@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "pnet/io/plot.hpp"
 #include "pnet/io/render.hpp"
 
 namespace pnet {
