@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "pnet/material/material_json.hpp"
+#include "pnet/scene/json_reader.hpp"
 #include "pnet/solver/integrators.hpp"
 
 namespace pnet {
@@ -14,119 +15,12 @@ namespace pnet {
 namespace {
 
 using nlohmann::json;
+using namespace scene_json;
 namespace fs = std::filesystem;
 
 constexpr const char* kAxisNames[] = {"x", "y", "z"};
 constexpr int kMinCells = 8;     // fewer cells than this cannot resolve an object 2 cells from every wall
 constexpr int kMarginCells = 2;  // quadratic B-spline stencil: base node one below the cell, three nodes wide
-
-/// A JSON value for "got ...": short, as written in the file.
-std::string show(const json& value) {
-    std::string text = value.dump();
-    if (text.size() > 60) text = text.substr(0, 57) + "...";
-    return text;
-}
-
-std::string show(double value) {
-    std::ostringstream out;
-    out.precision(10);  // enough to tell 3 dx = 0.01171875 from a rounded value in a message
-    out << value;
-    return out.str();
-}
-
-std::string show(const Eigen::VectorXd& v) {
-    std::string text = "(";
-    for (Eigen::Index i = 0; i < v.size(); ++i) text += (i ? ", " : "") + show(v[i]);
-    return text + ")";
-}
-
-std::string join(const std::string& path, const std::string& key) {
-    return path.empty() ? key : path + "." + key;
-}
-
-std::string index_path(const std::string& path, std::size_t i) {
-    return path + "[" + std::to_string(i) + "]";
-}
-
-/// Reads JSON values and fails with "<file>: <path>: <problem>".
-class Reader {
-public:
-    explicit Reader(std::string file) : file_(std::move(file)) {}
-
-    [[noreturn]] void fail(const std::string& path, const std::string& problem) const {
-        throw SceneError(file_ + ": " + path + ": " + problem);
-    }
-
-    const std::string& file() const { return file_; }
-
-    void require_object(const json& j, const std::string& path) const {
-        if (!j.is_object()) fail(path, "expected an object, got " + show(j));
-    }
-
-    /// `hint` lists the keys that are allowed, where the set depends on context (the shape).
-    void reject_unknown_keys(const json& j, const std::string& path, const std::vector<std::string>& known,
-                             const std::string& hint = "") const {
-        for (const auto& item : j.items())
-            if (std::find(known.begin(), known.end(), item.key()) == known.end())
-                fail(join(path, item.key()), "unknown field" + hint);
-    }
-
-    /// The field, or nullptr when absent.
-    static const json* find(const json& j, const std::string& key) {
-        const auto it = j.find(key);
-        return it == j.end() ? nullptr : &*it;
-    }
-
-    const json& require(const json& j, const std::string& key, const std::string& path,
-                        const std::string& expected) const {
-        const json* v = find(j, key);
-        if (!v) fail(join(path, key), "missing (expected " + expected + ")");
-        return *v;
-    }
-
-    /// A finite number (nlohmann lets NaN and infinity into JSON built in memory).
-    double number(const json& v, const std::string& path, const std::string& expected = "a number") const {
-        if (!v.is_number() || !std::isfinite(v.get<double>())) fail(path, "expected " + expected + ", got " + show(v));
-        return v.get<double>();
-    }
-
-    double positive(const json& v, const std::string& path) const {
-        const double x = number(v, path, "a positive number");
-        if (!(x > 0.0)) fail(path, "expected a positive number, got " + show(v));
-        return x;
-    }
-
-    double non_negative(const json& v, const std::string& path) const {
-        const double x = number(v, path, "a number >= 0");
-        if (x < 0.0) fail(path, "expected a number >= 0, got " + show(v));
-        return x;
-    }
-
-    /// An integer >= `least`; 2.0 is accepted (some writers emit every number as a float).
-    int integer(const json& v, const std::string& path, int least) const {
-        const std::string expected = "an integer >= " + std::to_string(least);
-        const double x = number(v, path, expected);
-        if (x != std::floor(x) || x < least || x > 1e9) fail(path, "expected " + expected + ", got " + show(v));
-        return static_cast<int>(x);
-    }
-
-    std::string text(const json& v, const std::string& path) const {
-        if (!v.is_string()) fail(path, "expected a string, got " + show(v));
-        return v.get<std::string>();
-    }
-
-    Eigen::VectorXd vector(const json& v, const std::string& path, int dim) const {
-        if (!v.is_array() || static_cast<int>(v.size()) != dim)
-            fail(path, "expected an array of " + std::to_string(dim) + " numbers (dim = " + std::to_string(dim) +
-                           "), got " + show(v));
-        Eigen::VectorXd x(dim);
-        for (int i = 0; i < dim; ++i) x[i] = number(v[i], index_path(path, i));
-        return x;
-    }
-
-private:
-    std::string file_;
-};
 
 /// An optional box {"min": [...], "max": [...]} at key `name` (either bound may be left out: it keeps
 /// the value given); each bound finite, max > min on every axis.
@@ -485,10 +379,6 @@ void check_inside_domain(const Reader& r, const Scene& scene, const SceneObject&
     }
 }
 
-json vector_json(const Eigen::VectorXd& v) {
-    return json(std::vector<double>(v.data(), v.data() + v.size()));
-}
-
 }  // namespace
 
 std::string to_string(SceneObject::Shape shape) {
@@ -627,103 +517,6 @@ Scene load_scene(const std::string& path) {
         throw SceneError(path + ": invalid JSON: " + what);
     }
     return scene_from_json(j, path, fs::path(path).parent_path().string());
-}
-
-json scene_to_json(const Scene& scene) {
-    json integrator = scene.integrator.options;
-    integrator["name"] = scene.integrator.name;
-    integrator["dt"] = scene.integrator.dt;
-    integrator["cfl"] = scene.integrator.cfl;
-
-    json objects = json::array();
-    for (const SceneObject& object : scene.objects) {
-        json o;
-        switch (object.shape) {
-            case SceneObject::Shape::Box:
-                o["shape"] = "box";
-                o["min"] = vector_json(object.min);
-                o["max"] = vector_json(object.max);
-                break;
-            case SceneObject::Shape::Sphere:
-                o["shape"] = scene.dim == 2 ? "disk" : "sphere";
-                o["center"] = vector_json(object.center);
-                o["radius"] = object.radius;
-                break;
-            case SceneObject::Shape::Cylinder:
-                o["shape"] = "cylinder";
-                o["center"] = vector_json(object.center);
-                o["radius"] = object.radius;
-                o["height"] = object.height;
-                break;
-        }
-        o["material"] = material_to_json(object.material);
-        if (!object.model.empty()) o["model"] = object.model;
-        o["velocity"] = vector_json(object.velocity);
-        if (object.hardening) o["hardening"] = *object.hardening;
-        objects.push_back(o);
-    }
-
-    json j = {{"name", scene.name},
-              {"dim", scene.dim},
-              {"domain", {{"min", vector_json(scene.domain_min)}, {"max", vector_json(scene.domain_max)}}},
-              {"view", {{"min", vector_json(scene.view_min)}, {"max", vector_json(scene.view_max)}}},
-              {"gravity", vector_json(scene.gravity)},
-              {"frame_dt", scene.frame_dt},
-              {"frames", scene.frames},
-              {"integrator", integrator}};
-    if (scene.dx > 0.0) j["dx"] = scene.dx;
-    if (scene.has_particles()) {
-        j["particles_per_cell"] = scene.particles_per_cell;
-        j["boundary"] = {{"walls", scene.boundary.slip_walls ? "slip" : "none"},
-                         {"sticky_floor_cells", scene.boundary.sticky_floor_cells}};
-        if (scene.boundary.floor_friction >= 0.0) j["boundary"]["floor_friction"] = scene.boundary.floor_friction;
-        if (scene.flip_relaxation_time > 0.0) j["transfer"] = {{"flip_relaxation_time", scene.flip_relaxation_time}};
-        j["objects"] = objects;
-    }
-    if (scene.has_meshes()) {
-        json meshes = json::array();
-        for (const SceneMesh& mesh : scene.meshes) {
-            json m;
-            switch (mesh.shape) {
-                case SceneMesh::Shape::Box:
-                case SceneMesh::Shape::Frame:
-                    m["shape"] = mesh.shape == SceneMesh::Shape::Box ? "box" : "frame";
-                    m["min"] = vector_json(mesh.min);
-                    m["max"] = vector_json(mesh.max);
-                    if (mesh.shape == SceneMesh::Shape::Frame) m["thickness"] = mesh.thickness;
-                    break;
-                case SceneMesh::Shape::Disk:
-                    m["shape"] = scene.dim == 2 ? "disk" : "sphere";
-                    m["center"] = vector_json(mesh.center);
-                    m["radius"] = mesh.radius;
-                    break;
-                case SceneMesh::Shape::File:
-                    m["shape"] = "file";
-                    m["file"] = mesh.file;
-                    break;
-            }
-            if (mesh.element_size > 0.0) m["element_size"] = mesh.element_size;
-            m["kinematic"] = mesh.kinematic;
-            if (!mesh.kinematic) m["material"] = material_to_json(mesh.material);
-            if (!mesh.model.empty()) m["model"] = mesh.model;
-            m["velocity"] = vector_json(mesh.velocity);
-            if (mesh.hardening) m["hardening"] = *mesh.hardening;
-            meshes.push_back(m);
-        }
-        j["meshes"] = meshes;
-        json contact = {{"dhat", scene.contact.dhat},         {"kappa", scene.contact.kappa},
-                        {"kappa_scale", scene.contact.kappa_scale}, {"friction", scene.contact.friction},
-                        {"friction_eps_v", scene.contact.friction_eps_v}};
-        // 0 means "the default" for dhat and kappa, which the reader refuses as a value.
-        if (scene.contact.dhat == 0.0) contact.erase("dhat");
-        if (scene.contact.kappa == 0.0) contact.erase("kappa");
-        if (scene.contact.particle_dhat > 0.0) contact["particle_dhat"] = scene.contact.particle_dhat;
-        if (scene.contact.particle_kappa > 0.0) contact["particle_kappa"] = scene.contact.particle_kappa;
-        j["contact"] = contact;
-        if (scene.contact.ground_height) j["ground"] = {{"height", *scene.contact.ground_height}};
-    }
-    if (!scene.description.empty()) j["description"] = scene.description;
-    return j;
 }
 
 }  // namespace pnet
