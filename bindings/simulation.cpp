@@ -7,16 +7,13 @@
 #include <memory>
 #include <type_traits>
 #include <utility>
-#include <variant>
 
 #include "common.hpp"
 #include "pnet/metrics/iou.hpp"
 #include "pnet/nn/torchscript.hpp"
 #include "pnet/sim/threads.hpp"
 #include "pnet/sim/scene_models.hpp"
-#include "pnet/sim/coupled_simulation.hpp"
-#include "pnet/sim/fem_simulation.hpp"
-#include "pnet/sim/mpm_simulation.hpp"
+#include "pnet/sim/fem_simulation.hpp"  // WithMesh
 #include "pnet/sim/run.hpp"
 
 namespace pnet::bindings {
@@ -42,18 +39,11 @@ py::dict to_dict(const FrameStats& f) {
     return d;
 }
 
-/// FEM alone (no particles).
-template <typename Sim>
-constexpr bool is_fem = std::is_same_v<std::decay_t<Sim>, FemSimulation<2>> ||
-                        std::is_same_v<std::decay_t<Sim>, FemSimulation<3>>;
-/// Particles and meshes (MPM-FEM coupling).
-template <typename Sim>
-constexpr bool is_coupled = std::is_same_v<std::decay_t<Sim>, CoupledSimulation<2>> ||
-                            std::is_same_v<std::decay_t<Sim>, CoupledSimulation<3>>;
-
 [[noreturn]] void no_particles() {
     throw py::value_error("a FEM scene (meshes) has no particles: see nodes, node_velocities, elements");
 }
+
+[[noreturn]] void no_mesh() { throw py::value_error("an MPM scene (particles) has no mesh: see positions, velocities"); }
 
 /// One column of the step history as a numpy array: float64, int64 or bool.
 template <typename T>
@@ -104,29 +94,29 @@ public:
 
     const Scene& scene() const { return scene_; }
     int dim() const { return scene_.dim; }
+    SimulationBase& sim() { return *sim_; }
+    const SimulationBase& sim() const { return *sim_; }
+    /// fn(the particles) of a method with material points (MPM, coupling), in its dimension;
+    /// ValueError for a scene of meshes alone.
     template <typename Fn>
-    decltype(auto) visit(Fn&& fn) const {
-        return visit_simulation(sim_, std::forward<Fn>(fn));
+    decltype(auto) with_particles(Fn&& fn) const {
+        if (const auto* p = dynamic_cast<const WithParticles<2>*>(sim_.get())) return fn(*p);
+        if (const auto* p = dynamic_cast<const WithParticles<3>*>(sim_.get())) return fn(*p);
+        no_particles();
     }
+    /// fn(the meshes' state) of a method with meshes (FEM, coupling); ValueError for an MPM scene.
     template <typename Fn>
-    decltype(auto) visit(Fn&& fn) {
-        return visit_simulation(sim_, std::forward<Fn>(fn));
-    }
-    /// fn(the simulation with meshes: FEM 2D or 3D, or MPM-FEM coupling); ValueError for an MPM scene.
-    template <typename Fn>
-    decltype(auto) visit_fem(Fn&& fn) const {
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<FemSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<2>>>(&sim_)) return fn(std::as_const(**s));
-        if (auto* s = std::get_if<std::unique_ptr<CoupledSimulation<3>>>(&sim_)) return fn(std::as_const(**s));
-        throw py::value_error("an MPM scene (particles) has no mesh: see positions, velocities");
+    decltype(auto) with_mesh(Fn&& fn) const {
+        if (const auto* f = dynamic_cast<const WithMesh<2>*>(sim_.get())) return fn(*f);
+        if (const auto* f = dynamic_cast<const WithMesh<3>*>(sim_.get())) return fn(*f);
+        no_mesh();
     }
 
     py::dict step() {
         StepStats s;
         {
             py::gil_scoped_release release;
-            s = visit([](auto& sim) { return sim.step(); });
+            s = sim().step();
         }
         history_.push_back(s);
         return to_dict(s);
@@ -143,14 +133,12 @@ public:
                 // Signals are checked (which needs the GIL) at most every 20 ms, so
                 // that other Python threads get the GIL while short steps run.
                 auto last_check = std::chrono::steady_clock::now();
-                stats = visit([&](auto& sim) {
-                    return sim.advance_frame([&] {
-                        const auto now = std::chrono::steady_clock::now();
-                        if (now - last_check < std::chrono::milliseconds(20)) return;
-                        last_check = now;
-                        py::gil_scoped_acquire acquire;
-                        if (PyErr_CheckSignals() != 0) throw Interrupted{};
-                    });
+                stats = sim().advance_frame([&] {
+                    const auto now = std::chrono::steady_clock::now();
+                    if (now - last_check < std::chrono::milliseconds(20)) return;
+                    last_check = now;
+                    py::gil_scoped_acquire acquire;
+                    if (PyErr_CheckSignals() != 0) throw Interrupted{};
                 });
             } catch (const Interrupted&) {
                 interrupted = true;
@@ -192,7 +180,7 @@ public:
         o.overwrite = overwrite;
         o.vtu = vtu;
         o.color = color;
-        const IntegratorSettings settings = visit([](const auto& sim) { return sim.settings(); });
+        const IntegratorSettings settings = sim().settings();
         auto last_check = std::chrono::steady_clock::now();
         o.after_step = [&] {  // as advance(): Ctrl-C between two steps, checked at most every 20 ms
             const auto now = std::chrono::steady_clock::now();
@@ -204,7 +192,7 @@ public:
         if (resume) history_.clear();  // the state becomes the checkpoint's
         try {
             py::gil_scoped_release release;
-            run_to_folder(sim_, scene_, settings, o);
+            run_to_folder(*sim_, scene_, settings, o);
         } catch (const Interrupted&) {
             throw py::error_already_set();  // KeyboardInterrupt
         }
@@ -213,32 +201,27 @@ public:
     void save_checkpoint(const py::object& path) const {
         const std::string file = path_string(path);
         py::gil_scoped_release release;
-        visit([&](const auto& sim) { sim.save_checkpoint(file); });
+        sim().save_checkpoint(file);
     }
 
     void load_checkpoint(const py::object& path) {
         const std::string file = path_string(path);
         {
             py::gil_scoped_release release;
-            visit([&](auto& sim) { sim.load_checkpoint(file); });
+            sim().load_checkpoint(file);
         }
         history_.clear();  // the statistics of the steps since construction no longer describe this state
     }
 
     py::array grid_mass() const {
-        GridField g = visit([&](const auto& sim) {
-            if constexpr (is_fem<decltype(sim)>) {
-                no_particles();
-                return GridField{};
-            } else {
-            constexpr int d = std::decay_t<decltype(sim)>::kDim;
-            const auto& p = sim.particles();
+        GridField g = with_particles([&](const auto& with) {
+            constexpr int d = std::decay_t<decltype(with)>::kDim;
+            const auto& p = with.particles();
             std::vector<double> x(p.size() * d);
             for (std::size_t k = 0; k < p.size(); ++k)
                 for (int a = 0; a < d; ++a) x[k * d + a] = p.x[k][a];
             py::gil_scoped_release release;
             return rasterize_mass(d, x, p.mass, scene_.domain_min.data(), scene_.domain_max.data(), scene_.dx);
-            }
         });
         return to_numpy(g);
     }
@@ -257,10 +240,8 @@ private:
     }
 
     void record_frame_steps() {
-        visit([&](const auto& sim) {
-            const auto& steps = sim.last_frame_steps();
-            history_.insert(history_.end(), steps.begin(), steps.end());
-        });
+        const auto& steps = sim().last_frame_steps();
+        history_.insert(history_.end(), steps.begin(), steps.end());
     }
 
     Scene scene_;
@@ -272,12 +253,9 @@ private:
 template <typename Member>
 py::array particle_view(const py::object& self, Member member) {
     const PySimulation& s = self.cast<const PySimulation&>();
-    return s.visit([&](const auto& sim) -> py::array {
-        if constexpr (is_fem<decltype(sim)>) {
-            no_particles();
-        } else {
-        constexpr int d = std::decay_t<decltype(sim)>::kDim;
-        const auto& array = member(sim.particles());
+    return s.with_particles([&](const auto& with) -> py::array {
+        constexpr int d = std::decay_t<decltype(with)>::kDim;
+        const auto& array = member(with.particles());
         using Element = typename std::decay_t<decltype(array)>::value_type;
         const py::ssize_t n = static_cast<py::ssize_t>(array.size());
         const py::ssize_t record = sizeof(Element);
@@ -288,7 +266,6 @@ py::array particle_view(const py::object& self, Member member) {
             return view(array.data()->data(), {n, d, d}, {record, sizeof(double), d * sizeof(double)}, self);
         } else {
             return view(array.data(), {n}, {record}, self);
-        }
         }
     });
 }
@@ -351,68 +328,53 @@ Every model the scene names is loaded and checked when the integrator reads mode
 (plasticitynet); the others open none.)doc")
         .def_property_readonly("scene", &PySimulation::scene)
         .def_property_readonly("dim", &PySimulation::dim)
-        .def_property_readonly("integrator", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.settings().name; }); },
+        .def_property_readonly("integrator", [](const PySimulation& s) { return s.sim().settings().name; },
                                "The integrator's name (plasticitynet_sim.integrators()).")
-        .def_property_readonly("dt", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.settings().dt; }); },
+        .def_property_readonly("dt", [](const PySimulation& s) { return s.sim().settings().dt; },
                                "Time step, s (0: the CFL step).")
         .def_property_readonly("solver", [](const PySimulation& s) {
-            return to_python(s.visit([](const auto& sim) { return sim.settings().implicit.to_json(); }));
+            return to_python(s.sim().settings().implicit.to_json());
         }, "The implicit solver options in use.")
-        .def_property_readonly("frame", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.frame(); }); },
+        .def_property_readonly("frame", [](const PySimulation& s) { return s.sim().frame(); },
                                "Frames completed.")
-        .def_property_readonly("time", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.time(); }); }, "s.")
-        .def_property_readonly("total_steps", [](const PySimulation& s) { return s.visit([](const auto& sim) { return sim.total_steps(); }); })
+        .def_property_readonly("time", [](const PySimulation& s) { return s.sim().time(); }, "s.")
+        .def_property_readonly("total_steps", [](const PySimulation& s) { return s.sim().total_steps(); })
         .def_property_readonly("num_particles", [](const PySimulation& s) {
-            return s.visit([](const auto& sim) -> std::size_t {
-                if constexpr (is_fem<decltype(sim)>) return 0;
-                else return sim.particles().size();
-            });
+            const auto* with_2d = dynamic_cast<const WithParticles<2>*>(&s.sim());
+            const auto* with_3d = dynamic_cast<const WithParticles<3>*>(&s.sim());
+            return with_2d ? with_2d->particles().size() : with_3d ? with_3d->particles().size() : std::size_t{0};
         }, "Particles (0 in a FEM scene).")
         .def_property_readonly("is_fem", [](const PySimulation& s) { return s.scene().has_meshes(); },
                                "Whether the scene has FEM meshes (node and element arrays); with particles beside "
                                "them it is an MPM-FEM coupling (is_coupled).")
         .def_property_readonly("nodes", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.state().x); });
+            return s.with_mesh([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.state().x); });
         }, "FEM: (n, d) float64 node positions, m (a new array).")
         .def_property_readonly("node_velocities", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.state().v); });
+            return s.with_mesh([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.state().v); });
         }, "FEM: (n, d) float64 node velocities, m/s (a new array).")
         .def_property_readonly("rest_nodes", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.mesh().x); });
+            return s.with_mesh([](const auto& f) { return rows<std::decay_t<decltype(f)>::kDim>(f.mesh().x); });
         }, "FEM: (n, d) float64 rest positions, m.")
         .def_property_readonly("elements", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) { return index_rows(f.mesh().elements); });
+            return s.with_mesh([](const auto& f) { return index_rows(f.mesh().elements); });
         }, "FEM: (m, d + 1) int64 node indices of the triangles (2D) or tetrahedra (3D), positively oriented at rest.")
         .def_property_readonly("boundary_faces", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) { return index_rows(f.mesh().boundary); });
+            return s.with_mesh([](const auto& f) { return index_rows(f.mesh().boundary); });
         }, "FEM: (k, d) int64 node indices of the boundary edges (2D) or triangles (3D), outward oriented.")
         .def_property_readonly("element_hardening", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) {
+            return s.with_mesh([](const auto& f) {
                 const auto& h = f.state().hardening;
                 return py::array_t<double>(static_cast<py::ssize_t>(h.size()), h.data());
             });
         }, "FEM: (m,) float64 hardening state per element (von Mises h).")
         .def_property_readonly("mesh_first_node", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) { return f.scene_system().first_node; });
+            return s.with_mesh([](const auto& f) { return f.scene_system().first_node; });
         }, "FEM: the first node of each scene mesh, and the node count at the end.")
         .def_property_readonly("contact", [](const PySimulation& s) {
-            return s.visit_fem([](const auto& f) {
-                py::dict d;
-                if constexpr (is_coupled<decltype(f)>) {
-                    d["dhat"] = f.coupling().dhat();
-                    d["kappa"] = f.coupling().kappa();
-                    d["min_distance"] = f.coupling().min_distance(f.particles().x, f.state().x);
-                    d["active_pairs"] = f.coupling().active(f.particles().x, f.state().x).size();
-                    d["penetrations"] = f.penetrations();
-                } else {
-                    d["dhat"] = f.scene_system().dhat;
-                    d["kappa"] = f.scene_system().kappa;
-                    d["bbox_diagonal"] = f.scene_system().diagonal;
-                    d["min_distance"] = f.contact().min_distance(f.state().x);
-                    d["active_pairs"] = f.contact().active_pairs(f.state().x);
-                }
-                return d;
-            });
+            const nlohmann::json state = s.sim().contact_state();
+            if (state.empty()) no_mesh();
+            return to_python(state);
         }, "FEM: barrier dhat (m), kappa (J/m^4), the bounding-box diagonal (m), and now the smallest pair "
            "distance (m) and the pairs within dhat. MPM-FEM coupling: the particle / mesh barrier's dhat and "
            "kappa, the smallest particle-edge distance, the pairs within dhat and the particles inside a mesh "
@@ -472,16 +434,8 @@ naming the frames that are complete; Ctrl-C raises KeyboardInterrupt between two
         .def_property_readonly("rest_volume", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.rest_volume; }); }, "(n,) float64, m^d.")
         .def_property_readonly("object", [](const py::object& self) { return particle_view(self, [](const auto& p) -> const auto& { return p.object; }); }, "(n,) int32: the scene object of each particle.")
         .def("__repr__", [](const PySimulation& s) {
-            return s.visit([&](const auto& sim) {
-                std::string size;
-                if constexpr (is_fem<decltype(sim)>)
-                    size = std::to_string(sim.mesh().nodes()) + " nodes, " +
-                           std::to_string(sim.mesh().elements.size()) + " elements";
-                else
-                    size = std::to_string(sim.particles().size()) + " particles";
-                return "<plasticitynet_sim.Simulation " + s.scene().name + ": " + sim.settings().name + ", frame " +
-                       std::to_string(sim.frame()) + ", " + size + ">";
-            });
+            return "<plasticitynet_sim.Simulation " + s.scene().name + ": " + s.sim().settings().name + ", frame " +
+                   std::to_string(s.sim().frame()) + ", " + s.sim().size_text() + ">";
         });
 
     // Every core the process may use by default, set before any model loads (LibTorch would

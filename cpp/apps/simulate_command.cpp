@@ -350,7 +350,7 @@ int simulate_command(int argc, char** argv) {
         // A folder holding another run is refused before the simulation is set up (meshing, models).
         if (!o.run.resume) check_run_folder(o.run.out, o.run.overwrite);
         AnySimulation sim = make_simulation(scene, settings);
-        run_to_folder(sim, scene, settings, o.run);
+        run_to_folder(*sim, scene, settings, o.run);
         return 0;
     } catch (const UsageError& e) {
         std::fprintf(stderr, "pnet simulate: %s\n%s", e.what(), usage().c_str());

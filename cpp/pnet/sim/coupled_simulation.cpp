@@ -10,6 +10,7 @@
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/sampler.hpp"
+#include "pnet/sim/frame_files.hpp"
 #include "pnet/sim/method_energy.hpp"
 
 namespace pnet {
@@ -177,6 +178,36 @@ void CoupledSimulation<dim>::load_checkpoint(const std::string& path) {
     particles_ = p;
     state_ = std::move(s);
     if (explicit_) explicit_->mpm().restore_checkpoint_state(std::move(stress));
+}
+
+template <int dim>
+nlohmann::json CoupledSimulation<dim>::describe() const {
+    return {{"dx", mpm_.dx},
+            {"particles", particles_.size()},
+            {"nodes", mesh().nodes()},
+            {"elements", mesh().elements.size()},
+            {"particle_dhat", coupling_->dhat()},
+            {"particle_kappa", coupling_->kappa()},
+            {"step", dt_}};
+}
+
+template <int dim>
+void CoupledSimulation<dim>::write_frame(const FrameFiles& files) const {
+    write_coupled_frame(files, particles_, state_, mesh(), frame(), time());
+}
+
+template <int dim>
+nlohmann::json CoupledSimulation<dim>::contact_state() const {
+    return {{"dhat", coupling_->dhat()},
+            {"kappa", coupling_->kappa()},
+            {"min_distance", coupling_->min_distance(particles_.x, state_.x)},
+            {"active_pairs", coupling_->active(particles_.x, state_.x).size()},
+            {"penetrations", penetrations()}};
+}
+
+template <int dim>
+std::string CoupledSimulation<dim>::size_text() const {
+    return std::to_string(particles_.size()) + " particles";
 }
 
 template class CoupledSimulation<2>;

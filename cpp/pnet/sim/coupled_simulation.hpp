@@ -22,7 +22,7 @@
 namespace pnet {
 
 template <int dim>
-class CoupledSimulation : public SimulationBase {
+class CoupledSimulation : public SimulationBase, public WithParticles<dim>, public WithMesh<dim> {
 public:
     static constexpr int kDim = dim;
 
@@ -32,15 +32,15 @@ public:
 
     /// One step (explicit with dt = 0: the smaller of the MPM CFL step and the FEM elements'),
     /// shortened to land on the end of the frame.
-    StepStats step();
+    StepStats step() override;
     /// Advances to the end of the next frame, then tests for particles inside a mesh.
-    FrameStats advance_frame(const std::function<void()>& after_step = {});
+    FrameStats advance_frame(const std::function<void()>& after_step = {}) override;
 
-    const Particles<dim>& particles() const { return particles_; }
+    const Particles<dim>& particles() const override { return particles_; }
     const MpmSystem<dim>& system() const { return mpm_; }
-    const FemState<dim>& state() const { return state_; }
-    const FemSceneSystem<dim>& scene_system() const { return fem_; }
-    const Mesh<dim>& mesh() const { return fem_.system.mesh; }
+    const FemState<dim>& state() const override { return state_; }
+    const FemSceneSystem<dim>& scene_system() const override { return fem_; }
+    const Mesh<dim>& mesh() const override { return fem_.system.mesh; }
     const ParticleContact<dim>& coupling() const { return *coupling_; }
     double step_size() const { return dt_; }
 
@@ -49,8 +49,15 @@ public:
 
     /// Atomic; load refuses another scene, integrator or size (std::invalid_argument) and a missing
     /// file (FileNotFoundError).
-    void save_checkpoint(const std::string& path) const;
-    void load_checkpoint(const std::string& path);
+    void save_checkpoint(const std::string& path) const override;
+    void load_checkpoint(const std::string& path) override;
+
+    /// dx, particles, mesh sizes, the particle / mesh barrier's dhat and kappa, the step.
+    nlohmann::json describe() const override;
+    void write_frame(const FrameFiles& files) const override;
+    double contact_dhat() const override { return coupling_->dhat(); }
+    nlohmann::json contact_state() const override;
+    std::string size_text() const override;
 
 private:
     MpmSystem<dim> mpm_;

@@ -12,6 +12,7 @@
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
+#include "pnet/sim/frame_files.hpp"
 #include "pnet/sim/method_energy.hpp"
 
 namespace pnet {
@@ -363,6 +364,37 @@ template struct FemSceneSystem<2>;
 template struct FemSceneSystem<3>;
 template FemSceneSystem<2> make_fem_system<2>(const Scene&);
 template FemSceneSystem<3> make_fem_system<3>(const Scene&);
+template <int dim>
+nlohmann::json FemSimulation<dim>::describe() const {
+    return {{"nodes", mesh().nodes()},
+            {"elements", mesh().elements.size()},
+            {"mesh_first_node", built_.first_node},
+            {"mesh_first_element", built_.first_element},
+            {"bbox_diagonal", built_.diagonal},
+            {"dhat", built_.dhat},
+            {"kappa", built_.kappa},
+            {"step", dt_}};
+}
+
+template <int dim>
+void FemSimulation<dim>::write_frame(const FrameFiles& files) const {
+    write_mesh_frame(files, state_, mesh(), frame(), time());
+}
+
+template <int dim>
+nlohmann::json FemSimulation<dim>::contact_state() const {
+    return {{"dhat", built_.dhat},
+            {"kappa", built_.kappa},
+            {"bbox_diagonal", built_.diagonal},
+            {"min_distance", contact_->min_distance(state_.x)},
+            {"active_pairs", contact_->active_pairs(state_.x)}};
+}
+
+template <int dim>
+std::string FemSimulation<dim>::size_text() const {
+    return std::to_string(mesh().nodes()) + " nodes, " + std::to_string(mesh().elements.size()) + " elements";
+}
+
 template class FemSimulation<2>;
 template class FemSimulation<3>;
 

@@ -51,8 +51,20 @@ FemSceneSystem<dim> make_fem_system(const Scene& scene);
 template <int dim>
 std::unique_ptr<ContactPotential<dim>> make_fem_contact(const Scene& scene, const FemSceneSystem<dim>& s);
 
+/// A method with meshes (FEM, coupling): their state, the meshes and how the scene's meshes were
+/// built into one system (what the Python bindings read).
 template <int dim>
-class FemSimulation : public SimulationBase {
+class WithMesh {
+public:
+    static constexpr int kDim = dim;
+    virtual ~WithMesh() = default;
+    virtual const FemState<dim>& state() const = 0;
+    virtual const Mesh<dim>& mesh() const = 0;
+    virtual const FemSceneSystem<dim>& scene_system() const = 0;
+};
+
+template <int dim>
+class FemSimulation : public SimulationBase, public WithMesh<dim> {
 public:
     static constexpr int kDim = dim;
 
@@ -64,22 +76,29 @@ public:
     /// One step of the integrator's dt (explicit with dt = 0: the CFL step of
     /// the elements), shortened to land on the end of the frame. Throws
     /// SimulationError on a failed solve or a blow-up.
-    StepStats step();
+    StepStats step() override;
     /// Advances to the end of the next frame (see Simulation::advance_frame),
     /// then tests the meshes for intersection exactly (SimulationError if any).
-    FrameStats advance_frame(const std::function<void()>& after_step = {});
+    FrameStats advance_frame(const std::function<void()>& after_step = {}) override;
 
-    const FemState<dim>& state() const { return state_; }
-    const FemSceneSystem<dim>& scene_system() const { return built_; }
+    const FemState<dim>& state() const override { return state_; }
+    const FemSceneSystem<dim>& scene_system() const override { return built_; }
     const FemSystem<dim>& system() const { return built_.system; }
-    const Mesh<dim>& mesh() const { return built_.system.mesh; }
+    const Mesh<dim>& mesh() const override { return built_.system.mesh; }
     const ContactPotential<dim>& contact() const { return *contact_; }
     /// The step the integrator takes (explicit with dt = 0: the CFL step), s.
     double step_size() const { return dt_; }
 
     /// As Simulation: atomic, refuses another scene, integrator or mesh size.
-    void save_checkpoint(const std::string& path) const;
-    void load_checkpoint(const std::string& path);
+    void save_checkpoint(const std::string& path) const override;
+    void load_checkpoint(const std::string& path) override;
+
+    /// Mesh sizes, the scene meshes' first nodes and elements, the contact's dhat and kappa, the step.
+    nlohmann::json describe() const override;
+    void write_frame(const FrameFiles& files) const override;
+    double contact_dhat() const override { return built_.dhat; }
+    nlohmann::json contact_state() const override;
+    std::string size_text() const override;
 
 private:
     FemSceneSystem<dim> built_;

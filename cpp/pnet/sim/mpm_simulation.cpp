@@ -7,6 +7,7 @@
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/scene/sampler.hpp"
+#include "pnet/sim/frame_files.hpp"
 #include "pnet/sim/method_energy.hpp"
 
 namespace pnet {
@@ -168,6 +169,21 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
 
 template MpmSystem<2> make_mpm_system<2>(const Scene&);
 template MpmSystem<3> make_mpm_system<3>(const Scene&);
+template <int dim>
+nlohmann::json Simulation<dim>::describe() const {
+    return {{"dx", system_.dx}, {"particles", particles_.size()}};
+}
+
+template <int dim>
+void Simulation<dim>::write_frame(const FrameFiles& files) const {
+    write_particle_frame(files, particles_, frame(), time());
+}
+
+template <int dim>
+std::string Simulation<dim>::size_text() const {
+    return std::to_string(particles_.size()) + " particles";
+}
+
 template class Simulation<2>;
 template class Simulation<3>;
 

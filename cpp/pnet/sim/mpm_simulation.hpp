@@ -26,7 +26,7 @@ template <int dim>
 MpmSystem<dim> make_mpm_system(const Scene& scene);
 
 template <int dim>
-class Simulation : public SimulationBase {
+class Simulation : public SimulationBase, public WithParticles<dim> {
 public:
     static constexpr int kDim = dim;
 
@@ -40,24 +40,29 @@ public:
     /// One step of the integrator's dt (or the CFL step), shortened to land on
     /// the end of the current frame; frame() advances when it does. Throws
     /// SimulationError on a blow-up.
-    StepStats step();
+    StepStats step() override;
 
     /// Advances to the end of the next frame by step(). Throws SimulationError
     /// on a blow-up. after_step, when given, runs after every step; an
     /// exception it throws (e.g. an interrupt) stops the frame between two
     /// steps, with a consistent state and the steps so far in last_frame_steps().
-    FrameStats advance_frame(const std::function<void()>& after_step = {});
+    FrameStats advance_frame(const std::function<void()>& after_step = {}) override;
 
     /// The particle arrays. Their storage never moves for the life of the
     /// simulation (load_checkpoint copies into it), so views of it stay valid.
-    const Particles<dim>& particles() const { return particles_; }
+    const Particles<dim>& particles() const override { return particles_; }
     const MpmSystem<dim>& system() const { return system_; }
 
     /// Writes the whole state atomically; load_checkpoint() refuses a file of
     /// another scene (sha of its JSON), integrator, dimension or particle count
     /// (std::invalid_argument) and a missing file (FileNotFoundError).
-    void save_checkpoint(const std::string& path) const;
-    void load_checkpoint(const std::string& path);
+    void save_checkpoint(const std::string& path) const override;
+    void load_checkpoint(const std::string& path) override;
+
+    /// dx and the particle count.
+    nlohmann::json describe() const override;
+    void write_frame(const FrameFiles& files) const override;
+    std::string size_text() const override;
 
 private:
     MpmSystem<dim> system_;

@@ -10,35 +10,19 @@
 #include <functional>
 #include <memory>
 #include <string>
-#include <utility>
-#include <variant>
 
 #include "pnet/scene/scene.hpp"
-#include "pnet/sim/coupled_simulation.hpp"
-#include "pnet/sim/fem_simulation.hpp"
-#include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/sim/run_stats.hpp"
+#include "pnet/sim/simulation_base.hpp"
 
 namespace pnet {
 
-/// A simulation of any method and dimension.
-using AnySimulation =
-    std::variant<std::unique_ptr<Simulation<2>>, std::unique_ptr<Simulation<3>>, std::unique_ptr<FemSimulation<2>>,
-                 std::unique_ptr<FemSimulation<3>>, std::unique_ptr<CoupledSimulation<2>>,
-                 std::unique_ptr<CoupledSimulation<3>>>;
+/// A simulation of any method and dimension, seen through the face every method shows
+/// (SimulationBase).
+using AnySimulation = std::unique_ptr<SimulationBase>;
 
 /// The simulation the scene calls for, set up with `settings` (models loaded by the caller).
 AnySimulation make_simulation(const Scene& scene, const IntegratorSettings& settings);
-
-/// fn(simulation) on the one `sim` holds.
-template <typename Fn>
-decltype(auto) visit_simulation(AnySimulation& sim, Fn&& fn) {
-    return std::visit([&](auto& p) -> decltype(auto) { return fn(*p); }, sim);
-}
-template <typename Fn>
-decltype(auto) visit_simulation(const AnySimulation& sim, Fn&& fn) {
-    return std::visit([&](const auto& p) -> decltype(auto) { return fn(std::as_const(*p)); }, sim);
-}
 
 /// Where and how a run writes.
 struct RunOptions {
@@ -60,7 +44,7 @@ struct RunOptions {
 /// ending with the frames that are complete (the tables are written up to them first). Throws
 /// RunFolderError if options.out holds another run (without overwrite), and std::invalid_argument
 /// for a bad option or a missing or mismatched checkpoint.
-void run_to_folder(AnySimulation& sim, const Scene& scene, const IntegratorSettings& settings,
+void run_to_folder(SimulationBase& sim, const Scene& scene, const IntegratorSettings& settings,
                    const RunOptions& options);
 
 }  // namespace pnet

@@ -2,7 +2,11 @@
 // What every simulation (MPM, FEM, MPM-FEM coupling) shares (docs/architecture.md): the scene and
 // its settings, where the run is in time, the frame loop (steps that land exactly on frame ends, the
 // statistics of a frame, the energies and momentum of its bodies), and the common preamble of their
-// checkpoints. Each method's class derives from SimulationBase and adds its state and its step.
+// checkpoints. Each method's class derives from SimulationBase, adds its state and its step, and
+// answers what the run driver (run.hpp) and the Python bindings ask of any method: its step and
+// frame, its checkpoints, its description in run.json, its frame files and its contact. Neither
+// knows a method by its type; the bindings read the arrays of a method through its capabilities
+// (WithParticles here, WithMesh in fem_simulation.hpp).
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -11,7 +15,10 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "pnet/math/types.hpp"
+#include "pnet/mpm/particles.hpp"
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/run_stats.hpp"
 
@@ -70,9 +77,41 @@ void add_point_mass(FrameStats& stats, double m, const Vec<dim>& x, const Vec<di
     for (int a = 0; a < dim; ++a) stats.momentum[a] += m * v[a];
 }
 
-/// The state every simulation keeps besides its method's, with its accessors.
+class FrameFiles;  // sim/frame_files.hpp
+
+/// The state every simulation keeps besides its method's, with its accessors, and the face every
+/// method shows.
 class SimulationBase {
 public:
+    virtual ~SimulationBase() = default;
+
+    /// One step of the integrator's dt (or its stable step), shortened to land on the end of the
+    /// current frame; frame() advances when it does. Throws SimulationError on a blow-up or a failed
+    /// solve.
+    virtual StepStats step() = 0;
+    /// Advances to the end of the next frame by step(), then checks what the method guarantees (no
+    /// intersection). after_step, when given, runs after every step; an exception it throws (an
+    /// interrupt) stops the frame between two steps, with the steps so far in last_frame_steps().
+    virtual FrameStats advance_frame(const std::function<void()>& after_step = {}) = 0;
+    /// Writes the whole state atomically; load_checkpoint() refuses a file of another scene,
+    /// integrator or size (std::invalid_argument) and a missing file (FileNotFoundError).
+    virtual void save_checkpoint(const std::string& path) const = 0;
+    virtual void load_checkpoint(const std::string& path) = 0;
+    /// The method's discretization for run.json (grid spacing, particles, mesh sizes, contact
+    /// parameters, the step it takes).
+    virtual nlohmann::json describe() const = 0;
+    /// Writes the current frame's files (frame_NNNNN.ply, .png, .vtu, ...) into the run's folder.
+    virtual void write_frame(const FrameFiles& files) const = 0;
+    /// The barrier's activation distance dhat, m, of a method with contact (its run ends with a
+    /// contact summary), 0 without contact.
+    virtual double contact_dhat() const { return 0.0; }
+    /// Contact now: dhat, kappa, the smallest distance, the pairs within dhat, ...; empty without
+    /// contact.
+    virtual nlohmann::json contact_state() const { return nlohmann::json::object(); }
+    /// "N particles", "N nodes, M elements": the size of the discretization in words.
+    virtual std::string size_text() const = 0;
+
+    int dimension() const { return scene_.dim; }
     const Scene& scene() const { return scene_; }
     const IntegratorSettings& settings() const { return settings_; }
     int frame() const { return frame_; }
@@ -115,6 +154,16 @@ protected:
     int frame_ = 0;
     long steps_ = 0;
     double time_ = 0.0;
+};
+
+/// A method with material points (MPM, coupling): their arrays, whose storage never moves for the
+/// life of the simulation (load_checkpoint copies into it), so that views of it stay valid.
+template <int dim>
+class WithParticles {
+public:
+    static constexpr int kDim = dim;
+    virtual ~WithParticles() = default;
+    virtual const Particles<dim>& particles() const = 0;
 };
 
 }  // namespace pnet
