@@ -1,8 +1,10 @@
 // Accuracy metrics (docs/metrics.md): IoU of grid mass fields, the B-spline
 // rasterization behind it, and the frame-by-frame comparison of two runs.
+#include <algorithm>
 #include <filesystem>
 
 #include "common.hpp"
+#include "pnet/io/ply.hpp"
 #include "pnet/metrics/iou.hpp"
 #include "pnet/metrics/run_comparison.hpp"
 #include "pnet/nn/model_file.hpp"  // FileNotFoundError
@@ -29,6 +31,28 @@ GridField field(const py::handle& obj, const std::string& name) {
     for (int k = 0; k < g.dim; ++k) g.nodes[k] = static_cast<int>(a.shape(k));
     g.value.assign(a.data(), a.data() + a.size());
     return g;
+}
+
+/// (n, d) float64 rows of a flat array.
+py::array_t<double> rows_of(const std::vector<double>& flat, int dim) {
+    const py::ssize_t n = static_cast<py::ssize_t>(flat.size()) / dim;
+    py::array_t<double> a({n, static_cast<py::ssize_t>(dim)});
+    std::copy(flat.begin(), flat.end(), a.mutable_data());
+    return a;
+}
+
+/// A frame file read by `read`: FileNotFoundError when it is missing, ValueError naming the file and the
+/// problem when it is not a frame `pnet simulate` writes.
+template <typename Read>
+auto read_frame(const py::object& path, Read&& read) {
+    const std::string file = path_string(path);
+    if (!std::filesystem::is_regular_file(file)) throw FileNotFoundError(file + ": no such file");
+    try {
+        py::gil_scoped_release release;
+        return read(file);
+    } catch (const std::runtime_error& e) {
+        throw py::value_error(e.what());
+    }
 }
 
 }  // namespace
@@ -130,6 +154,47 @@ spread_a / spread_b and height_a / height_b (deposit shape of each run, m) - plu
 clamped_a / clamped_b (particle positions at the domain's edge) and dx, the
 grid spacing used (dx = 0: DIR_A's). FileNotFoundError for a missing
 directory, ValueError for runs that cannot be compared (naming the file and field).)doc");
+
+    m.def(
+        "read_particle_frame",
+        [](const py::object& path) {
+            const PlyParticles p = read_frame(path, [](const std::string& f) { return read_particles_ply(f); });
+            py::dict d;
+            d["dim"] = p.dim;
+            d["position"] = rows_of(p.position, p.dim);
+            d["velocity"] = rows_of(p.velocity, p.dim);
+            d["mass"] = py::array_t<double>(static_cast<py::ssize_t>(p.mass.size()), p.mass.data());
+            d["hardening"] = py::array_t<double>(static_cast<py::ssize_t>(p.hardening.size()), p.hardening.data());
+            d["run_id"] = p.run_id;
+            return d;
+        },
+        py::arg("path"),
+        R"doc(A particle frame (frame_NNNNN.ply) as `pnet simulate` writes it, read by the simulator's
+own reader: a dict of dim, position and velocity (n, dim), mass and hardening (n,) and run_id.
+FileNotFoundError for a missing file, ValueError naming the file and the problem for anything
+else than such a frame.)doc");
+
+    m.def(
+        "read_mesh_frame",
+        [](const py::object& path) {
+            const PlyMesh p = read_frame(path, [](const std::string& f) { return read_mesh_ply(f); });
+            py::dict d;
+            d["dim"] = p.dim;
+            d["position"] = rows_of(p.position, p.dim);
+            d["velocity"] = rows_of(p.velocity, p.dim);
+            const py::ssize_t m = static_cast<py::ssize_t>(p.triangles.size() / 3);
+            py::array_t<std::int64_t> triangles({m, py::ssize_t{3}});
+            std::copy(p.triangles.begin(), p.triangles.end(), triangles.mutable_data());
+            d["triangles"] = triangles;
+            d["hardening"] = py::array_t<double>(static_cast<py::ssize_t>(p.hardening.size()), p.hardening.data());
+            d["run_id"] = p.run_id;
+            return d;
+        },
+        py::arg("path"),
+        R"doc(A FEM mesh frame (frame_NNNNN.ply, or frame_NNNNN_mesh.ply of a coupled run): a dict of dim,
+position and velocity (n, dim) of every node, triangles (m, 3) int64 (2D: the elements; 3D: the
+boundary triangles), hardening (m,) of each triangle's element, and run_id. Errors as
+read_particle_frame.)doc");
 }
 
 }  // namespace pnet::bindings

@@ -34,16 +34,13 @@ Runs are kept in --work (a finished run of the same scene, integrator and step i
 from __future__ import annotations
 
 import argparse
-import concurrent.futures
 import copy
 import csv
 import hashlib
 import json
 import math
 import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +48,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "python"))
 
-from plasticitynet.evaluation.metrics import read_particle_positions  # noqa: E402
+from plasticitynet import launch  # noqa: E402
+
+launch.with_simulator()  # the frames are read by plasticitynet_sim
+from plasticitynet.frames import read_particle_positions  # noqa: E402
 
 HALF_WIDTH = 0.05  # L0, m
 MODEL = ROOT / "models" / "sand_param_2d.pt"
@@ -118,19 +118,17 @@ def simulate(pnet: Path, scene_file: Path, out: Path, integrator: str, dt: float
     done = out / "done"
     if done.exists() and done.read_text().split()[1:] == [key]:
         return float(done.read_text().split()[0])
-    cmd = [str(pnet), "simulate", str(scene_file), "--out", str(out), "--integrator", integrator, "--threads", "1",
-           "--overwrite"]
-    if dt is not None:
-        cmd += ["--dt", f"{dt:g}"]
+    options = []
     if newton_tolerance is not None:
-        cmd += ["--newton-tol", f"{newton_tolerance:g}"]
+        options += ["--newton-tol", f"{newton_tolerance:g}"]
     if time_integrator is not None:
-        cmd += ["--time-integrator", time_integrator]
-    t0 = time.perf_counter()
-    result = subprocess.run(cmd, capture_output=True, text=True)
-    if result.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({result.returncode}):\n{result.stderr[-2000:]}")
-    wall = round(time.perf_counter() - t0, 1)
+        options += ["--time-integrator", time_integrator]
+    cmd = launch.simulate_command(pnet, scene_file, out, integrator=integrator, threads=1, overwrite=True,
+                                  dt=None if dt is None else f"{dt:g}", options=options)
+    finished = launch.run(cmd)
+    if finished.status != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({finished.status}):\n{finished.output[-2000:]}")
+    wall = round(finished.wall_s, 1)
     done.write_text(f"{wall:.1f} {key}")
     return wall
 
@@ -184,14 +182,12 @@ def dt_study(args, pnet: Path) -> int:
                 for integrator, dt in STUDY_STEPS:
                     name = f"{integrator}_{'cfl' if dt is None else f'{dt:g}'}"
                     jobs.append(((angle, aspect, variant, integrator, dt), scene_file, folder / name, integrator, dt))
-    results = {}
-    with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
-        futures = {pool.submit(simulate, pnet, j[1], j[2], j[3], j[4]): j for j in jobs}
-        for done, future in enumerate(concurrent.futures.as_completed(futures), 1):
-            key, _, out, _, _ = futures[future]
-            wall = future.result()
-            results[key] = ((runout(out) - HALF_WIDTH) / HALF_WIDTH, wall)
-            print(f"[{done}/{len(jobs)}] {key}: run-out {results[key][0]:.3f} ({wall:.0f} s)", flush=True)
+    def finished(out: Path, wall: float) -> tuple[float, float]:
+        return (runout(out) - HALF_WIDTH) / HALF_WIDTH, wall
+
+    results = launch.run_all(
+        [(j[0], lambda j=j: finished(j[2], simulate(pnet, j[1], j[2], j[3], j[4]))) for j in jobs], args.jobs,
+        lambda done, total, key, r: print(f"[{done}/{total}] {key}: run-out {r[0]:.3f} ({r[1]:.0f} s)", flush=True))
     heads = [f"{i} {'CFL' if dt is None else f'{dt:g} s'}" for i, dt in STUDY_STEPS]
     lines = ["# Granular collapse run-out against the step (scripts/granular_collapse.py --dt-study)", "",
              f"Run-out (L_inf - L0) / L0 as in runout.md, {args.frames} frames of 0.02 s, dx = {args.dx:g} m; Coulomb "
@@ -263,19 +259,19 @@ def main() -> int:
                 jobs.append((angle, aspect, name, scene_file, folder / name, integrator, dt))
     # The longest first (tall columns, small steps), so that the pool ends together.
     jobs.sort(key=lambda j: -(j[1] * (50.0 if j[2] == "ground_truth" else 1.0)))
-    rows = []
-    with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
-        futures = {pool.submit(simulate, pnet, j[3], j[4], j[5], j[6],
-                               *((args.newton_tolerance, args.time_integrator) if j[5] == "plasticitynet" else ())): j
-                   for j in jobs}
-        for done, future in enumerate(concurrent.futures.as_completed(futures), 1):
-            angle, aspect, name, _, out, _, _ = futures[future]
-            wall = future.result()
-            L = runout(out)
-            rows.append({"angle": angle, "aspect": aspect, "integrator": name, "L_inf": L,
-                         "runout": (L - HALF_WIDTH) / HALF_WIDTH, "wall_seconds": wall})
-            print(f"[{done}/{len(jobs)}] phi {angle:g} a {aspect:g} {name}: run-out {(L - HALF_WIDTH) / HALF_WIDTH:.3f} "
-                  f"({wall:.0f} s)", flush=True)
+    def run_one(job) -> dict:
+        angle, aspect, name, scene_file, out, integrator, dt = job
+        extra = (args.newton_tolerance, args.time_integrator) if integrator == "plasticitynet" else ()
+        wall = simulate(pnet, scene_file, out, integrator, dt, *extra)
+        L = runout(out)
+        return {"angle": angle, "aspect": aspect, "integrator": name, "L_inf": L,
+                "runout": (L - HALF_WIDTH) / HALF_WIDTH, "wall_seconds": wall}
+
+    def report(done: int, total: int, key, row: dict) -> None:
+        print(f"[{done}/{total}] phi {row['angle']:g} a {row['aspect']:g} {row['integrator']}: run-out "
+              f"{row['runout']:.3f} ({row['wall_seconds']:.0f} s)", flush=True)
+
+    rows = list(launch.run_all([(j[:3], lambda j=j: run_one(j)) for j in jobs], args.jobs, report).values())
     rows.sort(key=lambda r: (r["angle"], r["aspect"], r["integrator"]))
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "runout.csv", "w", newline="") as f:

@@ -14,48 +14,24 @@ summary.md, per run its stats.csv and run.json and the PNGs of a few frames,
 per scene the IoU CSV and plot. The full runs (PLY of every frame) stay in
 --work (default out/physics_check).
 
-    /usr/bin/python3 scripts/physics_check.py [--seconds 1.5] [--threads 2]
+    .venv/bin/python scripts/physics_check.py [--seconds 1.5] [--threads 2]   (plasticitynet_sim reads the frames)
 """
 import argparse
 import csv
 import json
 import shutil
-import struct
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "python"))
 
+from plasticitynet import launch  # noqa: E402
 
-def read_ply_positions(path):
-    """Positions (n, dim) of a particle PLY written by pnet (binary little endian)."""
-    data = path.read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    if "format binary_little_endian 1.0" not in header:
-        raise ValueError(f"{path}: not a binary little-endian PLY")
-    count, props = 0, []
-    types = {"float": "f", "double": "d", "int": "i", "uchar": "B", "float32": "f", "float64": "d"}
-    for line in header:
-        words = line.split()
-        if words[:2] == ["element", "vertex"]:
-            count = int(words[2])
-        elif words and words[0] == "property":
-            props.append((words[2], types[words[1]]))
-    fmt = "<" + "".join(t for _, t in props)
-    size = struct.calcsize(fmt)
-    rows = np.frombuffer(data[end:end + count * size],
-                         dtype=np.dtype([(name, "<" + t) for name, t in props]), count=count)
-    names = [n for n in ("x", "y", "z") if n in rows.dtype.names]
-    return np.stack([rows[n].astype(np.float64) for n in names], axis=1)
-
-
-def run(cmd):
-    print("+", " ".join(str(c) for c in cmd), flush=True)
-    subprocess.run([str(c) for c in cmd], check=True)
+launch.with_simulator()  # the frames are read by plasticitynet_sim
+from plasticitynet.frames import read_particle_positions  # noqa: E402
 
 
 def main():
@@ -87,15 +63,17 @@ def main():
             dirs[label] = out
             if not (out / "run.json").exists() or json.loads((out / "run.json").read_text())["frames"] != frames \
                     or not (out / f"frame_{frames:05d}.ply").exists():
-                run([pnet, "simulate", scene_file, "--integrator", "explicit", "--dt", dt, "--frames", frames,
-                     "--threads", args.threads, "--color", "hardening" if "snow" in scene else "speed",
-                     "--overwrite", "--out", out])
+                cmd = launch.simulate_command(pnet, scene_file, out, integrator="explicit", dt=dt, frames=frames,
+                                              threads=args.threads, overwrite=True,
+                                              options=["--color", "hardening" if "snow" in scene else "speed"])
+                if launch.run(cmd, echo=True, log=work / f"{scene}_{label}.log").status != 0:
+                    sys.exit(f"{' '.join(cmd)} failed; see {work / f'{scene}_{label}.log'}")
             with open(out / "stats.csv") as f:
                 stats = list(csv.DictReader(f))
             kinetic = np.array([float(r["kinetic_J"]) for r in stats])
             wall = np.array([float(r["wall_s"]) for r in stats])
             steps = np.array([int(r["steps"]) for r in stats])
-            x = read_ply_positions(out / f"frame_{frames:05d}.ply")
+            x = read_particle_positions(out / f"frame_{frames:05d}.ply")
             runout = float(np.max(np.abs(x[:, 0] - centre)))
             height = float(np.max(x[:, 1]) - floor)
             rows.append({
@@ -112,7 +90,9 @@ def main():
             for frame in sorted({0, frames // 6, frames // 3, frames // 2, frames}):
                 shutil.copy(out / f"frame_{frame:05d}.png", keep / f"frame_{frame:05d}.png")
         compare_out = results / f"{scene}_iou"
-        run([pnet, "compare", dirs["dt1e-5"], dirs["cfl"], "--out", compare_out])
+        if launch.run([str(c) for c in (pnet, "compare", dirs["dt1e-5"], dirs["cfl"], "--out", compare_out)],
+                      echo=True).status != 0:
+            sys.exit(f"pnet compare {dirs['dt1e-5']} {dirs['cfl']} failed")
         with open(compare_out / "iou.csv") as f:
             iou = list(csv.DictReader(f))
         soft = np.array([float(r["soft_iou"]) for r in iou])

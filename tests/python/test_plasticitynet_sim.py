@@ -723,3 +723,35 @@ def test_bdf2_is_a_solver_option_of_fem_scenes():
         sim.advance(2)
         frames[name] = np.array(sim.nodes)
     assert np.abs(frames["bdf2"] - frames["backward_euler"]).max() > 0.0
+
+
+def test_frames_are_read_by_the_simulators_own_readers(tmp_path):
+    """plasticitynet.frames reads what Simulation.run() wrote with the C++ readers: the particle and mesh
+    frames of a coupled run hold the simulation's positions; bad files name the file and the problem."""
+    from plasticitynet.frames import read_mesh_ply, read_particle_positions
+
+    sim = pns.Simulation(TINY / "sand_fem_coupling_2d.json", integrator="explicit")
+    sim.run(tmp_path / "run", frames=1, checkpoint_every=0)
+    assert np.array_equal(read_particle_positions(tmp_path / "run" / "frame_00001.ply"), sim.positions)
+    mesh = read_mesh_ply(tmp_path / "run" / "frame_00001_mesh.ply")
+    assert mesh.dim == 2 and np.array_equal(mesh.position, sim.nodes)
+    assert np.array_equal(mesh.triangles, sim.elements) and mesh.hardening.shape == (len(sim.elements),)
+    frame = pns.read_particle_frame(tmp_path / "run" / "frame_00001.ply")
+    assert frame["run_id"] == json.loads((tmp_path / "run" / "run.json").read_text())["run_id"]
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        read_particle_positions(tmp_path / "missing.ply")
+    with pytest.raises(ValueError, match="frame_00001.ply"):
+        read_mesh_ply(tmp_path / "run" / "frame_00001.ply")  # a particle frame is not a mesh frame
+
+
+def test_one_launcher_writes_pnet_simulates_command_line(tmp_path):
+    from plasticitynet import launch
+
+    cmd = launch.simulate_command("pnet", "s.json", tmp_path, integrator="explicit", dt=1e-5, frames=2, threads=1,
+                                  overwrite=True, options=["--color", "hardening"])
+    assert cmd == ["pnet", "simulate", "s.json", "--integrator", "explicit", "--dt", "1e-05", "--frames", "2",
+                   "--threads", "1", "--out", str(tmp_path), "--overwrite", "--color", "hardening"]
+    finished = launch.run(launch.simulate_command(PNET, TINY / "sand_column_2d.json", tmp_path / "r", frames=1))
+    assert finished.status == 0 and (tmp_path / "r" / "frame_00001.ply").exists()
+    bad = launch.run(launch.simulate_command(PNET, TINY / "sand_column_2d.json", tmp_path / "r2", dt=-1))
+    assert bad.status == 2 and "--dt" in bad.output

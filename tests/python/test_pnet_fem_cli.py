@@ -13,7 +13,7 @@ import pytest
 from test_pnet_cli import PNET, ROOT, TINY, frame_data, pnet
 
 sys.path.insert(0, str(ROOT / "python"))
-from plasticitynet.mesh_ply import read_mesh_ply  # noqa: E402
+from plasticitynet.frames import read_mesh_ply  # noqa: E402
 
 
 def fem_scene(name: str) -> dict:

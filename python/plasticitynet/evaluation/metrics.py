@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..mesh_ply import read_mesh_ply
+from ..frames import read_mesh_ply, read_particle_positions
 from .plan import Plan
 from .runner import frame_numbers
 
@@ -129,16 +129,6 @@ def fem_metric(plan: Plan, gt: Path, run: Path, reference: Path | None, frame_dt
         mean, worst = nodal_distance(run, reference, last, nodes)
         out["ref_mean_pct"], out["ref_max_pct"] = 100 * mean / diagonal, 100 * worst / diagonal
     return out
-
-
-def read_particle_positions(path: Path) -> np.ndarray:
-    data = path.read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    count = next(int(line.split()[2]) for line in header if line.startswith("element vertex"))
-    properties = [line.split()[-1] for line in header if line.startswith("property")]
-    record = np.frombuffer(data, dtype=np.dtype([(p, "<f8") for p in properties]), count=count, offset=end)
-    return np.stack([record[axis] for axis in ("x", "y", "z") if axis in record.dtype.names], axis=1)
 
 
 def boundary_edges(triangles: np.ndarray) -> np.ndarray:

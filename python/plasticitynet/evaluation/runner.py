@@ -11,17 +11,16 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import subprocess
-import time
 from dataclasses import asdict
 from pathlib import Path
 
+from .. import launch
 from .plan import Plan, RunJob
 
 
 def command(plan: Plan, job: RunJob, out: Path, threads: int) -> list[str]:
-    return [plan.pnet, "simulate", str(out / "scene.json"), "--integrator", job.integrator, "--dt", repr(job.dt),
-            "--frames", str(job.frames), "--threads", str(threads), "--out", str(out / "frames"), *job.options]
+    return launch.simulate_command(plan.pnet, out / "scene.json", out / "frames", integrator=job.integrator,
+                                   dt=job.dt, frames=job.frames, threads=threads, options=job.options)
 
 
 def simulate(plan: Plan, key: str, threads: int = 1, log=print) -> Path:
@@ -35,10 +34,8 @@ def simulate(plan: Plan, key: str, threads: int = 1, log=print) -> Path:
     (out / "job.json").write_text(json.dumps({**asdict(job), "pnet_version": plan.version}, indent=1))
     cmd = command(plan, job, out, threads)
     log(f"[run {key}] {job.describe()}: {' '.join(cmd)}")
-    t0 = time.perf_counter()
-    with open(out / "pnet.log", "w") as pnet_log:
-        status = subprocess.run(cmd, stdout=pnet_log, stderr=subprocess.STDOUT).returncode
-    wall = time.perf_counter() - t0
+    finished = launch.run(cmd, log=out / "pnet.log")
+    status, wall = finished.status, finished.wall_s
     if status not in (0, 1):
         raise RuntimeError(f"{job.describe()}: pnet simulate exited {status} (bad input); see {out / 'pnet.log'}:\n"
                            + (out / "pnet.log").read_text()[-2000:])
