@@ -27,27 +27,9 @@ constexpr const char* kUsage =
     "usage: pnet simulate SCENE.json --out DIR [--integrator NAME] [--dt SECONDS]\n"
     "                     [--cfl C] [--frames N] [--threads T] [--checkpoint-every N] [--resume | --overwrite]\n"
     "                     [--color speed|hardening] [--model FILE.pt] [--trust-model] [--vtu]\n"
-    "  implicit solver (every integrator but explicit; defaults from the scene's integrator block):\n"
-    "                     [--newton-tol M_PER_S] [--cg-tol R] [--outer-iteration auto|newton|fixed_point]\n"
-    "                     [--time-integrator backward_euler|bdf2]\n"
-    "                     [--hessian auto|network|tangent] [--hessian-precision single|double]\n"
-    "                     [--fixed-point-iterations N]\n"
-    "                     [--fixed-point-tol T] [--regularizer W] [--tangent-damping W]\n"
-    "                     [--preconditioner jacobi|block_jacobi|ichol|multigrid]\n"
-    "                     [--lazy-hessian R] [--fixed-point-anderson M] [--fixed-point-keep-hessian yes|no]\n"
-    "                     [--advection-cfl C] (MPM: cap a step so no particle moves more than C cells;\n"
-    "                     default 0.2, 0: off)\n"
     "  MPM scenes, overriding the scene: [--flip-relaxation-time S] (AFLIP transfers, transfer.flip_relaxation_time;\n"
     "                     0: APIC) [--floor-friction MU] (a Coulomb floor, boundary.floor_friction; docs/methods.md)\n"
-    "                     [--floor-friction-in-solve yes|no] (plasticitynet, return_map: the floor's friction\n"
-    "                     follows the Newton iterates in one solve; no, the default: three passes of solves)\n"
-    "                     [--fixed-point-inexact FORCING]\n"
-    "                     [--fail-on-unconverged]\n"
-    "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy;\n"
-    "                     [--analytic-regularizer W] (analytic + W mu/2 |F - F0|^2 under plasticitynet's outer\n"
-    "                     iteration: the learned solve without learning error, a diagnostic)\n"
-    "                     [--return-map learned|exact] (plasticitynet: a model's learned return mapping or the\n"
-    "                     material's exact one) [--kinematic-start scaled|last_velocity]\n";
+    "  FEM scenes (meshes): analytic is the closed-form StVK-Hencky + von Mises energy.\n";
 
 /// `text` (words separated by single spaces) in lines of at most `width` columns.
 std::vector<std::string> wrapped(const std::string& text, std::size_t width) {
@@ -64,10 +46,39 @@ std::vector<std::string> wrapped(const std::string& text, std::size_t width) {
     return lines;
 }
 
-/// The usage, then each integrator of solver/integrators.hpp with what a step solves.
-std::string usage() {
+/// `lead` then `entry` wrapped, its lines indented to kIndent (a lead too long for the indent on a line
+/// of its own).
+void add_entry(std::string& text, const std::string& lead, const std::string& entry) {
     constexpr std::size_t kIndent = 20, kWidth = 110;
+    const bool own_line = lead.size() + 1 > kIndent;
+    if (own_line) text += lead + "\n";
+    const std::vector<std::string> lines = wrapped(entry, kWidth - kIndent);
+    for (std::size_t k = 0; k < lines.size(); ++k) {
+        const std::string first = k == 0 && !own_line ? lead : "";
+        text += first + std::string(kIndent - first.size(), ' ') + lines[k] + "\n";
+    }
+}
+
+/// The usage, the implicit solvers' options (solver/implicit_options.hpp, each with its scene key
+/// and default), then each integrator of solver/integrators.hpp with what a step solves.
+std::string usage() {
     std::string text = kUsage;
+    text += "  implicit solvers (every integrator but explicit; the scene's integrator block holds the same keys):\n";
+    const ImplicitOptions defaults;
+    for (const OptionField& f : implicit_option_fields()) {
+        if (!f.flag) continue;
+        const bool is_switch = f.kind == OptionField::Kind::Boolean && f.choices.empty();
+        const std::string lead = std::string("    ") + f.flag + (is_switch ? "" : " X");
+        const nlohmann::json value = f.get(defaults);
+        std::string shown = value.dump();
+        if (f.kind == OptionField::Kind::Boolean) shown = is_switch ? "off" : f.choices[value.get<bool>() ? 0 : 1];
+        if (value.is_string()) shown = value.get<std::string>();
+        if (value.is_number_float() && value.get<double>() == std::floor(value.get<double>()))
+            shown = std::to_string(static_cast<long>(value.get<double>()));
+        add_entry(text, lead,
+                  std::string(f.help) + (is_switch ? "" : "; X: " + f.flag_expected()) + " (scene key " + f.key +
+                      ", default " + shown + ")");
+    }
     text += "  integrators (--integrator; the scene's by default; docs/integrators.md):\n";
     for (const IntegratorInfo& info : integrators()) {
         std::string entry = std::string(info.solves) + " [" +
@@ -75,12 +86,7 @@ std::string usage() {
                              : info.particles            ? "particles"
                                                          : "meshes") +
                             (info.reads_models ? "; reads the objects' models" : "; reads no model") + "]";
-        const std::string name = std::string("    ") + info.name;
-        const std::vector<std::string> lines = wrapped(entry, kWidth - kIndent);
-        for (std::size_t k = 0; k < lines.size(); ++k) {
-            const std::string lead = k == 0 ? name : "";
-            text += lead + std::string(kIndent > lead.size() ? kIndent - lead.size() : 1, ' ') + lines[k] + "\n";
-        }
+        add_entry(text, std::string("    ") + info.name, entry);
     }
     return text;
 }
@@ -94,17 +100,10 @@ struct Options {
     std::optional<std::string> model;  // --model: the energy model of every object and mesh that names one
     std::optional<double> dt, cfl;
     int threads = 0;
-    bool trust_model = false, fail_on_unconverged = false;
-    // Implicit solver overrides (unset: the scene's value).
-    std::optional<double> newton_tol, cg_tol, fixed_point_tol, regularizer, tangent_damping, lazy_hessian,
-        fixed_point_inexact;
-    std::optional<double> advection_cfl;
+    bool trust_model = false;
+    // The implicit solvers' options given on the command line, by key (solver/implicit_options.hpp).
+    nlohmann::json solver = nlohmann::json::object();
     std::optional<double> flip_relaxation_time, floor_friction;  // scene overrides (MPM)
-    std::optional<double> analytic_regularizer;
-    std::optional<std::string> preconditioner, return_map, outer_iteration, hessian, hessian_precision, kinematic_start,
-        time_integrator;
-    std::optional<int> fixed_point_iterations, fixed_point_anderson;
-    std::optional<bool> fixed_point_keep_hessian, floor_friction_in_solve;
 };
 
 class UsageError : public std::invalid_argument {
@@ -149,71 +148,17 @@ Options parse(int argc, char** argv) {
             o.threads = integer(value(), 0, 1024, " (0: all cores)");
         else if (arg == "--checkpoint-every")
             o.run.checkpoint_every = integer(value(), 0, 10000000, " (frames between checkpoints; 0: none)");
-        else if (arg == "--newton-tol")
-            o.newton_tol = number(value());
-        else if (arg == "--cg-tol")
-            o.cg_tol = number(value());
-        else if (arg == "--fixed-point-tol")
-            o.fixed_point_tol = number(value());
-        else if (arg == "--regularizer")
-            o.regularizer = number(value());
-        else if (arg == "--tangent-damping")
-            o.tangent_damping = number(value());
-        else if (arg == "--analytic-regularizer")
-            o.analytic_regularizer = number(value());
-        else if (arg == "--lazy-hessian")
-            o.lazy_hessian = number(value());
-        else if (arg == "--advection-cfl")
-            o.advection_cfl = number(value());
         else if (arg == "--flip-relaxation-time")
             o.flip_relaxation_time = number(value());
         else if (arg == "--floor-friction")
             o.floor_friction = number(value());
-        else if (arg == "--preconditioner")
-            o.preconditioner = value();
-        else if (arg == "--time-integrator") {
-            const std::string text = value();
-            if (text != "backward_euler" && text != "bdf2")
-                throw UsageError("--time-integrator: expected backward_euler or bdf2, got \"" + text + "\"");
-            o.time_integrator = text;
-        } else if (arg == "--outer-iteration") {
-            const std::string text = value();
-            if (text != "auto" && text != "newton" && text != "fixed_point")
-                throw UsageError("--outer-iteration: expected auto, newton or fixed_point, got \"" + text + "\"");
-            o.outer_iteration = text;
-        } else if (arg == "--kinematic-start") {
-            const std::string text = value();
-            if (text != "scaled" && text != "last_velocity")
-                throw UsageError("--kinematic-start: expected scaled or last_velocity, got \"" + text + "\"");
-            o.kinematic_start = text;
-        } else if (arg == "--hessian") {
-            const std::string text = value();
-            if (text != "auto" && text != "network" && text != "tangent")
-                throw UsageError("--hessian: expected auto, network or tangent, got \"" + text + "\"");
-            o.hessian = text;
-        } else if (arg == "--hessian-precision") {
-            const std::string text = value();
-            if (text != "single" && text != "double")
-                throw UsageError("--hessian-precision: expected single or double, got \"" + text + "\"");
-            o.hessian_precision = text;
-        } else if (arg == "--floor-friction-in-solve") {
-            const std::string text = value();
-            if (text != "yes" && text != "no")
-                throw UsageError("--floor-friction-in-solve: expected yes or no, got \"" + text + "\"");
-            o.floor_friction_in_solve = text == "yes";
-        } else if (arg == "--fixed-point-iterations")
-            o.fixed_point_iterations = integer(value(), 1, 100000, "");
-        else if (arg == "--fixed-point-inexact")
-            o.fixed_point_inexact = number(value());
-        else if (arg == "--fixed-point-anderson")
-            o.fixed_point_anderson = integer(value(), 0, 100, " (0: the plain iteration)");
-        else if (arg == "--fixed-point-keep-hessian") {
-            const std::string text = value();
-            if (text != "yes" && text != "no")
-                throw UsageError("--fixed-point-keep-hessian: expected yes or no, got \"" + text + "\"");
-            o.fixed_point_keep_hessian = text == "yes";
-        } else if (arg == "--return-map")
-            o.return_map = value();
+        else if (const OptionField* f = find_option_field(arg); f && f->flag && arg == f->flag) {
+            const bool is_switch = f->kind == OptionField::Kind::Boolean && f->choices.empty();
+            const std::string word = is_switch ? std::string() : value();
+            const std::optional<nlohmann::json> v = f->parse_flag(word);
+            if (!v) throw UsageError(arg + ": expected " + f->flag_expected() + ", got \"" + word + "\"");
+            o.solver[f->key] = *v;
+        }
         else if (arg == "--color")
             o.run.color = value();
         else if (arg == "--resume")
@@ -226,8 +171,6 @@ Options parse(int argc, char** argv) {
             o.model = value();
         else if (arg == "--trust-model")
             o.trust_model = true;
-        else if (arg == "--fail-on-unconverged")
-            o.fail_on_unconverged = true;
         else if (!arg.empty() && arg[0] == '-')
             throw UsageError("unknown option " + arg);
         else if (o.scene.empty())
@@ -244,33 +187,10 @@ Options parse(int argc, char** argv) {
         throw UsageError("--dt must be a number >= 0 (seconds; 0: the CFL step)");
     if (o.cfl && !(std::isfinite(*o.cfl) && *o.cfl > 0.0 && *o.cfl <= 1.0))
         throw UsageError("--cfl must be a number > 0 and <= 1 (a fraction of the cell size per step)");
-    if (o.newton_tol && !(std::isfinite(*o.newton_tol) && *o.newton_tol > 0.0))
-        throw UsageError("--newton-tol must be a finite number > 0 (m/s)");
-    if (o.cg_tol && !(*o.cg_tol > 0.0 && *o.cg_tol < 1.0)) throw UsageError("--cg-tol must be in (0, 1)");
-    if (o.fixed_point_tol && !(std::isfinite(*o.fixed_point_tol) && *o.fixed_point_tol >= 0.0))
-        throw UsageError("--fixed-point-tol must be a finite number >= 0");
-    if (o.regularizer && !(std::isfinite(*o.regularizer) && *o.regularizer >= 0.0))
-        throw UsageError("--regularizer must be a finite number >= 0");
-    if (o.tangent_damping && !(std::isfinite(*o.tangent_damping) && *o.tangent_damping >= 0.0))
-        throw UsageError("--tangent-damping must be a finite number >= 0");
-    if (o.analytic_regularizer && !(std::isfinite(*o.analytic_regularizer) && *o.analytic_regularizer >= 0.0))
-        throw UsageError("--analytic-regularizer must be a finite number >= 0");
-    if (o.lazy_hessian && !(*o.lazy_hessian >= 0.0 && *o.lazy_hessian < 1.0))
-        throw UsageError("--lazy-hessian must be in [0, 1)");
-    if (o.advection_cfl && !(*o.advection_cfl >= 0.0 && *o.advection_cfl <= 1.0))
-        throw UsageError("--advection-cfl must be in [0, 1]");
     if (o.flip_relaxation_time && !(std::isfinite(*o.flip_relaxation_time) && *o.flip_relaxation_time >= 0.0))
         throw UsageError("--flip-relaxation-time must be a finite number >= 0 (seconds; 0: APIC)");
     if (o.floor_friction && !(std::isfinite(*o.floor_friction) && *o.floor_friction >= 0.0))
         throw UsageError("--floor-friction must be a finite number >= 0 (a Coulomb friction coefficient)");
-    if (o.preconditioner && *o.preconditioner != "jacobi" && *o.preconditioner != "block_jacobi" &&
-        *o.preconditioner != "ichol" && *o.preconditioner != "multigrid")
-        throw UsageError("--preconditioner: expected jacobi, block_jacobi, ichol or multigrid, got \"" +
-                         *o.preconditioner + "\"");
-    if (o.return_map && *o.return_map != "learned" && *o.return_map != "exact")
-        throw UsageError("--return-map: expected learned or exact, got \"" + *o.return_map + "\"");
-    if (o.fixed_point_inexact && !(*o.fixed_point_inexact >= 0.0 && *o.fixed_point_inexact < 1.0))
-        throw UsageError("--fixed-point-inexact must be in [0, 1) (0: exact inner solves)");
     return o;
 }
 
@@ -325,27 +245,7 @@ int simulate_command(int argc, char** argv) {
         }
         if (o.dt) settings.dt = *o.dt;
         if (o.cfl) settings.cfl = *o.cfl;
-        if (o.fail_on_unconverged) settings.implicit.fail_on_unconverged = true;
-        if (o.newton_tol) settings.implicit.newton_tolerance = *o.newton_tol;
-        if (o.cg_tol) settings.implicit.cg_tolerance = *o.cg_tol;
-        if (o.fixed_point_tol) settings.implicit.fixed_point_tolerance = *o.fixed_point_tol;
-        if (o.regularizer) settings.implicit.regularizer_weight = *o.regularizer;
-        if (o.tangent_damping) settings.implicit.tangent_damping = *o.tangent_damping;
-        if (o.analytic_regularizer) settings.implicit.analytic_regularizer = *o.analytic_regularizer;
-        if (o.preconditioner) settings.implicit.preconditioner = *o.preconditioner;
-        if (o.lazy_hessian) settings.implicit.lazy_hessian = *o.lazy_hessian;
-        if (o.advection_cfl) settings.implicit.advection_cfl = *o.advection_cfl;
-        if (o.fixed_point_iterations) settings.implicit.max_fixed_point_iterations = *o.fixed_point_iterations;
-        if (o.fixed_point_anderson) settings.implicit.fixed_point_anderson = *o.fixed_point_anderson;
-        if (o.outer_iteration) settings.implicit.outer_iteration = *o.outer_iteration;
-        if (o.time_integrator) settings.implicit.time_integrator = *o.time_integrator;
-        if (o.hessian) settings.implicit.hessian = *o.hessian;
-        if (o.hessian_precision) settings.implicit.hessian_precision = *o.hessian_precision;
-        if (o.kinematic_start) settings.implicit.kinematic_start = *o.kinematic_start;
-        if (o.fixed_point_inexact) settings.implicit.fixed_point_inexact = *o.fixed_point_inexact;
-        if (o.fixed_point_keep_hessian) settings.implicit.fixed_point_keep_hessian = *o.fixed_point_keep_hessian;
-        if (o.floor_friction_in_solve) settings.implicit.floor_friction_in_solve = *o.floor_friction_in_solve;
-        if (o.return_map) settings.implicit.learned_return_map = *o.return_map == "learned";
+        for (const auto& [key, value] : o.solver.items()) find_option_field(key)->set(settings.implicit, value);
         load_scene_models(scene, o.trust_model, settings);
         // A folder holding another run is refused before the simulation is set up (meshing, models).
         if (!o.run.resume) check_run_folder(o.run.out, o.run.overwrite);

@@ -65,3 +65,17 @@ def test_the_readme_is_a_five_minute_read():
         assert must in readme, must
     image = re.search(r"!\[[^\]]*\]\(([^)]+)\)", readme)
     assert image and (ROOT / image.group(1)).is_file(), "the README's picture is missing"
+
+
+def test_every_solver_option_is_documented_and_listed_by_help():
+    """The implicit solvers' options are declared once in C++ (solver/implicit_options.hpp); their keys are
+    what plasticitynet_sim reports, docs/scenes.md names each, and `pnet simulate --help` lists each flag."""
+    import plasticitynet_sim as pns
+
+    keys = set(pns.Simulation(ROOT / "scenes" / "tiny" / "sand_column_2d.json").solver)
+    scenes_md = (ROOT / "docs" / "scenes.md").read_text(encoding="utf-8")
+    assert not sorted(k for k in keys if f"`{k}`" not in scenes_md), "docs/scenes.md does not name these keys"
+    help_text = subprocess.run([str(ROOT / "build" / "cpp" / "pnet"), "simulate", "--help"], capture_output=True,
+                               text=True, check=True).stdout
+    listed = set(re.findall(r"scene key (\w+)", help_text))
+    assert listed and listed <= keys

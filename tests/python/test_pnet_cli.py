@@ -394,21 +394,21 @@ def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
 
 
 @pytest.mark.parametrize("args, expected", [
-    (["--advection-cfl", 2], "--advection-cfl must be in [0, 1]"),
-    (["--fixed-point-iterations", 0], "--fixed-point-iterations must be a whole number in [1, 100000]"),
-    (["--cg-tol", 1.5], "--cg-tol must be in (0, 1)"),
-    (["--regularizer", -1], "--regularizer must be a finite number >= 0"),
-    (["--tangent-damping", -1], "--tangent-damping must be a finite number >= 0"),
+    (["--advection-cfl", 2], '--advection-cfl: expected a number in [0, 1], got "2"'),
+    (["--fixed-point-iterations", 0], '--fixed-point-iterations: expected an integer >= 1, got "0"'),
+    (["--cg-tol", 1.5], '--cg-tol: expected a number in (0, 1), got "1.5"'),
+    (["--regularizer", -1], '--regularizer: expected a number >= 0 or auto, got "-1"'),
+    (["--tangent-damping", -1], '--tangent-damping: expected a number >= 0, got "-1"'),
     (["--integrator", "implicit"], '--integrator: unknown integrator "implicit" (expected explicit, plasticitynet, '
                                    'return_map, lagged or analytic)'),
     (["--preconditioner", "ilu"], '--preconditioner: expected jacobi, block_jacobi, ichol or multigrid, got "ilu"'),
-    (["--lazy-hessian", 1], "--lazy-hessian must be in [0, 1)"),
+    (["--lazy-hessian", 1], '--lazy-hessian: expected a number in [0, 1), got "1"'),
     (["--dt", -1], "--dt must be a number >= 0"),
     (["--dt", "nan"], "--dt must be a number >= 0"),
     (["--cfl", 0], "--cfl must be a number > 0"),
     (["--outer-iteration", "anderson"], '--outer-iteration: expected auto, newton or fixed_point, got "anderson"'),
     (["--hessian", "exact"], '--hessian: expected auto, network or tangent, got "exact"'),
-    (["--analytic-regularizer", -1], "--analytic-regularizer must be a finite number >= 0"),
+    (["--analytic-regularizer", -1], '--analytic-regularizer: expected a number >= 0, got "-1"'),
     (["--kinematic-start", "warm"], '--kinematic-start: expected scaled or last_velocity, got "warm"'),
     (["--time-integrator", "euler"], '--time-integrator: expected backward_euler or bdf2, got "euler"'),
     (["--flip-relaxation-time", -1], "--flip-relaxation-time must be a finite number >= 0"),

@@ -3,147 +3,258 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
-#include <type_traits>
+#include <cstdlib>
 
 namespace pnet {
 
 namespace {
 
-template <typename T>
-T read_option(const nlohmann::json& block, const char* key, T value, const std::string& context, T lowest,
-              const char* expected) {
-    const auto it = block.find(key);
-    if (it == block.end()) return value;
-    const bool ok = std::is_integral_v<T> ? it->is_number_integer() : it->is_number();
-    if (ok) {
-        const T v = it->get<T>();
-        if (std::isfinite(static_cast<double>(v)) && v >= lowest) return v;
+using Kind = OptionField::Kind;
+using O = ImplicitOptions;
+
+OptionField number(const char* key, const char* flag, double lo, bool lo_open, double hi, bool hi_open,
+                   double O::*member, const char* help, const char* unit = nullptr) {
+    OptionField f;
+    f.key = key, f.flag = flag, f.kind = Kind::Number, f.help = help;
+    f.lo = lo, f.lo_open = lo_open, f.hi = hi, f.hi_open = hi_open, f.unit = unit, f.number = member;
+    return f;
+}
+OptionField integer(const char* key, const char* flag, int lo, int hi, int O::*member, const char* help) {
+    OptionField f;
+    f.key = key, f.flag = flag, f.kind = Kind::Integer, f.help = help;
+    f.lo = lo, f.hi = hi, f.integer = member;
+    return f;
+}
+OptionField boolean(const char* key, const char* flag, bool O::*member, const char* help,
+                    std::vector<std::string> words = {"yes", "no"}) {
+    OptionField f;
+    f.key = key, f.flag = flag, f.kind = Kind::Boolean, f.help = help;
+    f.boolean = member, f.choices = std::move(words);
+    return f;
+}
+OptionField choice(const char* key, const char* flag, std::vector<std::string> values, std::string O::*member,
+                   const char* help) {
+    OptionField f;
+    f.key = key, f.flag = flag, f.kind = Kind::Choice, f.help = help;
+    f.choices = std::move(values), f.text = member;
+    return f;
+}
+
+constexpr double kNone = 1e300;  // no upper bound
+
+std::vector<OptionField> make_fields() {
+    OptionField regularizer = number("regularizer_weight", "--regularizer", 0.0, false, kNone, false,
+                                     &O::regularizer_weight,
+                                     "plasticitynet: w of the paper's eq. 11 (0: the ablation); auto: the material "
+                                     "family's measured w");
+    regularizer.kind = Kind::NumberOrAuto;
+    return {
+        number("newton_tolerance", "--newton-tol", 0.0, true, kNone, false, &O::newton_tolerance,
+               "Newton's tolerance on the mass-weighted velocity residual", "m/s"),
+        number("newton_acceleration_tolerance", nullptr, 0.0, false, kNone, false, &O::newton_acceleration_tolerance,
+               "a step of dt stops at min(newton_tolerance, this x dt)", "m/s^2; 0: newton_tolerance alone"),
+        integer("max_newton_iterations", nullptr, 1, 1000000, &O::max_newton_iterations, "Newton's iteration cap"),
+        number("cg_tolerance", "--cg-tol", 0.0, true, 1.0, true, &O::cg_tolerance,
+               "the largest relative residual of a Newton step's linear solve (inexact Newton)"),
+        integer("max_cg_iterations", nullptr, 1, 1000000, &O::max_cg_iterations, "the linear solve's iteration cap"),
+        choice("outer_iteration", "--outer-iteration", {"auto", "newton", "fixed_point"}, &O::outer_iteration,
+               "plasticitynet: the reference F0 follows every Newton iterate (newton) or a whole solve (the "
+               "paper's fixed_point); auto: the one measured faster"),
+        choice("time_integrator", "--time-integrator", {"backward_euler", "bdf2"}, &O::time_integrator,
+               "the time discretization of the implicit step"),
+        choice("hessian", "--hessian", {"auto", "network", "tangent"}, &O::hessian,
+               "Newton's Hessian: auto, the integrator's own (plasticitynet: the network's; return_map: the "
+               "consistent tangent)"),
+        choice("hessian_precision", "--hessian-precision", {"single", "double"}, &O::hessian_precision,
+               "plasticitynet: the arithmetic of the network's Hessian pass"),
+        number("fixed_point_tolerance", "--fixed-point-tol", 0.0, false, kNone, false, &O::fixed_point_tolerance,
+               "plasticitynet's fixed point: max_p |F_p(v) - F0_p|"),
+        integer("max_fixed_point_iterations", "--fixed-point-iterations", 1, 100000, &O::max_fixed_point_iterations,
+                "plasticitynet's fixed point: the most solves per step"),
+        integer("fixed_point_anderson", "--fixed-point-anderson", 0, 100, &O::fixed_point_anderson,
+                "Anderson acceleration of the fixed point over this many iterates (0: the plain iteration)"),
+        boolean("fixed_point_keep_hessian", "--fixed-point-keep-hessian", &O::fixed_point_keep_hessian,
+                "later solves of the fixed point start from the Hessian the last one prepared"),
+        number("fixed_point_inexact", "--fixed-point-inexact", 0.0, false, 1.0, true, &O::fixed_point_inexact,
+               "inexact inner solves while F0 still moves: the forcing factor (0: exact solves)"),
+        regularizer,
+        number("tangent_damping", "--tangent-damping", 0.0, false, kNone, false, &O::tangent_damping,
+               "the damping w mu of sand's and snow's tangent Hessian"),
+        number("analytic_regularizer", "--analytic-regularizer", 0.0, false, kNone, false, &O::analytic_regularizer,
+               "FEM analytic: + W mu/2 |F - F0|^2 under plasticitynet's outer iteration (a diagnostic)"),
+        choice("preconditioner", "--preconditioner", {"jacobi", "block_jacobi", "ichol", "multigrid"},
+               &O::preconditioner, "the linear solve's preconditioner (ichol, multigrid: MPM)"),
+        choice("linear_solver", nullptr, {"pcg", "cholesky"}, &O::linear_solver,
+               "MPM's linear solve: matrix-free PCG or CHOLMOD on the assembled Hessian"),
+        choice("coupled_solver", nullptr, {"block", "cholesky"}, &O::coupled_solver,
+               "MPM-FEM coupling's linear solve: PCG with an exact FEM block, or CHOLMOD on the whole Hessian"),
+        number("lazy_hessian", "--lazy-hessian", 0.0, false, 1.0, true, &O::lazy_hessian,
+               "keep the last Hessian while each Newton iteration cuts the residual by this factor (0: never)"),
+        boolean("fail_on_unconverged", "--fail-on-unconverged", &O::fail_on_unconverged,
+                "a step whose solve ends unconverged is an error", {}),
+        integer("max_kinematic_stages", nullptr, 0, 1000000, &O::max_kinematic_stages,
+                "FEM: the most extra solves per step that lead kinematic nodes to their targets"),
+        choice("kinematic_start", "--kinematic-start", {"scaled", "last_velocity"}, &O::kinematic_start,
+               "FEM with kinematic nodes: the start of a step that CCD holds back"),
+        boolean("fem_predictor", nullptr, &O::fem_predictor,
+                "FEM plasticitynet under newton: start from the elastic energy's solution"),
+        boolean("learned_return_map", "--return-map", &O::learned_return_map,
+                "plasticitynet: a model's learned return mapping, or the material's exact one", {"learned", "exact"}),
+        number("advection_cfl", "--advection-cfl", 0.0, false, 1.0, false, &O::advection_cfl,
+               "MPM: cap a step so that no particle moves more than this many cells (0: off)"),
+        boolean("floor_friction_in_solve", "--floor-friction-in-solve", &O::floor_friction_in_solve,
+                "a Coulomb floor's friction follows the Newton iterates in one solve (no: three passes)"),
+    };
+}
+
+std::string range_text(const OptionField& f) {
+    const bool bounded = f.hi < kNone;
+    const auto show = [](double x) {
+        nlohmann::json j = x;
+        std::string t = j.dump();
+        if (t.size() > 2 && t.compare(t.size() - 2, 2, ".0") == 0) t.resize(t.size() - 2);
+        return t;
+    };
+    std::string text;
+    if (f.kind == Kind::Integer)
+        text = "an integer >= " + show(f.lo);
+    else if (bounded)
+        text = "a number in " + std::string(f.lo_open ? "(" : "[") + show(f.lo) + ", " + show(f.hi) +
+               (f.hi_open ? ")" : "]");
+    else if (f.lo_open && f.lo == 0.0)
+        text = "a positive number";
+    else
+        text = std::string("a number ") + (f.lo_open ? "> " : ">= ") + show(f.lo);
+    if (f.unit) text += std::string(" (") + f.unit + ")";
+    return text;
+}
+
+std::string listed(const std::vector<std::string>& words, bool quoted) {
+    std::string text;
+    for (std::size_t k = 0; k < words.size(); ++k) {
+        if (k > 0) text += k + 1 == words.size() ? " or " : ", ";
+        text += quoted ? "\"" + words[k] + "\"" : words[k];
     }
-    throw std::invalid_argument(context + ": integrator." + key + ": expected " + expected + ", got " + it->dump());
+    return text;
+}
+
+bool in_range(const OptionField& f, double x) {
+    return std::isfinite(x) && (f.lo_open ? x > f.lo : x >= f.lo) && (f.hi_open ? x < f.hi : x <= f.hi);
 }
 
 }  // namespace
 
+std::string OptionField::expected() const {
+    switch (kind) {
+        case Kind::Boolean: return "true or false";
+        case Kind::Choice: return listed(choices, true);
+        case Kind::NumberOrAuto: return range_text(*this) + " or \"auto\"";
+        default: return range_text(*this);
+    }
+}
+
+std::string OptionField::flag_expected() const {
+    switch (kind) {
+        case Kind::Boolean: return choices.empty() ? "no value" : listed(choices, false);
+        case Kind::Choice: return listed(choices, false);
+        case Kind::NumberOrAuto: return range_text(*this) + " or auto";
+        default: return range_text(*this);
+    }
+}
+
+bool OptionField::accepts(const nlohmann::json& value) const {
+    switch (kind) {
+        case Kind::Boolean: return value.is_boolean();
+        case Kind::Choice:
+            return value.is_string() &&
+                   std::find(choices.begin(), choices.end(), value.get<std::string>()) != choices.end();
+        case Kind::Integer: return value.is_number_integer() && in_range(*this, value.get<double>());
+        case Kind::NumberOrAuto:
+            if (value.is_string() && value == "auto") return true;
+            [[fallthrough]];
+        case Kind::Number: return value.is_number() && in_range(*this, value.get<double>());
+    }
+    return false;
+}
+
+nlohmann::json OptionField::get(const ImplicitOptions& o) const {
+    switch (kind) {
+        case Kind::Boolean: return o.*boolean;
+        case Kind::Choice: return o.*text;
+        case Kind::Integer: return o.*integer;
+        case Kind::NumberOrAuto: return o.*number >= 0.0 ? nlohmann::json(o.*number) : nlohmann::json("auto");
+        case Kind::Number: return o.*number;
+    }
+    return nullptr;
+}
+
+void OptionField::set(ImplicitOptions& o, const nlohmann::json& value) const {
+    switch (kind) {
+        case Kind::Boolean: o.*boolean = value.get<bool>(); break;
+        case Kind::Choice: o.*text = value.get<std::string>(); break;
+        case Kind::Integer: o.*integer = value.get<int>(); break;
+        case Kind::NumberOrAuto: o.*number = value.is_string() ? -1.0 : value.get<double>(); break;
+        case Kind::Number: o.*number = value.get<double>(); break;
+    }
+}
+
+std::optional<nlohmann::json> OptionField::parse_flag(const std::string& word) const {
+    nlohmann::json value;
+    switch (kind) {
+        case Kind::Boolean:
+            if (choices.empty()) return nlohmann::json(true);  // a switch
+            if (word == choices[0]) return nlohmann::json(true);
+            if (word == choices[1]) return nlohmann::json(false);
+            return std::nullopt;
+        case Kind::Choice: value = word; break;
+        case Kind::NumberOrAuto:
+            if (word == "auto") return nlohmann::json("auto");
+            [[fallthrough]];
+        case Kind::Number:
+        case Kind::Integer: {
+            char* end = nullptr;
+            const double x = std::strtod(word.c_str(), &end);
+            if (word.empty() || end != word.c_str() + word.size()) return std::nullopt;
+            if (kind == Kind::Integer) {
+                if (x != std::floor(x) || std::abs(x) > 2e9) return std::nullopt;
+                value = static_cast<long>(x);
+            } else {
+                value = x;
+            }
+            break;
+        }
+    }
+    if (!accepts(value)) return std::nullopt;
+    return value;
+}
+
+const std::vector<OptionField>& implicit_option_fields() {
+    static const std::vector<OptionField> fields = make_fields();
+    return fields;
+}
+
+const OptionField* find_option_field(const std::string& key_or_flag) {
+    for (const OptionField& f : implicit_option_fields())
+        if (key_or_flag == f.key || (f.flag && key_or_flag == f.flag)) return &f;
+    return nullptr;
+}
+
 ImplicitOptions ImplicitOptions::from_json(const nlohmann::json& block, const std::string& context) {
     ImplicitOptions o;
     if (!block.is_object()) return o;
-    o.newton_tolerance =
-        read_option(block, "newton_tolerance", o.newton_tolerance, context, 1e-300, "a positive number (m/s)");
-    o.newton_acceleration_tolerance = read_option(block, "newton_acceleration_tolerance",
-                                                  o.newton_acceleration_tolerance, context, 0.0,
-                                                  "a number >= 0 (m/s^2; 0: newton_tolerance alone)");
-    o.max_newton_iterations =
-        read_option(block, "max_newton_iterations", o.max_newton_iterations, context, 1, "an integer >= 1");
-    o.max_cg_iterations = read_option(block, "max_cg_iterations", o.max_cg_iterations, context, 1, "an integer >= 1");
-    o.cg_tolerance = read_option(block, "cg_tolerance", o.cg_tolerance, context, 1e-300, "a positive number");
-    if (o.cg_tolerance >= 1.0)
-        throw std::invalid_argument(context + ": integrator.cg_tolerance: expected a number in (0, 1), got " +
-                                    std::to_string(o.cg_tolerance));
-    o.fixed_point_tolerance =
-        read_option(block, "fixed_point_tolerance", o.fixed_point_tolerance, context, 0.0, "a number >= 0");
-    o.max_fixed_point_iterations =
-        read_option(block, "max_fixed_point_iterations", o.max_fixed_point_iterations, context, 1, "an integer >= 1");
-    o.fixed_point_anderson =
-        read_option(block, "fixed_point_anderson", o.fixed_point_anderson, context, 0, "an integer >= 0");
-    o.fixed_point_inexact =
-        read_option(block, "fixed_point_inexact", o.fixed_point_inexact, context, 0.0, "a number in [0, 1)");
-    if (o.fixed_point_inexact >= 1.0)
-        throw std::invalid_argument(context + ": integrator.fixed_point_inexact: expected a number in [0, 1), got " +
-                                    nlohmann::json(o.fixed_point_inexact).dump());
-    if (const auto it = block.find("regularizer_weight"); it != block.end() && !(it->is_string() && *it == "auto"))
-        o.regularizer_weight =
-            read_option(block, "regularizer_weight", 0.0, context, 0.0, "a number >= 0 or \"auto\"");
-    o.tangent_damping = read_option(block, "tangent_damping", o.tangent_damping, context, 0.0, "a number >= 0");
-    o.analytic_regularizer =
-        read_option(block, "analytic_regularizer", o.analytic_regularizer, context, 0.0, "a number >= 0");
-    o.lazy_hessian = read_option(block, "lazy_hessian", o.lazy_hessian, context, 0.0, "a number in [0, 1)");
-    if (o.lazy_hessian >= 1.0)
-        throw std::invalid_argument(context + ": integrator.lazy_hessian: expected a number in [0, 1), got " +
-                                    nlohmann::json(o.lazy_hessian).dump());
-    o.advection_cfl = read_option(block, "advection_cfl", o.advection_cfl, context, 0.0, "a number in [0, 1]");
-    if (o.advection_cfl > 1.0)
-        throw std::invalid_argument(context + ": integrator.advection_cfl: expected a number in [0, 1], got " +
-                                    nlohmann::json(o.advection_cfl).dump());
-    o.max_kinematic_stages =
-        read_option(block, "max_kinematic_stages", o.max_kinematic_stages, context, 0, "an integer >= 0");
-    if (const auto it = block.find("fail_on_unconverged"); it != block.end()) {
-        if (!it->is_boolean())
-            throw std::invalid_argument(context + ": integrator.fail_on_unconverged: expected true or false, got " +
-                                        it->dump());
-        o.fail_on_unconverged = it->get<bool>();
-    }
-    if (const auto it = block.find("fixed_point_keep_hessian"); it != block.end()) {
-        if (!it->is_boolean())
-            throw std::invalid_argument(
-                context + ": integrator.fixed_point_keep_hessian: expected true or false, got " + it->dump());
-        o.fixed_point_keep_hessian = it->get<bool>();
-    }
-    if (const auto it = block.find("floor_friction_in_solve"); it != block.end()) {
-        if (!it->is_boolean())
-            throw std::invalid_argument(context + ": integrator.floor_friction_in_solve: expected true or false, got " +
-                                        it->dump());
-        o.floor_friction_in_solve = it->get<bool>();
-    }
-    if (const auto it = block.find("fem_predictor"); it != block.end()) {
-        if (!it->is_boolean())
-            throw std::invalid_argument(context + ": integrator.fem_predictor: expected true or false, got " +
-                                        it->dump());
-        o.fem_predictor = it->get<bool>();
-    }
-    if (const auto it = block.find("learned_return_map"); it != block.end()) {
-        if (!it->is_boolean())
-            throw std::invalid_argument(context + ": integrator.learned_return_map: expected true or false, got " +
-                                        it->dump());
-        o.learned_return_map = it->get<bool>();
-    }
-    if (const auto it = block.find("linear_solver"); it != block.end()) {
-        if (!it->is_string() || (*it != "pcg" && *it != "cholesky"))
-            throw std::invalid_argument(context + ": integrator.linear_solver: expected \"pcg\" or \"cholesky\", got " +
-                                        it->dump());
-        o.linear_solver = it->get<std::string>();
-    }
-    if (const auto it = block.find("coupled_solver"); it != block.end()) {
-        if (!it->is_string() || (*it != "block" && *it != "cholesky"))
-            throw std::invalid_argument(
-                context + ": integrator.coupled_solver: expected \"block\" or \"cholesky\", got " + it->dump());
-        o.coupled_solver = it->get<std::string>();
-    }
-    if (const auto it = block.find("kinematic_start"); it != block.end()) {
-        if (!it->is_string() || (*it != "scaled" && *it != "last_velocity"))
-            throw std::invalid_argument(context + ": integrator.kinematic_start: expected \"scaled\" or "
-                                        "\"last_velocity\", got " + it->dump());
-        o.kinematic_start = it->get<std::string>();
-    }
-    if (const auto it = block.find("hessian"); it != block.end()) {
-        if (!it->is_string() || (*it != "auto" && *it != "network" && *it != "tangent"))
-            throw std::invalid_argument(
-                context + ": integrator.hessian: expected \"auto\", \"network\" or \"tangent\", got " + it->dump());
-        o.hessian = it->get<std::string>();
-    }
-    if (const auto it = block.find("hessian_precision"); it != block.end()) {
-        if (!it->is_string() || (*it != "single" && *it != "double"))
-            throw std::invalid_argument(context + ": integrator.hessian_precision: expected \"single\" or "
-                                        "\"double\", got " + it->dump());
-        o.hessian_precision = it->get<std::string>();
-    }
-    if (const auto it = block.find("outer_iteration"); it != block.end()) {
-        if (!it->is_string() || (*it != "auto" && *it != "newton" && *it != "fixed_point"))
-            throw std::invalid_argument(context + ": integrator.outer_iteration: expected \"auto\", \"newton\" or "
-                                        "\"fixed_point\", got " + it->dump());
-        o.outer_iteration = it->get<std::string>();
-    }
-    if (const auto it = block.find("time_integrator"); it != block.end()) {
-        if (!it->is_string() || (*it != "backward_euler" && *it != "bdf2"))
-            throw std::invalid_argument(context + ": integrator.time_integrator: expected \"backward_euler\" or "
-                                        "\"bdf2\", got " + it->dump());
-        o.time_integrator = it->get<std::string>();
-    }
-    if (const auto it = block.find("preconditioner"); it != block.end()) {
-        if (!it->is_string() || (*it != "jacobi" && *it != "block_jacobi" && *it != "ichol" && *it != "multigrid"))
-            throw std::invalid_argument(
-                context + ": integrator.preconditioner: expected \"jacobi\", \"block_jacobi\", \"ichol\" or \"multigrid\", got " +
-                it->dump());
-        o.preconditioner = it->get<std::string>();
+    for (const auto& [key, value] : block.items()) {
+        if (key == "name" || key == "dt" || key == "cfl") continue;  // the scene's
+        const OptionField* f = find_option_field(key);
+        if (!f || key != f->key) {
+            std::string known;
+            for (const OptionField& field : implicit_option_fields()) known += (known.empty() ? "" : ", ") + std::string(field.key);
+            throw std::invalid_argument(context + ": integrator." + key + ": unknown key (known: name, dt, cfl, " +
+                                        known + ")");
+        }
+        if (!f->accepts(value))
+            throw std::invalid_argument(context + ": integrator." + key + ": expected " + f->expected() + ", got " +
+                                        value.dump());
+        f->set(o, value);
     }
     return o;
 }
@@ -197,34 +308,9 @@ ReferenceSolveOptions ImplicitOptions::reference_solve_options(bool fixed_point)
 }
 
 nlohmann::json ImplicitOptions::to_json() const {
-    return {{"newton_tolerance", newton_tolerance},
-            {"newton_acceleration_tolerance", newton_acceleration_tolerance},
-            {"max_newton_iterations", max_newton_iterations},
-            {"max_cg_iterations", max_cg_iterations},
-            {"cg_tolerance", cg_tolerance},
-            {"outer_iteration", outer_iteration},
-            {"time_integrator", time_integrator},
-            {"fixed_point_tolerance", fixed_point_tolerance},
-            {"max_fixed_point_iterations", max_fixed_point_iterations},
-            {"fixed_point_anderson", fixed_point_anderson},
-            {"fixed_point_keep_hessian", fixed_point_keep_hessian},
-            {"fixed_point_inexact", fixed_point_inexact},
-            {"regularizer_weight", regularizer_weight >= 0.0 ? nlohmann::json(regularizer_weight) : nlohmann::json("auto")},
-            {"tangent_damping", tangent_damping},
-            {"analytic_regularizer", analytic_regularizer},
-            {"hessian", hessian},
-            {"hessian_precision", hessian_precision},
-            {"preconditioner", preconditioner},
-            {"linear_solver", linear_solver},
-            {"coupled_solver", coupled_solver},
-            {"lazy_hessian", lazy_hessian},
-            {"fail_on_unconverged", fail_on_unconverged},
-            {"max_kinematic_stages", max_kinematic_stages},
-            {"kinematic_start", kinematic_start},
-            {"fem_predictor", fem_predictor},
-            {"learned_return_map", learned_return_map},
-            {"advection_cfl", advection_cfl},
-            {"floor_friction_in_solve", floor_friction_in_solve}};
+    nlohmann::json j = nlohmann::json::object();
+    for (const OptionField& f : implicit_option_fields()) j[f.key] = f.get(*this);
+    return j;
 }
 
 }  // namespace pnet

@@ -2,8 +2,11 @@
 // The settings of every implicit integrator (MPM, FEM, coupling): Newton's tolerances and caps, the
 // outer iteration on F0, the time discretization, the Hessian and the linear solve
 // (docs/solver.md). A scene gives them as keys of its "integrator" block; `pnet simulate` and
-// Python can override them.
+// Python can override them. Each key is declared once, in implicit_option_fields(): the scene reader,
+// Python's solver= keys, `pnet simulate`'s flags and its --help are made from that list.
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -154,9 +157,10 @@ struct ImplicitOptions {
         return regularizer_weight >= 0.0 ? regularizer_weight : plasticitynet_defaults(family).regularizer_weight;
     }
 
-    /// Reads the keys above from an integrator block (others are ignored: the
-    /// block also holds name, dt and cfl). Throws std::invalid_argument
-    /// "<context>: integrator.<key>: <problem>" for a wrong type or range.
+    /// Reads the keys of implicit_option_fields() from an integrator block (name, dt and cfl, which
+    /// the block also holds, are the scene's). Throws std::invalid_argument
+    /// "<context>: integrator.<key>: <problem>" for a wrong type or range, or a key that is none of
+    /// these (naming the known ones).
     static ImplicitOptions from_json(const nlohmann::json& block, const std::string& context);
     /// The Newton loop's settings from these for a step of dt s (tolerance newton_tolerance_at(dt),
     /// iteration caps, CG tolerance, lazy Hessian); the caller adds its residual masses and linear
@@ -180,5 +184,40 @@ struct ImplicitOptions {
         return hessian_precision == "double" ? FusedMlp::Precision::Double : FusedMlp::Precision::Single;
     }
 };
+
+/// One key of ImplicitOptions, declared once: its name in a scene's integrator block and in Python's
+/// solver= dict, its `pnet simulate` flag, what it accepts and a line of help.
+struct OptionField {
+    enum class Kind { Number, NumberOrAuto, Integer, Boolean, Choice };
+    const char* key = nullptr;
+    const char* flag = nullptr;  // "--newton-tol"; nullptr: scenes and Python only
+    Kind kind = Kind::Number;
+    const char* help = nullptr;
+    // Number, NumberOrAuto, Integer: the accepted range; lo_open / hi_open exclude the bound itself.
+    double lo = 0.0, hi = 1e300;
+    bool lo_open = false, hi_open = false;
+    const char* unit = nullptr;        // in the expected text: "a positive number (m/s)"
+    std::vector<std::string> choices;  // Choice: the values; Boolean: the flag's words for true and false
+                                       // (empty: the flag is a switch that sets true)
+    double ImplicitOptions::*number = nullptr;  // Number, NumberOrAuto ("auto": -1)
+    int ImplicitOptions::*integer = nullptr;
+    bool ImplicitOptions::*boolean = nullptr;
+    std::string ImplicitOptions::*text = nullptr;
+
+    /// What a scene may give: "a number in [0, 1)", "\"jacobi\", ... or \"multigrid\"", "true or false".
+    std::string expected() const;
+    /// What the flag takes: "a number in [0, 1)", "jacobi, ... or multigrid", "yes or no".
+    std::string flag_expected() const;
+    bool accepts(const nlohmann::json& value) const;
+    nlohmann::json get(const ImplicitOptions& o) const;
+    void set(ImplicitOptions& o, const nlohmann::json& value) const;
+    /// A word of the command line as this key's value; nullopt when it is none of the accepted ones.
+    std::optional<nlohmann::json> parse_flag(const std::string& word) const;
+};
+
+/// Every key of ImplicitOptions, in the order --help lists them.
+const std::vector<OptionField>& implicit_option_fields();
+/// The field of a key or flag; nullptr if none.
+const OptionField* find_option_field(const std::string& key_or_flag);
 
 }  // namespace pnet

@@ -640,15 +640,15 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     };
     EXPECT_EQ(message({{"newton_tolerance", -1}}),
               "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
-    EXPECT_EQ(message({{"lazy_hessian", 1}}), "s.json: integrator.lazy_hessian: expected a number in [0, 1), got 1.0");
-    EXPECT_EQ(message({{"fixed_point_inexact", 1}}),
+    EXPECT_EQ(message({{"lazy_hessian", 1}}), "s.json: integrator.lazy_hessian: expected a number in [0, 1), got 1");
+    EXPECT_EQ(message({{"fixed_point_inexact", 1.0}}),
               "s.json: integrator.fixed_point_inexact: expected a number in [0, 1), got 1.0");
     EXPECT_EQ(message({{"preconditioner", "ilu"}}),
               "s.json: integrator.preconditioner: expected \"jacobi\", \"block_jacobi\", \"ichol\" or \"multigrid\", got \"ilu\"");
     EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),
               "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5");
     EXPECT_EQ(message({{"cg_tolerance", 2}}),
-              "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2.000000");
+              "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2");
     EXPECT_EQ(message({{"fixed_point_keep_hessian", "yes"}}),
               "s.json: integrator.fixed_point_keep_hessian: expected true or false, got \"yes\"");
     EXPECT_EQ(message({{"fail_on_unconverged", 1}}),
@@ -659,6 +659,47 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_EQ(message({{"regularizer_weight", "one"}}),
               "s.json: integrator.regularizer_weight: expected a number >= 0 or \"auto\", got \"one\"");
     EXPECT_EQ(message({{"tangent_damping", -0.5}}), "s.json: integrator.tangent_damping: expected a number >= 0, got -0.5");
+    // A key that is no option is refused, naming the known ones (it was silently ignored).
+    const std::string unknown = message({{"newton_tol", 1e-4}});
+    EXPECT_EQ(unknown.rfind("s.json: integrator.newton_tol: unknown key (known: name, dt, cfl, newton_tolerance, ", 0), 0u)
+        << unknown;
+    EXPECT_EQ(message({{"name", "lagged"}, {"dt", 1e-3}, {"cfl", 0.5}}), "accepted");
+}
+
+// Every option is declared once (implicit_option_fields()): to_json holds exactly its keys, each
+// field reads back what it writes, flags are unique, and each flag's words parse to values the
+// scene reader accepts.
+TEST(ImplicitOptions, EveryOptionIsDeclaredOnceAndItsFlagParsesToAnAcceptedValue) {
+    const ImplicitOptions defaults;
+    const nlohmann::json j = defaults.to_json();
+    std::set<std::string> keys, flags;
+    for (const OptionField& f : implicit_option_fields()) {
+        EXPECT_TRUE(keys.insert(f.key).second) << f.key;
+        if (f.flag) {
+            EXPECT_TRUE(flags.insert(f.flag).second) << f.flag;
+        }
+        ASSERT_TRUE(j.contains(f.key)) << f.key;
+        EXPECT_TRUE(f.accepts(j[f.key])) << f.key << " default " << j[f.key].dump();
+        EXPECT_EQ(find_option_field(f.key), &f);
+        if (f.flag) {
+            EXPECT_EQ(find_option_field(f.flag), &f);
+        }
+        ImplicitOptions o;
+        f.set(o, j[f.key]);
+        EXPECT_EQ(f.get(o), j[f.key]) << f.key;
+    }
+    EXPECT_EQ(keys.size(), j.size());
+    const OptionField& tol = *find_option_field("--newton-tol");
+    EXPECT_EQ(tol.parse_flag("1e-4"), nlohmann::json(1e-4));
+    EXPECT_FALSE(tol.parse_flag("-1"));
+    EXPECT_FALSE(tol.parse_flag("nan"));
+    EXPECT_FALSE(tol.parse_flag("1e-4x"));
+    EXPECT_EQ(find_option_field("--fixed-point-iterations")->parse_flag("3"), nlohmann::json(3));
+    EXPECT_FALSE(find_option_field("--fixed-point-iterations")->parse_flag("2.5"));
+    EXPECT_EQ(find_option_field("--return-map")->parse_flag("exact"), nlohmann::json(false));
+    EXPECT_EQ(find_option_field("--regularizer")->parse_flag("auto"), nlohmann::json("auto"));
+    EXPECT_FALSE(find_option_field("--preconditioner")->parse_flag("ilu"));
+    EXPECT_EQ(find_option_field("--preconditioner")->flag_expected(), "jacobi, block_jacobi, ichol or multigrid");
 }
 
 TEST(NeuralParticleEnergy, RefusesMissingAndMismatchedModels) {
