@@ -119,7 +119,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.incomplete_cholesky = options_.preconditioner == "ichol";
     if (options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
     const bool multigrid = options_.preconditioner == "multigrid";
-    potential_.set_multigrid(multigrid);
+    potential_.set_multigrid(multigrid, options_.multigrid_rebuild == "hessian");
     potential_.set_assemble(options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();

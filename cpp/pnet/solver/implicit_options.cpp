@@ -84,6 +84,8 @@ std::vector<OptionField> make_fields() {
                "FEM analytic: + W mu/2 |F - F0|^2 under plasticitynet's outer iteration (a diagnostic)"),
         choice("preconditioner", "--preconditioner", {"jacobi", "block_jacobi", "ichol", "multigrid"},
                &O::preconditioner, "the linear solve's preconditioner (ichol, multigrid: MPM)"),
+        choice("multigrid_rebuild", "--multigrid-rebuild", {"step", "hessian"}, &O::multigrid_rebuild,
+               "preconditioner multigrid: built once per step, or at every Hessian pass"),
         choice("linear_solver", nullptr, {"pcg", "cholesky"}, &O::linear_solver,
                "MPM's linear solve: matrix-free PCG or CHOLMOD on the assembled Hessian"),
         choice("coupled_solver", nullptr, {"block", "cholesky"}, &O::coupled_solver,

@@ -100,6 +100,10 @@ struct ImplicitOptions {
     // Jacobi saved 2-3% of the CG iterations on sand_column_2d and snowball_2d (measured), not its cost; the
     // multigrid cuts the Krylov iterations 1.2-3.6x and costs 2-4x the step at today's sizes (docs/solver.md).
     std::string preconditioner = "jacobi";
+    // preconditioner "multigrid": its hierarchy is built from the step's first Hessian and kept for the
+    // step's solves ("step"), or rebuilt at every Hessian pass ("hessian": fewer Krylov iterations, a
+    // build per Newton iteration; docs/solver.md, "Multigrid on the MPM grid").
+    std::string multigrid_rebuild = "step";
     // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the preconditioner above)
     // or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept while the
     // active grid is the same).
