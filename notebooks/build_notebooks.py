@@ -354,7 +354,7 @@ The last frame of each 2D scene: sand (Fig. 6), snow with hardening (Fig. 7), me
 (Fig. 8), metal with the learned return mapping and neo-Hookean elasticity (Fig. 9) and the FEM-MPM
 coupling (Fig. 10), by the explicit ground truth (or, for FEM, explicit at 2e-5 s), `plasticitynet`
 and the lagged baseline. Regenerate: `scripts/reproduce.sh fig06_10` (docs/workflow.md); each run's
-frames stay in `out/workflow/runs/<key>/frames/` (`python -m plasticitynet.evaluation list` names the
+frames stay in `out/workflow/runs/<key>/frames/` (`python -m plasticitynet.workflow list` names the
 keys), and `build/cpp/pnet video out/workflow/runs/<key>/frames` makes its video."""),
     new_code_cell(PREAMBLE),
     new_code_cell('''SCENES = [

@@ -9,7 +9,7 @@ batch) from a converged starting point, minutes instead of a full run.
 The run starts from the model file's weights with a fresh Adam, lr cosine from --lr to 1% of it, batches
 from seed 7 (not the training seed 0), and reports the relative RMS gradient error on the trainer's
 held-out curve samples (16384 per sampling) every 500 steps; at the end the Hessian error (20000 "near"
-samples) and the paper-1x error on 100000 samples, as `python -m plasticitynet.evaluate` measures them.
+samples) and the paper-1x error on 100000 samples, as `python -m plasticitynet.model_errors` measures them.
 Issue 32's fourth pass found with it that the Hessian loss at weight 0.1 outweighs eq. 9 by 100-1000x
 and costs gradient accuracy (notebooks/results/model_eval/recipe/cpu6).
 """
@@ -26,7 +26,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
 
 from plasticitynet.model import LearnedEnergy, load_model  # noqa: E402
-from plasticitynet.training.evaluate import EVAL_SEED, hessian_error, relative_rms_error  # noqa: E402
+from plasticitynet.training.held_out import EVAL_SEED, hessian_error, relative_rms_error  # noqa: E402
 from plasticitynet.training.trainer import EnergyTask, TrainConfig, initialise_from, make_scheduler  # noqa: E402
 
 

@@ -14,7 +14,7 @@ psi(F) = phi(log Sigma(F)), and its error is a weighted Poisson problem on the d
     tau_i = tau_i(Z(Sigma), h)  (the target's principal Kirchhoff stress; Ptilde = U diag(tau / Sigma) V^T).
 
 It is solved on a grid of n^d nodes per slice (all slices at once, conjugate gradients), and
-floor = sqrt(sum_slices residual / sum_slices E ||Ptilde||^2), the metric of `plasticitynet.evaluate`
+floor = sqrt(sum_slices residual / sum_slices E ||Ptilde||^2), the metric of `plasticitynet.model_errors`
 (relative RMS gradient error, paper 1x). Dropping the symmetry of phi under a permutation of the
 singular values and the exactness at F0 (eq. 8) can only lower the minimum: the figure is a lower bound
 up to the grid's discretisation, shown converging with n. The metal targets are gradient fields, so

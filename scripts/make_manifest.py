@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Writes models/MANIFEST: one entry per shipped model file, pinning its sha256 and recording how it
 was trained (command line, schedule, wall time, machine) and the errors measured on held-out samples
-at export (plasticitynet.evaluate). The C++ loader and the tests check model files against it.
+at export (plasticitynet.model_errors). The C++ loader and the tests check model files against it.
 
     .venv/bin/python scripts/make_manifest.py [--models DIR] [--all]
 

@@ -49,7 +49,7 @@ def old_hessian_errors(old: Path, files: Path | None) -> dict:
     path = old / "hessian_errors.json"
     if files is not None:
         from plasticitynet import load_model
-        from plasticitynet.training.evaluate import EVAL_SEED, HESSIAN_SAMPLES, hessian_error
+        from plasticitynet.training.held_out import EVAL_SEED, HESSIAN_SAMPLES, hessian_error
 
         errors = {}
         for name in manifest(old):
@@ -140,7 +140,7 @@ def main() -> int:
     text = table(args.old, args.new, old_hessian)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "models.md").write_text(
-        "Relative RMS gradient error on 100000 held-out samples (python -m plasticitynet.evaluate), before "
+        "Relative RMS gradient error on 100000 held-out samples (python -m plasticitynet.model_errors), before "
         "(raw input, the paper's sampling) and now; regenerate with `scripts/model_table.py`.\n\n" + text + "\n"
     )
     plot(args.old, args.new, args.out / "error_vs_time.png")

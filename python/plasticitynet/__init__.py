@@ -9,7 +9,7 @@ __all__ = ["load_model", "__version__"]
 
 
 def __getattr__(name: str):
-    """`load_model` on first use: importing the package (the evaluation's jobs, the mesh reader) does not
+    """`load_model` on first use: importing the package (the workflow's jobs, the frame reader) does not
     pay for torch's import."""
     if name == "load_model":
         from .model import load_model

@@ -1,5 +1,5 @@
 """Running `pnet simulate` from Python: the one place that writes its command line, runs it and runs many
-at once (the evaluation workflow's keyed runs, plasticitynet.evaluation.runner; the granular-collapse
+at once (the evaluation workflow's keyed runs, plasticitynet.workflow.runner; the granular-collapse
 study, scripts/granular_collapse.py; the physics check, scripts/physics_check.py).
 
 `pnet simulate` exits 0 when every frame was written, 1 after a simulation error (the frames before it

@@ -27,7 +27,7 @@ from plasticitynet.training import (
     script_network,
 )
 from plasticitynet.training.cli import main as cli_main
-from plasticitynet.training.evaluate import (
+from plasticitynet.training.held_out import (
     EVAL_SEED, MAP_BINS, format_errors, parameter_error_map, relative_rms_error,
 )
 from plasticitynet.training.nets import make_energy_net, mlp_input_width

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import plasticitynet
-from plasticitynet.training.evaluate import EVAL_SEED, evaluate_return_map, gradient_errors, relative_rms_error
+from plasticitynet.training.held_out import EVAL_SEED, evaluate_return_map, gradient_errors, relative_rms_error
 from plasticitynet.training.export import sha256_of
 from plasticitynet.training.sampling import sample_batch, sampling_spec
 

@@ -26,7 +26,7 @@ from plasticitynet.training import (
     sampling_spec,
     script_network,
 )
-from plasticitynet.training.evaluate import evaluate, format_errors
+from plasticitynet.training.held_out import evaluate, format_errors
 from plasticitynet.training.export import sha256_of
 
 RECIPE = {"epochs": 0, "batch": 1, "lr": 0.01, "decay": 0.95, "decay_steps": 1000, "sampling": "paper", "seed": 0,
@@ -236,13 +236,13 @@ def test_evaluate_in_process_and_cli(tmp_path):
     rm_errors = evaluate(plasticitynet.load_model(rm_path), samples=3000)
     assert 0 < rm_errors["yielding"] < 3000 and 0 <= rm_errors["frac_within_1e-3"] <= 1
     run = subprocess.run(
-        [sys.executable, "-m", "plasticitynet.evaluate", str(path), "--samples", "2000"],
+        [sys.executable, "-m", "plasticitynet.model_errors", str(path), "--samples", "2000"],
         capture_output=True, text=True, timeout=120,
     )
     assert run.returncode == 0, run.stderr
     assert "relative RMS gradient error" in run.stdout and "deps x0.5" in run.stdout
     run = subprocess.run(
-        [sys.executable, "-m", "plasticitynet.evaluate", str(tmp_path / "nope.pt")], capture_output=True, text=True,
+        [sys.executable, "-m", "plasticitynet.model_errors", str(tmp_path / "nope.pt")], capture_output=True, text=True,
         timeout=120,
     )
     assert run.returncode == 2 and "nope.pt: no such model file" in run.stderr

@@ -1,4 +1,4 @@
-"""The evaluation workflow (workflow/Snakefile, python/plasticitynet/evaluation, docs/workflow.md):
+"""The evaluation workflow (workflow/Snakefile, python/plasticitynet/workflow, docs/workflow.md):
 keys, the tiny-scene pipeline end to end through scripts/reproduce.sh, a second invocation that does
 nothing, a model change that re-runs only its dependants, and the cluster path (a local stand-in for the
 scheduler)."""
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from plasticitynet.evaluation import catalogue
-from plasticitynet.evaluation.plan import Plan, refined, target_names
+from plasticitynet.workflow import catalogue
+from plasticitynet.workflow.plan import Plan, refined, target_names
 
 ROOT = Path(__file__).resolve().parents[2]
 BUILD = ROOT / os.environ.get("PNET_BUILD_DIR", "build")
@@ -120,7 +120,7 @@ def test_every_study_names_runs_of_its_family_and_every_target_resolves(fake_pne
     with pytest.raises(KeyError, match="unknown target 'fig99'"):
         plan.target_outputs("fig99")
     # A study on its own: its record; the progress line follows its runs and their ground truths.
-    from plasticitynet.evaluation.progress import needed_runs
+    from plasticitynet.workflow.progress import needed_runs
     assert plan.target_outputs("regularizer_ablation") == [plan.study_record("regularizer_ablation")]
     runs = {(plan.runs[k].scene, plan.runs[k].run) for k in needed_runs(plan, ["regularizer_ablation"])}
     assert runs == {("sand_column_2d", r) for r in ("gt", "plasticitynet_1e-3", "plasticitynet_1e-3_w0")}
@@ -261,7 +261,7 @@ def test_pnet_reports_the_project_version_runs_are_keyed_by():
 
 
 def test_the_time_left_comes_from_the_runs_own_frame_timings(tmp_path, fake_pnet):
-    from plasticitynet.evaluation.progress import report
+    from plasticitynet.workflow.progress import report
     plan = plan_for(fake_pnet(), work=str(tmp_path / "work"), frames=6)
     keys = [k for k, j in plan.runs.items() if j.scene == "sand_column_2d"][:3]
     done, running, waiting = keys

@@ -8,7 +8,7 @@
 - return_map_net:  the learned von Mises return mapping of eqs. 12-13
 - trainer:         Adam + StepLR loop, CSV log, loss plot, resumable checkpoints
 - export:          float64 TorchScript + metadata JSON (read back by plasticitynet.load_model)
-- evaluate:        held-out accuracy (python -m plasticitynet.evaluate MODEL)
+- evaluate:        held-out accuracy (python -m plasticitynet.model_errors MODEL)
 - cli:             the argument parser behind the repository's train.py
 """
 

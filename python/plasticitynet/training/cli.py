@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 
 from .energy import ENERGY_FORMS
-from .evaluate import format_errors
+from .held_out import format_errors
 from .nets import REPRESENTATIONS
 from .return_map_net import RESIDUALS
 from .sampling import TRAINING_SAMPLINGS, WIDE_SCALE

@@ -771,7 +771,7 @@ class Trainer:
 
     def finish(self) -> TrainResult:
         """Evaluate the float64 model, export it with its errors, plot the curves."""
-        from .evaluate import evaluate
+        from .held_out import evaluate
 
         cfg = self.config
         paths = cfg.paths

@@ -1,6 +1,6 @@
 """Accuracy of a trained model on held-out samples (docs/metrics.md; issue 3 item 5).
 
-    python -m plasticitynet.evaluate MODEL [--samples N] [--seed S] [--json]
+    python -m plasticitynet.model_errors MODEL [--samples N] [--seed S] [--json]
 
 Energy models: the relative RMS gradient error
     e = sqrt( E||grad_F Psi(F, F0, h) - Ptilde(F, h)||^2 / E||Ptilde(F, h)||^2 )
@@ -237,7 +237,7 @@ def format_errors(errors: dict, title: str = "") -> str:
 def main(argv=None) -> int:
     from ..model import load_model
 
-    parser = argparse.ArgumentParser(prog="python -m plasticitynet.evaluate", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m plasticitynet.model_errors", description=__doc__.split("\n\n")[0])
     parser.add_argument("model", help="model file (.pt)")
     parser.add_argument("--samples", type=int, default=100_000, help="held-out samples (default 1e5)")
     parser.add_argument("--seed", type=int, default=EVAL_SEED, help=f"held-out seed (default {EVAL_SEED})")

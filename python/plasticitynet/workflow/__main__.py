@@ -1,12 +1,12 @@
 """The evaluation's jobs, one command each (what the workflow's rules run; docs/workflow.md).
 
-    python -m plasticitynet.evaluation simulate KEY   [--config FILE] [--threads N]
-    python -m plasticitynet.evaluation metric KEY     [--config FILE]
-    python -m plasticitynet.evaluation study NAME     [--config FILE]
-    python -m plasticitynet.evaluation sweep NAME     [--config FILE]
-    python -m plasticitynet.evaluation bench NAME     [--config FILE] [--threads N]
-    python -m plasticitynet.evaluation list           [--config FILE]   every run of the plan, with its key
-    python -m plasticitynet.evaluation progress       [--config FILE] [--jobs N] [--every S]
+    python -m plasticitynet.workflow simulate KEY   [--config FILE] [--threads N]
+    python -m plasticitynet.workflow metric KEY     [--config FILE]
+    python -m plasticitynet.workflow study NAME     [--config FILE]
+    python -m plasticitynet.workflow sweep NAME     [--config FILE]
+    python -m plasticitynet.workflow bench NAME     [--config FILE] [--threads N]
+    python -m plasticitynet.workflow list           [--config FILE]   every run of the plan, with its key
+    python -m plasticitynet.workflow progress       [--config FILE] [--jobs N] [--every S]
 """
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def bench(plan: Plan, name: str, out: Path, threads: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m plasticitynet.evaluation", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m plasticitynet.workflow", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("command", choices=["simulate", "metric", "study", "sweep", "bench", "list", "progress"])
     p.add_argument("name", nargs="?")
