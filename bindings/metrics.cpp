@@ -4,6 +4,7 @@
 #include <filesystem>
 
 #include "common.hpp"
+#include "pnet/contact/collisions/point_facet.hpp"
 #include "pnet/io/ply.hpp"
 #include "pnet/metrics/iou.hpp"
 #include "pnet/metrics/run_comparison.hpp"
@@ -154,6 +155,49 @@ spread_a / spread_b and height_a / height_b (deposit shape of each run, m) - plu
 clamped_a / clamped_b (particle positions at the domain's edge) and dx, the
 grid spacing used (dx = 0: DIR_A's). FileNotFoundError for a missing
 directory, ValueError for runs that cannot be compared (naming the file and field).)doc");
+
+    m.def(
+        "inside_count",
+        [](const py::object& points, const py::object& nodes, const py::object& facets) {
+            const py::array probe = py::array::ensure(nodes);
+            if (!probe || probe.ndim() != 2 || (probe.shape(1) != 2 && probe.shape(1) != 3))
+                throw py::value_error("nodes: expected a float64 array of shape (n, 2) or (n, 3)");
+            const py::ssize_t d = probe.shape(1);
+            const auto x = batch_array(nodes, "nodes", {d});
+            const auto p = batch_array(points, "points", {d});
+            const auto f = py::array_t<std::int64_t, py::array::c_style | py::array::forcecast>::ensure(facets);
+            if (!f || f.ndim() != 2 || f.shape(1) != d)
+                throw py::value_error("facets: expected an integer array of shape (k, " + std::to_string(d) + ")");
+            const std::int64_t n = x.shape(0);
+            for (py::ssize_t k = 0; k < f.size(); ++k)
+                if (f.data()[k] < 0 || f.data()[k] >= n)
+                    throw py::value_error("facets: node index " + std::to_string(f.data()[k]) + " outside [0, " +
+                                          std::to_string(n) + ")");
+            auto count = [&](auto dim_tag) {
+                constexpr int dim = decltype(dim_tag)::value;
+                std::vector<Vec<dim>> nodes_v(static_cast<std::size_t>(n));
+                for (std::int64_t i = 0; i < n; ++i)
+                    for (int a = 0; a < dim; ++a) nodes_v[i][a] = x.data()[i * dim + a];
+                std::vector<std::array<int, dim>> facets_v(static_cast<std::size_t>(f.shape(0)));
+                for (py::ssize_t k = 0; k < f.shape(0); ++k)
+                    for (int a = 0; a < dim; ++a) facets_v[k][a] = static_cast<int>(f.data()[k * dim + a]);
+                std::size_t inside = 0;
+                py::gil_scoped_release release;
+                for (py::ssize_t i = 0; i < p.shape(0); ++i) {
+                    Vec<dim> q;
+                    for (int a = 0; a < dim; ++a) q[a] = p.data()[i * dim + a];
+                    int on = -1;
+                    inside += inside_boundary(q, nodes_v, facets_v, &on);
+                }
+                return inside;
+            };
+            return d == 2 ? count(std::integral_constant<int, 2>{}) : count(std::integral_constant<int, 3>{});
+        },
+        py::arg("points"), py::arg("nodes"), py::arg("facets"),
+        R"doc(How many of the points (n, d) lie inside the body bounded by the closed boundary `facets`
+(k, d) node indices into nodes (m, d) - edges in 2D, triangles in 3D - or on it: the simulator's own
+test (2D: crossing number with an exact collinearity test; 3D: generalized winding number), the one
+that finds particles inside a mesh in a coupled run.)doc");
 
     m.def(
         "read_particle_frame",

@@ -1,5 +1,5 @@
 """The frames `pnet simulate` writes, read by the simulator's own readers (plasticitynet_sim, the C++ of
-cpp/pnet/io/ply.hpp): one reader of each format for C++ and Python.
+cpp/pnet/io/ply.hpp): one reader of each format for C++ and Python; and the inside-body test a coupled run is checked with.
 
 A particle frame holds position, velocity, mass and hardening per particle; a mesh frame (FEM, or
 frame_NNNNN_mesh.ply of a coupled run) every node with its velocity and the triangles (2D: the elements;
@@ -38,3 +38,10 @@ def read_mesh_ply(path: str | Path) -> MeshFrame:
 def read_particle_positions(path: str | Path) -> np.ndarray:
     """(n, dim) float64 particle positions of a particle frame, m."""
     return _sim().read_particle_frame(str(path))["position"]
+
+
+def inside_count(points: np.ndarray, nodes: np.ndarray, facets: np.ndarray) -> int:
+    """How many points lie inside (or on) the body a frame's closed boundary bounds (facets: edges in 2D,
+    triangles in 3D), by the simulator's own test (plasticitynet_sim.inside_count)."""
+    return int(_sim().inside_count(np.ascontiguousarray(points, dtype=np.float64),
+                                   np.ascontiguousarray(nodes, dtype=np.float64), np.asarray(facets)))

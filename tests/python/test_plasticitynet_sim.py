@@ -755,3 +755,20 @@ def test_one_launcher_writes_pnet_simulates_command_line(tmp_path):
     assert finished.status == 0 and (tmp_path / "r" / "frame_00001.ply").exists()
     bad = launch.run(launch.simulate_command(PNET, TINY / "sand_column_2d.json", tmp_path / "r2", dt=-1))
     assert bad.status == 2 and "--dt" in bad.output
+
+
+def test_inside_count_is_the_simulators_test():
+    """plasticitynet_sim.inside_count (the C++ inside_boundary) on a unit square's edges and a unit cube's
+    triangles: inside, outside and on the boundary (counted, as the simulator counts penetrations)."""
+    from plasticitynet.frames import inside_count
+
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 0]])
+    points = np.array([[0.5, 0.5], [0.1, 0.9], [1.5, 0.5], [-0.1, 0.2], [0.5, 0.0]])  # 2 in, 2 out, 1 on
+    assert inside_count(points, square, edges) == 3
+    cube = np.array([[x, y, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)])
+    faces = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                      [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    assert inside_count(np.array([[0.5, 0.5, 0.5], [0.2, 0.7, 0.9], [1.2, 0.5, 0.5]]), cube, faces) == 2
+    with pytest.raises(ValueError, match="facets: node index 9"):
+        pns.inside_count(points, square, np.array([[0, 9]]))

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..frames import read_mesh_ply, read_particle_positions
+from ..frames import inside_count, read_mesh_ply, read_particle_positions
 from .plan import Plan
 from .runner import frame_numbers
 
@@ -137,35 +137,6 @@ def boundary_edges(triangles: np.ndarray) -> np.ndarray:
     return edges[index[counts == 1]]
 
 
-def inside_count_2d(points: np.ndarray, nodes: np.ndarray, edges: np.ndarray) -> int:
-    """Points inside the region the closed boundary `edges` bounds: crossing number."""
-    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
-    near = points[np.all((points >= lo) & (points <= hi), axis=1)]
-    if len(near) == 0:
-        return 0
-    a, b = nodes[edges[:, 0]], nodes[edges[:, 1]]
-    px, py = near[:, None, 0], near[:, None, 1]
-    straddle = (a[None, :, 1] > py) != (b[None, :, 1] > py)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xc = a[None, :, 0] + (py - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / (b[None, :, 1] - a[None, :, 1])
-    return int(np.sum(np.sum(straddle & (px < xc), axis=1) % 2 == 1))
-
-
-def inside_count_3d(points: np.ndarray, nodes: np.ndarray, triangles: np.ndarray) -> int:
-    """Points inside the closed surface `triangles`: generalized winding number above 1/2."""
-    lo, hi = nodes.min(axis=0), nodes.max(axis=0)
-    near = points[np.all((points >= lo) & (points <= hi), axis=1)]
-    if len(near) == 0:
-        return 0
-    a, b, c = (nodes[triangles[:, i]][None] - near[:, None] for i in range(3))
-    la, lb, lc = (np.linalg.norm(v, axis=2) for v in (a, b, c))
-    numerator = np.einsum("pti,pti->pt", a, np.cross(b, c))
-    denominator = (la * lb * lc + np.einsum("pti,pti->pt", a, b) * lc + np.einsum("pti,pti->pt", a, c) * lb
-                   + np.einsum("pti,pti->pt", b, c) * la)
-    winding = np.abs(np.sum(2.0 * np.arctan2(numerator, denominator), axis=1)) / (4.0 * np.pi)
-    return int(np.sum(winding > 0.5))
-
-
 def coupling_metric(plan: Plan, gt: Path, run: Path, dim: int, frame_dt: float, compare_dir: Path) -> dict:
     sand = {int(r["frame"]): r for r in pnet_compare(plan, gt, run, compare_dir)}
     rest = read_mesh_ply(_mesh_file(gt, 0, True))
@@ -178,8 +149,7 @@ def coupling_metric(plan: Plan, gt: Path, run: Path, dim: int, frame_dt: float, 
             continue
         mesh = read_mesh_ply(_mesh_file(run, f, True))
         particles = read_particle_positions(run / "frames" / f"frame_{f:05d}.ply")[:, :dim]  # 2D: z = 0
-        inside = (inside_count_2d(particles, mesh.position, boundary) if dim == 2
-                  else inside_count_3d(particles, mesh.position, boundary))
+        inside = inside_count(particles, mesh.position, boundary)
         d = np.linalg.norm(mesh.position - read_mesh_ply(_mesh_file(gt, f, True)).position, axis=1)
         j = sand.get(f, {"soft_iou": 1.0, "soft_iou_coarse": 1.0})
         rows.append({"frame": f, "time_s": f * frame_dt, "jaccard": j["soft_iou"], "jaccard_4dx": j["soft_iou_coarse"],
