@@ -42,6 +42,18 @@ py::array_t<double> rows_of(const std::vector<double>& flat, int dim) {
     return a;
 }
 
+/// What particle and mesh frames share: dim, position and velocity (n, dim), hardening, run_id.
+template <typename Frame>
+py::dict frame_dict(const Frame& frame) {
+    py::dict d;
+    d["dim"] = frame.dim;
+    d["position"] = rows_of(frame.position, frame.dim);
+    d["velocity"] = rows_of(frame.velocity, frame.dim);
+    d["hardening"] = py::array_t<double>(static_cast<py::ssize_t>(frame.hardening.size()), frame.hardening.data());
+    d["run_id"] = frame.run_id;
+    return d;
+}
+
 /// A frame file read by `read`: FileNotFoundError when it is missing, ValueError naming the file and the
 /// problem when it is not a frame `pnet simulate` writes.
 template <typename Read>
@@ -203,13 +215,8 @@ that finds particles inside a mesh in a coupled run.)doc");
         "read_particle_frame",
         [](const py::object& path) {
             const PlyParticles p = read_frame(path, [](const std::string& f) { return read_particles_ply(f); });
-            py::dict d;
-            d["dim"] = p.dim;
-            d["position"] = rows_of(p.position, p.dim);
-            d["velocity"] = rows_of(p.velocity, p.dim);
+            py::dict d = frame_dict(p);
             d["mass"] = py::array_t<double>(static_cast<py::ssize_t>(p.mass.size()), p.mass.data());
-            d["hardening"] = py::array_t<double>(static_cast<py::ssize_t>(p.hardening.size()), p.hardening.data());
-            d["run_id"] = p.run_id;
             return d;
         },
         py::arg("path"),
@@ -222,16 +229,11 @@ else than such a frame.)doc");
         "read_mesh_frame",
         [](const py::object& path) {
             const PlyMesh p = read_frame(path, [](const std::string& f) { return read_mesh_ply(f); });
-            py::dict d;
-            d["dim"] = p.dim;
-            d["position"] = rows_of(p.position, p.dim);
-            d["velocity"] = rows_of(p.velocity, p.dim);
+            py::dict d = frame_dict(p);
             const py::ssize_t m = static_cast<py::ssize_t>(p.triangles.size() / 3);
             py::array_t<std::int64_t> triangles({m, py::ssize_t{3}});
             std::copy(p.triangles.begin(), p.triangles.end(), triangles.mutable_data());
             d["triangles"] = triangles;
-            d["hardening"] = py::array_t<double>(static_cast<py::ssize_t>(p.hardening.size()), p.hardening.data());
-            d["run_id"] = p.run_id;
             return d;
         },
         py::arg("path"),
