@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -123,13 +122,11 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
     particle_energy_.begin_step(particles.size());
     this->invalidate_pattern();  // a new grid
     multigrid_built_ = false;
-    multigrid_seconds_ = 0.0;
 }
 
 template <int dim>
 void IncrementalPotential<dim>::hessian_prepared(const VecX& /*x*/) {
     if (!multigrid_on_ || (multigrid_built_ && !multigrid_per_hessian_)) return;
-    const auto start = std::chrono::steady_clock::now();
     if (!multigrid_built_) {  // this step's grid
         std::vector<int> coordinates(dim * dof_node_.size());
         for (std::size_t k = 0; k < dof_node_.size(); ++k) grid_->coordinates(dof_node_[k], &coordinates[dim * k]);
@@ -142,7 +139,6 @@ void IncrementalPotential<dim>::hessian_prepared(const VecX& /*x*/) {
     }
     multigrid_.set_operator(*assembled, this->hessian_symmetric());
     multigrid_built_ = true;
-    multigrid_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 template <int dim>

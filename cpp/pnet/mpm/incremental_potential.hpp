@@ -128,8 +128,6 @@ public:
     bool has_preconditioner() const override { return multigrid_on_; }
     void apply_preconditioner(const VecX& r, VecX& z) const override { multigrid_.apply(r, z); }
     const GridMultigrid& multigrid() const { return multigrid_; }
-    /// Seconds spent building the multigrid hierarchy (the assembly included) since the last begin_step().
-    double multigrid_seconds() const { return multigrid_seconds_; }
 
     /// Seconds spent in the particle energies (evaluate) and in Hessian-vector
     /// products since the last begin_step().
@@ -142,7 +140,6 @@ public:
 
 protected:
     void hessian_prepared(const VecX& x) override;
-
 
 private:
     InertiaForm inertia_;
@@ -171,7 +168,6 @@ private:
     GridMultigrid multigrid_;
     SparseMatrix multigrid_matrix_;
     mutable std::vector<int> assembly_start_;
-    double multigrid_seconds_ = 0.0;
 };
 
 }  // namespace pnet

@@ -112,15 +112,23 @@ ParticleRenderOptions mesh_render_options(const Scene& scene, double time, int d
     return frame_render_options(scene, time, dim, o, colour, std::max(0.1, 2.0 * speed_scale));
 }
 
-/// A 2D mesh frame: every node and triangle, each triangle coloured by its mean speed or hardening.
-PlyMesh mesh_frame_2d(const FemState<2>& state, const Mesh<2>& mesh, const FrameFiles& o, std::vector<double>& colour) {
+/// A mesh frame's nodes: every node's position and velocity.
+template <int dim>
+PlyMesh mesh_nodes(const FemState<dim>& state, const FrameFiles& o) {
     PlyMesh ply;
     ply.run_id = o.run_id;
+    ply.dim = dim;
     for (std::size_t i = 0; i < state.x.size(); ++i)
-        for (int a = 0; a < 2; ++a) {
+        for (int a = 0; a < dim; ++a) {
             ply.position.push_back(state.x[i][a]);
             ply.velocity.push_back(state.v[i][a]);
         }
+    return ply;
+}
+
+/// A 2D mesh frame: every node and triangle, each triangle coloured by its mean speed or hardening.
+PlyMesh mesh_frame(const FemState<2>& state, const Mesh<2>& mesh, const FrameFiles& o, std::vector<double>& colour) {
+    PlyMesh ply = mesh_nodes(state, o);
     colour.resize(mesh.elements.size());
     for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
         Vec<2> v = Vec<2>::Zero();
@@ -150,17 +158,6 @@ void write_particle_frame(const FrameFiles& o, const Particles<dim>& particles, 
 
 namespace {
 
-/// A 2D FEM frame: the mesh (PLY, optionally VTU) and its picture.
-void write_mesh_frame_2d(const FrameFiles& o, const FemState<2>& state, const Mesh<2>& mesh, int frame, double time) {
-    const fs::path& out = o.out;
-    std::vector<double> colour;
-    const PlyMesh ply = mesh_frame_2d(state, mesh, o, colour);
-    write_mesh_ply((out / frame_name(frame, "ply")).string(), ply);
-    if (o.vtu) write_mesh_vtu(out / frame_name(frame, "vtu"), ply);
-    const ParticleRenderOptions r = mesh_render_options(o.scene, time, 2, o, colour);
-    write_frame_png(out / frame_name(frame, "png"), render_mesh_2d(ply.position, ply.triangles, colour, r), o);
-}
-
 /// The element each boundary facet of a 3D mesh belongs to (the one element that has it).
 std::vector<int> boundary_owner(const Mesh<3>& mesh) {
     std::map<std::array<int, 3>, int> owner;
@@ -182,16 +179,9 @@ std::vector<int> boundary_owner(const Mesh<3>& mesh) {
 
 /// A 3D mesh's frame: every node with the boundary triangles (the PLY), each triangle coloured by
 /// its element's speed or hardening.
-PlyMesh mesh_frame_3d(const FemState<3>& state, const Mesh<3>& mesh, const FrameFiles& o, std::vector<double>& colour) {
+PlyMesh mesh_frame(const FemState<3>& state, const Mesh<3>& mesh, const FrameFiles& o, std::vector<double>& colour) {
     const std::vector<int> owner = boundary_owner(mesh);
-    PlyMesh ply;
-    ply.run_id = o.run_id;
-    ply.dim = 3;
-    for (std::size_t i = 0; i < state.x.size(); ++i)
-        for (int a = 0; a < 3; ++a) {
-            ply.position.push_back(state.x[i][a]);
-            ply.velocity.push_back(state.v[i][a]);
-        }
+    PlyMesh ply = mesh_nodes(state, o);
     colour.resize(mesh.boundary.size());
     for (std::size_t f = 0; f < mesh.boundary.size(); ++f) {
         const int e = owner[f];
@@ -202,13 +192,6 @@ PlyMesh mesh_frame_3d(const FemState<3>& state, const Mesh<3>& mesh, const Frame
         colour[f] = o.color == "speed" ? v.norm() : state.hardening[e];
     }
     return ply;
-}
-
-PlyMesh mesh_frame(const FemState<2>& state, const Mesh<2>& mesh, const FrameFiles& o, std::vector<double>& colour) {
-    return mesh_frame_2d(state, mesh, o, colour);
-}
-PlyMesh mesh_frame(const FemState<3>& state, const Mesh<3>& mesh, const FrameFiles& o, std::vector<double>& colour) {
-    return mesh_frame_3d(state, mesh, o, colour);
 }
 
 /// The whole tetrahedral mesh as VTU (ParaView): node velocities, element hardening.
@@ -222,27 +205,31 @@ void write_mesh_vtu(const fs::path& path, const FemState<3>& state, const Mesh<3
     write_vtu(path.string(), vtu);
 }
 
-/// A 3D FEM frame: every node with the boundary triangles (PLY), the whole tetrahedral
-/// mesh (VTU, for ParaView), and a shaded render of the surface (PNG).
-void write_mesh_frame_3d(const FrameFiles& o, const FemState<3>& state, const Mesh<3>& mesh, int frame, double time) {
+}  // namespace
+
+/// A 2D FEM frame: the mesh (PLY, optionally VTU) and its picture.
+template <>
+void write_mesh_frame<2>(const FrameFiles& o, const FemState<2>& state, const Mesh<2>& mesh, int frame, double time) {
     const fs::path& out = o.out;
     std::vector<double> colour;
-    const PlyMesh ply = mesh_frame_3d(state, mesh, o, colour);
+    const PlyMesh ply = mesh_frame(state, mesh, o, colour);
+    write_mesh_ply((out / frame_name(frame, "ply")).string(), ply);
+    if (o.vtu) write_mesh_vtu(out / frame_name(frame, "vtu"), ply);
+    const ParticleRenderOptions r = mesh_render_options(o.scene, time, 2, o, colour);
+    write_frame_png(out / frame_name(frame, "png"), render_mesh_2d(ply.position, ply.triangles, colour, r), o);
+}
+
+/// A 3D FEM frame: every node with the boundary triangles (PLY), the whole tetrahedral
+/// mesh (VTU, for ParaView), and a shaded render of the surface (PNG).
+template <>
+void write_mesh_frame<3>(const FrameFiles& o, const FemState<3>& state, const Mesh<3>& mesh, int frame, double time) {
+    const fs::path& out = o.out;
+    std::vector<double> colour;
+    const PlyMesh ply = mesh_frame(state, mesh, o, colour);
     write_mesh_ply((out / frame_name(frame, "ply")).string(), ply);
     write_mesh_vtu(out / frame_name(frame, "vtu"), state, mesh, ply);
     const ParticleRenderOptions r = mesh_render_options(o.scene, time, 3, o, colour);
     write_frame_png(out / frame_name(frame, "png"), render_mesh_3d(ply.position, ply.triangles, colour, r), o);
-}
-
-}  // namespace
-
-template <>
-void write_mesh_frame<2>(const FrameFiles& o, const FemState<2>& state, const Mesh<2>& mesh, int frame, double time) {
-    write_mesh_frame_2d(o, state, mesh, frame, time);
-}
-template <>
-void write_mesh_frame<3>(const FrameFiles& o, const FemState<3>& state, const Mesh<3>& mesh, int frame, double time) {
-    write_mesh_frame_3d(o, state, mesh, frame, time);
 }
 
 template <int dim>

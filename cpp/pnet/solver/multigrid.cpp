@@ -98,8 +98,8 @@ void GridMultigrid::set_grid(int dim, const std::vector<int>& coordinates, const
             level.colour_nodes[colour_of(&level.coordinates[dim * k], dim)].push_back(static_cast<int>(k));
         if (nodes <= options_.coarsest_nodes || levels() >= options_.max_levels) break;
 
-        // The coarser level: each node's parents along every axis (c even: c / 2, weight 1; odd: the
-        // two neighbours, 1/2 each), numbered in the order the fine nodes first reach them.
+        // The coarser level: each node's 2^d parents (below), numbered in the order the fine nodes
+        // first reach them.
         auto coarse = std::make_unique<Level>();
         std::unordered_map<std::int64_t, int> index;
         index.reserve(static_cast<std::size_t>(nodes));
@@ -107,26 +107,15 @@ void GridMultigrid::set_grid(int dim, const std::vector<int>& coordinates, const
         entries.reserve(static_cast<std::size_t>(nodes) * dim * (dim == 2 ? 4 : 8));
         for (Eigen::Index k = 0; k < nodes; ++k) {
             const int* c = &level.coordinates[dim * k];
-            // Per axis: the parents' coordinates and weights.
+            // Per axis the two parents and their weights, by the quadratic B-splines' refinement: a
+            // coarse spline is 1/4, 3/4, 3/4, 1/4 of the fine ones at 2J .. 2J + 3 (coarse index J
+            // stored as J + 1, so that it stays >= 0).
             int parent_c[3][2];
-            double parent_w[3][2];
-            int count[3];
+            const double parent_w[2] = {0.75, 0.25};
             for (int a = 0; a < dim; ++a) {
-                if (options_.prolongation == MultigridOptions::Prolongation::Linear) {
-                    parent_c[a][0] = c[a] / 2;
-                    parent_c[a][1] = c[a] / 2 + 1;
-                    count[a] = c[a] % 2 == 0 ? 1 : 2;
-                    parent_w[a][0] = parent_w[a][1] = count[a] == 1 ? 1.0 : 0.5;
-                } else {
-                    // Quadratic B-spline refinement: a coarse spline is 1/4, 3/4, 3/4, 1/4 of the fine
-                    // ones at 2J .. 2J + 3 (coarse index J stored as J + 1, so that it stays >= 0).
-                    count[a] = 2;
-                    const int J = c[a] % 2 == 0 ? c[a] / 2 - 1 : (c[a] - 1) / 2;
-                    parent_c[a][0] = J + 1;
-                    parent_c[a][1] = c[a] % 2 == 0 ? J + 2 : J;
-                    parent_w[a][0] = 0.75;
-                    parent_w[a][1] = 0.25;
-                }
+                const int J = c[a] % 2 == 0 ? c[a] / 2 - 1 : (c[a] - 1) / 2;
+                parent_c[a][0] = J + 1;
+                parent_c[a][1] = c[a] % 2 == 0 ? J + 2 : J;
             }
             int corner[3] = {0, 0, 0};
             while (true) {
@@ -134,14 +123,14 @@ void GridMultigrid::set_grid(int dim, const std::vector<int>& coordinates, const
                 double w = 1.0;
                 for (int a = 0; a < dim; ++a) {
                     parent[a] = parent_c[a][corner[a]];
-                    w *= parent_w[a][corner[a]];
+                    w *= parent_w[corner[a]];
                 }
                 const auto [it, inserted] = index.emplace(key_of(parent, dim), static_cast<int>(index.size()));
                 if (inserted) coarse->coordinates.insert(coarse->coordinates.end(), parent, parent + dim);
                 for (int a = 0; a < dim; ++a)
                     if (level.free[dim * k + a] > 0.0) entries.emplace_back(dim * k + a, dim * it->second + a, w);
                 int a = 0;  // next corner
-                while (a < dim && ++corner[a] == count[a]) corner[a++] = 0;
+                while (a < dim && ++corner[a] == 2) corner[a++] = 0;
                 if (a == dim) break;
             }
         }

@@ -3,15 +3,15 @@
 // step's grid velocities; docs/solver.md, "Multigrid"), as a preconditioner of CG and BiCGSTAB.
 // After Wang et al. 2020 (HOT):
 //
-//   levels    the nodes of spacing dx, 2dx, 4dx, ...: a node of integer coordinates c has its
-//             coarse parents at c / 2 along each axis (one parent where c is even, the two
-//             neighbours with weight 1/2 where it is odd): P is the tensor product of 1D linear
-//             interpolation, one copy per velocity component;
+//   levels    the nodes of spacing dx, 2dx, 4dx, ...: P is the refinement relation of the quadratic
+//             B-splines (a coarse spline is 1/4, 3/4, 3/4, 1/4 of four fine ones along each axis,
+//             so the coarse spaces are nested), a tensor product over the axes, one copy per
+//             velocity component;
 //   operators A_{l+1} = P^T A_l P (Galerkin; R = P^T), from the symmetric part of the fine
 //             operator (a Hessian with a skew part is preconditioned by its symmetric part);
 //   smoother  block Gauss-Seidel on the nodes' d x d blocks, multi-coloured: the nodes coupled to a
 //             node lie within two nodes of it along each axis on every level (a quadratic B-spline
-//             stencil on the finest; linear interpolation keeps the reach on the coarser ones), so
+//             stencil on the finest; the Galerkin product keeps the reach on the coarser ones), so
 //             the 3^d colours of (c mod 3) are independent sets, updated in parallel and in the
 //             same order whatever the thread count. Forward sweeps before the coarse correction,
 //             backward after, so the V-cycle is a symmetric operator;
@@ -31,7 +31,6 @@ struct MultigridOptions {
     int smoothing_sweeps = 1;       // forward sweeps before and backward sweeps after each coarse correction
     int coarsest_nodes = 400;       // stop coarsening once a level has at most this many nodes
     int max_levels = 12;
-    enum class Prolongation { Linear, QuadraticBSpline } prolongation = Prolongation::QuadraticBSpline;
 };
 
 class GridMultigrid {
