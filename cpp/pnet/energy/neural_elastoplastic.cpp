@@ -100,6 +100,7 @@ void NeuralElastoplasticEnergy<dim>::set_reference(const Mat<dim>* F0, const dou
     hardening_clamped_ = clamped;
     correction_ready_ = false;
     buffers_at_reference_ = false;
+    iterate_at_reference_ = false;
     if (form == EnergyForm::Eq8) {
         stress_.resize(n);
         if (return_map_) {  // a learned return mapping: all states in one evaluation
@@ -128,21 +129,14 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
     net_.set_reference(global ? identity_.data() : F0_.data(), has_hardening_ ? network_h_.data() : nullptr, n);
     // N and grad_F N at F = F0: eq. 8's correction, the offset, and the next evaluation at F0 (with
     // Hess N too when the caller asks: Newton's Hessian at its iterate, in the same pass).
-    if (hessian && hessian_precision_ == FusedMlp::Precision::Single && form == EnergyForm::Eq8 && relative_) {
-        // The Hessian, and c's gradient, in single precision; the offset N(F0) by a double value pass
-        // (Options::hessian_precision). No later evaluation reads these buffers as a double gradient at
-        // F0: exactly_at_reference() answers there.
-        ++network_passes_;
-        net_.evaluate(F0_.data(), FusedMlp::Order::Value, net_value_.data());
-        single_value_.resize(n);
-        ++network_passes_;
-        net_.evaluate(F0_.data(), FusedMlp::Order::Hessian, single_value_.data(), net_gradient_.data(), hessian,
-                      FusedMlp::Precision::Single);
-    } else {
-        ++network_passes_;
-        net_.evaluate(F0_.data(), hessian ? FusedMlp::Order::Hessian : FusedMlp::Order::Gradient, net_value_.data(),
-                      net_gradient_.data(), hessian);
-    }
+    // In single precision (Options::hessian_precision) N(F0) is float's too: the offset of Psi(F0) = 0
+    // below, while trial points are valued as differences from F0 (value()); a double pass at another
+    // point takes a double offset first (ensure_offset()).
+    const bool single = single_at_reference();
+    ++network_passes_;
+    net_.evaluate(F0_.data(), hessian ? FusedMlp::Order::Hessian : FusedMlp::Order::Gradient, net_value_.data(),
+                  net_gradient_.data(), hessian, single ? FusedMlp::Precision::Single : FusedMlp::Precision::Double);
+    offset_exact_ = !single;
     if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {
         // c = grad_F N(I, slot, h), the rejected forms' correction at the identity.
         identity_value_.resize(n);
@@ -165,7 +159,21 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
         }
     }
     correction_ready_ = true;
-    buffers_at_reference_ = true;
+    buffers_at_reference_ = !single;  // no later pass reads float buffers as double ones
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::ensure_offset() const {
+    if (offset_exact_) return;
+    ++network_passes_;
+    net_.evaluate(F0_.data(), FusedMlp::Order::Value, offset_.data());
+    offset_exact_ = true;
+}
+
+template <int dim>
+bool NeuralElastoplasticEnergy<dim>::single_at_reference() const {
+    return hessian_precision_ == FusedMlp::Precision::Single && metadata_.energy_form == EnergyForm::Eq8 &&
+           relative_;
 }
 
 template <int dim>
@@ -195,7 +203,8 @@ Mat<dim> NeuralElastoplasticEnergy<dim>::correction(std::size_t p) const {
 /// reference, psi - Psi(F0) = E ((N - N0) - c : (F - F0) + w mu/2 |F - F0|^2), summed in that form so that
 /// no large constant is formed and cancelled.
 template <int dim>
-void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
+void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient,
+                                            bool difference) const {
     const double wmu = (w_ + damping_) * mu_train_;
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
 #pragma omp parallel for schedule(static) if (count >= 1024)
@@ -207,7 +216,8 @@ void NeuralElastoplasticEnergy<dim>::finish(const Mat<dim>* F, double* psi, Mat<
             dF2 += dFk * dFk;
             if (gradient) (*(gradient + p))(k / dim, k % dim) = E_ * (net_gradient_[p * kM + k] - c_[p][k] + wmu * dFk);
         }
-        psi[p] = E_ * ((net_value_[p] - offset_[p]) - cF + 0.5 * wmu * dF2);  // offset_: N0 or 0
+        const double dN = difference ? net_value_[p] : net_value_[p] - offset_[p];  // offset_: N0 or 0
+        psi[p] = E_ * (dN - cF + 0.5 * wmu * dF2);
     }
 }
 
@@ -221,19 +231,28 @@ void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const
     if (at_reference(F)) return finish(F, psi, nullptr);
     buffers_at_reference_ = false;
     ++network_passes_;
+    if (iterate_at_reference_ && single_at_reference()) {
+        // A trial point of a line search from the reference (the rebased Newton's every one), whose
+        // value is 0 exactly: N(F) - N(F0) in one float pass of the change.
+        net_.difference(F, F0_.data(), net_value_.data(), FusedMlp::Precision::Single);
+        return finish(F, psi, nullptr, true);
+    }
+    ensure_offset();
     net_.evaluate(F, FusedMlp::Order::Value, net_value_.data());
     finish(F, psi, nullptr);
 }
 
 template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
-    if (exactly_at_reference(F)) {
+    iterate_at_reference_ = exactly_at_reference(F);
+    if (iterate_at_reference_) {
         std::fill(psi, psi + size(), 0.0);
         for (std::size_t p = 0; p < size(); ++p) gradient[p] = E_ * stress_[p];
         return;
     }
     ensure_correction();
     if (at_reference(F)) return finish(F, psi, gradient);
+    ensure_offset();
     buffers_at_reference_ = false;
     ++network_passes_;
     net_.evaluate(F, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
@@ -285,18 +304,30 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
     }
     // Hess_F N is symmetric, so the row-major output is also the column-major
     // Eigen matrix.
+    iterate_at_reference_ = exactly_at_reference(F);
     if (!correction_ready_ && metadata_.energy_form == EnergyForm::Eq8 && is_reference(F)) {
         // At the reference before its correction: N, grad N and Hess N at F0 in one pass, which gives
         // c and the offset too (the Newton outer iteration's iterates).
         ensure_correction(reinterpret_cast<double*>(hessian));
+        finish(F, psi, gradient);
+    } else if (iterate_at_reference_ && single_at_reference()) {
+        // At a reference whose correction stands (a Coulomb floor's next pass starts there): the
+        // Hessian pass in float, Psi and its gradient exact there.
+        ++network_passes_;
+        net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
+                      reinterpret_cast<double*>(hessian), FusedMlp::Precision::Single);
+        buffers_at_reference_ = false;
+        std::fill(psi, psi + size(), 0.0);
+        for (std::size_t p = 0; p < size(); ++p) gradient[p] = E_ * stress_[p];
     } else {
         ensure_correction();
+        ensure_offset();
         buffers_at_reference_ = false;
         ++network_passes_;
         net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
                       reinterpret_cast<double*>(hessian));
+        finish(F, psi, gradient);
     }
-    finish(F, psi, gradient);
     const double wmu = (w_ + damping_) * mu_train_;
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size());
 #pragma omp parallel for schedule(static) if (count >= 256)

@@ -78,12 +78,14 @@ public:
         /// particle energies). The symmetrized tangent made Newton chatter on stiff granular flow
         /// (docs/solver.md, measured).
         bool nonsymmetric_tangent = false;
-        /// The arithmetic of the network's Hessian pass at the reference (Newton's Hessian under the
-        /// rebased Newton: eq. 8 relative to its reference, F = F0). Single: the MLP's value, gradient and
-        /// Hessian there in float (twice the particles per instruction); N(F0), which the line search
-        /// compares every trial value with, is then taken by a double value pass, and c's grad N(F0) keeps
-        /// float's 1e-6 relative error, which shifts the line search's slope by that fraction of the stress
-        /// (the gradient Newton solves with is E Ptilde(F0), exact either way). Every other evaluation,
+        /// The arithmetic of the network's passes at and from the reference (eq. 8 relative to its
+        /// reference; under the rebased Newton every iterate is one). Single: the Hessian pass there (N,
+        /// grad N and Hess N at F = F0) in float (twice the particles per instruction), and each trial point
+        /// of a line search from the reference valued by one float pass of the change N(F) - N(F0)
+        /// (FusedMlp::difference: relative to the change, where float's N(F) - N(F0) would rank noise).
+        /// c's grad N(F0) keeps float's 1e-6 relative error, which shifts the line search's slope by that
+        /// fraction of the stress; the gradient Newton solves with is E Ptilde(F0), exact either way.
+        /// Every other evaluation (a Newton iterate away from its reference: the paper's fixed point),
         /// and every one of the other energy forms, is double.
         FusedMlp::Precision hessian_precision = FusedMlp::Precision::Double;
     };
@@ -134,7 +136,9 @@ public:
     const LearnedReturnMap<dim>* learned_return_map() const { return return_map_.get(); }
 
 private:
-    void finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const;
+    /// Psi (and its gradient) from the network's buffers: N - N(F0) there, or with `difference` the
+    /// change N(F) - N(F0) itself (value()'s float pass of the change).
+    void finish(const Mat<dim>* F, double* psi, Mat<dim>* gradient, bool difference = false) const;
 
     mutable EnergyNetwork<dim> net_;  // its reference is set lazily (ensure_correction)
     Material<dim> training_material_;
@@ -160,7 +164,10 @@ private:
     // evaluation first needs them (not at all where every evaluation is at the reference).
     mutable bool correction_ready_ = false;
     mutable std::vector<Eigen::Matrix<double, kM, 1>> c_;  // row-major vec of c (dimensionless)
-    mutable std::vector<double> offset_;                   // Psi(F0) / E when relative_, else 0
+    mutable std::vector<double> offset_;                   // N(F0) when relative_, else 0
+    // Whether offset_ is a double pass's N(F0): a float Hessian pass at the reference gives float's,
+    // enough for Psi(F0) = 0 there, and a double pass elsewhere takes a double offset (ensure_offset).
+    mutable bool offset_exact_ = true;
     // The rejected energy forms only: identities (the F0 slot or the correction point) and N, grad N there.
     std::vector<Mat<dim>> identity_;
     mutable std::vector<double> identity_value_, identity_gradient_;
@@ -169,10 +176,17 @@ private:
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> net_value_, net_gradient_;
-    mutable std::vector<double> single_value_;  // the single-precision pass's N(F0), not used
     // net_value_ and net_gradient_ hold N and grad N at F0 (ensure_correction()'s pass) until another
     // evaluation: the fixed point's next solve starts at F(v) = F0 and reuses them.
     mutable bool buffers_at_reference_ = false;
+    // Whether the last point Newton asked a gradient at (its iterate) was exactly the reference, whose
+    // Psi is 0: its line search's trial points are then valued by the change from F0 (value()).
+    mutable bool iterate_at_reference_ = false;
+    /// Whether the passes at and from the reference run in float: Options::hessian_precision single,
+    /// eq. 8 relative to its reference.
+    bool single_at_reference() const;
+    /// Makes offset_ a double pass's N(F0) (one value pass, once per reference, where it is float's).
+    void ensure_offset() const;
     /// Whether F[0..size()) is bitwise the reference F0.
     bool is_reference(const Mat<dim>* F) const;
     /// Whether F[0..size()) is bitwise the reference F0 and the buffers still hold its pass.

@@ -98,18 +98,34 @@ void EnergyNetwork<dim>::set_reference(const Mat<dim>* F0, const double* h, std:
 }
 
 template <int dim>
+void EnergyNetwork<dim>::set_rows(const Mat<dim>* F, std::vector<double>& rows) const {
+    if (&rows != &inputs_) rows = inputs_;  // the reference's slots
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size_);
+    const bool principal = representation_ == EnergyRepresentation::Principal;
+#pragma omp parallel for schedule(static) if (count >= 1024)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        double* x = &rows[p * input_width_];
+        const Mat<dim> G = principal ? Mat<dim>(U_[p].transpose() * F[p] * V_[p]) : F[p];
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) x[i * dim + j] = G(i, j);
+    }
+}
+
+template <int dim>
+void EnergyNetwork<dim>::difference(const Mat<dim>* F, const Mat<dim>* from, double* change,
+                                    FusedMlp::Precision precision) const {
+    set_rows(from, from_inputs_);
+    set_rows(F, inputs_);
+    mlp(precision).difference(inputs_.data(), from_inputs_.data(), size_, change);
+}
+
+template <int dim>
 void EnergyNetwork<dim>::evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient,
                                   double* hessian, FusedMlp::Precision precision) const {
     const FusedMlp& mlp = this->mlp(precision);
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size_);
     const bool principal = representation_ == EnergyRepresentation::Principal;
-#pragma omp parallel for schedule(static) if (count >= 1024)
-    for (std::ptrdiff_t p = 0; p < count; ++p) {
-        double* x = &inputs_[p * input_width_];
-        const Mat<dim> G = principal ? Mat<dim>(U_[p].transpose() * F[p] * V_[p]) : F[p];
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j) x[i * dim + j] = G(i, j);
-    }
+    set_rows(F, inputs_);
     if (!principal || order == FusedMlp::Order::Value) {
         mlp.evaluate(inputs_.data(), size_, order, value, gradient, hessian);
         return;

@@ -47,6 +47,11 @@ public:
     void evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient = nullptr,
                   double* hessian = nullptr, FusedMlp::Precision precision = FusedMlp::Precision::Double) const;
 
+    /// change[r] = N(F_r, F0_r, h_r) - N(from_r, F0_r, h_r), accurate relative to the change
+    /// (FusedMlp::difference), in the MLP arithmetic of `precision`.
+    void difference(const Mat<dim>* F, const Mat<dim>* from, double* change,
+                    FusedMlp::Precision precision = FusedMlp::Precision::Double) const;
+
     /// The MLP's input for one forward() row [vec F, vec F0, (h), (u)] of a model
     /// file (`parameters` entries u): what the loader checks forward() against.
     static void mlp_input(EnergyRepresentation representation, bool has_hardening, const double* forward_row,
@@ -65,7 +70,9 @@ private:
     int input_width_;
     std::size_t size_ = 0;
     std::vector<Mat<dim>> U_, V_;  // Principal: the frame of each row's F0
-    mutable std::vector<double> inputs_;
+    mutable std::vector<double> inputs_, from_inputs_;  // the MLP's rows (the F slot set per evaluation)
+    /// Writes the F slot of `rows` (inputs_ or from_inputs_, whose other slots are the reference's).
+    void set_rows(const Mat<dim>* F, std::vector<double>& rows) const;
     mutable std::vector<double> mlp_gradient_, mlp_hessian_;  // Principal: in G, before the change of frame
 };
 

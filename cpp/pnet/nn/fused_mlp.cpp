@@ -126,26 +126,73 @@ public:
 
     void evaluate(const double* x, std::size_t rows, FusedMlp::Order order, double* value, double* gradient,
                   double* hessian) const override {
-        const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((rows + kLanes - 1) / kLanes);
-        auto run = [&](std::ptrdiff_t b) {
-            const std::size_t first = static_cast<std::size_t>(b) * kLanes;
-            const int lanes = static_cast<int>(std::min<std::size_t>(kLanes, rows - first));
+        for_each_block(rows, [&](std::size_t first, int lanes) {
             block(x + first * In, lanes, order, value + first, gradient ? gradient + first * M : nullptr,
                   hessian ? hessian + first * M * M : nullptr);
+        });
+    }
+
+    void difference(const double* x, const double* x0, std::size_t rows, double* change) const override {
+        for_each_block(rows, [&](std::size_t first, int lanes) {
+            block_difference(x + first * In, x0 + first * In, lanes, change + first);
+        });
+    }
+
+private:
+    /// run(first row, lanes) over the register blocks of `rows` rows.
+    template <class Run>
+    static void for_each_block(std::size_t rows, Run&& run) {
+        const std::ptrdiff_t blocks = static_cast<std::ptrdiff_t>((rows + kLanes - 1) / kLanes);
+        auto one = [&](std::ptrdiff_t b) {
+            const std::size_t first = static_cast<std::size_t>(b) * kLanes;
+            run(first, static_cast<int>(std::min<std::size_t>(kLanes, rows - first)));
         };
         // Small batches, and calls from inside a parallel loop (the learned return map of
         // one element), stay out of OpenMP: even an if(false) region builds a team, nested
         // ones with futex calls (metal_nh_frame_2d at 1e-3: 312,000 futex calls per frame
         // before, 165,000 after; 3 frames 7.50 -> 7.27 s at 2 threads, same frames).
         if (blocks < 16 || omp_in_parallel()) {
-            for (std::ptrdiff_t b = 0; b < blocks; ++b) run(b);
+            for (std::ptrdiff_t b = 0; b < blocks; ++b) one(b);
             return;
         }
 #pragma omp parallel for schedule(static)
-        for (std::ptrdiff_t b = 0; b < blocks; ++b) run(b);
+        for (std::ptrdiff_t b = 0; b < blocks; ++b) one(b);
     }
 
-private:
+    /// N(x) - N(x0) of one register block: the reference's forward pass beside the change's,
+    /// z_k = W_k a_{k-1} + b_k and dz_k = W_k da_{k-1}, da_k = silu(z_k + dz_k) - silu(z_k)
+    /// without cancellation (simd::silu_change), dN = w4 . da_3. Its error is relative to the
+    /// size of the change, not of N.
+    void block_difference(const double* x, const double* x0, int lanes, double* change) const {
+        V in0[In], din[In];
+        for (int l = 0; l < kLanes; ++l) {
+            const int row = std::min(l, lanes - 1) * In;
+            for (int i = 0; i < In; ++i) {
+                in0[i][l] = static_cast<S>(x0[row + i]);
+                din[i][l] = static_cast<S>(x[row + i] - x0[row + i]);
+            }
+        }
+        V z[W], dz[W], a[W], da[W];
+        // (Measured: two products per layer are faster than one loop of both, whose blocks of rows
+        // must halve to keep their accumulators in registers; keeping the reference's z and
+        // sigmoid(z) from the Hessian pass cost that pass more in stores than it saved here.)
+        auto layer = [&](const auto& A, const S* bias, const V* input, const V* dinput) {
+            gemv(A, bias, input, z);
+            gemv(A, nullptr, dinput, dz);
+            for (int j = 0; j < W; ++j) {
+                const V s0 = simd::sigmoid(z[j]);
+                a[j] = z[j] * s0;
+                da[j] = simd::silu_change(z[j], s0, dz[j]);
+            }
+        };
+        layer(W1, b1, in0, din);
+        layer(W2, b2, a, da);
+        layer(W3, b3, a, da);
+        V dN = V{};
+        for (int j = 0; j < W; ++j) dN += w4[j] * da[j];
+        for (int l = 0; l < lanes; ++l) change[l] = dN[l];
+    }
+
     void block(const double* x, int lanes, FusedMlp::Order order, double* value, double* gradient,
                double* hessian) const {
         using Order = FusedMlp::Order;
@@ -316,6 +363,12 @@ std::string FusedMlp::supported_architectures() {
 
 bool FusedMlp::supports(const std::vector<int>& widths, int derivative_inputs) {
     return find_architecture(widths, derivative_inputs) != nullptr;
+}
+
+void FusedMlp::difference(const double* x, const double* x0, std::size_t rows, double* change) const {
+    if (rows == 0) return;
+    if (!x || !x0 || !change) throw std::invalid_argument("FusedMlp::difference: null input or output array");
+    kernel_->difference(x, x0, rows, change);
 }
 
 void FusedMlp::evaluate(const double* x, std::size_t rows, Order order, double* value, double* gradient,

@@ -165,4 +165,55 @@ inline Silu<V> silu_with_derivatives(V z) {
     return {z * s, s * (S(1) + z * one_minus_s), s * one_minus_s * (S(2) + z * (S(1) - S(2) * s))};
 }
 
+/// 1/k! for k = 0 .. n, at compile time.
+template <class S, int n>
+struct InverseFactorials {
+    S c[n + 1];
+    constexpr InverseFactorials() : c{} {
+        c[0] = 1;
+        for (int k = 1; k <= n; ++k) c[k] = c[k - 1] / S(k);
+    }
+};
+
+/// e^t - 1 per lane, to the pack's relative precision also where e^t ~ 1: below |t| = 1/2
+/// by its Taylor polynomial (expm1_polynomial: degree 8 in float, remainder < 0.5^8/9! ~ 1e-8
+/// of t; degree 14 in double, < 0.5^14/15! ~ 5e-17), else e^t - 1, which cancels no digit
+/// there. `e` = e^t.
+template <class V>
+inline V expm1_polynomial(V t) {
+    using S = Scalar<V>;
+    constexpr int degree = std::is_same_v<S, float> ? 8 : 14;
+    static constexpr InverseFactorials<S, degree> f{};
+    V p = splat<V>(f.c[degree]);
+    for (int k = degree - 1; k >= 1; --k) p = p * t + f.c[k];
+    return p * t;
+}
+
+template <class V>
+inline V expm1_with(V t, V e) {
+    using S = Scalar<V>;
+    const V magnitude = t < S(0) ? -t : t;
+    return magnitude < S(0.5) ? expm1_polynomial(t) : e - S(1);
+}
+
+/// The change of a SiLU, silu(z0 + dz) - silu(z0), from z0 and s0 = sigmoid(z0), to the pack's
+/// precision relative to |dz| (no cancellation between two values of silu: the line search's
+/// values as differences from the reference, FusedMlp::difference). With q = e^-dz,
+///   silu(z0 + dz) - silu(z0) = dz s1 + z0 (s1 - s0),
+///   s1 = s0 / (1 + (1 - s0)(q - 1)),   s1 - s0 = -(q - 1)(1 - s0) s1,
+/// and q - 1 = expm1(-dz). (1 - s0 loses float's digits where s0 ~ 1, an error of 1e-7 z0 dz in
+/// the change, below the rest.)
+template <class V>
+inline V silu_change(V z0, V s0, V dz) {
+    using S = Scalar<V>;
+    // q - 1 by its polynomial alone where every lane's change is below 1/2 (a line search's trial
+    // points near their reference): no exp.
+    bool small = true;
+    for (int l = 0; l < Pack<S>::kLanes; ++l) small = small && dz[l] < S(0.5) && dz[l] > S(-0.5);
+    const V q_minus_1 = small ? expm1_polynomial(-dz) : expm1_with(-dz, exp(-dz));
+    const V t0 = S(1) - s0;
+    const V s1 = s0 / (S(1) + t0 * q_minus_1);
+    return dz * s1 - z0 * (q_minus_1 * t0 * s1);
+}
+
 }  // namespace pnet::simd

@@ -66,7 +66,8 @@ std::vector<OptionField> make_fields() {
                "Newton's Hessian: auto, the integrator's own (plasticitynet: the network's; return_map: the "
                "consistent tangent)"),
         choice("hessian_precision", "--hessian-precision", {"single", "double"}, &O::hessian_precision,
-               "plasticitynet: the arithmetic of the network's Hessian pass"),
+               "plasticitynet: the arithmetic of the network's passes at Newton's iterate (its Hessian) and from "
+               "it (the line search's values, as changes from the iterate)"),
         number("fixed_point_tolerance", "--fixed-point-tol", 0.0, false, kNone, false, &O::fixed_point_tolerance,
                "plasticitynet's fixed point: max_p |F_p(v) - F0_p|"),
         integer("max_fixed_point_iterations", "--fixed-point-iterations", 1, 100000, &O::max_fixed_point_iterations,

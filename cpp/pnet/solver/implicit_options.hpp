@@ -85,9 +85,10 @@ struct ImplicitOptions {
     // return_map: "tangent", the return mapping's consistent tangent (+ w mu I for non-associative
     // flow, w = tangent_damping). Each refuses the other's (check_for()).
     std::string hessian = "auto";
-    // plasticitynet: the arithmetic of the network's Hessian pass at Newton's iterate, "single" (the
+    // plasticitynet: the arithmetic of the network's passes at Newton's iterate (its Hessian) and from it
+    // (the line search's trial values, as float passes of the change N(F) - N(F0)): "single" (the
     // default: float, twice the particles per instruction; measured in docs/integrators.md) or
-    // "double". Values, and the gradient Newton solves with, are double either way
+    // "double". The gradient Newton solves with is double either way
     // (NeuralElastoplasticEnergy::Options::hessian_precision).
     std::string hessian_precision = "single";
     // FEM `analytic` only, a diagnostic: > 0 adds w mu/2 ||F - F0||^2 about a reference to the

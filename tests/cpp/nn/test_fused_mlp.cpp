@@ -156,6 +156,73 @@ TEST_P(FusedMlpTest, SinglePrecisionMatchesDouble) {
     EXPECT_EQ(v0, sv);
 }
 
+// N(x) - N(x0) as a pass of the change (the line search's values from the reference): in double,
+// the difference of two values where they have digits to spare (t >= 1e-2) and the linearization
+// grad N . (x - x0) where t is small; in float, within float's rounding of the double change at every
+// size, down to changes where float's N(x) - N(x0) is mostly rounding; 0 at x0; a short last block
+// (37 rows) and 1 or 2 threads alike.
+TEST_P(FusedMlpTest, DifferenceIsAccurateRelativeToTheChange) {
+    const auto& [arch, scale] = GetParam();
+    const MlpWeights weights = random_mlp(arch.widths, 16, scale);
+    const int m = arch.m, in = arch.widths[0];
+    const FusedMlp exact(weights, m);
+    const FusedMlp single(weights, m, FusedMlp::Precision::Single);
+    const std::size_t rows = 37;
+    const std::vector<double> x0 = random_inputs(in, rows, 17);
+    const std::vector<double> u = random_inputs(in, rows, 18, 1.0);
+    const int moved = m > 0 ? m : in;  // the energies' F entries; every input of a return map's net
+    const double tolerance = scale > 1.0 ? 1e-4 : 2e-5;
+    std::vector<double> change(rows), single_change(rows), v(rows), v0(rows), g(rows * std::max(m, 1));
+    for (double t : {1.0, 1e-2, 1e-4, 1e-6}) {
+        SCOPED_TRACE("t = " + std::to_string(t));
+        std::vector<double> x = x0;
+        for (std::size_t r = 0; r < rows; ++r)
+            for (int i = 0; i < moved; ++i) x[r * in + i] += t * u[r * in + i];
+        exact.difference(x.data(), x0.data(), rows, change.data());
+        single.difference(x.data(), x0.data(), rows, single_change.data());
+        if (t >= 1e-2) {
+            exact.evaluate(x.data(), rows, FusedMlp::Order::Value, v.data());
+            exact.evaluate(x0.data(), rows, FusedMlp::Order::Value, v0.data());
+            std::vector<double> subtracted(rows);
+            for (std::size_t r = 0; r < rows; ++r) subtracted[r] = v[r] - v0[r];
+            // The subtraction's own rounding: 1e-16 of N (up to about 10 here) over the change.
+            EXPECT_LT(max_relative_difference(change, subtracted, rows), 1e-12 + 1e-13 / t);
+        } else if (m > 0) {
+            exact.evaluate(x0.data(), rows, FusedMlp::Order::Gradient, v0.data(), g.data());
+            std::vector<double> linear(rows, 0.0);
+            for (std::size_t r = 0; r < rows; ++r)
+                for (int i = 0; i < m; ++i) linear[r] += g[r * m + i] * t * u[r * in + i];
+            EXPECT_LT(max_relative_difference(change, linear, rows), 1e3 * t);  // the second-order term
+        }
+        EXPECT_LT(max_relative_difference(single_change, change, rows), tolerance);
+        if (t <= 1e-6) {
+            // Float's values subtracted: their rounding (6e-8 of N) against a change of 1e-6.
+            std::vector<double> sv(rows), sv0(rows), subtracted(rows);
+            single.evaluate(x.data(), rows, FusedMlp::Order::Value, sv.data());
+            single.evaluate(x0.data(), rows, FusedMlp::Order::Value, sv0.data());
+            for (std::size_t r = 0; r < rows; ++r) subtracted[r] = sv[r] - sv0[r];
+            EXPECT_GT(max_relative_difference(subtracted, change, rows),
+                      100.0 * max_relative_difference(single_change, change, rows));
+        }
+    }
+    single.difference(x0.data(), x0.data(), rows, single_change.data());
+    exact.difference(x0.data(), x0.data(), rows, change.data());
+    for (std::size_t r = 0; r < rows; ++r) {
+        EXPECT_EQ(single_change[r], 0.0);
+        EXPECT_EQ(change[r], 0.0);
+    }
+    const std::size_t many = 1001;
+    const std::vector<double> y0 = random_inputs(in, many, 19), y = random_inputs(in, many, 20);
+    std::vector<double> by_threads[2];
+    for (int threads : {1, 2}) {
+        omp_set_num_threads(threads);
+        by_threads[threads - 1].resize(many);
+        single.difference(y.data(), y0.data(), many, by_threads[threads - 1].data());
+    }
+    omp_set_num_threads(omp_get_num_procs());
+    EXPECT_EQ(by_threads[0], by_threads[1]);
+}
+
 TEST_P(FusedMlpTest, ThreadCountDoesNotChangeResults) {
     const auto& [arch, scale] = GetParam();
     const MlpWeights weights = random_mlp(arch.widths, 14, scale);
