@@ -402,7 +402,7 @@ def test_advection_limit_cuts_the_steps_of_a_fast_scene(tmp_path):
     (["--integrator", "implicit"], '--integrator: unknown integrator "implicit" (expected explicit, plasticitynet, '
                                    'return_map, lagged or analytic)'),
     (["--preconditioner", "ilu"], '--preconditioner: expected jacobi, block_jacobi, ichol or multigrid, got "ilu"'),
-    (["--lazy-hessian", 1], '--lazy-hessian: expected a number in [0, 1), got "1"'),
+    (["--lazy-hessian", 1], '--lazy-hessian: expected a number in [0, 1) or auto, got "1"'),
     (["--dt", -1], "--dt must be a number >= 0"),
     (["--dt", "nan"], "--dt must be a number >= 0"),
     (["--cfl", 0], "--cfl must be a number > 0"),

@@ -78,7 +78,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
         if (fem_contact_) mesh_friction_.lag(*fem_contact_, state.x);
     }
 
-    NewtonOptions newton = options_.newton_options(dt);
+    NewtonOptions newton = options_.newton_options(dt, method_);
     newton.residual_mass = coupled_.residual_mass();
     const bool cholesky = options_.coupled_solver == "cholesky";
     coupled_.set_linear_solve(cholesky ? CoupledPotential<dim>::LinearSolve::Assembled

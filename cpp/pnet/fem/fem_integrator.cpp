@@ -126,7 +126,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     potential_.begin_step(x_hat, v_star, h, state.plastic_inverse, fixed_components_);
     potential_.set_material_state(system_.element_object, state.hardening);
 
-    NewtonOptions newton = options_.newton_options(dt);
+    NewtonOptions newton = options_.newton_options(dt, method_);
     newton.residual_mass = potential_.residual_mass();
     newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
 

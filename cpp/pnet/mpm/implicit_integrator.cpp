@@ -113,7 +113,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         potential_.floor_friction_contacts();
     }
 
-    NewtonOptions newton = options_.newton_options(dt);
+    NewtonOptions newton = options_.newton_options(dt, method_);
     newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
     newton.incomplete_cholesky = options_.preconditioner == "ichol";

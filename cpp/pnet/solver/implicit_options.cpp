@@ -48,6 +48,10 @@ std::vector<OptionField> make_fields() {
                                      "plasticitynet: w of the paper's eq. 11 (0: the ablation); auto: the material "
                                      "family's measured w");
     regularizer.kind = Kind::NumberOrAuto;
+    OptionField lazy = number("lazy_hessian", "--lazy-hessian", 0.0, false, 1.0, true, &O::lazy_hessian,
+                              "keep the last Hessian while each Newton iteration cuts the residual by this factor "
+                              "(0: never); auto: the integrator's measured value (plasticitynet 0.8, the others 0.5)");
+    lazy.kind = Kind::NumberOrAuto;
     return {
         number("newton_tolerance", "--newton-tol", 0.0, true, kNone, false, &O::newton_tolerance,
                "Newton's tolerance on the mass-weighted velocity residual", "m/s"),
@@ -91,8 +95,7 @@ std::vector<OptionField> make_fields() {
                "MPM's linear solve: matrix-free PCG or CHOLMOD on the assembled Hessian"),
         choice("coupled_solver", nullptr, {"block", "cholesky"}, &O::coupled_solver,
                "MPM-FEM coupling's linear solve: PCG with an exact FEM block, or CHOLMOD on the whole Hessian"),
-        number("lazy_hessian", "--lazy-hessian", 0.0, false, 1.0, true, &O::lazy_hessian,
-               "keep the last Hessian while each Newton iteration cuts the residual by this factor (0: never)"),
+        lazy,
         boolean("fail_on_unconverged", "--fail-on-unconverged", &O::fail_on_unconverged,
                 "a step whose solve ends unconverged is an error", {}),
         integer("max_kinematic_stages", nullptr, 0, 1000000, &O::max_kinematic_stages,
@@ -286,13 +289,13 @@ double ImplicitOptions::newton_tolerance_at(double dt) const {
                                                : newton_tolerance;
 }
 
-NewtonOptions ImplicitOptions::newton_options(double dt) const {
+NewtonOptions ImplicitOptions::newton_options(double dt, Method method) const {
     NewtonOptions newton;
     newton.tolerance = newton_tolerance_at(dt);
     newton.max_iterations = max_newton_iterations;
     newton.max_cg_iterations = max_cg_iterations;
     newton.cg_tolerance = cg_tolerance;
-    newton.lazy_hessian = lazy_hessian;
+    newton.lazy_hessian = lazy_hessian >= 0.0 ? lazy_hessian : integrator_info(method).lazy_hessian;
     return newton;
 }
 

@@ -111,9 +111,11 @@ struct ImplicitOptions {
     std::string linear_solver = "pcg";
     // Newton keeps the last Hessian while each iteration cuts the residual by
     // this factor (NewtonOptions::lazy_hessian; 0: a fresh one every
-    // iteration). 0.5 halved the energy time on sand_column_2d and cut it by
-    // 40% on snowball_2d at dt 1e-3, with as many or fewer Newton iterations.
-    double lazy_hessian = 0.5;
+    // iteration); -1 ("auto", the default): the integrator's measured value
+    // (IntegratorInfo::lazy_hessian: plasticitynet 0.8, the others 0.5). 0.5 halved
+    // the energy time on sand_column_2d and cut it by 40% on snowball_2d at dt 1e-3,
+    // with as many or fewer Newton iterations.
+    double lazy_hessian = -1.0;
     // MPM-FEM coupling: the linear solve of the coupled Newton iterations, "block" (PCG with Jacobi
     // on the grid and an exact Cholesky solve of the FEM block) or "cholesky" (CHOLMOD on the whole
     // assembled Hessian); coupling/coupled_potential.hpp.
@@ -170,7 +172,7 @@ struct ImplicitOptions {
     /// The Newton loop's settings from these for a step of dt s (tolerance newton_tolerance_at(dt),
     /// iteration caps, CG tolerance, lazy Hessian); the caller adds its residual masses and linear
     /// solver.
-    NewtonOptions newton_options(double dt) const;
+    NewtonOptions newton_options(double dt, Method method) const;
     /// m/s: min(newton_tolerance, newton_acceleration_tolerance dt), or newton_tolerance where the
     /// acceleration tolerance is 0.
     double newton_tolerance_at(double dt) const;

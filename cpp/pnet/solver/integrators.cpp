@@ -10,23 +10,23 @@ const std::vector<IntegratorInfo>& integrators() {
          "symplectic Euler: the return mapping's stress as a force, at the CFL step (or a given dt); the ground "
          "truth",
          /*implicit=*/false, /*reads_models=*/false, /*particles=*/true, /*meshes=*/true, /*references=*/false,
-         "cfl"},
+         "cfl", 0.0},
         {Method::PlasticityNet, "plasticitynet",
          "backward Euler on the learned energy (eqs. 8, 10, 11): the network's value judges the line search and its "
          "Hessian (+ w mu I, projected) is Newton's, at every iteration; the reference F0 follows F(v) (outer "
          "iteration newton) or is iterated by full solves (fixed_point)",
          true, true, true, true, true,
-         "outer_iteration, hessian (auto = network), regularizer_weight, fixed_point_*, learned_return_map"},
+         "outer_iteration, hessian (auto = network), regularizer_weight, fixed_point_*, learned_return_map", 0.8},
         {Method::ReturnMap, "return_map",
          "backward Euler with the return mapping's stress and its consistent tangent (skew part kept for "
          "non-associative flow), Newton with the work line search; the classical implicit solver, no model file",
-         true, false, true, true, true, "tangent_damping"},
+         true, false, true, true, true, "tangent_damping", 0.5},
         {Method::Lagged, "lagged",
          "backward Euler on the elastic energy alone; the return mapping after the step (Ziran, HOT)", true, false,
-         true, true, false, ""},
+         true, true, false, "", 0.5},
         {Method::Analytic, "analytic",
          "FEM, StVK-Hencky + von Mises: backward Euler on the closed-form elastoplastic energy (ECI)", true, false,
-         false, true, false, "analytic_regularizer"},
+         false, true, false, "analytic_regularizer", 0.5},
     };
     return list;
 }

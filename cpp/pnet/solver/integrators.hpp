@@ -30,6 +30,10 @@ struct IntegratorInfo {
     bool meshes;              // runs FEM scenes
     bool references;          // its energy has a reference F0 that the outer iteration moves to F(v)
     const char* options;      // the implicit options that apply beyond Newton's and the linear solve's
+    /// Newton's lazy Hessian (NewtonOptions::lazy_hessian) that "auto" stands for, measured: a learned
+    /// step's Hessian pass costs 2.6 of its trial passes, so plasticitynet keeps its Hessian longer
+    /// (0.8; docs/integrators.md, "Keeping the Hessian"); the others 0.5 (0 for explicit: no Newton).
+    double lazy_hessian;
 };
 
 /// plasticitynet's settings per material family, measured (docs/integrators.md): the outer iteration

@@ -620,7 +620,14 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_TRUE(o.fail_on_unconverged);
     EXPECT_EQ(o.fixed_point_anderson, 2);
     EXPECT_FALSE(o.fixed_point_keep_hessian);
-    EXPECT_EQ(ImplicitOptions{}.lazy_hessian, 0.5);
+    // The lazy Hessian's "auto" (the default) is the integrator's measured value; a number overrides it.
+    EXPECT_EQ(ImplicitOptions{}.lazy_hessian, -1.0);
+    EXPECT_EQ(ImplicitOptions{}.newton_options(1e-3, Method::PlasticityNet).lazy_hessian, 0.8);
+    EXPECT_EQ(ImplicitOptions{}.newton_options(1e-3, Method::ReturnMap).lazy_hessian, 0.5);
+    EXPECT_EQ(ImplicitOptions{}.newton_options(1e-3, Method::Lagged).lazy_hessian, 0.5);
+    EXPECT_EQ(o.newton_options(1e-3, Method::PlasticityNet).lazy_hessian, 0.0);
+    EXPECT_EQ(ImplicitOptions::from_json({{"lazy_hessian", "auto"}}, "s.json").lazy_hessian, -1.0);
+    EXPECT_EQ(ImplicitOptions{}.to_json()["lazy_hessian"], "auto");
     EXPECT_TRUE(ImplicitOptions{}.fixed_point_keep_hessian);
     EXPECT_EQ(ImplicitOptions{}.fixed_point_anderson, 0);
     EXPECT_EQ(ImplicitOptions{}.fixed_point_inexact, 0.0);
@@ -640,7 +647,8 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     };
     EXPECT_EQ(message({{"newton_tolerance", -1}}),
               "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
-    EXPECT_EQ(message({{"lazy_hessian", 1}}), "s.json: integrator.lazy_hessian: expected a number in [0, 1), got 1");
+    EXPECT_EQ(message({{"lazy_hessian", 1}}),
+              "s.json: integrator.lazy_hessian: expected a number in [0, 1) or \"auto\", got 1");
     EXPECT_EQ(message({{"fixed_point_inexact", 1.0}}),
               "s.json: integrator.fixed_point_inexact: expected a number in [0, 1), got 1.0");
     EXPECT_EQ(message({{"preconditioner", "ilu"}}),
