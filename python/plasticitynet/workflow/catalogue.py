@@ -174,6 +174,8 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
     Study("integrator_study_snow", "mpm", {"snowball_2d": 25}, STUDY_MPM_RUNS),
     # Its 2D metal frames (notebooks/results/integrator_study_metal/).
     Study("integrator_study_metal", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100}, STUDY_FEM_RUNS),
+    # Its stiff sand column, the first 15 frames of the collapse (notebooks/results/integrator_study_stiff/).
+    Study("integrator_study_stiff", "mpm", {"stiff/sand_column_2d": 15}, STUDY_MPM_RUNS),
 ]}
 
 # --- Sweeps ------------------------------------------------------------------------------------------
@@ -223,3 +225,4 @@ TARGETS["integrators"] = Target(studies=("integrator_study", "integrator_study_f
 TARGETS["integrators_sand"] = Target(studies=("integrator_study_sand",))
 TARGETS["integrators_metal"] = Target(studies=("integrator_study_metal",))
 TARGETS["integrators_snow"] = Target(studies=("integrator_study_snow",))
+TARGETS["integrators_stiff"] = Target(studies=("integrator_study_stiff",))
