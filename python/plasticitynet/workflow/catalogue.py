@@ -174,8 +174,15 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
     Study("integrator_study_snow", "mpm", {"snowball_2d": 25}, STUDY_MPM_RUNS),
     # Its 2D metal frames (notebooks/results/integrator_study_metal/).
     Study("integrator_study_metal", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100}, STUDY_FEM_RUNS),
-    # Its stiff sand column, the first 15 frames of the collapse (notebooks/results/integrator_study_stiff/).
-    Study("integrator_study_stiff", "mpm", {"stiff/sand_column_2d": 15}, STUDY_MPM_RUNS),
+    # Its stiff sand column, the first 15 frames of the collapse, at the steps and budgets that fit one
+    # session on two cores: capped, every step size runs at about the same step once the column flows
+    # (notebooks/results/integrator_study_stiff/).
+    Study("integrator_study_stiff", "mpm", {"stiff/sand_column_2d": 15},
+          ("gt", "explicit_2e-5", "explicit_cfl", "plasticitynet_1e-3_study", "return_map_1e-3_study",
+           "plasticitynet_1e-3_capped", "return_map_1e-3_capped", "return_map_2e-3_capped", "return_map_5e-3_capped",
+           "return_map_1e-2_capped", "plasticitynet_5e-3_study", "return_map_5e-3_study", "plasticitynet_1e-2_study",
+           "return_map_1e-2_study", "plasticitynet_1e-3_budget1", "plasticitynet_1e-3_budget2",
+           "plasticitynet_1e-3_budget3", "plasticitynet_1e-2_budget1")),
 ]}
 
 # --- Sweeps ------------------------------------------------------------------------------------------
