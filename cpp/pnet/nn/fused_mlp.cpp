@@ -180,9 +180,9 @@ private:
             gemv(A, bias, input, z);
             gemv(A, nullptr, dinput, dz);
             for (int j = 0; j < W; ++j) {
-                const V s0 = simd::sigmoid(z[j]);
-                a[j] = z[j] * s0;
-                da[j] = simd::silu_change(z[j], s0, dz[j]);
+                const simd::SiluChange<V> s = simd::silu_change(z[j], dz[j]);
+                a[j] = s.value;
+                da[j] = s.change;
             }
         };
         layer(W1, b1, in0, din);

@@ -196,24 +196,39 @@ inline V expm1_with(V t, V e) {
     return magnitude < S(0.5) ? expm1_polynomial(t) : e - S(1);
 }
 
-/// The change of a SiLU, silu(z0 + dz) - silu(z0), from z0 and s0 = sigmoid(z0), to the pack's
-/// precision relative to |dz| (no cancellation between two values of silu: the line search's
-/// values as differences from the reference, FusedMlp::difference). With q = e^-dz,
+/// The change of a SiLU, silu(z0 + dz) - silu(z0), to the pack's precision relative to |dz| (no
+/// cancellation between two values of silu: the line search's values as differences from the
+/// reference, FusedMlp::difference). With e0 = e^-z0, s0 = sigmoid(z0) = 1 / (1 + e0),
+/// t0 = 1 - s0 = e0 s0 (without cancellation) and q = e^-dz,
 ///   silu(z0 + dz) - silu(z0) = dz s1 + z0 (s1 - s0),
-///   s1 = s0 / (1 + (1 - s0)(q - 1)),   s1 - s0 = -(q - 1)(1 - s0) s1,
-/// and q - 1 = expm1(-dz). (1 - s0 loses float's digits where s0 ~ 1, an error of 1e-7 z0 dz in
-/// the change, below the rest.)
+///   s1 = s0 / (s0 + t0 q),   s1 - s0 = -(q - 1) t0 s1,
+/// and q - 1 = expm1(-dz); s1's denominator is a sum of two positive terms, finite for any z0 and
+/// dz. Also returns silu(z0) (`value`), the next layer's reference input.
 template <class V>
-inline V silu_change(V z0, V s0, V dz) {
+struct SiluChange {
+    V value, change;
+};
+
+template <class V>
+inline SiluChange<V> silu_change(V z0, V dz) {
     using S = Scalar<V>;
+    const V e0 = exp(-z0);
+    const V s0 = S(1) / (S(1) + e0);
+    const V t0 = e0 * s0;
     // q - 1 by its polynomial alone where every lane's change is below 1/2 (a line search's trial
-    // points near their reference): no exp.
+    // points near their reference): no second exp.
     bool small = true;
     for (int l = 0; l < Pack<S>::kLanes; ++l) small = small && dz[l] < S(0.5) && dz[l] > S(-0.5);
-    const V q_minus_1 = small ? expm1_polynomial(-dz) : expm1_with(-dz, exp(-dz));
-    const V t0 = S(1) - s0;
-    const V s1 = s0 / (S(1) + t0 * q_minus_1);
-    return dz * s1 - z0 * (q_minus_1 * t0 * s1);
+    V q, q_minus_1;
+    if (small) {
+        q_minus_1 = expm1_polynomial(-dz);
+        q = S(1) + q_minus_1;
+    } else {
+        q = exp(-dz);
+        q_minus_1 = expm1_with(-dz, q);
+    }
+    const V s1 = s0 / (s0 + t0 * q);
+    return {z0 * s0, dz * s1 - z0 * (q_minus_1 * t0 * s1)};
 }
 
 }  // namespace pnet::simd

@@ -4,10 +4,12 @@
 #include <omp.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
 #include "pnet/nn/fused_mlp.hpp"
+#include "pnet/nn/simd.hpp"
 #include "pnet/nn/torchscript.hpp"
 #include "support/finite_difference.hpp"
 
@@ -221,6 +223,40 @@ TEST_P(FusedMlpTest, DifferenceIsAccurateRelativeToTheChange) {
     }
     omp_set_num_threads(omp_get_num_procs());
     EXPECT_EQ(by_threads[0], by_threads[1]);
+}
+
+// The SiLU's change against long double, relative to |dz| (the float and double packs), over
+// pre-activations and changes from 1e-7 to 40: finite and accurate where the two sigmoids are far
+// apart (z0 = -30, z0 + dz = 10: a denominator written as 1 + (1 - s0)(q - 1) was 0 there; z0 = 30,
+// z0 + dz = -10: 1 - s0 is all rounding, so t0 = e^-z0 s0).
+template <class S>
+void check_silu_change(double tolerance) {
+    using V = typename simd::Pack<S>::V;
+    constexpr int lanes = simd::Pack<S>::kLanes;
+    auto silu = [](long double z) { return z / (1.0L + std::exp(-z)); };
+    double worst = 0.0;
+    for (double z0 : {-30.0, -17.0, -5.0, -1.2785, 0.0, 0.7, 4.0, 17.0, 30.0})
+        for (double magnitude : {1e-7, 1e-4, 0.3, 0.6, 3.0, 40.0})
+            for (double sign : {-1.0, 1.0}) {
+                const double dz = sign * magnitude;
+                V z = simd::splat<V>(static_cast<S>(z0)), d = simd::splat<V>(static_cast<S>(dz));
+                const V change = simd::silu_change(z, d).change;
+                // The reference at the pack's own rounding of z0 and dz.
+                const long double zr = static_cast<long double>(z[0]), dr = static_cast<long double>(d[0]);
+                const long double exact = silu(zr + dr) - silu(zr);
+                // The reference's own rounding: long double's of the two values it subtracts.
+                const long double rounding =
+                    4 * std::numeric_limits<long double>::epsilon() * (std::abs(silu(zr + dr)) + std::abs(silu(zr)));
+                for (int l = 0; l < lanes; ++l) ASSERT_TRUE(std::isfinite(change[l])) << z0 << " " << dz;
+                const long double error = std::max(0.0L, std::abs(change[0] - exact) - rounding);
+                worst = std::max(worst, static_cast<double>(error / std::abs(dr)));
+            }
+    EXPECT_LT(worst, tolerance);
+}
+
+TEST(Simd, SiluChangeIsAccurateRelativeToTheChangeAndFinite) {
+    check_silu_change<float>(2e-6 * 30);   // float's rounding of z0 s0 terms up to |z0| = 30
+    check_silu_change<double>(1e-14 * 30);
 }
 
 TEST_P(FusedMlpTest, ThreadCountDoesNotChangeResults) {
