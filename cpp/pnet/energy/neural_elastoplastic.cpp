@@ -243,13 +243,15 @@ void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const
 }
 
 template <int dim>
+void NeuralElastoplasticEnergy<dim>::values_at_reference(double* psi, Mat<dim>* gradient) const {
+    std::fill(psi, psi + size(), 0.0);
+    for (std::size_t p = 0; p < size(); ++p) gradient[p] = E_ * stress_[p];
+}
+
+template <int dim>
 void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* psi, Mat<dim>* gradient) const {
     iterate_at_reference_ = exactly_at_reference(F);
-    if (iterate_at_reference_) {
-        std::fill(psi, psi + size(), 0.0);
-        for (std::size_t p = 0; p < size(); ++p) gradient[p] = E_ * stress_[p];
-        return;
-    }
+    if (iterate_at_reference_) return values_at_reference(psi, gradient);
     ensure_correction();
     if (at_reference(F)) return finish(F, psi, gradient);
     ensure_offset();
@@ -317,8 +319,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
         net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
                       reinterpret_cast<double*>(hessian), FusedMlp::Precision::Single);
         buffers_at_reference_ = false;
-        std::fill(psi, psi + size(), 0.0);
-        for (std::size_t p = 0; p < size(); ++p) gradient[p] = E_ * stress_[p];
+        values_at_reference(psi, gradient);
     } else {
         ensure_correction();
         ensure_offset();

@@ -194,6 +194,8 @@ private:
     /// Eq. 8 relative to the reference, evaluated at F = F0 exactly: psi = 0 and grad = E Ptilde(F0)
     /// by construction, so no network pass is needed (the Newton outer iteration's every point).
     bool exactly_at_reference(const Mat<dim>* F) const;
+    /// Psi = 0 and its gradient E Ptilde(F0) there, by construction (F = F0 exactly).
+    void values_at_reference(double* psi, Mat<dim>* gradient) const;
     /// Evaluates the network at F0 for c and the offset (once per set_reference()); with `hessian`
     /// (n d^2 x d^2, row-major) also Hess N at F0, in the same pass.
     void ensure_correction(double* hessian = nullptr) const;
