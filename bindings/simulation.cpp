@@ -77,7 +77,7 @@ public:
         if (!dt.is_none()) settings.dt = to_number(dt, "dt");
         if (!cfl.is_none()) settings.cfl = to_number(cfl, "cfl");
         if (!solver.is_none()) {
-            nlohmann::json options = settings.implicit.to_json();
+            nlohmann::json options = settings.options_json();
             const nlohmann::json given = to_json(solver, "solver");
             if (!given.is_object()) throw py::value_error("solver: expected a dict of implicit solver options");
             for (const auto& [key, value] : given.items()) {
@@ -85,7 +85,7 @@ public:
                     throw py::value_error("solver: unknown option \"" + key + "\" (known: " + key_list(options) + ")");
                 options[key] = value;
             }
-            settings.implicit = ImplicitOptions::from_json(options, "solver");
+            settings.read_options(options, "solver");
         }
         load_scene_models(scene_, trust_models, settings);
         py::gil_scoped_release release;
@@ -333,7 +333,7 @@ Every model the scene names is loaded and checked when the integrator reads mode
         .def_property_readonly("dt", [](const PySimulation& s) { return s.sim().settings().dt; },
                                "Time step, s (0: the CFL step).")
         .def_property_readonly("solver", [](const PySimulation& s) {
-            return to_python(s.sim().settings().implicit.to_json());
+            return to_python(s.sim().settings().options_json());
         }, "The implicit solver options in use.")
         .def_property_readonly("frame", [](const PySimulation& s) { return s.sim().frame(); },
                                "Frames completed.")

@@ -17,7 +17,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
 known="fig04 fig05 fig06_10 fig11 fig12 fig13 fig14_16 table1 time_integrator coupling_3d integrators integrators_sand integrators_metal integrators_snow integrators_stiff sweep_dt sweep_dx all
-implicit_eval representation_ablation regularizer_ablation time_integrator_mpm fem_eval coupling_eval coupling_eval_3d
+implicit_eval implicit_eval_2d representation_ablation regularizer_ablation time_integrator_mpm fem_eval fem_eval_2d coupling_eval coupling_eval_3d
 integrator_study integrator_study_fem integrator_study_sand integrator_study_metal integrator_study_snow
 integrator_study_stiff"
 known="${known//$'\n'/ }"

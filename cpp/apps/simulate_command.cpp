@@ -64,14 +64,14 @@ void add_entry(std::string& text, const std::string& lead, const std::string& en
 std::string usage() {
     std::string text = kUsage;
     text += "  implicit solvers (every integrator but explicit; the scene's integrator block holds the same keys):\n";
-    const ImplicitOptions defaults;
-    for (const OptionField& f : implicit_option_fields()) {
+    const IntegratorSettings defaults;
+    for (const OptionField<IntegratorSettings>& f : integrator_option_fields()) {
         if (!f.flag) continue;
-        const bool is_switch = f.kind == OptionField::Kind::Boolean && f.choices.empty();
+        const bool is_switch = f.is_switch();
         const std::string lead = std::string("    ") + f.flag + (is_switch ? "" : " X");
         const nlohmann::json value = f.get(defaults);
         std::string shown = value.dump();
-        if (f.kind == OptionField::Kind::Boolean) shown = is_switch ? "off" : f.choices[value.get<bool>() ? 0 : 1];
+        if (f.kind == OptionSpec::Kind::Boolean) shown = is_switch ? "off" : f.choices[value.get<bool>() ? 0 : 1];
         if (value.is_string()) shown = value.get<std::string>();
         if (value.is_number_float() && value.get<double>() == std::floor(value.get<double>()))
             shown = std::to_string(static_cast<long>(value.get<double>()));
@@ -152,8 +152,8 @@ Options parse(int argc, char** argv) {
             o.flip_relaxation_time = number(value());
         else if (arg == "--floor-friction")
             o.floor_friction = number(value());
-        else if (const OptionField* f = find_option_field(arg); f && f->flag && arg == f->flag) {
-            const bool is_switch = f->kind == OptionField::Kind::Boolean && f->choices.empty();
+        else if (const OptionField<IntegratorSettings>* f = find_option_field(arg); f && f->flag && arg == f->flag) {
+            const bool is_switch = f->is_switch();
             const std::string word = is_switch ? std::string() : value();
             const std::optional<nlohmann::json> v = f->parse_flag(word);
             if (!v) throw UsageError(arg + ": expected " + f->flag_expected() + ", got \"" + word + "\"");
@@ -245,7 +245,7 @@ int simulate_command(int argc, char** argv) {
         }
         if (o.dt) settings.dt = *o.dt;
         if (o.cfl) settings.cfl = *o.cfl;
-        for (const auto& [key, value] : o.solver.items()) find_option_field(key)->set(settings.implicit, value);
+        for (const auto& [key, value] : o.solver.items()) find_option_field(key)->set(settings, value);
         load_scene_models(scene, o.trust_model, settings);
         // A folder holding another run is refused before the simulation is set up (meshing, models).
         if (!o.run.resume) check_run_folder(o.run.out, o.run.overwrite);

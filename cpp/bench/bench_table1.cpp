@@ -31,7 +31,7 @@
 // plasticitynet with the paper's outer iteration (eq. 10), --with-newton-outer with the reference
 // following every iterate; --with-last-velocity adds the metal frames' plasticitynet with
 // every step started from the last velocities with the plate on its target
-// (ImplicitOptions::kinematic_start); --with-uncapped adds, on the MPM scenes, plasticitynet and
+// (FemOptions::kinematic_start); --with-uncapped adds, on the MPM scenes, plasticitynet and
 // return_map with the advection limit (on by default, 0.2 cells per step) off. Implicit rows give the Newton solves, the updates of F0 to F(v)
 // (outer iterations) per step and the largest true residual |R(v)| at a step's
 // end (docs/solver.md).
@@ -188,7 +188,7 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
     if (extras.uncapped) {  // the scene's dt alone, the advection limit (on by default) off
         for (const char* name : {"plasticitynet", "return_map"}) {
             pnet::IntegratorSettings s = with(name, dt_implicit);
-            s.implicit.advection_cfl = 0.0;
+            s.mpm.advection_cfl = 0.0;
             rows.push_back(measure<Sim>(scene, s, frames));
             rows.back().integrator = std::string(name) + ", uncapped";
         }
@@ -225,7 +225,7 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, const Ext
     add_outer_rows<Sim>(rows, scene, base, frames, extras);
     if (extras.last_velocity) {  // each step from the last velocities with the plate on its target
         pnet::IntegratorSettings last = base;
-        last.implicit.kinematic_start = "last_velocity";
+        last.fem.kinematic_start = "last_velocity";
         rows.push_back(measure<Sim>(scene, last, frames));
         rows.back().integrator = "plasticitynet, last-velocity start";
     }

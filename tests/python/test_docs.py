@@ -68,7 +68,8 @@ def test_the_readme_is_a_five_minute_read():
 
 
 def test_every_solver_option_is_documented_and_listed_by_help():
-    """The implicit solvers' options are declared once in C++ (solver/implicit_options.hpp); their keys are
+    """The integrators' options are declared once in C++, each beside what reads it (solver/, mpm/, fem/,
+    coupling/; joined in sim/integrator_settings.hpp); their keys are
     what plasticitynet_sim reports, docs/scenes.md names each, and `pnet simulate --help` lists each flag."""
     import plasticitynet_sim as pns
 

@@ -17,6 +17,8 @@ namespace pnet {
 template <int dim>
 CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
                                                           ImplicitMethod method, const ImplicitOptions& options,
+                                                          const MpmOptions& mpm_options,
+                                                          const CouplingOptions& coupling_options,
                                                           std::unique_ptr<ParticleEnergy<dim>> mpm_energy,
                                                           std::vector<const LearnedReturnMap<dim>*> return_maps,
                                                           const ContactPotential<dim>* fem_contact,
@@ -25,6 +27,8 @@ CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(const MpmSystem<dim>& 
       fem_system_(fem),
       method_(method),
       options_(options),
+      mpm_options_(mpm_options),
+      coupling_options_(coupling_options),
       mpm_energy_(std::move(mpm_energy)),
       return_maps_(std::move(return_maps)),
       fem_contact_(fem_contact),
@@ -80,7 +84,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
 
     NewtonOptions newton = options_.newton_options(dt, method_);
     newton.residual_mass = coupled_.residual_mass();
-    const bool cholesky = options_.coupled_solver == "cholesky";
+    const bool cholesky = coupling_options_.coupled_solver == "cholesky";
     coupled_.set_linear_solve(cholesky ? CoupledPotential<dim>::LinearSolve::Assembled
                                        : CoupledPotential<dim>::LinearSolve::BlockPreconditioned);
     newton.linear_solver = cholesky ? NewtonOptions::LinearSolver::Cholesky : NewtonOptions::LinearSolver::Pcg;
@@ -92,6 +96,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     if (alpha < 1.0) v_ *= alpha;
 
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
+    solve.floor_friction_in_solve = mpm_options_.floor_friction_in_solve;
     solve.work_line_search = mpm_energy_->tangent_hessian();
     const long network_before = mpm_energy_->network_evaluations();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
@@ -125,7 +130,7 @@ StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     grid_to_particles(grid_, particles, dt, return_map,
                       [](std::ptrdiff_t, const PolarSVD<dim>&, const ReturnResult<dim>&) {});
     if (flip_alpha > 0.0) add_velocity_residual(particles, residual_, flip_alpha);
-    stats.clamped = clamp_implicit_step(particles, mpm_system_, grid_, step_index, dt, options_.advection_cfl);
+    stats.clamped = clamp_implicit_step(particles, mpm_system_, grid_, step_index, dt, mpm_options_.advection_cfl);
 
     // FEM: positions and the return mapping (identity for elastic bodies).
     for (std::size_t i = 0; i < nodes; ++i) {

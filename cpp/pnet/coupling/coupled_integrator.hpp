@@ -29,6 +29,7 @@
 
 #include "pnet/contact/friction.hpp"
 #include "pnet/coupling/coupled_potential.hpp"
+#include "pnet/coupling/coupling_options.hpp"
 #include "pnet/coupling/particle_contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/mpm/explicit_integrator.hpp"
@@ -51,7 +52,8 @@ public:
     /// ElasticParticleEnergy for lagged); return_maps as ImplicitIntegrator's; fem_contact: the
     /// meshes' own contact (ground, between meshes), may be null.
     CoupledImplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem, ImplicitMethod method,
-                              const ImplicitOptions& options, std::unique_ptr<ParticleEnergy<dim>> mpm_energy,
+                              const ImplicitOptions& options, const MpmOptions& mpm_options,
+                              const CouplingOptions& coupling_options, std::unique_ptr<ParticleEnergy<dim>> mpm_energy,
                               std::vector<const LearnedReturnMap<dim>*> return_maps,
                               const ContactPotential<dim>* fem_contact, const ParticleContact<dim>& contact,
                               CouplingFriction friction = {});
@@ -67,6 +69,8 @@ private:
     const FemSystem<dim>& fem_system_;
     ImplicitMethod method_;
     ImplicitOptions options_;
+    MpmOptions mpm_options_;
+    CouplingOptions coupling_options_;
     std::unique_ptr<ParticleEnergy<dim>> mpm_energy_;
     std::vector<const LearnedReturnMap<dim>*> return_maps_;
     const ContactPotential<dim>* fem_contact_;

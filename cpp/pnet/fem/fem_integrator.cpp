@@ -64,10 +64,12 @@ template <int dim>
 FemImplicitIntegrator<dim>::FemImplicitIntegrator(const FemSystem<dim>& system, FemMethod method,
                                                   const ImplicitOptions& options,
                                                   std::unique_ptr<ParticleEnergy<dim>> energy,
-                                                  const ContactPotential<dim>* contact)
+                                                  const ContactPotential<dim>* contact,
+                                                  const FemOptions& fem_options)
     : system_(system),
       method_(method),
       options_(options),
+      fem_options_(fem_options),
       iterates_reference_(integrator_info(method).references ||
                           (method == FemMethod::Analytic && options.analytic_regularizer > 0.0)),
       energy_(std::move(energy)),
@@ -138,7 +140,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
     // 2.36% of the diagonal from the ground truth instead of 0.52%.)
     VecX v = v_star;
     double alpha = potential_.max_step(at_start, v_star - at_start);
-    if (alpha < 1.0 && has_kinematic_ && options_.kinematic_start == "last_velocity") {
+    if (alpha < 1.0 && has_kinematic_ && fem_options_.kinematic_start == "last_velocity") {
         // CCD usually holds v* back because gravity's increment pushes the nodes resting on the
         // ground into it, and the uniform scaling then holds the plate back too. The free nodes at
         // their last velocities (the ones under the plate already move with it) with the kinematic
@@ -156,8 +158,8 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
 
     // The elastic predictor keeps the paper's fixed point's first F0 near the solution; the Newton
     // outer iteration evaluates the energy only within a step of its reference and needs none
-    // (ImplicitOptions::fem_predictor).
-    const bool predictor = iterates_reference_ && (options_.resolved_outer_iteration() == "fixed_point" || options_.fem_predictor);
+    // (FemOptions::fem_predictor).
+    const bool predictor = iterates_reference_ && (options_.resolved_outer_iteration() == "fixed_point" || fem_options_.fem_predictor);
     if (predictor) {
         predictor_.begin_step(x_hat, v_star, h, state.plastic_inverse, fixed_components_);
         predictor_.set_material_state(system_.element_object, state.hardening);
@@ -217,7 +219,7 @@ StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
             // fixed point only at the end: 0.090%, 5 frames).
             ReferenceSolveOptions stage_solve = solve;
             stage_solve.tolerance = std::max(solve.tolerance, kStageTolerance);
-            for (int stage = 0; stage < options_.max_kinematic_stages && deviation() > 1e-9; ++stage, weight *= 10.0) {
+            for (int stage = 0; stage < fem_options_.max_kinematic_stages && deviation() > 1e-9; ++stage, weight *= 10.0) {
                 potential_.soften_fixed(weight);
                 NewtonOptions soft = newton;
                 soft.residual_mass = potential_.residual_mass();

@@ -35,6 +35,7 @@
 
 #include "pnet/contact/collisions/contact.hpp"
 #include "pnet/energy/particle_energy.hpp"
+#include "pnet/fem/fem_options.hpp"
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
@@ -88,7 +89,8 @@ public:
     /// energy: the element energy of the method (NeuralParticleEnergy,
     /// ElasticParticleEnergy or AnalyticElastoplasticEnergy); contact may be null.
     FemImplicitIntegrator(const FemSystem<dim>& system, FemMethod method, const ImplicitOptions& options,
-                          std::unique_ptr<ParticleEnergy<dim>> energy, const ContactPotential<dim>* contact);
+                          std::unique_ptr<ParticleEnergy<dim>> energy, const ContactPotential<dim>* contact,
+                          const FemOptions& fem_options = {});
 
     /// Lagged friction on the pairs of `contact`, lagged at the start of every step.
     void set_friction(Friction<dim>* friction, const ContactPotential<dim>* contact);
@@ -102,6 +104,7 @@ private:
     const FemSystem<dim>& system_;
     FemMethod method_;
     ImplicitOptions options_;
+    FemOptions fem_options_;
     // F0 is an unknown of the step: plasticitynet, or analytic regularized about F0 (a diagnostic).
     bool iterates_reference_;
     std::unique_ptr<ParticleEnergy<dim>> energy_;

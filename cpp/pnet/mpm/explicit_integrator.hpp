@@ -71,7 +71,7 @@ template <int dim>
 double cfl_time_step(const MpmSystem<dim>& system, const Particles<dim>& particles, double cfl);
 
 /// The step dt capped so that no particle moves more than `cfl` grid cells at its velocity:
-/// min(dt, cfl dx / max_p |v_p|) (dt when cfl = 0 or nothing moves). ImplicitOptions::advection_cfl.
+/// min(dt, cfl dx / max_p |v_p|) (dt when cfl = 0 or nothing moves). MpmOptions::advection_cfl.
 template <int dim>
 double advection_time_step(const MpmSystem<dim>& system, const Particles<dim>& particles, double dt, double cfl);
 

@@ -15,11 +15,13 @@ namespace pnet {
 
 template <int dim>
 ImplicitIntegrator<dim>::ImplicitIntegrator(const MpmSystem<dim>& system, ImplicitMethod method,
-                                            const ImplicitOptions& options, std::unique_ptr<ParticleEnergy<dim>> energy,
+                                            const ImplicitOptions& options, const MpmOptions& mpm_options,
+                                            std::unique_ptr<ParticleEnergy<dim>> energy,
                                             std::vector<const LearnedReturnMap<dim>*> return_maps)
     : system_(system),
       method_(method),
       options_(options),
+      mpm_options_(mpm_options),
       energy_(std::move(energy)),
       return_maps_(std::move(return_maps)),
       grid_(system.origin, system.dx, system.cells),
@@ -117,14 +119,15 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
     newton.residual_mass = potential_.residual_mass();  // mass-weighted velocity residual, m/s
     newton.block_preconditioner = options_.preconditioner == "block_jacobi";
     newton.incomplete_cholesky = options_.preconditioner == "ichol";
-    if (options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
+    if (mpm_options_.linear_solver == "cholesky") newton.linear_solver = NewtonOptions::LinearSolver::Cholesky;
     const bool multigrid = options_.preconditioner == "multigrid";
     potential_.set_multigrid(multigrid, options_.multigrid_rebuild == "hessian");
-    potential_.set_assemble(options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
+    potential_.set_assemble(mpm_options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();
     const long network_before = energy_->network_evaluations();
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
+    solve.floor_friction_in_solve = mpm_options_.floor_friction_in_solve;
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
@@ -171,7 +174,7 @@ StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, lo
         }
     }
     if (alpha > 0.0) add_velocity_residual(particles, residual_, alpha);
-    stats.clamped = clamp_implicit_step(particles, system_, grid_, step_index, dt, options_.advection_cfl);
+    stats.clamped = clamp_implicit_step(particles, system_, grid_, step_index, dt, mpm_options_.advection_cfl);
 
     const auto end = std::chrono::steady_clock::now();
     record_phases(stats, start, after_p2g, after_solve, end);

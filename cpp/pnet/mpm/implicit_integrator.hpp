@@ -43,6 +43,7 @@
 #include "pnet/mpm/grid.hpp"
 #include "pnet/mpm/incremental_potential.hpp"
 #include "pnet/mpm/integrator.hpp"
+#include "pnet/mpm/mpm_options.hpp"
 #include "pnet/mpm/mpm_system.hpp"
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
@@ -63,7 +64,7 @@ public:
     /// object k's learned return mapping, or null for its material's analytic
     /// one (empty: analytic for all).
     ImplicitIntegrator(const MpmSystem<dim>& system, ImplicitMethod method, const ImplicitOptions& options,
-                       std::unique_ptr<ParticleEnergy<dim>> energy,
+                       const MpmOptions& mpm_options, std::unique_ptr<ParticleEnergy<dim>> energy,
                        std::vector<const LearnedReturnMap<dim>*> return_maps = {});
 
     std::string name() const override { return to_string(method_); }
@@ -82,6 +83,7 @@ public:
     void restore_checkpoint_state(std::vector<Mat<dim>> state) override;
 
     const ImplicitOptions& options() const { return options_; }
+    const MpmOptions& mpm_options() const { return mpm_options_; }
     const Grid<dim>& grid() const { return grid_; }
     IncrementalPotential<dim>& potential() { return potential_; }
 
@@ -89,6 +91,7 @@ private:
     const MpmSystem<dim>& system_;
     ImplicitMethod method_;
     ImplicitOptions options_;
+    MpmOptions mpm_options_;
     std::unique_ptr<ParticleEnergy<dim>> energy_;
     std::vector<const LearnedReturnMap<dim>*> return_maps_;
     Grid<dim> grid_;

@@ -77,7 +77,8 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
         MethodEnergy<dim> made = make_method_energy<dim>(settings, mpm_.materials, settings.models, where);
         std::unique_ptr<ParticleEnergy<dim>> energy = std::move(made.energy);
         std::vector<const LearnedReturnMap<dim>*> return_maps = std::move(made.return_maps);
-        implicit_ = std::make_unique<CoupledImplicitIntegrator<dim>>(mpm_, s, method, settings.implicit,
+        implicit_ = std::make_unique<CoupledImplicitIntegrator<dim>>(mpm_, s, method, settings.implicit, settings.mpm,
+                                                                     settings.coupling,
                                                                      std::move(energy), std::move(return_maps),
                                                                      fem_contact_.get(), *coupling_, friction);
     }
@@ -86,7 +87,7 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
 template <int dim>
 StepStats CoupledSimulation<dim>::step() {
     const bool limit = dt_ > 0.0 && implicit_;
-    const double limited = limit ? advection_time_step(mpm_, particles_, dt_, settings_.implicit.advection_cfl) : 0.0;
+    const double limited = limit ? advection_time_step(mpm_, particles_, dt_, settings_.mpm.advection_cfl) : 0.0;
     const double dt =
         clip_to_frame(limit ? limited : dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl));
     StepStats s =

@@ -249,7 +249,7 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
         std::unique_ptr<ParticleEnergy<dim>> energy = std::move(made.energy);
         built_.system.return_maps = made.return_maps;
         implicit_ = std::make_unique<FemImplicitIntegrator<dim>>(s, method, settings.implicit, std::move(energy),
-                                                               contact_.get());
+                                                               contact_.get(), settings.fem);
         if (frictional) implicit_->set_friction(friction_.get(), contact_.get());
     }
 }

@@ -59,7 +59,7 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
         std::vector<std::string> where;
         for (const SceneObject& object : scene.objects) where.push_back(scene.file + ": " + object.json_path);
         MethodEnergy<dim> energy = make_method_energy<dim>(settings, system_.materials, settings.models, where);
-        integrator_ = std::make_unique<ImplicitIntegrator<dim>>(system_, method, settings.implicit,
+        integrator_ = std::make_unique<ImplicitIntegrator<dim>>(system_, method, settings.implicit, settings.mpm,
                                                                 std::move(energy.energy), energy.return_maps);
     }
     integrator_->reset(particles_);
@@ -69,7 +69,7 @@ template <int dim>
 StepStats Simulation<dim>::step() {
     const bool implicit = settings_.dt > 0.0 && settings_.method() != Method::Explicit;
     const double limited =
-        implicit ? advection_time_step(system_, particles_, settings_.dt, settings_.implicit.advection_cfl) : 0.0;
+        implicit ? advection_time_step(system_, particles_, settings_.dt, settings_.mpm.advection_cfl) : 0.0;
     const double dt = clip_to_frame(implicit ? limited : settings_.dt > 0.0 ? settings_.dt
                                                                             : cfl_time_step(system_, particles_, settings_.cfl));
     StepStats s = integrator_->step(particles_, dt, steps_);

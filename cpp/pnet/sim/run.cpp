@@ -90,7 +90,7 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
     // The models the run read: none unless its integrator reads them (solver/integrators.hpp).
     run_json["models"] = integrator.reads_models ? scene_models(scene) : nlohmann::json::array();
     if (implicit) {
-        run_json["solver"] = settings.implicit.to_json();
+        run_json["solver"] = settings.options_json();
         if (settings.method() == Method::PlasticityNet)
             run_json["solver"]["outer_iteration_resolved"] = settings.implicit.resolved_outer_iteration();
     }

@@ -1,39 +1,16 @@
 #pragma once
-// What a run of a scene is set up with and what each frame did, for every method (MPM, FEM,
-// coupling): the integrator settings, and the frame statistics a run writes to stats.csv and
-// Python reads as a dict, declared once with their column names (for_each_frame_field).
+// What each frame of a run did, for every method (MPM, FEM, coupling): the frame statistics a run
+// writes to stats.csv and Python reads as a dict, declared once with their column names
+// (for_each_frame_field). What the run is set up with: sim/integrator_settings.hpp.
 #include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include "pnet/nn/model_file.hpp"
-#include "pnet/scene/scene.hpp"
-#include "pnet/solver/implicit_options.hpp"
-#include "pnet/solver/integrators.hpp"
+#include "pnet/sim/integrator_settings.hpp"
 #include "pnet/solver/step_stats.hpp"
 
 namespace pnet {
-
-/// Which integrator a Simulation runs and how.
-struct IntegratorSettings {
-    std::string name = "explicit";  // an integrator of solver/integrators.hpp
-    /// The integrator's method (std::invalid_argument for a name not in the list).
-    Method method() const { return parse_integrator(name); }
-    double dt = 0.0;                // s; 0: the CFL step before every step
-    double cfl = 0.5;
-    ImplicitOptions implicit;       // plasticitynet, lagged
-    /// Energy model of each scene object, or of each mesh in a FEM scene
-    /// (plasticitynet needs one for every object and deformable mesh; the
-    /// others ignore them). Loading a model file needs LibTorch
-    /// (load_model_file in pnet_torch), so the caller does it.
-    std::vector<std::shared_ptr<const ModelFile>> models;
-
-    /// The scene's "integrator" block: name, dt, cfl and the implicit options
-    /// (std::invalid_argument naming the file and key on a bad value). Models
-    /// are not loaded.
-    static IntegratorSettings from_scene(const Scene& scene);
-};
 
 struct FrameStats {
     int frame = 0;        // frame reached

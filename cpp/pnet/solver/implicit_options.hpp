@@ -1,10 +1,10 @@
 #pragma once
-// The settings of every implicit integrator (MPM, FEM, coupling): Newton's tolerances and caps, the
-// outer iteration on F0, the time discretization, the Hessian and the linear solve
-// (docs/solver.md). A scene gives them as keys of its "integrator" block; `pnet simulate` and
-// Python can override them. Each key is declared once, in implicit_option_fields(): the scene reader,
-// Python's solver= keys, `pnet simulate`'s flags and its --help are made from that list.
-#include <optional>
+// The solver's settings of every implicit integrator (MPM, FEM, coupling): Newton's tolerances and
+// caps, the outer iteration on F0, the time discretization, the Hessian, the network's passes and the
+// linear solve's preconditioner (docs/solver.md). A scene gives them as keys of its "integrator"
+// block; `pnet simulate` and Python can override them. Each key is declared once, in
+// implicit_option_fields(); the methods' own options live with them (mpm/mpm_options,
+// fem/fem_options, coupling/coupling_options), and sim/integrator_settings joins the tables.
 #include <string>
 #include <vector>
 
@@ -14,13 +14,9 @@
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/integrators.hpp"
 #include "pnet/solver/newton.hpp"
+#include "pnet/solver/option_field.hpp"
 
 namespace pnet {
-
-/// The advection limit's default (ImplicitOptions::advection_cfl), in grid cells per step: snowball_2d,
-/// which uncapped ends 58% short of the ground truth's spread, is at explicit's noise floor with it;
-/// the sand column's accuracy is unchanged (docs/solver.md, "The advection limit").
-inline constexpr double kDefaultAdvectionCfl = 0.2;
 
 /// Solver settings of the implicit integrators. In a scene they are keys of the
 /// "integrator" block (same names); the command line can override some.
@@ -105,10 +101,6 @@ struct ImplicitOptions {
     // step's solves ("step"), or rebuilt at every Hessian pass ("hessian": fewer Krylov iterations, a
     // build per Newton iteration; docs/solver.md, "Multigrid on the MPM grid").
     std::string multigrid_rebuild = "step";
-    // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the preconditioner above)
-    // or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept while the
-    // active grid is the same).
-    std::string linear_solver = "pcg";
     // Newton keeps the last Hessian while each iteration cuts the residual by
     // this factor (NewtonOptions::lazy_hessian; 0: a fresh one every
     // iteration); -1 ("auto", the default): the integrator's measured value
@@ -116,42 +108,13 @@ struct ImplicitOptions {
     // the energy time on sand_column_2d and cut it by 40% on snowball_2d at dt 1e-3,
     // with as many or fewer Newton iterations.
     double lazy_hessian = -1.0;
-    // MPM-FEM coupling: the linear solve of the coupled Newton iterations, "block" (PCG with Jacobi
-    // on the grid and an exact Cholesky solve of the FEM block) or "cholesky" (CHOLMOD on the whole
-    // assembled Hessian); coupling/coupled_potential.hpp.
-    std::string coupled_solver = "block";
     // A step whose solve ends unconverged (iteration cap or failed line search)
     // is an error (SimulationError) instead of being counted and used.
     bool fail_on_unconverged = false;
-    // FEM: the most extra solves per step that move kinematic nodes (the plate)
-    // to targets that contact's CCD kept them from at the start.
-    int max_kinematic_stages = 20;
-    // FEM with kinematic nodes: the start of a step when CCD holds v* back: "scaled" (v* as far as
-    // CCD allows, the kinematic nodes then led to their targets in stages) or "last_velocity" (the
-    // free nodes at their last velocities with the kinematic nodes on their targets, where that is
-    // intersection-free; else "scaled").
-    std::string kinematic_start = "scaled";
-    // FEM plasticitynet with the Newton outer iteration: first solve the step with the elastic
-    // energy and start from there (always done under the fixed point, whose first F0 must be near
-    // the solution).
-    bool fem_predictor = true;
     // plasticitynet: after each step, the return mapping of a model that ships
     // one (metal_nh_2d.pt: metal_nh_rm_2d.pt) instead of the material's exact
     // one; false: the material library's (for the comparison of the two).
     bool learned_return_map = true;
-    // Implicit MPM (and the particles of coupling): cap each step so that no particle moves more
-    // than this fraction of a grid cell, dt <= advection_cfl dx / max_p |v_p| (start-of-step
-    // velocities); 0: off (the scene's dt throughout). A particle that crosses about a cell in one
-    // step leaves the stencil its motion was solved on: snowball_2d at 1e-3 (impact at 3.9 m/s,
-    // v dt / dx = 0.99) spreads 54% less than the ground truth, at 5e-4 (0.49) 20% less. On by
-    // default at kDefaultAdvectionCfl (docs/solver.md, "The advection limit", measured).
-    double advection_cfl = kDefaultAdvectionCfl;
-    // A Coulomb floor (MPM, coupling) under plasticitynet and return_map: true, its friction's contacts
-    // follow the Newton iterates within the step's one solve (ReferenceSolveOptions::
-    // floor_friction_in_solve), at 0.3x the Newton tolerance for the same accuracy; false (the default):
-    // three majorize-minimize passes of whole solves, as lagged always takes. At the same accuracy the
-    // two cost about the same on the sand column (docs/methods.md, measured), so the passes stay.
-    bool floor_friction_in_solve = false;
 
     /// Throws std::invalid_argument "<context>.<key>: ..." for a combination `method` does not take:
     /// plasticitynet with hessian "tangent" (the classical integrator's, return_map), return_map with
@@ -192,39 +155,8 @@ struct ImplicitOptions {
     }
 };
 
-/// One key of ImplicitOptions, declared once: its name in a scene's integrator block and in Python's
-/// solver= dict, its `pnet simulate` flag, what it accepts and a line of help.
-struct OptionField {
-    enum class Kind { Number, NumberOrAuto, Integer, Boolean, Choice };
-    const char* key = nullptr;
-    const char* flag = nullptr;  // "--newton-tol"; nullptr: scenes and Python only
-    Kind kind = Kind::Number;
-    const char* help = nullptr;
-    // Number, NumberOrAuto, Integer: the accepted range; lo_open / hi_open exclude the bound itself.
-    double lo = 0.0, hi = 1e300;
-    bool lo_open = false, hi_open = false;
-    const char* unit = nullptr;        // in the expected text: "a positive number (m/s)"
-    std::vector<std::string> choices;  // Choice: the values; Boolean: the flag's words for true and false
-                                       // (empty: the flag is a switch that sets true)
-    double ImplicitOptions::*number = nullptr;  // Number, NumberOrAuto ("auto": -1)
-    int ImplicitOptions::*integer = nullptr;
-    bool ImplicitOptions::*boolean = nullptr;
-    std::string ImplicitOptions::*text = nullptr;
-
-    /// What a scene may give: "a number in [0, 1)", "\"jacobi\", ... or \"multigrid\"", "true or false".
-    std::string expected() const;
-    /// What the flag takes: "a number in [0, 1)", "jacobi, ... or multigrid", "yes or no".
-    std::string flag_expected() const;
-    bool accepts(const nlohmann::json& value) const;
-    nlohmann::json get(const ImplicitOptions& o) const;
-    void set(ImplicitOptions& o, const nlohmann::json& value) const;
-    /// A word of the command line as this key's value; nullopt when it is none of the accepted ones.
-    std::optional<nlohmann::json> parse_flag(const std::string& word) const;
-};
-
-/// Every key of ImplicitOptions, in the order --help lists them.
-const std::vector<OptionField>& implicit_option_fields();
-/// The field of a key or flag; nullptr if none.
-const OptionField* find_option_field(const std::string& key_or_flag);
+/// Every key of ImplicitOptions, in the order --help lists them (the other layers' options:
+/// sim/integrator_settings.hpp).
+const std::vector<OptionField<ImplicitOptions>>& implicit_option_fields();
 
 }  // namespace pnet

@@ -154,7 +154,14 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
     Study("time_integrator_mpm", "mpm", {"sand_column_2d": 50, "snowball_2d": 50, "snowball_3d": 25},
           ("gt", "explicit_cfl", "plasticitynet_1e-3", "lagged_1e-3", "plasticitynet_1e-3_bdf2",
            "plasticitynet_1e-3_advection", "plasticitynet_1e-3_uncapped")),
+    # Its 2D scenes re-measured with the network on every plasticitynet iteration (2026-11-29): what one
+    # session fits on two cores (notebooks/results/implicit_eval_2d/).
+    Study("implicit_eval_2d", "mpm", {"sand_column_2d": 50, "snowball_2d": 50}, MAIN_MPM),
     Study("fem_eval", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100, "metal_frame_3d": 25},
+          ("gt", "explicit_2e-5", "explicit_cfl", "analytic_1e-2", "plasticitynet_1e-2", "plasticitynet_1e-3",
+           "return_map_1e-2", "lagged_1e-2", "plasticitynet_1e-2_w0", "plasticitynet_1e-2_exact_rm")),
+    # Its 2D frames, re-measured with the network on every plasticitynet iteration (notebooks/results/fem_eval_2d/).
+    Study("fem_eval_2d", "fem", {"metal_frame_2d": 100, "metal_nh_frame_2d": 100},
           ("gt", "explicit_2e-5", "explicit_cfl", "analytic_1e-2", "plasticitynet_1e-2", "plasticitynet_1e-3",
            "return_map_1e-2", "lagged_1e-2", "plasticitynet_1e-2_w0", "plasticitynet_1e-2_exact_rm")),
     Study("coupling_eval", "coupling", {"sand_fem_coupling_2d": 50},

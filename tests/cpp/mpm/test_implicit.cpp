@@ -597,7 +597,9 @@ TYPED_TEST(ImplicitTest, EveryTinySceneRunsWithEveryImplicitIntegrator) {
         }
 }
 
-TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
+// The integrator block's keys of every layer (the solver's, MPM's, FEM's) are read by one reader
+// (IntegratorSettings::read_options over integrator_option_fields()).
+TEST(IntegratorSettings, ReadsAndValidatesTheIntegratorBlock) {
     const nlohmann::json ok = {{"name", "plasticitynet"},
                                {"dt", 1e-3},
                                {"newton_tolerance", 1e-4},
@@ -611,12 +613,14 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
                                {"fixed_point_anderson", 2},
                                {"fixed_point_keep_hessian", false},
                                {"advection_cfl", 0.25}};
-    const ImplicitOptions o = ImplicitOptions::from_json(ok, "s.json");
-    EXPECT_EQ(o.advection_cfl, 0.25);
-    EXPECT_EQ(ImplicitOptions{}.advection_cfl, 0.2) << "on by default";
+    IntegratorSettings settings;
+    settings.read_options(ok, "s.json");
+    const ImplicitOptions& o = settings.implicit;
+    EXPECT_EQ(settings.mpm.advection_cfl, 0.25);
+    EXPECT_EQ(MpmOptions{}.advection_cfl, 0.2) << "on by default";
     EXPECT_EQ(o.preconditioner, "block_jacobi");
     EXPECT_EQ(o.lazy_hessian, 0.0);
-    EXPECT_EQ(o.max_kinematic_stages, 5);
+    EXPECT_EQ(settings.fem.max_kinematic_stages, 5);
     EXPECT_TRUE(o.fail_on_unconverged);
     EXPECT_EQ(o.fixed_point_anderson, 2);
     EXPECT_FALSE(o.fixed_point_keep_hessian);
@@ -632,6 +636,11 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_EQ(ImplicitOptions{}.fixed_point_anderson, 0);
     EXPECT_EQ(ImplicitOptions{}.fixed_point_inexact, 0.0);
     EXPECT_EQ(ImplicitOptions::from_json(o.to_json(), "s.json").to_json(), o.to_json());
+    IntegratorSettings again;
+    again.read_options(settings.options_json(), "s.json");
+    EXPECT_EQ(again.options_json(), settings.options_json());
+    // A layer's own reader knows its keys only: the solver's refuses MPM's.
+    EXPECT_THROW(ImplicitOptions::from_json({{"advection_cfl", 0.25}}, "s.json"), std::invalid_argument);
     EXPECT_EQ(o.newton_tolerance, 1e-4);
     EXPECT_EQ(o.max_fixed_point_iterations, 3);
     EXPECT_EQ(o.regularizer_weight, 0.0);
@@ -639,7 +648,7 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_EQ(ImplicitOptions{}.tangent_damping, 0.3);
     auto message = [](const nlohmann::json& block) {
         try {
-            ImplicitOptions::from_json(block, "s.json");
+            IntegratorSettings{}.read_options(block, "s.json");
         } catch (const std::invalid_argument& e) {
             return std::string(e.what());
         }
@@ -674,14 +683,14 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
     EXPECT_EQ(message({{"name", "lagged"}, {"dt", 1e-3}, {"cfl", 0.5}}), "accepted");
 }
 
-// Every option is declared once (implicit_option_fields()): to_json holds exactly its keys, each
-// field reads back what it writes, flags are unique, and each flag's words parse to values the
-// scene reader accepts.
-TEST(ImplicitOptions, EveryOptionIsDeclaredOnceAndItsFlagParsesToAnAcceptedValue) {
-    const ImplicitOptions defaults;
-    const nlohmann::json j = defaults.to_json();
+// Every option is declared once, in its layer's table (integrator_option_fields() joins them):
+// options_json holds exactly their keys, each field reads back what it writes, keys and flags are
+// unique across the layers, and each flag's words parse to values the scene reader accepts.
+TEST(IntegratorSettings, EveryOptionIsDeclaredOnceAndItsFlagParsesToAnAcceptedValue) {
+    const IntegratorSettings defaults;
+    const nlohmann::json j = defaults.options_json();
     std::set<std::string> keys, flags;
-    for (const OptionField& f : implicit_option_fields()) {
+    for (const OptionField<IntegratorSettings>& f : integrator_option_fields()) {
         EXPECT_TRUE(keys.insert(f.key).second) << f.key;
         if (f.flag) {
             EXPECT_TRUE(flags.insert(f.flag).second) << f.flag;
@@ -692,12 +701,14 @@ TEST(ImplicitOptions, EveryOptionIsDeclaredOnceAndItsFlagParsesToAnAcceptedValue
         if (f.flag) {
             EXPECT_EQ(find_option_field(f.flag), &f);
         }
-        ImplicitOptions o;
+        IntegratorSettings o;
         f.set(o, j[f.key]);
         EXPECT_EQ(f.get(o), j[f.key]) << f.key;
     }
     EXPECT_EQ(keys.size(), j.size());
-    const OptionField& tol = *find_option_field("--newton-tol");
+    EXPECT_EQ(keys.size(), implicit_option_fields().size() + mpm_option_fields().size() + fem_option_fields().size() +
+                               coupling_option_fields().size());
+    const OptionSpec& tol = *find_option_field("--newton-tol");
     EXPECT_EQ(tol.parse_flag("1e-4"), nlohmann::json(1e-4));
     EXPECT_FALSE(tol.parse_flag("-1"));
     EXPECT_FALSE(tol.parse_flag("nan"));
@@ -1047,7 +1058,7 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveStopsASlidingBoxA
         settings.name = "return_map";
         settings.dt = dt;
         settings.implicit.newton_tolerance = 1e-7;
-        settings.implicit.floor_friction_in_solve = in_solve;
+        settings.mpm.floor_friction_in_solve = in_solve;
         Simulation<dim> sim(scene, settings);
         auto mean_x = [&] { return mean_position_x<dim>(sim.particles()); };
         const double start = mean_x();
@@ -1087,7 +1098,7 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveEndsWhereTightPas
         IntegratorSettings settings;
         settings.name = "return_map";
         settings.dt = 1e-3;
-        settings.implicit.floor_friction_in_solve = in_solve;
+        settings.mpm.floor_friction_in_solve = in_solve;
         if (tolerance > 0.0) settings.implicit.newton_tolerance = tolerance;
         return spread_growth<dim>(scene, settings, 10);
     };
@@ -1231,8 +1242,8 @@ TYPED_TEST(ImplicitTest, Bdf2StartsWithABackwardEulerStepThenUsesItsHistory) {
     const MpmSystem<dim> system = make_mpm_system<dim>(scene);
     ImplicitOptions be, bdf2;
     bdf2.time_integrator = "bdf2";
-    ImplicitIntegrator<dim> a(system, ImplicitMethod::Lagged, be, std::make_unique<ElasticParticleEnergy<dim>>(system.materials));
-    ImplicitIntegrator<dim> b(system, ImplicitMethod::Lagged, bdf2,
+    ImplicitIntegrator<dim> a(system, ImplicitMethod::Lagged, be, MpmOptions{}, std::make_unique<ElasticParticleEnergy<dim>>(system.materials));
+    ImplicitIntegrator<dim> b(system, ImplicitMethod::Lagged, bdf2, MpmOptions{},
                               std::make_unique<ElasticParticleEnergy<dim>>(system.materials));
     Particles<dim> pa = sample_particles<dim>(scene), pb = pa;
     a.step(pa, 1e-3, 0);
@@ -1260,7 +1271,7 @@ TYPED_TEST(ImplicitTest, Bdf2WithChangingStepsKeepsAFreeFallExact) {
     const MpmSystem<dim> system = make_mpm_system<dim>(scene);
     ImplicitOptions bdf2;
     bdf2.time_integrator = "bdf2";
-    ImplicitIntegrator<dim> integrator(system, ImplicitMethod::Lagged, bdf2,
+    ImplicitIntegrator<dim> integrator(system, ImplicitMethod::Lagged, bdf2, MpmOptions{},
                                        std::make_unique<ElasticParticleEnergy<dim>>(system.materials));
     Particles<dim> particles = sample_particles<dim>(scene);
     Vec<dim> v0 = Vec<dim>::Zero();
@@ -1288,7 +1299,7 @@ TYPED_TEST(ImplicitTest, Bdf2WithChangingStepsKeepsAFreeFallExact) {
     ASSERT_EQ(state.size(), 3 * particles.size() + 1);
     EXPECT_EQ(state.back()(0, 0), 2.5e-4);
     state.pop_back();
-    ImplicitIntegrator<dim> resumed(system, ImplicitMethod::Lagged, bdf2,
+    ImplicitIntegrator<dim> resumed(system, ImplicitMethod::Lagged, bdf2, MpmOptions{},
                                     std::make_unique<ElasticParticleEnergy<dim>>(system.materials));
     resumed.restore_checkpoint_state(state);
     resumed.step(particles, 2.5e-4, step++);

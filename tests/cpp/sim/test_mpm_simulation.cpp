@@ -86,7 +86,7 @@ void checkpoint_round_trip(const char* file) {
     EXPECT_EQ(dir.entries(), std::vector<std::string>{"state.bin"});  // no temporary left
 }
 
-// The advection limit (ImplicitOptions::advection_cfl): the implicit steps of a disk thrown down at
+// The advection limit (MpmOptions::advection_cfl): the implicit steps of a disk thrown down at
 // 8 m/s are cut to C dx / max_p |v_p| (the velocities at each step's start), frames still land on
 // their times, each cut step says so (StepStats::advection_capped), and with the limit off the
 // scene's dt is kept.
@@ -97,7 +97,7 @@ TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
     IntegratorSettings settings = IntegratorSettings::from_scene(scene);
     settings.name = "lagged";
     settings.dt = 2e-3;
-    settings.implicit.advection_cfl = 0.0;
+    settings.mpm.advection_cfl = 0.0;
     Simulation<2> off(scene, settings);
     const FrameStats whole = off.advance_frame();
     EXPECT_DOUBLE_EQ(whole.dt_max, 2e-3);
@@ -106,7 +106,7 @@ TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
     for (const StepStats& s : off.last_frame_steps()) EXPECT_FALSE(s.advection_capped);
 
     const double cfl = 0.25;
-    settings.implicit.advection_cfl = cfl;
+    settings.mpm.advection_cfl = cfl;
     Simulation<2> capped(scene, settings);
     const double dx = capped.system().dx;
     auto fastest = [&] {
@@ -138,13 +138,13 @@ TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
 // The limit is on by default (0.2 cells: docs/solver.md, "The advection limit"): the shipped scene
 // taken as it is, thrown fast, is cut; an explicit run is not (its own CFL step governs it).
 TEST(Simulation, AdvectionLimitIsOnByDefault) {
-    EXPECT_EQ(ImplicitOptions{}.advection_cfl, kDefaultAdvectionCfl);
+    EXPECT_EQ(MpmOptions{}.advection_cfl, kDefaultAdvectionCfl);
     EXPECT_EQ(kDefaultAdvectionCfl, 0.2);
     nlohmann::json j = scene_to_json(load_scene(PNET_SCENES_DIR "/tiny/snowball_2d.json"));
     j["objects"][0]["velocity"] = {0.0, -8.0};
     const Scene scene = scene_from_json(j, "fast.json", PNET_SCENES_DIR "/tiny");
     IntegratorSettings settings = IntegratorSettings::from_scene(scene);
-    EXPECT_EQ(settings.implicit.advection_cfl, 0.2);
+    EXPECT_EQ(settings.mpm.advection_cfl, 0.2);
     settings.name = "lagged";
     settings.dt = 2e-3;
     Simulation<2> sim(scene, settings);

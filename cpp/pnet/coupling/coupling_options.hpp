@@ -1,0 +1,22 @@
+#pragma once
+// The coupled MPM-FEM step's own option, its linear solve: a key of a scene's "integrator" block
+// beside the solver's and MPM's (solver/implicit_options.hpp, mpm/mpm_options.hpp); declared once, in
+// coupling_option_fields().
+#include <string>
+#include <vector>
+
+#include "pnet/solver/option_field.hpp"
+
+namespace pnet {
+
+struct CouplingOptions {
+    // The linear solve of the coupled Newton iterations, "block" (PCG with Jacobi on the grid and an
+    // exact Cholesky solve of the FEM block) or "cholesky" (CHOLMOD on the whole assembled Hessian);
+    // coupling/coupled_potential.hpp.
+    std::string coupled_solver = "block";
+};
+
+/// Every key of CouplingOptions.
+const std::vector<OptionField<CouplingOptions>>& coupling_option_fields();
+
+}  // namespace pnet

@@ -1,0 +1,18 @@
+#include "pnet/mpm/mpm_options.hpp"
+
+namespace pnet {
+
+const std::vector<OptionField<MpmOptions>>& mpm_option_fields() {
+    using O = MpmOptions;
+    static const std::vector<OptionField<O>> fields = {
+        number_option("advection_cfl", "--advection-cfl", 0.0, false, 1.0, false, &O::advection_cfl,
+                      "MPM: cap a step so that no particle moves more than this many cells (0: off)"),
+        boolean_option("floor_friction_in_solve", "--floor-friction-in-solve", &O::floor_friction_in_solve,
+                       "a Coulomb floor's friction follows the Newton iterates in one solve (no: three passes)"),
+        choice_option("linear_solver", nullptr, {"pcg", "cholesky"}, &O::linear_solver,
+                      "MPM's linear solve: matrix-free PCG or CHOLMOD on the assembled Hessian"),
+    };
+    return fields;
+}
+
+}  // namespace pnet

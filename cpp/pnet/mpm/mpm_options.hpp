@@ -1,0 +1,40 @@
+#pragma once
+// The implicit MPM step's own options (and those of coupling's particles): the advection limit, the
+// Coulomb floor's friction and the grid's linear solve. Keys of a scene's "integrator" block beside
+// the solver's (solver/implicit_options.hpp); declared once, in mpm_option_fields().
+#include <string>
+#include <vector>
+
+#include "pnet/solver/option_field.hpp"
+
+namespace pnet {
+
+/// The advection limit's default (MpmOptions::advection_cfl), in grid cells per step: snowball_2d,
+/// which uncapped ends 58% short of the ground truth's spread, is at explicit's noise floor with it;
+/// the sand column's accuracy is unchanged (docs/solver.md, "The advection limit").
+inline constexpr double kDefaultAdvectionCfl = 0.2;
+
+struct MpmOptions {
+    // Implicit MPM (and the particles of coupling): cap each step so that no particle moves more
+    // than this fraction of a grid cell, dt <= advection_cfl dx / max_p |v_p| (start-of-step
+    // velocities); 0: off (the scene's dt throughout). A particle that crosses about a cell in one
+    // step leaves the stencil its motion was solved on: snowball_2d at 1e-3 (impact at 3.9 m/s,
+    // v dt / dx = 0.99) spreads 54% less than the ground truth, at 5e-4 (0.49) 20% less. On by
+    // default at kDefaultAdvectionCfl (docs/solver.md, "The advection limit", measured).
+    double advection_cfl = kDefaultAdvectionCfl;
+    // A Coulomb floor (MPM, coupling) under plasticitynet and return_map: true, its friction's contacts
+    // follow the Newton iterates within the step's one solve (ReferenceSolveOptions::
+    // floor_friction_in_solve), at 0.3x the Newton tolerance for the same accuracy; false (the default):
+    // three majorize-minimize passes of whole solves, as lagged always takes. At the same accuracy the
+    // two cost about the same on the sand column (docs/methods.md, measured), so the passes stay.
+    bool floor_friction_in_solve = false;
+    // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the solver's
+    // preconditioner) or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept
+    // while the active grid is the same).
+    std::string linear_solver = "pcg";
+};
+
+/// Every key of MpmOptions, in the order --help lists them.
+const std::vector<OptionField<MpmOptions>>& mpm_option_fields();
+
+}  // namespace pnet
