@@ -163,6 +163,14 @@ double reference_step(const std::string& name) {
     return name == "sand_fem_coupling_2d" || name.rfind("stiff/", 0) == 0 ? 1e-6 : 1e-5;
 }
 
+/// `base` with another integrator and step.
+pnet::IntegratorSettings with_integrator(const pnet::IntegratorSettings& base, const char* name, double dt) {
+    pnet::IntegratorSettings s = base;
+    s.name = name;
+    s.dt = dt;
+    return s;
+}
+
 template <int dim>
 std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_implicit, double reference_dt,
                              const Extras& extras) {
@@ -176,34 +184,28 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
                                   : std::make_shared<const pnet::ModelFile>(pnet::load_model_file(object.model, load)));
     }
     std::vector<Row> rows;
-    auto with = [&](const char* name, double dt) {
-        pnet::IntegratorSettings s = base;
-        s.name = name;
-        s.dt = dt;
-        return s;
-    };
     using Sim = pnet::Simulation<dim>;
-    rows.push_back(measure<Sim>(scene, with("plasticitynet", dt_implicit), frames));
-    rows.push_back(measure<Sim>(scene, with("return_map", dt_implicit), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "plasticitynet", dt_implicit), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "return_map", dt_implicit), frames));
     if (extras.uncapped) {  // the scene's dt alone, the advection limit (on by default) off
         for (const char* name : {"plasticitynet", "return_map"}) {
-            pnet::IntegratorSettings s = with(name, dt_implicit);
+            pnet::IntegratorSettings s = with_integrator(base, name, dt_implicit);
             s.mpm.advection_cfl = 0.0;
             rows.push_back(measure<Sim>(scene, s, frames));
             rows.back().integrator = std::string(name) + ", uncapped";
         }
     }
     if (extras.one_solve) {  // the paper's cheapest mode: one solve per step about F0 = F(v*), not converged
-        pnet::IntegratorSettings one = with("plasticitynet", dt_implicit);
+        pnet::IntegratorSettings one = with_integrator(base, "plasticitynet", dt_implicit);
         one.implicit.outer_iteration = "fixed_point";
         one.implicit.max_fixed_point_iterations = 1;
         rows.push_back(measure<Sim>(scene, one, frames));
         rows.back().integrator = "plasticitynet, 1 solve";
     }
-    add_outer_rows<Sim>(rows, scene, with("plasticitynet", dt_implicit), frames, extras);
-    if (extras.lagged) rows.push_back(measure<Sim>(scene, with("lagged", dt_implicit), frames));
-    rows.push_back(measure<Sim>(scene, with("explicit", reference_dt), frames));
-    rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
+    add_outer_rows<Sim>(rows, scene, with_integrator(base, "plasticitynet", dt_implicit), frames, extras);
+    if (extras.lagged) rows.push_back(measure<Sim>(scene, with_integrator(base, "lagged", dt_implicit), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", reference_dt), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", 0.0), frames));
     return rows;
 }
 
@@ -213,15 +215,9 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, const Ext
     using Sim = pnet::FemSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
-    auto with = [&](const char* name, double dt) {
-        pnet::IntegratorSettings s = base;
-        s.name = name;
-        s.dt = dt;
-        return s;
-    };
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
-    rows.push_back(measure<Sim>(scene, with("return_map", base.dt), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "return_map", base.dt), frames));
     add_outer_rows<Sim>(rows, scene, base, frames, extras);
     if (extras.last_velocity) {  // each step from the last velocities with the plate on its target
         pnet::IntegratorSettings last = base;
@@ -231,11 +227,11 @@ std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, const Ext
     }
     if (extras.lagged) {
         if (scene.meshes[0].material.name == "metal")
-            rows.push_back(measure<Sim>(scene, with("analytic", base.dt), frames));
-        rows.push_back(measure<Sim>(scene, with("lagged", base.dt), frames));
+            rows.push_back(measure<Sim>(scene, with_integrator(base, "analytic", base.dt), frames));
+        rows.push_back(measure<Sim>(scene, with_integrator(base, "lagged", base.dt), frames));
     }
-    rows.push_back(measure<Sim>(scene, with("explicit", 1e-5), frames));
-    rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", 1e-5), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", 0.0), frames));
     return rows;
 }
 
@@ -246,19 +242,13 @@ std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, const
     using Sim = pnet::CoupledSimulation<dim>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
-    auto with = [&](const char* name, double dt) {
-        pnet::IntegratorSettings s = base;
-        s.name = name;
-        s.dt = dt;
-        return s;
-    };
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
-    rows.push_back(measure<Sim>(scene, with("return_map", base.dt), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "return_map", base.dt), frames));
     add_outer_rows<Sim>(rows, scene, base, frames, extras);
-    if (extras.lagged) rows.push_back(measure<Sim>(scene, with("lagged", base.dt), frames));
-    rows.push_back(measure<Sim>(scene, with("explicit", reference_step(scene.name)), frames));
-    rows.push_back(measure<Sim>(scene, with("explicit", 0.0), frames));
+    if (extras.lagged) rows.push_back(measure<Sim>(scene, with_integrator(base, "lagged", base.dt), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", reference_step(scene.name)), frames));
+    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", 0.0), frames));
     return rows;
 }
 
