@@ -16,7 +16,7 @@
 #include "pnet/contact/broad_phase/hash_grid.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
-#include "support/finite_difference.hpp"
+#include "support/contact_checks.hpp"
 #include "support/random.hpp"
 
 namespace pnet {
@@ -64,48 +64,14 @@ TwoTriangles near_pair(double gap) {
     return t;
 }
 
-std::vector<Vec<3>> unpack(const Eigen::VectorXd& q) {
-    std::vector<Vec<3>> y(q.size() / 3);
-    for (std::size_t i = 0; i < y.size(); ++i) y[i] = q.segment<3>(3 * i);
-    return y;
-}
-
-Eigen::VectorXd pack(const std::vector<Vec<3>>& x) {
-    Eigen::VectorXd q(3 * x.size());
-    for (std::size_t i = 0; i < x.size(); ++i) q.segment<3>(3 * i) = x[i];
-    return q;
-}
-
 TEST(Contact3d, BarrierPotentialMatchesFiniteDifferences) {
     const TwoTriangles t = near_pair(0.0006);
     Contact3d contact(t.faces, t.x, 1e-3, 1e8);
     contact.add_half_space({Vec<3>(0.0, -0.0007, 0.0), Vec<3>(0.0, 1.0, 0.0)});
     const std::vector<Vec<3>>& x = t.x;
     ASSERT_GE(contact.active_pairs(x), 4u) << "point-triangle, edge-edge and point-plane pairs within dhat";
-    const Eigen::VectorXd q = pack(x);
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(q.size());
-    const double b = contact.add_gradient(x, 1.0, g);
+    const double b = test::expect_barrier_derivatives<3>(contact, x);
     EXPECT_DOUBLE_EQ(b, contact.value(x));
-    test::FdStats fd;
-    EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return contact.value(unpack(y)); }, g, q, fd,
-                                     1e-9, 1e-5, 1e-6 * g.cwiseAbs().maxCoeff()));
-    std::vector<Eigen::Triplet<double>> triplets;
-    contact.add_hessian(x, 1.0, triplets, /*project_psd=*/false);
-    Eigen::SparseMatrix<double> H(q.size(), q.size());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    const Eigen::MatrixXd Hd(H);
-    auto grad = [&](const Eigen::VectorXd& y) {
-        Eigen::VectorXd gy = Eigen::VectorXd::Zero(y.size());
-        contact.add_gradient(unpack(y), 1.0, gy);
-        return gy;
-    };
-    EXPECT_TRUE(test::check_jacobian(grad, Hd, q, fd, 1e-9, 1e-4, 1e-6 * Hd.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(q.size() + q.size() * q.size()));
-    triplets.clear();
-    contact.add_hessian(x, 1.0, triplets, true);
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    EXPECT_GE(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Eigen::MatrixXd(H)).eigenvalues().minCoeff(),
-              -1e-9 * Hd.cwiseAbs().maxCoeff());
     EXPECT_EQ(contact.first_intersection(x), "");
     EXPECT_GT(contact.min_distance(x), 0.0);
     EXPECT_LT(contact.min_distance(x), 1e-3);
@@ -148,25 +114,7 @@ TEST(Friction3d, PotentialMatchesFiniteDifferences) {
         // Between two primitives a rigid translation does not slip; against the ground the node does.
         EXPECT_NEAR(sum, p.count == 1 ? 1.0 : 0.0, 1e-12);
     }
-    Eigen::VectorXd v(3 * t.x.size());
-    for (Eigen::Index k = 0; k < v.size(); ++k) v[k] = 1e-3 * std::sin(1.7 * k + 0.3);  // slips below and above eps
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(v.size());
-    friction.add_gradient(v, 1.0, g);
-    test::FdStats fd;
-    EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return friction.value(y); }, g, v, fd, 1e-9, 1e-5,
-                                     1e-6 * g.cwiseAbs().maxCoeff()));
-    std::vector<Eigen::Triplet<double>> triplets;
-    friction.add_hessian(v, 1.0, triplets);
-    Eigen::SparseMatrix<double> H(v.size(), v.size());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    const Eigen::MatrixXd Hd(H);
-    auto grad = [&](const Eigen::VectorXd& y) {
-        Eigen::VectorXd gy = Eigen::VectorXd::Zero(y.size());
-        friction.add_gradient(y, 1.0, gy);
-        return gy;
-    };
-    EXPECT_TRUE(test::check_jacobian(grad, Hd, v, fd, 1e-10, 1e-4, 1e-6 * Hd.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(v.size() + v.size() * v.size()));
+    const Eigen::MatrixXd Hd = test::expect_friction_derivatives<3>(friction, t.x.size());
     EXPECT_GE(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Hd).eigenvalues().minCoeff(), -1e-9 * Hd.norm());
 }
 

@@ -12,6 +12,7 @@
 #include "pnet/contact/collisions/contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
+#include "support/contact_checks.hpp"
 #include "support/finite_difference.hpp"
 
 namespace pnet {
@@ -48,25 +49,7 @@ TEST(Friction, PotentialMatchesFiniteDifferences) {
     Friction2d friction(0.3, 1e-3);
     friction.lag(contact, x);
     ASSERT_GE(friction.pairs(), 2u);
-    Eigen::VectorXd v(2 * x.size());
-    for (Eigen::Index k = 0; k < v.size(); ++k) v[k] = 1e-3 * std::sin(1.7 * k + 0.3);  // slips below and above eps
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(v.size());
-    friction.add_gradient(v, 1.0, g);
-    test::FdStats fd;
-    EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return friction.value(y); }, g, v, fd, 1e-9, 1e-5,
-                                     1e-6 * g.cwiseAbs().maxCoeff()));
-    std::vector<Eigen::Triplet<double>> triplets;
-    friction.add_hessian(v, 1.0, triplets);
-    Eigen::SparseMatrix<double> H(v.size(), v.size());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    auto grad = [&](const Eigen::VectorXd& y) {
-        Eigen::VectorXd gy = Eigen::VectorXd::Zero(y.size());
-        friction.add_gradient(y, 1.0, gy);
-        return gy;
-    };
-    const Eigen::MatrixXd Hd(H);
-    EXPECT_TRUE(test::check_jacobian(grad, Hd, v, fd, 1e-10, 1e-4, 1e-6 * Hd.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(v.size() + v.size() * v.size()));
+    test::expect_friction_derivatives<2>(friction, x.size());
 }
 
 /// A stiff 2 x 2 cm block resting on a slope of angle `degrees`, friction mu; returns the block's
