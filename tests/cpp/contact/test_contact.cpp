@@ -17,6 +17,7 @@
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/solver/newton.hpp"
 #include "support/contact_checks.hpp"
+#include "support/fem_systems.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 
@@ -154,17 +155,8 @@ TEST(Contact2d, BarrierPotentialMatchesFiniteDifferences) {
 // rests on it: no node ever reaches the ground, and at rest it floats within
 // dhat of it.
 TEST(Contact2d, ElasticSquareDroppedOnTheGroundComesToRestWithoutPenetration) {
-    Shape2d box;
-    box.kind = Shape2d::Kind::Box;
-    box.min = Vec<2>(0.0, 0.05);
-    box.max = Vec<2>(0.1, 0.15);
-    box.element_size = 0.02;
-    const Mesh<2> mesh = mesh_shape(box, "square");
-    MaterialDescription jelly;
-    jelly.density = 1000.0;
-    jelly.elasticity = ElasticityModel::NeoHookeanMetal;
-    jelly.elastic.E = 1e5;
-    jelly.elastic.nu = 0.3;
+    const Mesh<2> mesh = mesh_shape(test::box_shape<2>(Vec<2>(0.0, 0.05), Vec<2>(0.1, 0.15), 0.02), "square");
+    const MaterialDescription jelly = test::elastic_material(ElasticityModel::NeoHookeanMetal, 1e5);
     const std::vector<Material<2>> materials = {Material<2>(jelly)};
     ElasticParticleEnergy<2> energy(materials);
     const ElementRest<2> rest(mesh, std::vector<double>(mesh.elements.size(), jelly.density));

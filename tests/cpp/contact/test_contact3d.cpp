@@ -17,6 +17,7 @@
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "support/contact_checks.hpp"
+#include "support/fem_systems.hpp"
 #include "support/random.hpp"
 
 namespace pnet {
@@ -124,34 +125,13 @@ double slope_speed(double degrees, double mu, double t) {
     const double angle = degrees * M_PI / 180.0, dhat = 1e-4;
     const Eigen::Matrix3d R = Eigen::AngleAxisd(angle, Vec<3>::UnitZ()).toRotationMatrix();
     const Vec<3> along = R * Vec<3>::UnitX(), normal = R * Vec<3>::UnitY();
-    Shape3d box;
-    box.kind = Shape3d::Kind::Box;
-    box.min = Vec<3>(0.0, 0.0, 0.0);
-    box.max = Vec<3>(0.02, 0.02, 0.02);
-    box.element_size = 0.02;
-    FemSystem<3> system;
-    system.mesh = mesh_shape(box, "block");
-    for (Vec<3>& p : system.mesh.x) p = R * p + 0.5 * dhat * normal;
-    system.mesh.finalize("block on a slope");
-    MaterialDescription stiff;
-    stiff.density = 1000.0;
-    stiff.elasticity = ElasticityModel::NeoHookeanMetal;
-    stiff.elastic.E = 1e7;
-    stiff.elastic.nu = 0.3;
-    system.materials = {Material<3>(stiff)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<3>(0.0, -9.8, 0.0);
-    system.make_rest();
+    const FemSystem<3> system = test::block_on_slope<3>(R, normal, 0.02, 0.02, dhat);
     // kappa: the weight, 0.08 N, held by the 4 bottom nodes at about dhat / 2, where
     // kappa |b'(s)| 2 d = kappa 4.3e-12 m^3 (1e15 put 4 kN on each node and Newton stalled).
     Contact3d contact(system.mesh.boundary, system.mesh.x, dhat, 5e9);
     contact.add_half_space({Vec<3>(0.0, 0.0, 0.0), normal});
     Friction<3> friction(mu, 1e-4);
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-7;
-    options.max_newton_iterations = 200;
-    FemImplicitIntegrator<3> implicit(system, FemMethod::Lagged, options,
-                                      std::make_unique<ElasticParticleEnergy<3>>(system.materials), &contact);
+    FemImplicitIntegrator<3> implicit = test::lagged_integrator<3>(system, &contact, 1e-7);
     implicit.set_friction(&friction, &contact);
     FemState<3> state = FemState<3>::at_rest(system);
     const double dt = 2e-3;
@@ -178,30 +158,14 @@ TEST(Friction3d, BoxOnASlopeSticksBelowTheFrictionAngleAndSlidesAbove) {
 }
 
 TEST(Contact3d, TetrahedralCubeDroppedOnTheGroundRestsWithoutPenetration) {
-    Shape3d box;
-    box.kind = Shape3d::Kind::Box;
-    box.min = Vec<3>(0.0, 0.02, 0.0);
-    box.max = Vec<3>(0.04, 0.06, 0.04);
-    box.element_size = 0.02;
-    FemSystem<3> system;
-    system.mesh = mesh_shape(box, "cube");
-    MaterialDescription jelly;
-    jelly.density = 1000.0;
-    jelly.elasticity = ElasticityModel::NeoHookeanMetal;
-    jelly.elastic.E = 1e5;
-    jelly.elastic.nu = 0.3;
-    system.materials = {Material<3>(jelly)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<3>(0.0, -9.8, 0.0);
+    const Shape3d cube = test::box_shape<3>(Vec<3>(0.0, 0.02, 0.0), Vec<3>(0.04, 0.06, 0.04), 0.02);
+    const MaterialDescription jelly = test::elastic_material(ElasticityModel::NeoHookeanMetal, 1e5);
+    FemSystem<3> system = test::falling_object<3>(mesh_shape(cube, "cube"), jelly);
     system.make_rest();
     const double dhat = 1e-3;
     Contact3d contact(system.mesh.boundary, system.mesh.x, dhat, 1e10);
     contact.add_half_space({Vec<3>::Zero(), Vec<3>::UnitY()});
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-6;
-    options.max_newton_iterations = 200;
-    FemImplicitIntegrator<3> implicit(system, FemMethod::Lagged, options,
-                                      std::make_unique<ElasticParticleEnergy<3>>(system.materials), &contact);
+    FemImplicitIntegrator<3> implicit = test::lagged_integrator<3>(system, &contact, 1e-6);
     FemState<3> state = FemState<3>::at_rest(system);
     int contact_steps = 0;
     double lowest = 1.0;

@@ -13,6 +13,7 @@
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "support/contact_checks.hpp"
+#include "support/fem_systems.hpp"
 #include "support/finite_difference.hpp"
 
 namespace pnet {
@@ -58,33 +59,12 @@ std::pair<double, double> slope_velocities(double degrees, double mu, double t1,
     const double angle = degrees * M_PI / 180.0, dhat = 1e-4;
     const Eigen::Matrix2d R = Eigen::Rotation2Dd(angle).toRotationMatrix();
     const Vec<2> along(std::cos(angle), std::sin(angle)), normal(-std::sin(angle), std::cos(angle));
-    Shape2d box;
-    box.kind = Shape2d::Kind::Box;
-    box.min = Vec<2>(0.0, 0.0);
-    box.max = Vec<2>(0.02, 0.02);
-    box.element_size = 0.01;
-    FemSystem<2> system;
-    system.mesh = mesh_shape(box, "block");
-    for (Vec<2>& p : system.mesh.x) p = R * p + 0.5 * dhat * normal;
-    system.mesh.finalize("block on a slope");
-    MaterialDescription stiff;
-    stiff.density = 1000.0;
-    stiff.elasticity = ElasticityModel::NeoHookeanMetal;
-    stiff.elastic.E = 1e7;
-    stiff.elastic.nu = 0.3;
-    system.materials = {Material<2>(stiff)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<2>(0.0, -9.8);
-    system.make_rest();
+    const FemSystem<2> system = test::block_on_slope<2>(R, normal, 0.02, 0.01, dhat);
     // kappa: the weight's normal part, 0.4 kg/m g cos, held at about dhat / 2 by the few bottom nodes.
     Contact2d contact(system.mesh.boundary, dhat, 1e13);
     contact.add_half_space({Vec<2>(0.0, 0.0), normal});
     Friction2d friction(mu, 1e-4);
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-7;
-    options.max_newton_iterations = 200;
-    FemImplicitIntegrator<2> implicit(system, FemMethod::Lagged, options,
-                                      std::make_unique<ElasticParticleEnergy<2>>(system.materials), &contact);
+    FemImplicitIntegrator<2> implicit = test::lagged_integrator<2>(system, &contact, 1e-7);
     implicit.set_friction(&friction, &contact);
     FemExplicitIntegrator<2> explicit_integrator(system, &contact);
     explicit_integrator.set_friction(&friction, &contact);
