@@ -10,7 +10,6 @@
 #include <omp.h>
 
 #include <array>
-#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -23,6 +22,7 @@
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/newton.hpp"
 #include "support/finite_difference.hpp"
+#include "support/identical_states.hpp"
 #include "support/random.hpp"
 #include "support/temp_dir.hpp"
 
@@ -508,16 +508,7 @@ TYPED_TEST(ImplicitTest, PlasticityNetEqualsLaggedWithoutPlasticity) {
     EXPECT_GT(differ, 1e-6);
 }
 
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
-
-template <int dim>
-bool identical(const Particles<dim>& a, const Particles<dim>& b) {
-    return same_bytes(a.x, b.x) && same_bytes(a.v, b.v) && same_bytes(a.C, b.C) &&
-           same_bytes(a.F_elastic, b.F_elastic) && same_bytes(a.hardening, b.hardening);
-}
+using test::identical;
 
 TYPED_TEST(ImplicitTest, OneAndTwoThreadsGiveIdenticalResults) {
     constexpr int dim = TypeParam::value;

@@ -1,10 +1,9 @@
 #pragma once
-// Helpers of the MPM-FEM coupling tests: a scene's integrator settings with another integrator
-// and step, a bit-for-bit comparison of two coupled runs' states, and the parts of one coupled
+// Helpers of the MPM-FEM coupling tests: a bit-for-bit comparison of two coupled runs' states
+// (settings_for and same_bytes: support/identical_states.hpp), and the parts of one coupled
 // implicit step set up by hand.
 #include <gtest/gtest.h>
 
-#include <cstring>
 #include <string>
 #include <vector>
 
@@ -13,20 +12,9 @@
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
+#include "support/identical_states.hpp"
 
 namespace pnet::test {
-
-inline IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
-    IntegratorSettings s = IntegratorSettings::from_scene(scene);
-    s.name = integrator;
-    s.dt = dt;
-    return s;
-}
-
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
 
 /// The particles' positions, velocities and elastic F and the mesh's positions and velocities are identical.
 template <int dim>
