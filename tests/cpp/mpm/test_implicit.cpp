@@ -21,6 +21,7 @@
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/newton.hpp"
+#include "support/dims.hpp"
 #include "support/finite_difference.hpp"
 #include "support/identical_states.hpp"
 #include "support/random.hpp"
@@ -126,10 +127,7 @@ struct PotentialFixture {
     }
 };
 
-template <typename T>
-class ImplicitTest : public ::testing::Test {};
-using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
-TYPED_TEST_SUITE(ImplicitTest, Dims);
+PNET_TYPED_TEST_SUITE_2D_3D(ImplicitTest);
 
 // Gradient of E on the free components against central differences of E, and
 // H d against differences of the gradient along random directions and unit
