@@ -634,28 +634,27 @@ TEST(ImplicitOptions, ReadsAndValidatesTheIntegratorBlock) {
         }
         return std::string("accepted");
     };
-    EXPECT_EQ(message({{"newton_tolerance", -1}}),
-              "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
-    EXPECT_EQ(message({{"lazy_hessian", 1}}),
-              "s.json: integrator.lazy_hessian: expected a number in [0, 1) or \"auto\", got 1");
-    EXPECT_EQ(message({{"fixed_point_inexact", 1.0}}),
-              "s.json: integrator.fixed_point_inexact: expected a number in [0, 1), got 1.0");
-    EXPECT_EQ(message({{"preconditioner", "ilu"}}),
-              "s.json: integrator.preconditioner: expected \"jacobi\", \"block_jacobi\", \"ichol\" or \"multigrid\", got \"ilu\"");
-    EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),
-              "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5");
-    EXPECT_EQ(message({{"cg_tolerance", 2}}),
-              "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2");
-    EXPECT_EQ(message({{"fixed_point_keep_hessian", "yes"}}),
-              "s.json: integrator.fixed_point_keep_hessian: expected true or false, got \"yes\"");
-    EXPECT_EQ(message({{"fail_on_unconverged", 1}}),
-              "s.json: integrator.fail_on_unconverged: expected true or false, got 1");
-    EXPECT_EQ(message({{"advection_cfl", 1.5}}), "s.json: integrator.advection_cfl: expected a number in [0, 1], got 1.5");
-    EXPECT_EQ(message({{"advection_cfl", -0.1}}),
-              "s.json: integrator.advection_cfl: expected a number in [0, 1], got -0.1");
-    EXPECT_EQ(message({{"regularizer_weight", "one"}}),
-              "s.json: integrator.regularizer_weight: expected a number >= 0 or \"auto\", got \"one\"");
-    EXPECT_EQ(message({{"tangent_damping", -0.5}}), "s.json: integrator.tangent_damping: expected a number >= 0, got -0.5");
+    // A bad value is refused naming the file, the key and what the key expects.
+    const std::vector<std::pair<nlohmann::json, std::string>> refused = {
+        {{{"newton_tolerance", -1}}, "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1"},
+        {{{"lazy_hessian", 1}}, "s.json: integrator.lazy_hessian: expected a number in [0, 1) or \"auto\", got 1"},
+        {{{"fixed_point_inexact", 1.0}},
+         "s.json: integrator.fixed_point_inexact: expected a number in [0, 1), got 1.0"},
+        {{{"preconditioner", "ilu"}},
+         "s.json: integrator.preconditioner: expected \"jacobi\", \"block_jacobi\", \"ichol\" or \"multigrid\", got \"ilu\""},
+        {{{"max_fixed_point_iterations", 1.5}},
+         "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5"},
+        {{{"cg_tolerance", 2}}, "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2"},
+        {{{"fixed_point_keep_hessian", "yes"}},
+         "s.json: integrator.fixed_point_keep_hessian: expected true or false, got \"yes\""},
+        {{{"fail_on_unconverged", 1}}, "s.json: integrator.fail_on_unconverged: expected true or false, got 1"},
+        {{{"advection_cfl", 1.5}}, "s.json: integrator.advection_cfl: expected a number in [0, 1], got 1.5"},
+        {{{"advection_cfl", -0.1}}, "s.json: integrator.advection_cfl: expected a number in [0, 1], got -0.1"},
+        {{{"regularizer_weight", "one"}},
+         "s.json: integrator.regularizer_weight: expected a number >= 0 or \"auto\", got \"one\""},
+        {{{"tangent_damping", -0.5}}, "s.json: integrator.tangent_damping: expected a number >= 0, got -0.5"},
+    };
+    for (const auto& [block, expected] : refused) EXPECT_EQ(message(block), expected) << block.dump();
     // A key that is no option is refused, naming the known ones (it was silently ignored).
     const std::string unknown = message({{"newton_tol", 1e-4}});
     EXPECT_EQ(unknown.rfind("s.json: integrator.newton_tol: unknown key (known: name, dt, cfl, newton_tolerance, ", 0), 0u)
