@@ -18,20 +18,12 @@ import torch
 import plasticitynet
 import plasticitynet_sim as pns
 from plasticitynet.materials import Material as TorchMaterial
+from test_pnet_cli import tiny_scene
 
 ROOT = Path(__file__).resolve().parents[2]
 MODELS = ROOT / "models"
 TINY = ROOT / "scenes" / "tiny"
 PNET = ROOT / os.environ.get("PNET_BUILD_DIR", "build") / "cpp" / "pnet"
-
-
-def tiny_dict(name: str) -> dict:
-    """A tiny scene as a dict, model paths made absolute (dicts resolve them against the working directory)."""
-    scene = json.loads((TINY / f"{name}.json").read_text())
-    for obj in scene["objects"]:
-        if "model" in obj:
-            obj["model"] = str((TINY / obj["model"]).resolve())
-    return scene
 
 
 def random_F(n: int, dim: int, seed: int, spread: float = 0.15) -> np.ndarray:
@@ -63,7 +55,7 @@ def test_load_scene_and_dict_round_trip():
 
 
 def test_bad_scene_dict_names_the_field():
-    scene = tiny_dict("snowball_2d")
+    scene = tiny_scene("snowball_2d")
     scene["objects"][0]["radius"] = -1
     with pytest.raises(ValueError, match=r"<dict>: objects\[0\]\.radius: expected a positive number, got -1"):
         pns.Scene.from_dict(scene)
@@ -78,7 +70,7 @@ def test_missing_files_raise_file_not_found(tmp_path):
         pns.load_scene(tmp_path / "nope.json")
     with pytest.raises(FileNotFoundError, match="nope.pt"):
         pns.load_model(tmp_path / "nope.pt")
-    scene = tiny_dict("sand_column_2d")
+    scene = tiny_scene("sand_column_2d")
     scene["objects"][0]["model"] = str(tmp_path / "missing.pt")
     with pytest.raises(FileNotFoundError, match=r"objects\[0\]\.model: .*missing\.pt"):
         pns.Simulation(scene)
@@ -284,7 +276,7 @@ def test_run_writes_the_folder_pnet_simulate_writes(tmp_path, name):
 
 
 def test_run_stops_on_a_failed_step_with_the_frames_before_it_complete(tmp_path):
-    scene = tiny_dict("snowball_2d")
+    scene = tiny_scene("snowball_2d")
     scene["objects"][0]["velocity"] = [0, -30]
     sim = pns.Simulation(scene, integrator="explicit", dt=0.01)  # far above the CFL step: blows up
     with pytest.raises(pns.SimulationError, match="blew up(.|\n)*are complete"):
@@ -380,7 +372,7 @@ def test_untrusted_model_is_refused(tmp_path):
     assert isinstance(info.value, ValueError)
     model = pns.load_model(copy, trusted=True)
     assert not model.pinned and model.kind == "energy"
-    scene = tiny_dict("sand_column_2d")
+    scene = tiny_scene("sand_column_2d")
     scene["objects"][0]["model"] = str(copy)
     with pytest.raises(pns.UntrustedModelError, match=r"objects\[0\]\.model"):
         pns.Simulation(scene)

@@ -27,10 +27,13 @@ def pnet(*args, timeout=300) -> subprocess.CompletedProcess:
     return subprocess.run([str(PNET), *map(str, args)], capture_output=True, text=True, timeout=timeout)
 
 
-def tiny_scene(name: str) -> dict:
+def tiny_scene(name: str, parts: str = "objects") -> dict:
+    """A tiny scene as a dict, the model paths of its `parts` ("objects" or "meshes") made absolute,
+    so that the scene can be written anywhere (dicts resolve them against the working directory)."""
     scene = json.loads((TINY / f"{name}.json").read_text())
-    for obj in scene["objects"]:  # absolute model paths, so that the scene can be written anywhere
-        obj["model"] = str((TINY / obj["model"]).resolve())
+    for part in scene[parts]:
+        if "model" in part:
+            part["model"] = str((TINY / part["model"]).resolve())
     return scene
 
 

@@ -10,18 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from test_pnet_cli import PNET, ROOT, TINY, frame_data, pnet
+from test_pnet_cli import PNET, ROOT, TINY, frame_data, pnet, tiny_scene
 
 sys.path.insert(0, str(ROOT / "python"))
 from plasticitynet.frames import read_mesh_ply  # noqa: E402
-
-
-def fem_scene(name: str) -> dict:
-    scene = json.loads((TINY / f"{name}.json").read_text())
-    for mesh in scene["meshes"]:
-        if "model" in mesh:
-            mesh["model"] = str((TINY / mesh["model"]).resolve())
-    return scene
 
 
 def write(tmp_path: Path, scene: dict, name="scene.json") -> Path:
@@ -128,7 +120,7 @@ def test_resume_continues_bit_identically(tmp_path):
 @pytest.mark.parametrize("case", ["plate_through_frame", "no_material", "bad_element_size", "mesh_file_missing",
                                   "garbage_mesh_file", "no_model"])
 def test_bad_fem_scenes_exit_2_naming_file_and_path(tmp_path, case):
-    scene = fem_scene("metal_frame_2d")
+    scene = tiny_scene("metal_frame_2d", "meshes")
     args = []
     if case == "plate_through_frame":
         scene["meshes"][1]["min"][1], scene["meshes"][1]["max"][1] = 0.1711, 0.1811

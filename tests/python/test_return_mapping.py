@@ -41,23 +41,35 @@ def branch_counts(material, branch):
     return {BRANCH_NAMES[c]: int((branch == c).sum()) for c in material.plasticity.BRANCHES}
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+DIMS = pytest.mark.parametrize("dim", [2, 3])
+
+
+@pytest.fixture
+def return_mapped(material_factory, state_sampler):
+    """return_mapped(name, dim, seed): the material, N of its sampled states (Sigma, h) and their
+    return map (Z, h_new, branch)."""
+
+    def sample(name, dim, seed):
+        m = material_factory(name, dim)
+        Sigma, h = state_sampler(m, N, seed=seed)
+        return (m, Sigma, h, *m.return_map(Sigma, h))
+
+    return sample
+
+
+@DIMS
 @pytest.mark.parametrize("name", ALL)
-def test_every_branch_is_sampled(dim, name, material_factory, state_sampler):
-    m = material_factory(name, dim)
-    Sigma, h = state_sampler(m, N, seed=1)
-    _, _, branch = m.return_map(Sigma, h)
+def test_every_branch_is_sampled(dim, name, return_mapped):
+    m, _, _, _, _, branch = return_mapped(name, dim, seed=1)
     counts = branch_counts(m, branch)
     assert set(branch.unique().tolist()) <= set(m.plasticity.BRANCHES)
     assert all(n >= 20 for n in counts.values()), counts
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 @pytest.mark.parametrize("name", ALL)
-def test_interior_points_unchanged(dim, name, material_factory, state_sampler):
-    m = material_factory(name, dim)
-    Sigma, h = state_sampler(m, N, seed=2)
-    Z, h_new, branch = m.return_map(Sigma, h)
+def test_interior_points_unchanged(dim, name, return_mapped):
+    m, Sigma, h, Z, h_new, branch = return_mapped(name, dim, seed=2)
     elastic = branch == ELASTIC
     assert elastic.sum() >= 20
     assert torch.equal(Z[elastic], Sigma[elastic])
@@ -68,25 +80,21 @@ def test_interior_points_unchanged(dim, name, material_factory, state_sampler):
     assert (y[~elastic] > 0).all()
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 @pytest.mark.parametrize("name", IDEMPOTENT)
-def test_projection_lies_on_yield_surface(dim, name, material_factory, state_sampler):
-    m = material_factory(name, dim)
-    Sigma, h = state_sampler(m, N, seed=3)
-    Z, _, branch = m.return_map(Sigma, h)
+def test_projection_lies_on_yield_surface(dim, name, return_mapped):
+    m, _, h, Z, _, branch = return_mapped(name, dim, seed=3)
     plastic = branch != ELASTIC
     assert plastic.sum() >= 20
     drift = relative_yield(m, Z, h)[plastic]
     assert drift.max() <= SURFACE_TOL, f"max |y|/scale = {drift.max():.3e}"
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 @pytest.mark.parametrize("name", IDEMPOTENT)
-def test_return_map_is_idempotent(dim, name, material_factory, state_sampler):
+def test_return_map_is_idempotent(dim, name, return_mapped):
     """Z(Z(Sigma, h), h) == Z(Sigma, h) (same hardening input: the same yield surface)."""
-    m = material_factory(name, dim)
-    Sigma, h = state_sampler(m, N, seed=4)
-    Z, _, branch = m.return_map(Sigma, h)
+    m, _, h, Z, _, branch = return_mapped(name, dim, seed=4)
     Z2, _, _ = m.return_map(Z, h)
     err = ((Z2 - Z).abs().amax(-1) / Z.abs().amax(-1))
     for code in m.plasticity.BRANCHES:
@@ -95,24 +103,20 @@ def test_return_map_is_idempotent(dim, name, material_factory, state_sampler):
         assert err[rows].max() <= 1e-12, f"{BRANCH_NAMES[code]}: {err[rows].max():.3e}"
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 @pytest.mark.parametrize("name", ["sand", "snow", "metal", "metal_perfect", "metal_nh", "metal_nh_perfect"])
-def test_volume_preserving_branches_keep_det(dim, name, material_factory, state_sampler):
+def test_volume_preserving_branches_keep_det(dim, name, return_mapped):
     """von Mises yield, the Drucker-Prager cone and the exact Cam-Clay ellipse keep J = prod(Sigma_c)."""
-    m = material_factory(name, dim)
-    Sigma, h = state_sampler(m, N, seed=5)
-    Z, _, branch = m.return_map(Sigma, h)
+    _, Sigma, _, Z, _, branch = return_mapped(name, dim, seed=5)
     rows = (branch == YIELD) | (branch == CONE) | (branch == ELLIPSE)
     assert rows.sum() >= 20
     log_J_ratio = torch.log(Z).sum(-1) - torch.log(Sigma).sum(-1)
     assert log_J_ratio[rows].abs().max() <= 1e-13
 
 
-@pytest.mark.parametrize("dim", [2, 3])
-def test_drucker_prager_branches(dim, material_factory, state_sampler):
-    m = material_factory("sand", dim)
-    Sigma, h = state_sampler(m, N, seed=6)
-    Z, h_new, branch = m.return_map(Sigma, h)
+@DIMS
+def test_drucker_prager_branches(dim, return_mapped):
+    _, Sigma, h, Z, h_new, branch = return_mapped("sand", dim, seed=6)
     eps = torch.log(Sigma)
     assert torch.equal(branch == APEX, eps.sum(-1) > 0)
     assert torch.equal(Z[branch == APEX], torch.ones_like(Z[branch == APEX]))
@@ -126,12 +130,10 @@ def test_drucker_prager_branches(dim, material_factory, state_sampler):
     assert (dev_Z.norm(dim=-1)[cone] < dev.norm(dim=-1)[cone]).all()
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 @pytest.mark.parametrize("name", ["snow", "snow_paper"])
-def test_cam_clay_hardening(dim, name, material_factory, state_sampler):
-    m = material_factory(name, dim)
-    Sigma, a = state_sampler(m, N, seed=7)
-    Z, a_new, branch = m.return_map(Sigma, a)
+def test_cam_clay_hardening(dim, name, return_mapped):
+    m, Sigma, a, Z, a_new, branch = return_mapped(name, dim, seed=7)
     J, J_Z = Sigma.prod(-1), Z.prod(-1)
     tips = (branch == COMPRESSION_TIP) | (branch == TENSION_TIP)
     assert tips.sum() >= 20
@@ -148,13 +150,11 @@ def test_cam_clay_hardening(dim, name, material_factory, state_sampler):
         assert torch.isfinite(a_new).all()
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 @pytest.mark.parametrize("name", ["metal", "metal_perfect", "metal_nh", "metal_nh_perfect"])
-def test_von_mises_hardening_and_smallest_root(dim, name, material_factory, state_sampler):
-    m = material_factory(name, dim)
+def test_von_mises_hardening_and_smallest_root(dim, name, return_mapped):
+    m, Sigma, h, Z, h_new, branch = return_mapped(name, dim, seed=8)
     xi = m.plasticity.params.hardening_coefficient
-    Sigma, h = state_sampler(m, N, seed=8)
-    Z, h_new, branch = m.return_map(Sigma, h)
     rows = branch == YIELD
     assert rows.sum() >= 20
     eps, eps_Z = torch.log(Sigma[rows]), torch.log(Z[rows])
@@ -172,7 +172,7 @@ def test_von_mises_hardening_and_smallest_root(dim, name, material_factory, stat
         torch.testing.assert_close(dgamma, L - h[rows], rtol=1e-12, atol=1e-14)
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 def test_von_mises_root_find_matches_closed_form_for_small_strain(dim, material_factory, state_sampler):
     """At small strain the two metal elasticities agree to first order, and so do their projections."""
     m_cf, m_nh = material_factory("metal", dim), material_factory("metal_nh", dim)
@@ -187,7 +187,7 @@ def test_von_mises_root_find_matches_closed_form_for_small_strain(dim, material_
     assert (torch.log(Z_cf) - torch.log(Z_nh))[agree].abs().max() < 1e-6
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 def test_cam_clay_paper_variant_drift(dim, material_factory, state_sampler):
     """The paper's eq. 20 keeps tr(b), not J: it lands on the surface only to first order and is
     not idempotent. Measure and print how far off it is, binned by the trial deviatoric Hencky
@@ -245,7 +245,7 @@ def test_cam_clay_paper_variant_drift(dim, material_factory, state_sampler):
     assert creep.max() < 0.5 and vs_exact.max() < 0.5
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 def test_von_mises_yield_function_is_differentiable(dim, material_factory, state_sampler):
     """A learned return mapping trains through y(Z_theta): autograd gradient vs finite differences."""
     for name in ("metal", "metal_nh"):
@@ -258,7 +258,7 @@ def test_von_mises_yield_function_is_differentiable(dim, material_factory, state
         assert torch.autograd.gradcheck(lambda S: scale * m.yield_function(S, h), (Sigma,), eps=1e-7, atol=1e-6)
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 def test_unimodular_shift(dim):
     g = torch.Generator().manual_seed(12)
     t = torch.randn(500, dim, generator=g, dtype=torch.float64) * torch.logspace(-6, 1, 500, dtype=torch.float64)[:, None]
@@ -270,7 +270,7 @@ def test_unimodular_shift(dim):
     assert (err <= 1e-14 * (c[:, None] + t.abs()).prod(-1)).all()
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@DIMS
 @pytest.mark.parametrize("name", ALL)
 def test_clamped_and_batched_consistency(dim, name, material_factory, state_sampler):
     """Z acts on Sigma_c: a raw Sigma below SIGMA_MIN gives the clamped result; single == batch."""

@@ -238,11 +238,30 @@ bool certified_apart(const std::function<double(double)>& d, double L, double t0
     return ::testing::AssertionSuccess();
 }
 
+/// CCD's times of impact t over random motions, against a sampled stand-in t*: the first of 4000
+/// steps where the distance is below 1e-3 of its start.
+struct ImpactTally {
+    int hits = 0;       // motions with t != kNoImpact
+    int true_hits = 0;  // ... that also have a t*
+    double ratio = 0.0;  // sum of t / t* over those
+
+    void add(const std::function<double(double)>& distance, double t) {
+        double t_star = kNoImpact;
+        for (int k = 1; k <= 4000 && t_star == kNoImpact; ++k)
+            if (distance(k / 4000.0) < 1e-3 * distance(0.0)) t_star = k / 4000.0;
+        if (t != kNoImpact) ++hits;
+        if (t_star != kNoImpact && t != kNoImpact) {
+            ++true_hits;
+            ratio += t / t_star;
+        }
+    }
+    double mean_ratio() const { return ratio / true_hits; }
+};
+
 TEST(Ccd3d, RandomMotionsNeverTouchBeforeTheReturnedTime) {
     test::Random random(61);
     constexpr int kTrials = 3000;
-    int pt_hits = 0, ee_hits = 0, pt_true_hits = 0, ee_true_hits = 0;
-    double pt_ratio = 0.0, ee_ratio = 0.0;
+    ImpactTally pt, ee;
     for (int trial = 0; trial < kTrials; ++trial) {
         // Point-triangle: the point starts near the triangle and is thrown at (or past) it.
         Quad x, dx;
@@ -258,15 +277,7 @@ TEST(Ccd3d, RandomMotionsNeverTouchBeforeTheReturnedTime) {
         const double t = pt_toi(x, dx);
         ASSERT_GE(t, 0.0);
         ASSERT_TRUE(apart_until([&](double s) { return pt_distance(x, dx, s); }, L, t)) << "point-triangle " << trial;
-        // A sampled stand-in for the time of impact: the first near-contact (1e-3 of the start).
-        double t_star = kNoImpact;
-        for (int k = 1; k <= 4000 && t_star == kNoImpact; ++k)
-            if (pt_distance(x, dx, k / 4000.0) < 1e-3 * pt_distance(x, dx, 0.0)) t_star = k / 4000.0;
-        if (t != kNoImpact) ++pt_hits;
-        if (t_star != kNoImpact && t != kNoImpact) {
-            ++pt_true_hits;
-            pt_ratio += t / t_star;
-        }
+        pt.add([&](double s) { return pt_distance(x, dx, s); }, t);
 
         // Edge-edge: edge b starts near edge a and is thrown at (or past) it.
         Quad y, dy;
@@ -284,25 +295,18 @@ TEST(Ccd3d, RandomMotionsNeverTouchBeforeTheReturnedTime) {
         const double te = ee_toi(y, dy);
         ASSERT_GE(te, 0.0);
         ASSERT_TRUE(apart_until([&](double s) { return ee_distance(y, dy, s); }, Le, te)) << "edge-edge " << trial;
-        double te_star = kNoImpact;
-        for (int k = 1; k <= 4000 && te_star == kNoImpact; ++k)
-            if (ee_distance(y, dy, k / 4000.0) < 1e-3 * ee_distance(y, dy, 0.0)) te_star = k / 4000.0;
-        if (te != kNoImpact) ++ee_hits;
-        if (te_star != kNoImpact && te != kNoImpact) {
-            ++ee_true_hits;
-            ee_ratio += te / te_star;
-        }
+        ee.add([&](double s) { return ee_distance(y, dy, s); }, te);
     }
     // Enough of the motions collide for the test to mean something, and CCD is not
     // needlessly conservative on average (t against the first sampled near-contact).
-    EXPECT_GT(pt_hits, kTrials / 4);
-    EXPECT_GT(ee_hits, kTrials / 4);
-    EXPECT_GT(pt_ratio / pt_true_hits, 0.7);
-    EXPECT_GT(ee_ratio / ee_true_hits, 0.7);
+    EXPECT_GT(pt.hits, kTrials / 4);
+    EXPECT_GT(ee.hits, kTrials / 4);
+    EXPECT_GT(pt.mean_ratio(), 0.7);
+    EXPECT_GT(ee.mean_ratio(), 0.7);
     std::printf(
         "[          ] CCD stress: point-triangle %d of %d hit (%d sampled contacts, mean t/t* %.3f); "
         "edge-edge %d hit (%d, %.3f)\n",
-        pt_hits, kTrials, pt_true_hits, pt_ratio / pt_true_hits, ee_hits, ee_true_hits, ee_ratio / ee_true_hits);
+        pt.hits, kTrials, pt.true_hits, pt.mean_ratio(), ee.hits, ee.true_hits, ee.mean_ratio());
 }
 
 }  // namespace

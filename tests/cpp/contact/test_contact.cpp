@@ -16,6 +16,8 @@
 #include "pnet/fem/fem_potential.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
 #include "pnet/solver/newton.hpp"
+#include "support/contact_checks.hpp"
+#include "support/fem_systems.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 
@@ -142,37 +144,8 @@ TEST(Contact2d, BarrierPotentialMatchesFiniteDifferences) {
                              Vec<2>(0.0095, 0.0022), Vec<2>(0.0095, 0.012)};                  // edge 3-4
     Contact2d contact({{0, 1}, {1, 2}, {3, 4}}, 1e-3, 1e8);
     contact.add_half_space({Vec<2>(0.0, 0.0), Vec<2>(0.0, 1.0)});
-    auto unpack = [&](const Eigen::VectorXd& q) {
-        std::vector<Vec<2>> y(x.size());
-        for (std::size_t i = 0; i < y.size(); ++i) y[i] = q.segment<2>(2 * i);
-        return y;
-    };
-    Eigen::VectorXd q(2 * x.size());
-    for (std::size_t i = 0; i < x.size(); ++i) q.segment<2>(2 * i) = x[i];
     EXPECT_GE(contact.active_pairs(x), 3u);
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(q.size());
-    contact.add_gradient(x, 1.0, g);
-    test::FdStats fd;
-    EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return contact.value(unpack(y)); }, g, q, fd,
-                                     1e-9, 1e-5, 1e-6 * g.cwiseAbs().maxCoeff()));
-    std::vector<Eigen::Triplet<double>> triplets;
-    contact.add_hessian(x, 1.0, triplets, /*project_psd=*/false);
-    Eigen::SparseMatrix<double> H(q.size(), q.size());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    auto grad = [&](const Eigen::VectorXd& y) {
-        Eigen::VectorXd gy = Eigen::VectorXd::Zero(y.size());
-        contact.add_gradient(unpack(y), 1.0, gy);
-        return gy;
-    };
-    const Eigen::MatrixXd Hd(H);
-    EXPECT_TRUE(test::check_jacobian(grad, Hd, q, fd, 1e-9, 1e-4, 1e-6 * Hd.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(q.size() + q.size() * q.size()));
-    // Projected, every pair's Hessian is PSD, so the sum is.
-    triplets.clear();
-    contact.add_hessian(x, 1.0, triplets, true);
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    EXPECT_GE(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Eigen::MatrixXd(H)).eigenvalues().minCoeff(),
-              -1e-9 * Hd.cwiseAbs().maxCoeff());
+    test::expect_barrier_derivatives<2>(contact, x);
     EXPECT_EQ(contact.first_intersection(x), "");
     x[3] = Vec<2>(0.0095, 0.0015);  // on edge 0-1... exactly on the line through it
     EXPECT_TRUE(std::isinf(contact.value(x)) || contact.value(x) > 0.0);
@@ -182,17 +155,8 @@ TEST(Contact2d, BarrierPotentialMatchesFiniteDifferences) {
 // rests on it: no node ever reaches the ground, and at rest it floats within
 // dhat of it.
 TEST(Contact2d, ElasticSquareDroppedOnTheGroundComesToRestWithoutPenetration) {
-    Shape2d box;
-    box.kind = Shape2d::Kind::Box;
-    box.min = Vec<2>(0.0, 0.05);
-    box.max = Vec<2>(0.1, 0.15);
-    box.element_size = 0.02;
-    const Mesh<2> mesh = mesh_shape(box, "square");
-    MaterialDescription jelly;
-    jelly.density = 1000.0;
-    jelly.elasticity = ElasticityModel::NeoHookeanMetal;
-    jelly.elastic.E = 1e5;
-    jelly.elastic.nu = 0.3;
+    const Mesh<2> mesh = mesh_shape(test::box_shape<2>(Vec<2>(0.0, 0.05), Vec<2>(0.1, 0.15), 0.02), "square");
+    const MaterialDescription jelly = test::elastic_material(ElasticityModel::NeoHookeanMetal, 1e5);
     const std::vector<Material<2>> materials = {Material<2>(jelly)};
     ElasticParticleEnergy<2> energy(materials);
     const ElementRest<2> rest(mesh, std::vector<double>(mesh.elements.size(), jelly.density));

@@ -16,7 +16,8 @@
 #include "pnet/contact/broad_phase/hash_grid.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
-#include "support/finite_difference.hpp"
+#include "support/contact_checks.hpp"
+#include "support/fem_systems.hpp"
 #include "support/random.hpp"
 
 namespace pnet {
@@ -64,48 +65,14 @@ TwoTriangles near_pair(double gap) {
     return t;
 }
 
-std::vector<Vec<3>> unpack(const Eigen::VectorXd& q) {
-    std::vector<Vec<3>> y(q.size() / 3);
-    for (std::size_t i = 0; i < y.size(); ++i) y[i] = q.segment<3>(3 * i);
-    return y;
-}
-
-Eigen::VectorXd pack(const std::vector<Vec<3>>& x) {
-    Eigen::VectorXd q(3 * x.size());
-    for (std::size_t i = 0; i < x.size(); ++i) q.segment<3>(3 * i) = x[i];
-    return q;
-}
-
 TEST(Contact3d, BarrierPotentialMatchesFiniteDifferences) {
     const TwoTriangles t = near_pair(0.0006);
     Contact3d contact(t.faces, t.x, 1e-3, 1e8);
     contact.add_half_space({Vec<3>(0.0, -0.0007, 0.0), Vec<3>(0.0, 1.0, 0.0)});
     const std::vector<Vec<3>>& x = t.x;
     ASSERT_GE(contact.active_pairs(x), 4u) << "point-triangle, edge-edge and point-plane pairs within dhat";
-    const Eigen::VectorXd q = pack(x);
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(q.size());
-    const double b = contact.add_gradient(x, 1.0, g);
+    const double b = test::expect_barrier_derivatives<3>(contact, x);
     EXPECT_DOUBLE_EQ(b, contact.value(x));
-    test::FdStats fd;
-    EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return contact.value(unpack(y)); }, g, q, fd,
-                                     1e-9, 1e-5, 1e-6 * g.cwiseAbs().maxCoeff()));
-    std::vector<Eigen::Triplet<double>> triplets;
-    contact.add_hessian(x, 1.0, triplets, /*project_psd=*/false);
-    Eigen::SparseMatrix<double> H(q.size(), q.size());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    const Eigen::MatrixXd Hd(H);
-    auto grad = [&](const Eigen::VectorXd& y) {
-        Eigen::VectorXd gy = Eigen::VectorXd::Zero(y.size());
-        contact.add_gradient(unpack(y), 1.0, gy);
-        return gy;
-    };
-    EXPECT_TRUE(test::check_jacobian(grad, Hd, q, fd, 1e-9, 1e-4, 1e-6 * Hd.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(q.size() + q.size() * q.size()));
-    triplets.clear();
-    contact.add_hessian(x, 1.0, triplets, true);
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    EXPECT_GE(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Eigen::MatrixXd(H)).eigenvalues().minCoeff(),
-              -1e-9 * Hd.cwiseAbs().maxCoeff());
     EXPECT_EQ(contact.first_intersection(x), "");
     EXPECT_GT(contact.min_distance(x), 0.0);
     EXPECT_LT(contact.min_distance(x), 1e-3);
@@ -148,25 +115,7 @@ TEST(Friction3d, PotentialMatchesFiniteDifferences) {
         // Between two primitives a rigid translation does not slip; against the ground the node does.
         EXPECT_NEAR(sum, p.count == 1 ? 1.0 : 0.0, 1e-12);
     }
-    Eigen::VectorXd v(3 * t.x.size());
-    for (Eigen::Index k = 0; k < v.size(); ++k) v[k] = 1e-3 * std::sin(1.7 * k + 0.3);  // slips below and above eps
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(v.size());
-    friction.add_gradient(v, 1.0, g);
-    test::FdStats fd;
-    EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return friction.value(y); }, g, v, fd, 1e-9, 1e-5,
-                                     1e-6 * g.cwiseAbs().maxCoeff()));
-    std::vector<Eigen::Triplet<double>> triplets;
-    friction.add_hessian(v, 1.0, triplets);
-    Eigen::SparseMatrix<double> H(v.size(), v.size());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    const Eigen::MatrixXd Hd(H);
-    auto grad = [&](const Eigen::VectorXd& y) {
-        Eigen::VectorXd gy = Eigen::VectorXd::Zero(y.size());
-        friction.add_gradient(y, 1.0, gy);
-        return gy;
-    };
-    EXPECT_TRUE(test::check_jacobian(grad, Hd, v, fd, 1e-10, 1e-4, 1e-6 * Hd.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(v.size() + v.size() * v.size()));
+    const Eigen::MatrixXd Hd = test::expect_friction_derivatives<3>(friction, t.x.size());
     EXPECT_GE(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Hd).eigenvalues().minCoeff(), -1e-9 * Hd.norm());
 }
 
@@ -176,34 +125,13 @@ double slope_speed(double degrees, double mu, double t) {
     const double angle = degrees * M_PI / 180.0, dhat = 1e-4;
     const Eigen::Matrix3d R = Eigen::AngleAxisd(angle, Vec<3>::UnitZ()).toRotationMatrix();
     const Vec<3> along = R * Vec<3>::UnitX(), normal = R * Vec<3>::UnitY();
-    Shape3d box;
-    box.kind = Shape3d::Kind::Box;
-    box.min = Vec<3>(0.0, 0.0, 0.0);
-    box.max = Vec<3>(0.02, 0.02, 0.02);
-    box.element_size = 0.02;
-    FemSystem<3> system;
-    system.mesh = mesh_shape(box, "block");
-    for (Vec<3>& p : system.mesh.x) p = R * p + 0.5 * dhat * normal;
-    system.mesh.finalize("block on a slope");
-    MaterialDescription stiff;
-    stiff.density = 1000.0;
-    stiff.elasticity = ElasticityModel::NeoHookeanMetal;
-    stiff.elastic.E = 1e7;
-    stiff.elastic.nu = 0.3;
-    system.materials = {Material<3>(stiff)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<3>(0.0, -9.8, 0.0);
-    system.make_rest();
+    const FemSystem<3> system = test::block_on_slope<3>(R, normal, 0.02, 0.02, dhat);
     // kappa: the weight, 0.08 N, held by the 4 bottom nodes at about dhat / 2, where
     // kappa |b'(s)| 2 d = kappa 4.3e-12 m^3 (1e15 put 4 kN on each node and Newton stalled).
     Contact3d contact(system.mesh.boundary, system.mesh.x, dhat, 5e9);
     contact.add_half_space({Vec<3>(0.0, 0.0, 0.0), normal});
     Friction<3> friction(mu, 1e-4);
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-7;
-    options.max_newton_iterations = 200;
-    FemImplicitIntegrator<3> implicit(system, FemMethod::Lagged, options,
-                                      std::make_unique<ElasticParticleEnergy<3>>(system.materials), &contact);
+    FemImplicitIntegrator<3> implicit = test::lagged_integrator<3>(system, &contact, 1e-7);
     implicit.set_friction(&friction, &contact);
     FemState<3> state = FemState<3>::at_rest(system);
     const double dt = 2e-3;
@@ -230,30 +158,14 @@ TEST(Friction3d, BoxOnASlopeSticksBelowTheFrictionAngleAndSlidesAbove) {
 }
 
 TEST(Contact3d, TetrahedralCubeDroppedOnTheGroundRestsWithoutPenetration) {
-    Shape3d box;
-    box.kind = Shape3d::Kind::Box;
-    box.min = Vec<3>(0.0, 0.02, 0.0);
-    box.max = Vec<3>(0.04, 0.06, 0.04);
-    box.element_size = 0.02;
-    FemSystem<3> system;
-    system.mesh = mesh_shape(box, "cube");
-    MaterialDescription jelly;
-    jelly.density = 1000.0;
-    jelly.elasticity = ElasticityModel::NeoHookeanMetal;
-    jelly.elastic.E = 1e5;
-    jelly.elastic.nu = 0.3;
-    system.materials = {Material<3>(jelly)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<3>(0.0, -9.8, 0.0);
+    const Shape3d cube = test::box_shape<3>(Vec<3>(0.0, 0.02, 0.0), Vec<3>(0.04, 0.06, 0.04), 0.02);
+    const MaterialDescription jelly = test::elastic_material(ElasticityModel::NeoHookeanMetal, 1e5);
+    FemSystem<3> system = test::falling_object<3>(mesh_shape(cube, "cube"), jelly);
     system.make_rest();
     const double dhat = 1e-3;
     Contact3d contact(system.mesh.boundary, system.mesh.x, dhat, 1e10);
     contact.add_half_space({Vec<3>::Zero(), Vec<3>::UnitY()});
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-6;
-    options.max_newton_iterations = 200;
-    FemImplicitIntegrator<3> implicit(system, FemMethod::Lagged, options,
-                                      std::make_unique<ElasticParticleEnergy<3>>(system.materials), &contact);
+    FemImplicitIntegrator<3> implicit = test::lagged_integrator<3>(system, &contact, 1e-6);
     FemState<3> state = FemState<3>::at_rest(system);
     int contact_steps = 0;
     double lowest = 1.0;

@@ -162,22 +162,78 @@ constexpr PointTriangleCase kPointTriangleCases[7] = {
     PointTriangleCase::VertexA, PointTriangleCase::VertexB, PointTriangleCase::VertexC, PointTriangleCase::EdgeAB,
     PointTriangleCase::EdgeBC,  PointTriangleCase::EdgeCA,  PointTriangleCase::Interior};
 
+/// The functions of one kind of primitive pair, point-triangle or edge-edge (four points x and
+/// a case k), for the checks the two kinds share.
+template <typename Case>
+struct PairDistance {
+    template <typename Result, typename... Extra>
+    using Function = Result (*)(const Vec<3>&, const Vec<3>&, const Vec<3>&, const Vec<3>&, Extra...);
+    Function<Case> select;                  // the case
+    Function<double, Case> value;           // the case's squared distance
+    Function<Vec12, Case> gradient;         // ... its gradient
+    Function<Mat12, Case> hessian;          // ... its Hessian
+    Function<double> distance_sq;           // the squared distance, case chosen by select
+    Function<double> brute_force;           // the same, by brute force (no cases)
+
+    template <typename Result, typename... Extra>
+    static Result at(Function<Result, Extra...> f, const Quad& x, Extra... k) {
+        return f(x[0], x[1], x[2], x[3], k...);
+    }
+};
+
+const PairDistance<PointTriangleCase> kPointTriangle{point_triangle_case,
+                                                     point_triangle_distance_sq,
+                                                     point_triangle_distance_sq_gradient,
+                                                     point_triangle_distance_sq_hessian,
+                                                     point_triangle_distance_sq,
+                                                     brute_point_triangle};
+
 /// Compares the case's gradient and Hessian with central differences (its value / its
 /// gradient), the case held fixed.
-void check_point_triangle_derivatives(const Quad& x, PointTriangleCase k, test::FdStats& fd) {
-    auto f = [k](const Eigen::VectorXd& q) {
-        const Quad y = unstack(q);
-        return point_triangle_distance_sq(y[0], y[1], y[2], y[3], k);
-    };
-    auto grad = [k](const Eigen::VectorXd& q) {
-        const Quad y = unstack(q);
-        return Eigen::VectorXd(point_triangle_distance_sq_gradient(y[0], y[1], y[2], y[3], k));
-    };
-    const Vec12 g = point_triangle_distance_sq_gradient(x[0], x[1], x[2], x[3], k);
-    const Mat12 H = point_triangle_distance_sq_hessian(x[0], x[1], x[2], x[3], k);
+template <typename Case>
+void check_case_derivatives(const PairDistance<Case>& d, const Quad& x, Case k, test::FdStats& fd) {
+    using D = PairDistance<Case>;
+    auto f = [&](const Eigen::VectorXd& q) { return D::at(d.value, unstack(q), k); };
+    auto grad = [&](const Eigen::VectorXd& q) { return Eigen::VectorXd(D::at(d.gradient, unstack(q), k)); };
+    const Vec12 g = D::at(d.gradient, x, k);
+    const Mat12 H = D::at(d.hessian, x, k);
     EXPECT_TRUE(test::check_gradient(f, g, stack(x), fd, 1e-6, 1e-6)) << "case " << static_cast<int>(k);
     EXPECT_TRUE(test::check_jacobian(grad, H, stack(x), fd, 1e-6, 1e-6)) << "case " << static_cast<int>(k);
     EXPECT_LE((H - H.transpose()).cwiseAbs().maxCoeff(), 1e-12 * (1.0 + H.cwiseAbs().maxCoeff()));
+}
+
+/// x, built to lie in case k, does: the selector picks k, the case's value is the brute-force
+/// distance and the case-free one, and its derivatives match finite differences.
+template <typename Case>
+void expect_in_case(const PairDistance<Case>& d, const Quad& x, Case k, test::FdStats& fd, int trial) {
+    using D = PairDistance<Case>;
+    ASSERT_EQ(D::at(d.select, x), k) << "trial " << trial;
+    const double s = D::at(d.value, x, k);
+    const double reference = D::at(d.brute_force, x);
+    EXPECT_NEAR(s, reference, 1e-12 * (1.0 + reference)) << "case " << static_cast<int>(k);
+    EXPECT_EQ(D::at(d.distance_sq, x), s);
+    check_case_derivatives(d, x, k, fd);
+}
+
+/// x lies on the boundary between cases `minus` and `plus`, x_minus and x_plus just off it on
+/// either side: on it both formulas give the (brute-force) distance and the same gradient; off
+/// it the selector picks each side's case and the gradients differ by O(delta) only. Returns
+/// the distance on the boundary.
+template <typename Case>
+double expect_c1_across(const PairDistance<Case>& d, const Quad& x, Case minus, Case plus, const Quad& x_minus,
+                        const Quad& x_plus) {
+    using D = PairDistance<Case>;
+    const double s_minus = D::at(d.value, x, minus), s_plus = D::at(d.value, x, plus);
+    EXPECT_NEAR(s_minus, s_plus, 1e-13 * (1.0 + s_plus));
+    EXPECT_NEAR(s_plus, D::at(d.brute_force, x), 1e-12 * (1.0 + s_plus));
+    const Vec12 g_minus = D::at(d.gradient, x, minus), g_plus = D::at(d.gradient, x, plus);
+    EXPECT_LE((g_minus - g_plus).norm(), 1e-11 * (1.0 + g_plus.norm()))
+        << "cases " << static_cast<int>(minus) << " / " << static_cast<int>(plus);
+    EXPECT_EQ(D::at(d.select, x_minus), minus);
+    EXPECT_EQ(D::at(d.select, x_plus), plus);
+    const Vec12 g0 = D::at(d.gradient, x_minus, minus), g1 = D::at(d.gradient, x_plus, plus);
+    EXPECT_LE((g0 - g1).norm(), 1e-5 * (1.0 + g1.norm()));
+    return s_plus;
 }
 
 TEST(PointTriangleDistance, EveryCaseMatchesBruteForceAndFiniteDifferences) {
@@ -188,12 +244,7 @@ TEST(PointTriangleDistance, EveryCaseMatchesBruteForceAndFiniteDifferences) {
         for (int trial = 0; trial < kPerCase; ++trial) {
             const Triangle T(random);
             const Vec<3> p = point_in_case(random, T, k);
-            ASSERT_EQ(point_triangle_case(p, T.a, T.b, T.c), k) << "trial " << trial;
-            const double s = point_triangle_distance_sq(p, T.a, T.b, T.c, k);
-            const double reference = brute_point_triangle(p, T.a, T.b, T.c);
-            EXPECT_NEAR(s, reference, 1e-12 * (1.0 + reference)) << "case " << static_cast<int>(k);
-            EXPECT_EQ(point_triangle_distance_sq(p, T.a, T.b, T.c), s);
-            check_point_triangle_derivatives({p, T.a, T.b, T.c}, k, fd);
+            ASSERT_NO_FATAL_FAILURE(expect_in_case(kPointTriangle, {p, T.a, T.b, T.c}, k, fd, trial));
         }
     EXPECT_EQ(fd.checks, 7 * kPerCase * (12 + 144)) << "every entry of every case was compared";
 }
@@ -232,24 +283,10 @@ TEST(PointTriangleDistance, IsC1AcrossCaseBoundaries) {
         const Triangle T(random);
         for (const Boundary& B : point_triangle_boundaries(random, T)) {
             ++boundaries;
-            // On the boundary both formulas give the distance and the same gradient.
-            const double s_minus = point_triangle_distance_sq(B.p, T.a, T.b, T.c, B.minus);
-            const double s_plus = point_triangle_distance_sq(B.p, T.a, T.b, T.c, B.plus);
-            EXPECT_NEAR(s_minus, s_plus, 1e-13 * (1.0 + s_plus));
-            EXPECT_NEAR(s_plus, brute_point_triangle(B.p, T.a, T.b, T.c), 1e-12 * (1.0 + s_plus));
-            const Vec12 g_minus = point_triangle_distance_sq_gradient(B.p, T.a, T.b, T.c, B.minus);
-            const Vec12 g_plus = point_triangle_distance_sq_gradient(B.p, T.a, T.b, T.c, B.plus);
-            EXPECT_LE((g_minus - g_plus).norm(), 1e-11 * (1.0 + g_plus.norm()))
-                << "cases " << static_cast<int>(B.minus) << " / " << static_cast<int>(B.plus);
-            // Just off it, on either side, the selector picks each side's case and the
-            // gradients differ by O(delta) only.
             const double delta = 1e-7;
             const Vec<3> p_minus = B.p - delta * B.across, p_plus = B.p + delta * B.across;
-            EXPECT_EQ(point_triangle_case(p_minus, T.a, T.b, T.c), B.minus);
-            EXPECT_EQ(point_triangle_case(p_plus, T.a, T.b, T.c), B.plus);
-            const Vec12 g0 = point_triangle_distance_sq_gradient(p_minus, T.a, T.b, T.c, B.minus);
-            const Vec12 g1 = point_triangle_distance_sq_gradient(p_plus, T.a, T.b, T.c, B.plus);
-            EXPECT_LE((g0 - g1).norm(), 1e-5 * (1.0 + g1.norm()));
+            const double s_plus = expect_c1_across(kPointTriangle, {B.p, T.a, T.b, T.c}, B.minus, B.plus,
+                                                   {p_minus, T.a, T.b, T.c}, {p_plus, T.a, T.b, T.c});
             EXPECT_NEAR(point_triangle_distance_sq(p_minus, T.a, T.b, T.c),
                         point_triangle_distance_sq(p_plus, T.a, T.b, T.c), 1e-5 * (1.0 + s_plus));
         }
@@ -279,7 +316,7 @@ TEST(PointTriangleDistance, DegenerateTrianglesAreFiniteAndExact) {
             EXPECT_TRUE(point_triangle_distance_sq_gradient(p, a, bb, c, k).allFinite());
             EXPECT_TRUE(point_triangle_distance_sq_hessian(p, a, bb, c, k).allFinite());
             // The chosen case's formula never divides by a vanishing length: its derivatives are exact.
-            if (variant != 3) check_point_triangle_derivatives({p, a, bb, c}, k, fd);
+            if (variant != 3) check_case_derivatives(kPointTriangle, {p, a, bb, c}, k, fd);
             ++checked;
         }
     }
@@ -345,21 +382,12 @@ constexpr EdgeEdgeCaseSpec kEdgeEdgeCases[9] = {
     {EdgeEdgeCase::B0EdgeA, Param::Inside, Param::Start},  {EdgeEdgeCase::B1EdgeA, Param::Inside, Param::End},
     {EdgeEdgeCase::Interior, Param::Inside, Param::Inside}};
 
-void check_edge_edge_derivatives(const Quad& x, EdgeEdgeCase k, test::FdStats& fd) {
-    auto f = [k](const Eigen::VectorXd& q) {
-        const Quad y = unstack(q);
-        return edge_edge_distance_sq(y[0], y[1], y[2], y[3], k);
-    };
-    auto grad = [k](const Eigen::VectorXd& q) {
-        const Quad y = unstack(q);
-        return Eigen::VectorXd(edge_edge_distance_sq_gradient(y[0], y[1], y[2], y[3], k));
-    };
-    const Vec12 g = edge_edge_distance_sq_gradient(x[0], x[1], x[2], x[3], k);
-    const Mat12 H = edge_edge_distance_sq_hessian(x[0], x[1], x[2], x[3], k);
-    EXPECT_TRUE(test::check_gradient(f, g, stack(x), fd, 1e-6, 1e-6)) << "case " << static_cast<int>(k);
-    EXPECT_TRUE(test::check_jacobian(grad, H, stack(x), fd, 1e-6, 1e-6)) << "case " << static_cast<int>(k);
-    EXPECT_LE((H - H.transpose()).cwiseAbs().maxCoeff(), 1e-12 * (1.0 + H.cwiseAbs().maxCoeff()));
-}
+const PairDistance<EdgeEdgeCase> kEdgeEdge{edge_edge_case,
+                                           edge_edge_distance_sq,
+                                           edge_edge_distance_sq_gradient,
+                                           edge_edge_distance_sq_hessian,
+                                           edge_edge_distance_sq,
+                                           brute_edge_edge};
 
 TEST(EdgeEdgeDistance, EveryCaseMatchesBruteForceAndFiniteDifferences) {
     test::Random random(41);
@@ -368,12 +396,7 @@ TEST(EdgeEdgeDistance, EveryCaseMatchesBruteForceAndFiniteDifferences) {
     for (const EdgeEdgeCaseSpec& spec : kEdgeEdgeCases)
         for (int trial = 0; trial < kPerCase; ++trial) {
             const EdgePair e = edges_in_case(random, spec.s, spec.t);
-            ASSERT_EQ(edge_edge_case(e.a0, e.a1, e.b0, e.b1), spec.k) << "trial " << trial;
-            const double s = edge_edge_distance_sq(e.a0, e.a1, e.b0, e.b1, spec.k);
-            const double reference = brute_edge_edge(e.a0, e.a1, e.b0, e.b1);
-            EXPECT_NEAR(s, reference, 1e-12 * (1.0 + reference)) << "case " << static_cast<int>(spec.k);
-            EXPECT_EQ(edge_edge_distance_sq(e.a0, e.a1, e.b0, e.b1), s);
-            check_edge_edge_derivatives({e.a0, e.a1, e.b0, e.b1}, spec.k, fd);
+            ASSERT_NO_FATAL_FAILURE(expect_in_case(kEdgeEdge, {e.a0, e.a1, e.b0, e.b1}, spec.k, fd, trial));
         }
     EXPECT_EQ(fd.checks, 9 * kPerCase * (12 + 144)) << "every entry of every case was compared";
 }
@@ -412,14 +435,6 @@ TEST(EdgeEdgeDistance, IsC1AcrossCaseBoundaries) {
         for (const EdgeBoundarySpec& spec : specs) {
             ++boundaries;
             const EdgePair e = edges_in_case(random, spec.s, spec.t, spec.on_boundary_a, spec.on_boundary_b);
-            const double s_minus = edge_edge_distance_sq(e.a0, e.a1, e.b0, e.b1, spec.minus);
-            const double s_plus = edge_edge_distance_sq(e.a0, e.a1, e.b0, e.b1, spec.plus);
-            EXPECT_NEAR(s_minus, s_plus, 1e-13 * (1.0 + s_plus));
-            EXPECT_NEAR(s_plus, brute_edge_edge(e.a0, e.a1, e.b0, e.b1), 1e-12 * (1.0 + s_plus));
-            const Vec12 g_minus = edge_edge_distance_sq_gradient(e.a0, e.a1, e.b0, e.b1, spec.minus);
-            const Vec12 g_plus = edge_edge_distance_sq_gradient(e.a0, e.a1, e.b0, e.b1, spec.plus);
-            EXPECT_LE((g_minus - g_plus).norm(), 1e-11 * (1.0 + g_plus.norm()))
-                << "cases " << static_cast<int>(spec.minus) << " / " << static_cast<int>(spec.plus);
             const double delta = 1e-7;
             auto shifted = [&](double sign) {
                 EdgePair f = e;
@@ -435,11 +450,8 @@ TEST(EdgeEdgeDistance, IsC1AcrossCaseBoundaries) {
                 return f;
             };
             const EdgePair m = shifted(-1.0), p = shifted(1.0);
-            EXPECT_EQ(edge_edge_case(m.a0, m.a1, m.b0, m.b1), spec.minus);
-            EXPECT_EQ(edge_edge_case(p.a0, p.a1, p.b0, p.b1), spec.plus);
-            const Vec12 g0 = edge_edge_distance_sq_gradient(m.a0, m.a1, m.b0, m.b1, spec.minus);
-            const Vec12 g1 = edge_edge_distance_sq_gradient(p.a0, p.a1, p.b0, p.b1, spec.plus);
-            EXPECT_LE((g0 - g1).norm(), 1e-5 * (1.0 + g1.norm()));
+            expect_c1_across(kEdgeEdge, {e.a0, e.a1, e.b0, e.b1}, spec.minus, spec.plus, {m.a0, m.a1, m.b0, m.b1},
+                             {p.a0, p.a1, p.b0, p.b1});
         }
     EXPECT_EQ(boundaries, 20 * 12);
 }
@@ -474,7 +486,7 @@ TEST(EdgeEdgeDistance, ParallelAndDegenerateEdgesAreFiniteAndExact) {
             EXPECT_GE(s, reference - 1e-12) << "the segments' distance is the smallest";
             EXPECT_TRUE(edge_edge_distance_sq_gradient(e.a0, e.a1, e.b0, e.b1, k).allFinite());
             EXPECT_TRUE(edge_edge_distance_sq_hessian(e.a0, e.a1, e.b0, e.b1, k).allFinite());
-            if (variant < 4) check_edge_edge_derivatives({e.a0, e.a1, e.b0, e.b1}, k, fd);
+            if (variant < 4) check_case_derivatives(kEdgeEdge, {e.a0, e.a1, e.b0, e.b1}, k, fd);
             if (variant == 4) {
                 EXPECT_LE(s, 1e-28) << "collinear overlapping segments touch";
             }

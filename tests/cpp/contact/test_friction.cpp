@@ -12,6 +12,8 @@
 #include "pnet/contact/collisions/contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/fem/gmsh_mesher.hpp"
+#include "support/contact_checks.hpp"
+#include "support/fem_systems.hpp"
 #include "support/finite_difference.hpp"
 
 namespace pnet {
@@ -48,25 +50,7 @@ TEST(Friction, PotentialMatchesFiniteDifferences) {
     Friction2d friction(0.3, 1e-3);
     friction.lag(contact, x);
     ASSERT_GE(friction.pairs(), 2u);
-    Eigen::VectorXd v(2 * x.size());
-    for (Eigen::Index k = 0; k < v.size(); ++k) v[k] = 1e-3 * std::sin(1.7 * k + 0.3);  // slips below and above eps
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(v.size());
-    friction.add_gradient(v, 1.0, g);
-    test::FdStats fd;
-    EXPECT_TRUE(test::check_gradient([&](const Eigen::VectorXd& y) { return friction.value(y); }, g, v, fd, 1e-9, 1e-5,
-                                     1e-6 * g.cwiseAbs().maxCoeff()));
-    std::vector<Eigen::Triplet<double>> triplets;
-    friction.add_hessian(v, 1.0, triplets);
-    Eigen::SparseMatrix<double> H(v.size(), v.size());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    auto grad = [&](const Eigen::VectorXd& y) {
-        Eigen::VectorXd gy = Eigen::VectorXd::Zero(y.size());
-        friction.add_gradient(y, 1.0, gy);
-        return gy;
-    };
-    const Eigen::MatrixXd Hd(H);
-    EXPECT_TRUE(test::check_jacobian(grad, Hd, v, fd, 1e-10, 1e-4, 1e-6 * Hd.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(v.size() + v.size() * v.size()));
+    test::expect_friction_derivatives<2>(friction, x.size());
 }
 
 /// A stiff 2 x 2 cm block resting on a slope of angle `degrees`, friction mu; returns the block's
@@ -75,33 +59,12 @@ std::pair<double, double> slope_velocities(double degrees, double mu, double t1,
     const double angle = degrees * M_PI / 180.0, dhat = 1e-4;
     const Eigen::Matrix2d R = Eigen::Rotation2Dd(angle).toRotationMatrix();
     const Vec<2> along(std::cos(angle), std::sin(angle)), normal(-std::sin(angle), std::cos(angle));
-    Shape2d box;
-    box.kind = Shape2d::Kind::Box;
-    box.min = Vec<2>(0.0, 0.0);
-    box.max = Vec<2>(0.02, 0.02);
-    box.element_size = 0.01;
-    FemSystem<2> system;
-    system.mesh = mesh_shape(box, "block");
-    for (Vec<2>& p : system.mesh.x) p = R * p + 0.5 * dhat * normal;
-    system.mesh.finalize("block on a slope");
-    MaterialDescription stiff;
-    stiff.density = 1000.0;
-    stiff.elasticity = ElasticityModel::NeoHookeanMetal;
-    stiff.elastic.E = 1e7;
-    stiff.elastic.nu = 0.3;
-    system.materials = {Material<2>(stiff)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<2>(0.0, -9.8);
-    system.make_rest();
+    const FemSystem<2> system = test::block_on_slope<2>(R, normal, 0.02, 0.01, dhat);
     // kappa: the weight's normal part, 0.4 kg/m g cos, held at about dhat / 2 by the few bottom nodes.
     Contact2d contact(system.mesh.boundary, dhat, 1e13);
     contact.add_half_space({Vec<2>(0.0, 0.0), normal});
     Friction2d friction(mu, 1e-4);
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-7;
-    options.max_newton_iterations = 200;
-    FemImplicitIntegrator<2> implicit(system, FemMethod::Lagged, options,
-                                      std::make_unique<ElasticParticleEnergy<2>>(system.materials), &contact);
+    FemImplicitIntegrator<2> implicit = test::lagged_integrator<2>(system, &contact, 1e-7);
     implicit.set_friction(&friction, &contact);
     FemExplicitIntegrator<2> explicit_integrator(system, &contact);
     explicit_integrator.set_friction(&friction, &contact);

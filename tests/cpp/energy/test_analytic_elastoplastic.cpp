@@ -6,16 +6,14 @@
 #include <Eigen/Eigenvalues>
 
 #include "pnet/energy/analytic_elastoplastic.hpp"
+#include "support/dims.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 
 namespace pnet {
 namespace {
 
-template <typename T>
-class AnalyticEnergyTest : public ::testing::Test {};
-using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
-TYPED_TEST_SUITE(AnalyticEnergyTest, Dims);
+PNET_TYPED_TEST_SUITE_2D_3D(AnalyticEnergyTest);
 
 TYPED_TEST(AnalyticEnergyTest, GradientIsTheElastoplasticStressAndDerivativesMatch) {
     constexpr int dim = TypeParam::value;

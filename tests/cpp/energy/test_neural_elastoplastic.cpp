@@ -174,27 +174,15 @@ TEST(NeuralElastoplasticEnergy, RelativeToTheReferenceNeedsNoNetworkAtIt) {
     check_relative_to_reference<3>("snow_3d.pt");
 }
 
-TEST(NeuralElastoplasticEnergy, Sand2d) {
-    check_model<2>("sand_2d.pt");
-}
-TEST(NeuralElastoplasticEnergy, Snow2d) {
-    check_model<2>("snow_2d.pt");
-}
-TEST(NeuralElastoplasticEnergy, Metal2d) {
-    check_model<2>("metal_2d.pt");
-}
-TEST(NeuralElastoplasticEnergy, MetalNeoHookeanLearnedReturnMap2d) {
-    check_model<2>("metal_nh_2d.pt");
-}
-TEST(NeuralElastoplasticEnergy, Sand3d) {
-    check_model<3>("sand_3d.pt");
-}
-TEST(NeuralElastoplasticEnergy, Snow3d) {
-    check_model<3>("snow_3d.pt");
-}
-TEST(NeuralElastoplasticEnergy, Metal3d) {
-    check_model<3>("metal_3d.pt");
-}
+// Each shipped model, one test a model.
+TEST(NeuralElastoplasticEnergy, Sand2d) { check_model<2>("sand_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, Snow2d) { check_model<2>("snow_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, Metal2d) { check_model<2>("metal_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, MetalNeoHookeanLearnedReturnMap2d) { check_model<2>("metal_nh_2d.pt"); }
+TEST(NeuralElastoplasticEnergy, Sand3d) { check_model<3>("sand_3d.pt"); }
+TEST(NeuralElastoplasticEnergy, Snow3d) { check_model<3>("snow_3d.pt"); }
+TEST(NeuralElastoplasticEnergy, Metal3d) { check_model<3>("metal_3d.pt"); }
+
 // A parametric model at the ends of its ranges and inside: exact at F0 for that material, derivatives
 // against finite differences.
 TEST(NeuralElastoplasticEnergy, SandParametric2d) {

@@ -81,28 +81,13 @@ namespace {
 // reaches its prescribed position every step (the start is held back by CCD,
 // then stages move it as the block makes room), and nothing ever touches.
 TEST(FemIntegrator, KinematicPlatePressesABlockWithoutPenetration) {
-    Shape2d block_shape, plate_shape;
-    block_shape.kind = plate_shape.kind = Shape2d::Kind::Box;
-    block_shape.min = Vec<2>(0.0, 0.0005);
-    block_shape.max = Vec<2>(0.1, 0.0505);
-    block_shape.element_size = 0.01;
-    plate_shape.min = Vec<2>(-0.01, 0.051);
-    plate_shape.max = Vec<2>(0.11, 0.061);
-    plate_shape.element_size = 0.01;
-    FemSystem<2> system;
-    system.mesh = mesh_shape(block_shape, "block");
-    const std::size_t block_nodes = system.mesh.nodes();
-    const std::size_t block_elements = system.mesh.elements.size();
-    system.mesh.append(mesh_shape(plate_shape, "plate"));
-    system.mesh.finalize("block and plate");
-    MaterialDescription jelly;
-    jelly.density = 1000.0;
-    jelly.elasticity = ElasticityModel::NeoHookeanMetal;
-    jelly.elastic.E = 1e5;
-    jelly.elastic.nu = 0.3;
-    system.materials = {Material<2>(jelly)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<2>(0.0, -9.8);
+    Mesh<2> mesh = mesh_shape(test::box_shape<2>(Vec<2>(0.0, 0.0005), Vec<2>(0.1, 0.0505), 0.01), "block");
+    const std::size_t block_nodes = mesh.nodes();
+    const std::size_t block_elements = mesh.elements.size();
+    mesh.append(mesh_shape(test::box_shape<2>(Vec<2>(-0.01, 0.051), Vec<2>(0.11, 0.061), 0.01), "plate"));
+    mesh.finalize("block and plate");
+    FemSystem<2> system =
+        test::falling_object<2>(std::move(mesh), test::elastic_material(ElasticityModel::NeoHookeanMetal, 1e5));
     system.fixed_node.assign(system.mesh.nodes(), 0);
     system.prescribed_velocity.assign(system.mesh.nodes(), Vec<2>::Zero());
     const double speed = 0.05, dt = 1e-2;  // the frame scene's plate: 0.5 mm per step
@@ -114,11 +99,7 @@ TEST(FemIntegrator, KinematicPlatePressesABlockWithoutPenetration) {
     Contact2d contact(system.mesh.boundary, 1e-3, 1e8);
     contact.add_half_space({Vec<2>(0.0, 0.0), Vec<2>(0.0, 1.0)});
     ASSERT_EQ(contact.first_intersection(system.mesh.x), "");
-    ImplicitOptions options;
-    options.newton_tolerance = 1e-5;  // m/s
-    options.max_newton_iterations = 200;
-    FemImplicitIntegrator<2> integrator(system, FemMethod::Lagged, options,
-                                        std::make_unique<ElasticParticleEnergy<2>>(system.materials), &contact);
+    FemImplicitIntegrator<2> integrator = test::lagged_integrator<2>(system, &contact, 1e-5);
     FemState<2> state = FemState<2>::at_rest(system);
     int staged = 0, newton = 0;
     for (int step = 0; step < 10; ++step) {
@@ -147,21 +128,9 @@ TEST(FemIntegrator, ExplicitSubstepsWhereTheBarrierStiffensAndLandsWithoutPenetr
     // grows like kappa dhat^4 / d^2 as the gap d closes: with a fixed step the square goes
     // unstable on the barrier and CCD finds the step intersecting (the bug: metal_frame_2d
     // at 1e-5 s failed at frame 47).
-    Shape2d box;
-    box.kind = Shape2d::Kind::Box;
-    box.min = Vec<2>(0.0, 0.0005);
-    box.max = Vec<2>(0.02, 0.0205);
-    box.element_size = 0.005;
-    FemSystem<2> system;
-    system.mesh = mesh_shape(box, "square");
-    MaterialDescription steel;
-    steel.density = 7800.0;
-    steel.elasticity = ElasticityModel::StvkHencky;
-    steel.elastic.E = 1e7;
-    steel.elastic.nu = 0.3;
-    system.materials = {Material<2>(steel)};
-    system.element_object.assign(system.mesh.elements.size(), 0);
-    system.gravity = Vec<2>(0.0, -9.8);
+    const Shape2d box = test::box_shape<2>(Vec<2>(0.0, 0.0005), Vec<2>(0.02, 0.0205), 0.005);
+    const MaterialDescription steel = test::elastic_material(ElasticityModel::StvkHencky, 1e7, 7800.0);
+    FemSystem<2> system = test::falling_object<2>(mesh_shape(box, "square"), steel);
     system.make_rest();
     // kappa: the barrier's energy at the closest approach, kappa dhat^4 ln(dhat^2 / d^2) summed
     // over the bottom nodes, must take the square's kinetic energy (156 J/m) at a gap d well

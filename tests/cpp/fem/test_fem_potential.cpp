@@ -63,6 +63,10 @@ struct Fixture {
 struct FreeComponents {
     VecX v;
     std::vector<Eigen::Index> free;
+    FreeComponents(const VecX& at, const std::vector<char>& fixed) : v(at) {
+        for (Eigen::Index k = 0; k < v.size(); ++k)
+            if (!fixed[k]) free.push_back(k);
+    }
     VecX expand(const VecX& y) const {
         VecX full = v;
         for (std::size_t k = 0; k < free.size(); ++k) full[free[k]] = y[k];
@@ -72,6 +76,19 @@ struct FreeComponents {
         VecX y(free.size());
         for (std::size_t k = 0; k < free.size(); ++k) y[k] = full[free[k]];
         return y;
+    }
+    /// H's rows and columns of the free components.
+    Eigen::MatrixXd restrict_hessian(const Eigen::MatrixXd& H) const {
+        Eigen::MatrixXd H_free(free.size(), free.size());
+        for (std::size_t a = 0; a < free.size(); ++a)
+            for (std::size_t b = 0; b < free.size(); ++b) H_free(a, b) = H(free[a], free[b]);
+        return H_free;
+    }
+    /// The potential's gradient at expand(y), restricted to the free components.
+    VecX gradient(FemPotential<2>& potential, const VecX& y) const {
+        VecX g;
+        potential.value_gradient(expand(y), g);
+        return restrict(g);
     }
 };
 
@@ -97,33 +114,24 @@ TEST(FemPotential, GradientAndHessianMatchFiniteDifferences) {
 
     // Derivatives along the free components (node 0's are fixed: its gradient is 0 and its
     // Hessian rows and columns hold only the mass).
-    FreeComponents components{v, {}};
-    for (Eigen::Index k = 2; k < v.size(); ++k) components.free.push_back(k);
-    const std::vector<Eigen::Index>& free = components.free;
-    auto expand = [&](const VecX& y) { return components.expand(y); };
-    auto restrict_to_free = [&](const VecX& full) { return components.restrict(full); };
+    const FreeComponents components(v, fixed);
+    const std::size_t n_free = components.free.size();
     VecX g;
     f.potential.value_gradient(v, g);
     EXPECT_EQ(g[0], 0.0);
     EXPECT_EQ(g[1], 0.0);
     test::FdStats fd;
-    const VecX v_free = restrict_to_free(v);
-    EXPECT_TRUE(test::check_gradient([&](const VecX& y) { return f.potential.value(expand(y)); },
-                                     restrict_to_free(g), v_free, fd, 1e-6, 1e-5, 1e-6 * g.cwiseAbs().maxCoeff()));
+    const VecX v_free = components.restrict(v);
+    EXPECT_TRUE(test::check_gradient([&](const VecX& y) { return f.potential.value(components.expand(y)); },
+                                     components.restrict(g), v_free, fd, 1e-6, 1e-5, 1e-6 * g.cwiseAbs().maxCoeff()));
     f.potential.prepare_hessian(v);
     const Eigen::MatrixXd H = Eigen::MatrixXd(*f.potential.hessian_matrix());
-    Eigen::MatrixXd H_free(free.size(), free.size());
-    for (std::size_t a = 0; a < free.size(); ++a)
-        for (std::size_t b = 0; b < free.size(); ++b) H_free(a, b) = H(free[a], free[b]);
-    auto grad_of = [&](const VecX& y) {
-        VecX gy;
-        f.potential.value_gradient(expand(y), gy);
-        return restrict_to_free(gy);
-    };
-    EXPECT_TRUE(test::check_jacobian(grad_of, H_free, v_free, fd, 1e-6, 1e-5, 1e-6 * H.cwiseAbs().maxCoeff()));
+    auto grad_of = [&](const VecX& y) { return components.gradient(f.potential, y); };
+    EXPECT_TRUE(test::check_jacobian(grad_of, components.restrict_hessian(H), v_free, fd, 1e-6, 1e-5,
+                                     1e-6 * H.cwiseAbs().maxCoeff()));
     for (Eigen::Index k = 2; k < H.cols(); ++k) EXPECT_EQ(H(0, k), 0.0);
     EXPECT_EQ(H(0, 0), f.rest.node_mass[0]);
-    EXPECT_EQ(fd.checks, static_cast<int>(free.size() + free.size() * free.size())) << "every entry was compared";
+    EXPECT_EQ(fd.checks, static_cast<int>(n_free + n_free * n_free)) << "every entry was compared";
     EXPECT_LT((H - H.transpose()).cwiseAbs().maxCoeff(), 1e-12 * H.cwiseAbs().maxCoeff()) << "symmetric";
     VecX d = VecX::Random(2 * n), Hd;
     f.potential.hessian_multiply(d, Hd);
@@ -171,26 +179,15 @@ TEST(FemPotential, AssembledHessianWithContactAndFrictionMatchesFiniteDifference
     const Eigen::MatrixXd soft(*f.potential.hessian_matrix());
     f.potential.harden_fixed();
 
-    FreeComponents components{v, {}};
-    for (Eigen::Index k = 0; k < v.size(); ++k)
-        if (!fixed[k]) components.free.push_back(k);
-    const std::vector<Eigen::Index>& free = components.free;
-    auto expand = [&](const VecX& y) { return components.expand(y); };
-    auto restrict_to_free = [&](const VecX& full) { return components.restrict(full); };
+    const FreeComponents components(v, fixed);
+    const std::size_t n_free = components.free.size();
     f.potential.prepare_hessian(v);
     const Eigen::MatrixXd H(*f.potential.hessian_matrix());
-    Eigen::MatrixXd H_free(free.size(), free.size());
-    for (std::size_t a = 0; a < free.size(); ++a)
-        for (std::size_t b = 0; b < free.size(); ++b) H_free(a, b) = H(free[a], free[b]);
-    auto grad_of = [&](const VecX& y) {
-        VecX gy;
-        f.potential.value_gradient(expand(y), gy);
-        return restrict_to_free(gy);
-    };
+    auto grad_of = [&](const VecX& y) { return components.gradient(f.potential, y); };
     test::FdStats fd;
-    EXPECT_TRUE(test::check_jacobian(grad_of, H_free, restrict_to_free(v), fd, 1e-7, 1e-4,
+    EXPECT_TRUE(test::check_jacobian(grad_of, components.restrict_hessian(H), components.restrict(v), fd, 1e-7, 1e-4,
                                      1e-6 * H.cwiseAbs().maxCoeff()));
-    EXPECT_EQ(fd.checks, static_cast<int>(free.size() * free.size())) << "every entry was compared";
+    EXPECT_EQ(fd.checks, static_cast<int>(n_free * n_free)) << "every entry was compared";
     // The fixed node keeps only its mass, although its contact and element entries are in the pattern.
     for (Eigen::Index k = 0; k < H.cols(); ++k)
         for (const Eigen::Index c : {2 * node, 2 * node + 1}) {

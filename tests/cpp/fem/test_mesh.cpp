@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>  // cross()
 
 #include "pnet/fem/gmsh_mesher.hpp"
+#include "support/fem_systems.hpp"
 #include "support/temp_dir.hpp"
 
 namespace pnet {
@@ -91,12 +92,7 @@ TEST(Mesh, BadMeshesAreRefusedNamingTheElementOrNode) {
 }
 
 TEST(GmshMesher, FrameHasTheRightAreaBoundaryAndSize) {
-    Shape2d frame;
-    frame.kind = Shape2d::Kind::Frame;
-    frame.min = Vec<2>(0.0, 0.0);
-    frame.max = Vec<2>(0.10, 0.18);
-    frame.thickness = 0.012;
-    frame.element_size = 0.003;
+    const Shape2d frame = test::frame_shape(Vec<2>(0.0, 0.0), Vec<2>(0.10, 0.18), 0.012, 0.003);
     const Mesh<2> m = mesh_shape(frame, "metal frame");
     const double area = 0.10 * 0.18 - (0.10 - 0.024) * (0.18 - 0.024);
     EXPECT_NEAR(total_volume(m), area, 1e-12);
@@ -140,11 +136,7 @@ TEST(GmshMesher, DiskAndBadShapes) {
     Shape2d bad = disk;
     bad.element_size = 0.0;
     EXPECT_NE(message(bad).find("scene.json: objects[0]: element_size must be > 0"), std::string::npos);
-    Shape2d frame;
-    frame.kind = Shape2d::Kind::Frame;
-    frame.max = Vec<2>(0.1, 0.1);
-    frame.thickness = 0.06;
-    frame.element_size = 0.01;
+    const Shape2d frame = test::frame_shape(Vec<2>::Zero(), Vec<2>(0.1, 0.1), 0.06, 0.01);
     EXPECT_NE(message(frame).find("the frame's thickness must be > 0 and leave a hole"), std::string::npos);
 }
 
@@ -178,12 +170,7 @@ TEST(GmshMesher, ReadsMeshFilesAndRefusesBadOnes) {
 
 TEST(GmshMesher, AnElementAsLargeAsTheShapeUpToRoundOffIsAccepted) {
     // 0.1911 - 0.1811 is 0.00999999... in doubles: a 1 cm plate meshed with 1 cm triangles.
-    Shape2d plate;
-    plate.kind = Shape2d::Kind::Box;
-    plate.min = Vec<2>(0.42, 0.1811);
-    plate.max = Vec<2>(0.58, 0.1911);
-    plate.element_size = 0.01;
-    const Mesh<2> mesh = mesh_shape(plate, "plate");
+    const Mesh<2> mesh = mesh_shape(test::box_shape<2>(Vec<2>(0.42, 0.1811), Vec<2>(0.58, 0.1911), 0.01), "plate");
     EXPECT_GT(mesh.elements.size(), 0u);
 }
 

@@ -12,6 +12,7 @@
 #include "pnet/io/ply.hpp"
 #include "pnet/io/render.hpp"
 #include "pnet/io/vtu.hpp"
+#include "support/fem_systems.hpp"
 #include "support/temp_dir.hpp"
 
 namespace pnet {
@@ -53,11 +54,7 @@ Shape3d frame(double size) {
 }
 
 TEST(Mesh3d, ShapesHaveTheirVolumeAndAClosedOutwardBoundary) {
-    Shape3d box;
-    box.kind = Shape3d::Kind::Box;
-    box.min = Vec<3>(0.0, 0.0, 0.0);
-    box.max = Vec<3>(0.02, 0.03, 0.04);
-    box.element_size = 0.01;
+    const Shape3d box = test::box_shape<3>(Vec<3>(0.0, 0.0, 0.0), Vec<3>(0.02, 0.03, 0.04), 0.01);
     Shape3d sphere;
     sphere.kind = Shape3d::Kind::Sphere;
     sphere.center = Vec<3>(0.5, 0.5, 0.5);

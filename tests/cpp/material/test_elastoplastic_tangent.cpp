@@ -13,16 +13,14 @@
 
 #include "pnet/material/elastoplastic_tangent.hpp"
 #include "pnet/material/material.hpp"
+#include "support/dims.hpp"
 #include "support/finite_difference.hpp"
 #include "support/random.hpp"
 
 namespace pnet {
 namespace {
 
-template <typename T>
-class ElastoplasticTangentTest : public ::testing::Test {};
-using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
-TYPED_TEST_SUITE(ElastoplasticTangentTest, Dims);
+PNET_TYPED_TEST_SUITE_2D_3D(ElastoplasticTangentTest);
 
 template <int dim>
 Tensor4<dim> tangent_of(const Material<dim>& material, const Mat<dim>& F, double h, bool project,

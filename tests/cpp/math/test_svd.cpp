@@ -1,15 +1,13 @@
 #include <gtest/gtest.h>
 
 #include "pnet/math/svd.hpp"
+#include "support/dims.hpp"
 #include "support/random.hpp"
 
 namespace pnet {
 namespace {
 
-template <typename T>
-class PolarSvdTest : public ::testing::Test {};
-using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
-TYPED_TEST_SUITE(PolarSvdTest, Dims);
+PNET_TYPED_TEST_SUITE_2D_3D(PolarSvdTest);
 
 template <int dim>
 void expect_polar(const Mat<dim>& F) {

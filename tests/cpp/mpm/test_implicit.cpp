@@ -10,7 +10,6 @@
 #include <omp.h>
 
 #include <array>
-#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <memory>
@@ -22,7 +21,9 @@
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/newton.hpp"
+#include "support/dims.hpp"
 #include "support/finite_difference.hpp"
+#include "support/identical_states.hpp"
 #include "support/random.hpp"
 #include "support/temp_dir.hpp"
 
@@ -126,10 +127,7 @@ struct PotentialFixture {
     }
 };
 
-template <typename T>
-class ImplicitTest : public ::testing::Test {};
-using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
-TYPED_TEST_SUITE(ImplicitTest, Dims);
+PNET_TYPED_TEST_SUITE_2D_3D(ImplicitTest);
 
 // Gradient of E on the free components against central differences of E, and
 // H d against differences of the gradient along random directions and unit
@@ -508,16 +506,7 @@ TYPED_TEST(ImplicitTest, PlasticityNetEqualsLaggedWithoutPlasticity) {
     EXPECT_GT(differ, 1e-6);
 }
 
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
-
-template <int dim>
-bool identical(const Particles<dim>& a, const Particles<dim>& b) {
-    return same_bytes(a.x, b.x) && same_bytes(a.v, b.v) && same_bytes(a.C, b.C) &&
-           same_bytes(a.F_elastic, b.F_elastic) && same_bytes(a.hardening, b.hardening);
-}
+using test::identical;
 
 TYPED_TEST(ImplicitTest, OneAndTwoThreadsGiveIdenticalResults) {
     constexpr int dim = TypeParam::value;
@@ -654,28 +643,27 @@ TEST(IntegratorSettings, ReadsAndValidatesTheIntegratorBlock) {
         }
         return std::string("accepted");
     };
-    EXPECT_EQ(message({{"newton_tolerance", -1}}),
-              "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1");
-    EXPECT_EQ(message({{"lazy_hessian", 1}}),
-              "s.json: integrator.lazy_hessian: expected a number in [0, 1) or \"auto\", got 1");
-    EXPECT_EQ(message({{"fixed_point_inexact", 1.0}}),
-              "s.json: integrator.fixed_point_inexact: expected a number in [0, 1), got 1.0");
-    EXPECT_EQ(message({{"preconditioner", "ilu"}}),
-              "s.json: integrator.preconditioner: expected \"jacobi\", \"block_jacobi\", \"ichol\" or \"multigrid\", got \"ilu\"");
-    EXPECT_EQ(message({{"max_fixed_point_iterations", 1.5}}),
-              "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5");
-    EXPECT_EQ(message({{"cg_tolerance", 2}}),
-              "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2");
-    EXPECT_EQ(message({{"fixed_point_keep_hessian", "yes"}}),
-              "s.json: integrator.fixed_point_keep_hessian: expected true or false, got \"yes\"");
-    EXPECT_EQ(message({{"fail_on_unconverged", 1}}),
-              "s.json: integrator.fail_on_unconverged: expected true or false, got 1");
-    EXPECT_EQ(message({{"advection_cfl", 1.5}}), "s.json: integrator.advection_cfl: expected a number in [0, 1], got 1.5");
-    EXPECT_EQ(message({{"advection_cfl", -0.1}}),
-              "s.json: integrator.advection_cfl: expected a number in [0, 1], got -0.1");
-    EXPECT_EQ(message({{"regularizer_weight", "one"}}),
-              "s.json: integrator.regularizer_weight: expected a number >= 0 or \"auto\", got \"one\"");
-    EXPECT_EQ(message({{"tangent_damping", -0.5}}), "s.json: integrator.tangent_damping: expected a number >= 0, got -0.5");
+    // A bad value is refused naming the file, the key and what the key expects.
+    const std::vector<std::pair<nlohmann::json, std::string>> refused = {
+        {{{"newton_tolerance", -1}}, "s.json: integrator.newton_tolerance: expected a positive number (m/s), got -1"},
+        {{{"lazy_hessian", 1}}, "s.json: integrator.lazy_hessian: expected a number in [0, 1) or \"auto\", got 1"},
+        {{{"fixed_point_inexact", 1.0}},
+         "s.json: integrator.fixed_point_inexact: expected a number in [0, 1), got 1.0"},
+        {{{"preconditioner", "ilu"}},
+         "s.json: integrator.preconditioner: expected \"jacobi\", \"block_jacobi\", \"ichol\" or \"multigrid\", got \"ilu\""},
+        {{{"max_fixed_point_iterations", 1.5}},
+         "s.json: integrator.max_fixed_point_iterations: expected an integer >= 1, got 1.5"},
+        {{{"cg_tolerance", 2}}, "s.json: integrator.cg_tolerance: expected a number in (0, 1), got 2"},
+        {{{"fixed_point_keep_hessian", "yes"}},
+         "s.json: integrator.fixed_point_keep_hessian: expected true or false, got \"yes\""},
+        {{{"fail_on_unconverged", 1}}, "s.json: integrator.fail_on_unconverged: expected true or false, got 1"},
+        {{{"advection_cfl", 1.5}}, "s.json: integrator.advection_cfl: expected a number in [0, 1], got 1.5"},
+        {{{"advection_cfl", -0.1}}, "s.json: integrator.advection_cfl: expected a number in [0, 1], got -0.1"},
+        {{{"regularizer_weight", "one"}},
+         "s.json: integrator.regularizer_weight: expected a number >= 0 or \"auto\", got \"one\""},
+        {{{"tangent_damping", -0.5}}, "s.json: integrator.tangent_damping: expected a number >= 0, got -0.5"},
+    };
+    for (const auto& [block, expected] : refused) EXPECT_EQ(message(block), expected) << block.dump();
     // A key that is no option is refused, naming the known ones (it was silently ignored).
     const std::string unknown = message({{"newton_tol", 1e-4}});
     EXPECT_EQ(unknown.rfind("s.json: integrator.newton_tol: unknown key (known: name, dt, cfl, newton_tolerance, ", 0), 0u)

@@ -98,34 +98,24 @@ TEST_P(FusedMlpDerivativeTest, DerivativesMatchFiniteDifferences) {
     test::FdStats stats;
     for (int r = 0; r < 3; ++r) {
         const Eigen::VectorXd x0 = Eigen::Map<const Eigen::VectorXd>(&x[r * in], in);
-        auto eval = [&](const Eigen::VectorXd& F, FusedMlp::Order order, double& value, Eigen::VectorXd& grad,
-                        Eigen::MatrixXd& hess) {
+        // The network at x0 with its first m inputs replaced by F, to the given order.
+        struct Evaluation {
+            double value = 0.0;
+            Eigen::VectorXd grad;
+            Eigen::MatrixXd hess;
+        };
+        auto eval = [&](const Eigen::VectorXd& F, FusedMlp::Order order) {
             Eigen::VectorXd row = x0;
             row.head(m) = F;
-            grad.resize(m);
-            hess.resize(m, m);
-            fused.evaluate(row.data(), 1, order, &value, grad.data(), hess.data());
+            Evaluation e{0.0, Eigen::VectorXd(m), Eigen::MatrixXd(m, m)};
+            fused.evaluate(row.data(), 1, order, &e.value, e.grad.data(), e.hess.data());
+            return e;
         };
-        double value;
-        Eigen::VectorXd grad;
-        Eigen::MatrixXd hess;
-        eval(x0.head(m), FusedMlp::Order::Hessian, value, grad, hess);
-        auto f = [&](const Eigen::VectorXd& F) {
-            double v;
-            Eigen::VectorXd g;
-            Eigen::MatrixXd h;
-            eval(F, FusedMlp::Order::Value, v, g, h);
-            return v;
-        };
-        auto gradient = [&](const Eigen::VectorXd& F) {
-            double v;
-            Eigen::VectorXd g;
-            Eigen::MatrixXd h;
-            eval(F, FusedMlp::Order::Gradient, v, g, h);
-            return g;
-        };
-        EXPECT_TRUE(test::check_gradient(f, grad, x0.head(m), stats, 1e-6, 1e-6, 1e-3));
-        EXPECT_TRUE(test::check_jacobian(gradient, hess, x0.head(m), stats, 1e-6, 1e-6, 1e-3));
+        const Evaluation at_x0 = eval(x0.head(m), FusedMlp::Order::Hessian);
+        auto f = [&](const Eigen::VectorXd& F) { return eval(F, FusedMlp::Order::Value).value; };
+        auto gradient = [&](const Eigen::VectorXd& F) { return eval(F, FusedMlp::Order::Gradient).grad; };
+        EXPECT_TRUE(test::check_gradient(f, at_x0.grad, x0.head(m), stats, 1e-6, 1e-6, 1e-3));
+        EXPECT_TRUE(test::check_jacobian(gradient, at_x0.hess, x0.head(m), stats, 1e-6, 1e-6, 1e-3));
     }
     EXPECT_EQ(stats.checks, 3 * (m + m * m));
 }

@@ -14,6 +14,7 @@
 #include "pnet/material/material_json.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/scene/scene.hpp"
+#include "support/dims.hpp"
 
 #ifndef PNET_SCENES_DIR
 #define PNET_SCENES_DIR "/work/main/scenes"
@@ -768,10 +769,7 @@ TEST_F(SceneFileTest, ModelPathsAreRelativeToTheFile) {
 // ---------------------------------------------------------------------------------------------------------------
 // The sampler, in 2D and 3D.
 
-template <typename T>
-class Sampler : public ::testing::Test {};
-using Dims = ::testing::Types<std::integral_constant<int, 2>, std::integral_constant<int, 3>>;
-TYPED_TEST_SUITE(Sampler, Dims);
+PNET_TYPED_TEST_SUITE_2D_3D(Sampler);
 
 /// [0, 1]^dim, dx = 1/32 (lattice spacing 1/64), with the given objects.
 json unit_scene(int dim, const std::vector<json>& objects) {

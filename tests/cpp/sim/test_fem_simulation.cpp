@@ -7,37 +7,19 @@
 #include <omp.h>
 
 #include <cmath>
-#include <cstring>
 #include <nlohmann/json.hpp>
 
 #include "pnet/io/sha256.hpp"
 #include "pnet/sim/fem_simulation.hpp"
+#include "support/identical_states.hpp"
 #include "support/temp_dir.hpp"
 
 namespace pnet {
 namespace {
 
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
-
-template <int dim>
-void expect_identical(const FemState<dim>& a, const FemState<dim>& b) {
-    EXPECT_TRUE(same_bytes(a.x, b.x));
-    EXPECT_TRUE(same_bytes(a.v, b.v));
-    EXPECT_TRUE(same_bytes(a.plastic_inverse, b.plastic_inverse));
-    EXPECT_TRUE(same_bytes(a.hardening, b.hardening));
-    EXPECT_TRUE(same_bytes(a.x_previous, b.x_previous));
-    EXPECT_TRUE(same_bytes(a.v_previous, b.v_previous));
-}
-
-IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
-    IntegratorSettings s = IntegratorSettings::from_scene(scene);
-    s.name = integrator;
-    s.dt = dt;
-    return s;
-}
+using test::expect_identical;
+using test::same_bytes;
+using test::settings_for;
 
 const char* const kTinyFrame = PNET_SCENES_DIR "/tiny/metal_frame_2d.json";
 const char* const kTinyFrame3d = PNET_SCENES_DIR "/tiny/metal_frame_3d.json";
@@ -108,18 +90,9 @@ TEST(FemSimulation, CheckpointThenResumeEqualsAnUninterruptedRun) {
         const Scene scene = load_scene(kTinyFrame);
         IntegratorSettings settings = settings_for(scene, integrator, integrator == "explicit" ? 0.0 : 1e-2);
         if (variant == "lagged bdf2") settings.implicit.time_integrator = "bdf2";
-        test::TempDir dir;
         FemSimulation<2> uninterrupted(scene, settings), first(scene, settings), resumed(scene, settings);
-        for (int f = 0; f < 3; ++f) uninterrupted.advance_frame();
-        first.advance_frame();
-        first.save_checkpoint(dir.file("state.bin"));
-        resumed.load_checkpoint(dir.file("state.bin"));
-        EXPECT_EQ(resumed.frame(), 1);
-        EXPECT_EQ(resumed.total_steps(), first.total_steps());
-        for (int f = 0; f < 2; ++f) resumed.advance_frame();
-        EXPECT_EQ(resumed.total_steps(), uninterrupted.total_steps());
+        test::resume_from_checkpoint(uninterrupted, first, resumed, 1, 3);
         expect_identical(resumed.state(), uninterrupted.state());
-        EXPECT_EQ(dir.entries(), std::vector<std::string>{"state.bin"});
     }
 }
 

@@ -2,11 +2,11 @@
 // their times, checkpoints resume bit-identically and refuse foreign files.
 #include <gtest/gtest.h>
 
-#include <cstring>
 #include <filesystem>
 
 #include "pnet/scene/scene.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
+#include "support/identical_states.hpp"
 #include "support/temp_dir.hpp"
 
 namespace pnet {
@@ -14,19 +14,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
-
-template <int dim>
-void expect_identical(const Particles<dim>& a, const Particles<dim>& b) {
-    EXPECT_TRUE(same_bytes(a.x, b.x));
-    EXPECT_TRUE(same_bytes(a.v, b.v));
-    EXPECT_TRUE(same_bytes(a.C, b.C));
-    EXPECT_TRUE(same_bytes(a.F_elastic, b.F_elastic));
-    EXPECT_TRUE(same_bytes(a.hardening, b.hardening));
-}
+using test::expect_identical;
 
 template <int dim>
 void run_tiny_scene(const Scene& scene) {
@@ -72,18 +60,9 @@ TEST(Simulation, EveryTinySceneRunsTwoFrames) {
 template <int dim>
 void checkpoint_round_trip(const char* file) {
     const Scene scene = load_scene(file);
-    test::TempDir dir;
     Simulation<dim> uninterrupted(scene, 0.0, 0.5), first(scene, 0.0, 0.5), resumed(scene, 0.0, 0.5);
-    for (int f = 0; f < 4; ++f) uninterrupted.advance_frame();
-    for (int f = 0; f < 2; ++f) first.advance_frame();
-    first.save_checkpoint(dir.file("state.bin"));
-    resumed.load_checkpoint(dir.file("state.bin"));
-    EXPECT_EQ(resumed.frame(), 2);
-    EXPECT_EQ(resumed.total_steps(), first.total_steps());
-    for (int f = 0; f < 2; ++f) resumed.advance_frame();
-    EXPECT_EQ(resumed.total_steps(), uninterrupted.total_steps());
+    test::resume_from_checkpoint(uninterrupted, first, resumed, 2, 4);
     expect_identical(resumed.particles(), uninterrupted.particles());
-    EXPECT_EQ(dir.entries(), std::vector<std::string>{"state.bin"});  // no temporary left
 }
 
 // The advection limit (MpmOptions::advection_cfl): the implicit steps of a disk thrown down at

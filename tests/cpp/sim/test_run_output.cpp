@@ -3,6 +3,8 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "pnet/sim/run_output.hpp"
 
@@ -13,6 +15,12 @@ std::size_t cells(const std::string& line) {
     std::size_t n = 1;
     for (char c : line) n += c == ',';
     return n;
+}
+
+/// A one-row table (header and row) holds `cell` (the text) in each named column.
+void expect_cells(const std::string& table, const std::vector<std::pair<std::string, std::string>>& columns) {
+    for (const auto& [column, cell] : columns)
+        EXPECT_EQ(csv_column(table, column), std::vector<std::string>{cell}) << column;
 }
 
 // The tables' columns as the evaluation scripts, notebooks and users' tools read them: a change here
@@ -64,20 +72,20 @@ TEST(RunOutput, RowsMatchTheirHeaders) {
         }
     const RunColumns fem3{3, true, "plasticitynet"};
     const std::string stats = stats_csv_header(fem3) + stats_csv_row(f, fem3);
-    EXPECT_EQ(csv_column(stats, "frame"), std::vector<std::string>{"3"});
-    EXPECT_EQ(csv_column(stats, "time_s"), std::vector<std::string>{"0.060000"});
-    EXPECT_EQ(csv_column(stats, "wall_s"), std::vector<std::string>{"1.2346"});
-    EXPECT_EQ(csv_column(stats, "kinetic_J"), std::vector<std::string>{"0.333333333"});
-    EXPECT_EQ(csv_column(stats, "momentum_z"), std::vector<std::string>{"-2.5"});
-    EXPECT_EQ(csv_column(stats, "converged"), std::vector<std::string>{"0"});
-    EXPECT_EQ(csv_column(stats, "contact_pairs"), std::vector<std::string>{"7"});
+    expect_cells(stats, {{"frame", "3"},
+                         {"time_s", "0.060000"},
+                         {"wall_s", "1.2346"},
+                         {"kinetic_J", "0.333333333"},
+                         {"momentum_z", "-2.5"},
+                         {"converged", "0"},
+                         {"contact_pairs", "7"}});
     const std::string steps = steps_csv_header(fem3) + steps_csv_row(3, 41, 0.061, s, fem3);
-    EXPECT_EQ(csv_column(steps, "step"), std::vector<std::string>{"41"});
-    EXPECT_EQ(csv_column(steps, "time_s"), std::vector<std::string>{"0.061"});
-    EXPECT_EQ(csv_column(steps, "dt_s"), std::vector<std::string>{"0.001"});
-    EXPECT_EQ(csv_column(steps, "energy_J"), std::vector<std::string>{"0.333333333333"});
-    EXPECT_EQ(csv_column(steps, "kinematic_reached"), std::vector<std::string>{"0"});
-    EXPECT_EQ(csv_column(steps, "integrator"), std::vector<std::string>{"plasticitynet"});
+    expect_cells(steps, {{"step", "41"},
+                         {"time_s", "0.061"},
+                         {"dt_s", "0.001"},
+                         {"energy_J", "0.333333333333"},
+                         {"kinematic_reached", "0"},
+                         {"integrator", "plasticitynet"}});
 
     EXPECT_THROW(csv_column(stats, "no_such_column"), std::invalid_argument);
     EXPECT_THROW(csv_column("a,b\n1\n", "b"), std::invalid_argument);

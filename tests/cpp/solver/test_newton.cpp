@@ -98,15 +98,17 @@ private:
     double k_ = 40.0;
 };
 
+/// M M^T + shift I with M's entries ~ U[-1, 1]: a random symmetric positive definite n x n matrix.
+Eigen::MatrixXd random_spd(test::Random& rng, int n, double shift) {
+    const Eigen::MatrixXd M = rng.uniform_matrix(n, n, -1.0, 1.0);
+    return M * M.transpose() + shift * Eigen::MatrixXd::Identity(n, n);
+}
+
 TEST(Pcg, SolvesASymmetricPositiveDefiniteSystem) {
     test::Random rng(3);
     const int n = 40;
-    Eigen::MatrixXd M(n, n);
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) M(i, j) = rng.uniform(-1.0, 1.0);
-    const Eigen::MatrixXd A = M * M.transpose() + n * Eigen::MatrixXd::Identity(n, n);
-    VecX b(n);
-    for (int i = 0; i < n; ++i) b[i] = rng.uniform(-1.0, 1.0);
+    const Eigen::MatrixXd A = random_spd(rng, n, n);
+    const VecX b = rng.uniform_vector(n, -1.0, 1.0);
     Quadratic q(A, b);
     for (int block : {1, 2}) {
         VecX blocks(n * block);
@@ -141,8 +143,7 @@ TEST(Bicgstab, SolvesAPositiveRealNonSymmetricSystem) {
     const Eigen::MatrixXd K = 4.0 * (N - N.transpose());
     const Eigen::MatrixXd A = S + K;
     ASSERT_GT((A - A.transpose()).norm(), 0.5 * A.norm()) << "a strongly non-symmetric test matrix";
-    VecX b(n);
-    for (int i = 0; i < n; ++i) b[i] = rng.uniform(-1.0, 1.0);
+    const VecX b = rng.uniform_vector(n, -1.0, 1.0);
     Quadratic q(A, b);
     VecX d;
     BicgstabWorkspace work;
@@ -164,17 +165,15 @@ TEST(Pcg, BlockJacobiSolvesABlockDiagonalSystemInOneIteration) {
     test::Random rng(5);
     const int n = 12;
     Eigen::MatrixXd A = Eigen::MatrixXd::Zero(n, n);
-    VecX blocks(n * 3), b(n);
+    VecX blocks(n * 3);
     for (int k = 0; k < n / 3; ++k) {
-        Eigen::Matrix3d M;
-        for (int i = 0; i < 3; ++i)
-            for (int j = 0; j < 3; ++j) M(i, j) = rng.uniform(-1.0, 1.0);
+        const Eigen::Matrix3d M = rng.uniform_matrix(3, 3, -1.0, 1.0);
         const Eigen::Matrix3d B = M * M.transpose() + 0.1 * Eigen::Matrix3d::Identity();
         A.block<3, 3>(3 * k, 3 * k) = B;
         for (int i = 0; i < 3; ++i)
             for (int j = 0; j < 3; ++j) blocks[9 * k + 3 * i + j] = B(i, j);
     }
-    for (int i = 0; i < n; ++i) b[i] = rng.uniform(-1.0, 1.0);
+    const VecX b = rng.uniform_vector(n, -1.0, 1.0);
     Quadratic q(A, b);
     VecX d;
     const PcgResult block = solve_pcg(q, b, Preconditioner::block_jacobi(blocks, 3), d, 1e-12, 50);
@@ -194,12 +193,8 @@ TEST(Pcg, BlockJacobiSolvesABlockDiagonalSystemInOneIteration) {
 TEST(Newton, QuadraticIsSolvedInOneIteration) {
     test::Random rng(4);
     const int n = 25;
-    Eigen::MatrixXd M(n, n);
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < n; ++j) M(i, j) = rng.uniform(-1.0, 1.0);
-    const Eigen::MatrixXd A = M * M.transpose() + Eigen::MatrixXd::Identity(n, n);
-    VecX b(n);
-    for (int i = 0; i < n; ++i) b[i] = rng.uniform(-1.0, 1.0);
+    const Eigen::MatrixXd A = random_spd(rng, n, 1.0);
+    const VecX b = rng.uniform_vector(n, -1.0, 1.0);
     Quadratic q(A, b);
     VecX x = VecX::Zero(n);
     NewtonOptions options;

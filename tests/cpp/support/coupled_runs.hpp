@@ -1,10 +1,9 @@
 #pragma once
-// Helpers of the MPM-FEM coupling tests: a scene's integrator settings with another integrator
-// and step, a bit-for-bit comparison of two coupled runs' states, and the parts of one coupled
+// Helpers of the MPM-FEM coupling tests: a bit-for-bit comparison of two coupled runs' states
+// (settings_for and same_bytes: support/identical_states.hpp), and the parts of one coupled
 // implicit step set up by hand.
 #include <gtest/gtest.h>
 
-#include <cstring>
 #include <string>
 #include <vector>
 
@@ -13,20 +12,10 @@
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/coupled_simulation.hpp"
+#include "support/identical_states.hpp"
+#include "support/random.hpp"
 
 namespace pnet::test {
-
-inline IntegratorSettings settings_for(const Scene& scene, const std::string& integrator, double dt) {
-    IntegratorSettings s = IntegratorSettings::from_scene(scene);
-    s.name = integrator;
-    s.dt = dt;
-    return s;
-}
-
-template <typename T>
-bool same_bytes(const std::vector<T>& a, const std::vector<T>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0;
-}
 
 /// The particles' positions, velocities and elastic F and the mesh's positions and velocities are identical.
 template <int dim>
@@ -73,5 +62,32 @@ struct CoupledFixture {
         coupled.set_friction(contact.lagged_pairs(particles.x, state.x), mu, eps_v);
     }
 };
+
+/// v*, its free components (residual mass > 0) moved by up to 0.05 m/s at random.
+template <int dim>
+VecX perturbed_v_star(const CoupledPotential<dim>& coupled, Random& rng) {
+    VecX v = coupled.v_star();
+    for (Eigen::Index i = 0; i < v.size(); ++i)
+        v[i] += 0.05 * rng.uniform(-1.0, 1.0) * (coupled.residual_mass()[i] > 0.0);
+    return v;
+}
+
+/// At v with the block-preconditioned solve, the matrix-free product (three random directions)
+/// and the diagonal apply the assembled Hessian H. Leaves that solve selected.
+template <int dim>
+void expect_matrix_free_hessian(CoupledPotential<dim>& coupled, const VecX& v, const Eigen::MatrixXd& H, Random& rng) {
+    coupled.set_linear_solve(CoupledPotential<dim>::LinearSolve::BlockPreconditioned);
+    VecX g;
+    coupled.value_gradient_hessian(v, g);
+    for (int trial = 0; trial < 3; ++trial) {
+        const VecX d = rng.uniform_vector(v.size(), -1.0, 1.0);
+        VecX Hd;
+        coupled.hessian_multiply(d, Hd);
+        EXPECT_LT((Hd - H * d).norm(), 1e-12 * (H * d).norm()) << "trial " << trial;
+    }
+    VecX diagonal;
+    coupled.hessian_diagonal(diagonal);
+    EXPECT_LT((diagonal - H.diagonal()).norm(), 1e-12 * H.diagonal().norm());
+}
 
 }  // namespace pnet::test

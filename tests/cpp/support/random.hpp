@@ -22,6 +22,21 @@ public:
         return v;
     }
 
+    /// A rows x cols matrix of entries ~ U[lo, hi], drawn row by row.
+    Eigen::MatrixXd uniform_matrix(Eigen::Index rows, Eigen::Index cols, double lo, double hi) {
+        Eigen::MatrixXd M(rows, cols);
+        for (Eigen::Index i = 0; i < rows; ++i)
+            for (Eigen::Index j = 0; j < cols; ++j) M(i, j) = uniform(lo, hi);
+        return M;
+    }
+
+    /// A vector of n entries ~ U[lo, hi].
+    Eigen::VectorXd uniform_vector(Eigen::Index n, double lo, double hi) {
+        Eigen::VectorXd v(n);
+        for (Eigen::Index i = 0; i < n; ++i) v[i] = uniform(lo, hi);
+        return v;
+    }
+
     /// Haar-random rotation (QR of a Gaussian matrix with the sign fix of Mezzadri 2007).
     template <int dim>
     Mat<dim> rotation() {
