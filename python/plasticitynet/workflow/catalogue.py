@@ -190,6 +190,12 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
            "return_map_1e-2_capped", "plasticitynet_5e-3_study", "return_map_5e-3_study", "plasticitynet_1e-2_study",
            "return_map_1e-2_study", "plasticitynet_1e-3_budget1", "plasticitynet_1e-3_budget2",
            "plasticitynet_1e-3_budget3", "plasticitynet_1e-2_budget1")),
+    # Its 3D sand column, the first 10 frames of the collapse, at 1e-3 s and one larger capped step
+    # (notebooks/results/integrator_study_3d/).
+    Study("integrator_study_3d", "mpm", {"sand_column_3d": 10},
+          ("gt", "explicit_2e-5", "explicit_cfl", "plasticitynet_1e-3_study", "return_map_1e-3_study",
+           "plasticitynet_1e-3_capped", "return_map_1e-3_capped", "plasticitynet_5e-3_capped", "return_map_5e-3_capped",
+           "plasticitynet_1e-3_budget1", "plasticitynet_1e-3_budget2", "plasticitynet_1e-3_budget3")),
 ]}
 
 # --- Sweeps ------------------------------------------------------------------------------------------
@@ -240,3 +246,4 @@ TARGETS["integrators_sand"] = Target(studies=("integrator_study_sand",))
 TARGETS["integrators_metal"] = Target(studies=("integrator_study_metal",))
 TARGETS["integrators_snow"] = Target(studies=("integrator_study_snow",))
 TARGETS["integrators_stiff"] = Target(studies=("integrator_study_stiff",))
+TARGETS["integrators_3d"] = Target(studies=("integrator_study_3d",))
