@@ -52,6 +52,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "pnet/nn/model_file.hpp"
@@ -209,43 +210,26 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
     return rows;
 }
 
-/// The metal rows: the scene's own implicit settings (dt 1e-2) against explicit at 1e-5 and CFL.
-template <int dim>
-std::vector<Row> bench_fem_scene(const pnet::Scene& scene, int frames, const Extras& extras) {
-    using Sim = pnet::FemSimulation<dim>;
+/// The rows of a scene with meshes, FEM (the metal frames) or MPM-FEM coupling: plasticitynet at the
+/// scene's own implicit settings (dt 1e-2 FEM, 1e-3 coupling) and the other integrators at that step,
+/// against explicit at the reference step (1e-5 s; 1e-6 s for the 2D coupling) and at its CFL step.
+template <class Sim>
+std::vector<Row> bench_mesh_scene(const pnet::Scene& scene, int frames, const Extras& extras) {
+    constexpr bool fem = std::is_same_v<Sim, pnet::FemSimulation<Sim::kDim>>;
     pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
     pnet::load_scene_models(scene, false, base);
     std::vector<Row> rows;
     rows.push_back(measure<Sim>(scene, base, frames));
     rows.push_back(measure<Sim>(scene, with_integrator(base, "return_map", base.dt), frames));
     add_outer_rows<Sim>(rows, scene, base, frames, extras);
-    if (extras.last_velocity) {  // each step from the last velocities with the plate on its target
+    if (fem && extras.last_velocity) {  // each step from the last velocities with the plate on its target
         pnet::IntegratorSettings last = base;
         last.fem.kinematic_start = "last_velocity";
         rows.push_back(measure<Sim>(scene, last, frames));
         rows.back().integrator = "plasticitynet, last-velocity start";
     }
-    if (extras.lagged) {
-        if (scene.meshes[0].material.name == "metal")
-            rows.push_back(measure<Sim>(scene, with_integrator(base, "analytic", base.dt), frames));
-        rows.push_back(measure<Sim>(scene, with_integrator(base, "lagged", base.dt), frames));
-    }
-    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", 1e-5), frames));
-    rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", 0.0), frames));
-    return rows;
-}
-
-/// The MPM-FEM coupling row: plasticitynet (the sand's learned energy) at the scene's step against
-/// explicit coupling at 1e-6 s and at its CFL step.
-template <int dim>
-std::vector<Row> bench_coupled_scene(const pnet::Scene& scene, int frames, const Extras& extras) {
-    using Sim = pnet::CoupledSimulation<dim>;
-    pnet::IntegratorSettings base = pnet::integrator_settings(scene, "plasticitynet");
-    pnet::load_scene_models(scene, false, base);
-    std::vector<Row> rows;
-    rows.push_back(measure<Sim>(scene, base, frames));
-    rows.push_back(measure<Sim>(scene, with_integrator(base, "return_map", base.dt), frames));
-    add_outer_rows<Sim>(rows, scene, base, frames, extras);
+    if (fem && extras.lagged && scene.meshes[0].material.name == "metal")
+        rows.push_back(measure<Sim>(scene, with_integrator(base, "analytic", base.dt), frames));
     if (extras.lagged) rows.push_back(measure<Sim>(scene, with_integrator(base, "lagged", base.dt), frames));
     rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", reference_step(scene.name)), frames));
     rows.push_back(measure<Sim>(scene, with_integrator(base, "explicit", 0.0), frames));
@@ -354,12 +338,12 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "%s:\n", name.c_str());
             if (scene.has_meshes() && scene.has_particles()) {
                 scene_frames = coupling_frames;
-                rows = scene.dim == 2 ? bench_coupled_scene<2>(scene, scene_frames, extras)
-                                      : bench_coupled_scene<3>(scene, scene_frames, extras);
+                rows = scene.dim == 2 ? bench_mesh_scene<pnet::CoupledSimulation<2>>(scene, scene_frames, extras)
+                                      : bench_mesh_scene<pnet::CoupledSimulation<3>>(scene, scene_frames, extras);
             } else if (scene.has_meshes()) {
                 scene_frames = fem_frames > 0 ? fem_frames : scene.frames;
-                rows = scene.dim == 2 ? bench_fem_scene<2>(scene, scene_frames, extras)
-                                      : bench_fem_scene<3>(scene, scene_frames, extras);
+                rows = scene.dim == 2 ? bench_mesh_scene<pnet::FemSimulation<2>>(scene, scene_frames, extras)
+                                      : bench_mesh_scene<pnet::FemSimulation<3>>(scene, scene_frames, extras);
             } else {
                 if (name.rfind("stiff/", 0) == 0) scene_frames = stiff_frames;
                 const double reference_dt = reference_step(name);

@@ -45,33 +45,26 @@ bool in_range(const OptionSpec& f, double x) {
     return std::isfinite(x) && (f.lo_open ? x > f.lo : x >= f.lo) && (f.hi_open ? x < f.hi : x <= f.hi);
 }
 
+/// What the option accepts, as a scene's value (quoted choices, "auto") or as the flag's word.
+std::string accepted_text(const OptionSpec& f, bool as_flag) {
+    switch (f.kind) {
+        case Kind::Boolean:
+            if (!as_flag) return "true or false";
+            return f.choices.empty() ? "no value" : listed(f.choices, false);
+        case Kind::Choice:
+            return listed(f.choices, !as_flag);
+        case Kind::NumberOrAuto:
+            return range_text(f) + (as_flag ? " or auto" : " or \"auto\"");
+        default:
+            return range_text(f);
+    }
+}
+
 }  // namespace
 
-std::string OptionSpec::expected() const {
-    switch (kind) {
-        case Kind::Boolean:
-            return "true or false";
-        case Kind::Choice:
-            return listed(choices, true);
-        case Kind::NumberOrAuto:
-            return range_text(*this) + " or \"auto\"";
-        default:
-            return range_text(*this);
-    }
-}
+std::string OptionSpec::expected() const { return accepted_text(*this, false); }
 
-std::string OptionSpec::flag_expected() const {
-    switch (kind) {
-        case Kind::Boolean:
-            return choices.empty() ? "no value" : listed(choices, false);
-        case Kind::Choice:
-            return listed(choices, false);
-        case Kind::NumberOrAuto:
-            return range_text(*this) + " or auto";
-        default:
-            return range_text(*this);
-    }
-}
+std::string OptionSpec::flag_expected() const { return accepted_text(*this, true); }
 
 bool OptionSpec::accepts(const nlohmann::json& value) const {
     switch (kind) {
