@@ -38,7 +38,7 @@ struct StepStats {
     // value, gradient or Hessian evaluation of every point; ParticleEnergy::network_evaluations). At
     // least one per Newton iteration: the network is on the path of every iteration. 0 for the others.
     long network_evaluations = 0;
-    // FEM: the Newton iterations of the elastic predictor (ImplicitOptions::fem_predictor), which are
+    // FEM: the Newton iterations of the elastic predictor (FemOptions::fem_predictor), which are
     // part of newton_iterations and evaluate no network.
     int predictor_iterations = 0;
     // FEM with kinematic nodes: extra solves that moved them toward their targets, and whether they got there.
