@@ -196,6 +196,12 @@ inline V expm1_with(V t, V e) {
     return magnitude < S(0.5) ? expm1_polynomial(t) : e - S(1);
 }
 
+/// silu(z0) and the change silu(z0 + dz) - silu(z0) of silu_change().
+template <class V>
+struct SiluChange {
+    V value, change;
+};
+
 /// The change of a SiLU, silu(z0 + dz) - silu(z0), to the pack's precision relative to |dz| (no
 /// cancellation between two values of silu: the line search's values as differences from the
 /// reference, FusedMlp::difference). With e0 = e^-z0, s0 = sigmoid(z0) = 1 / (1 + e0),
@@ -204,11 +210,6 @@ inline V expm1_with(V t, V e) {
 ///   s1 = s0 / (s0 + t0 q),   s1 - s0 = -(q - 1) t0 s1,
 /// and q - 1 = expm1(-dz); s1's denominator is a sum of two positive terms, finite for any z0 and
 /// dz. Also returns silu(z0) (`value`), the next layer's reference input.
-template <class V>
-struct SiluChange {
-    V value, change;
-};
-
 template <class V>
 inline SiluChange<V> silu_change(V z0, V dz) {
     using S = Scalar<V>;
