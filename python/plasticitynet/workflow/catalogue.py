@@ -111,6 +111,11 @@ for _dt in (1e-2, 2e-2):
         FEM_RUNS[f"plasticitynet_{_step(_dt)}_budget{_solves}"] = Run(
             "plasticitynet", _dt, ("--outer-iteration", "fixed_point", "--fixed-point-iterations", str(_solves),
                                    "--fixed-point-tol", "0"))
+#: The coupling's runs take the default advection limit (the MPM runs above name theirs).
+for _integrator in ("plasticitynet", "return_map"):
+    COUPLING_RUNS[f"{_integrator}_5e-3_capped"] = Run(_integrator, 5e-3)
+COUPLING_RUNS["plasticitynet_1e-3_budget1"] = Run(
+    "plasticitynet", 1e-3, ("--outer-iteration", "fixed_point", "--fixed-point-iterations", "1", "--fixed-point-tol", "0"))
 STUDY_MPM_RUNS = ("gt", "explicit_2e-5", "explicit_cfl") + tuple(
     k for k in MPM_RUNS if k.endswith(("_study", "_capped")) or "_budget" in k)
 STUDY_FEM_RUNS = ("gt", "explicit_2e-5", "explicit_cfl") + tuple(
@@ -190,6 +195,18 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
            "return_map_1e-2_capped", "plasticitynet_5e-3_study", "return_map_5e-3_study", "plasticitynet_1e-2_study",
            "return_map_1e-2_study", "plasticitynet_1e-3_budget1", "plasticitynet_1e-3_budget2",
            "plasticitynet_1e-3_budget3", "plasticitynet_1e-2_budget1")),
+    # Its stiff snowball, the first 10 frames (the fall and the impact), at the runs that fit one session
+    # (notebooks/results/integrator_study_stiff_snow/).
+    Study("integrator_study_stiff_snow", "mpm", {"stiff/snowball_2d": 10},
+          ("gt", "explicit_cfl", "plasticitynet_1e-3_study", "return_map_1e-3_study", "plasticitynet_1e-3_capped",
+           "return_map_1e-3_capped", "plasticitynet_5e-3_capped", "return_map_5e-3_capped",
+           "plasticitynet_1e-3_budget1", "plasticitynet_1e-3_budget2")),
+    # The coupling (sand on an elastic FEM disk): coupling_eval's runs, the same 50 frames (so they are
+    # shared), with both integrators at a larger capped step and the budget of one solve per step
+    # (notebooks/results/integrator_study_coupling/).
+    Study("integrator_study_coupling", "coupling", {"sand_fem_coupling_2d": 50},
+          ("gt", "explicit_cfl", "plasticitynet_1e-3", "return_map_1e-3", "lagged_1e-3", "plasticitynet_5e-3_capped",
+           "return_map_5e-3_capped", "plasticitynet_1e-3_budget1")),
     # Its 3D sand column, the first 10 frames of the collapse, at 1e-3 s and one larger capped step
     # (notebooks/results/integrator_study_3d/).
     Study("integrator_study_3d", "mpm", {"sand_column_3d": 10},
@@ -247,3 +264,5 @@ TARGETS["integrators_metal"] = Target(studies=("integrator_study_metal",))
 TARGETS["integrators_snow"] = Target(studies=("integrator_study_snow",))
 TARGETS["integrators_stiff"] = Target(studies=("integrator_study_stiff",))
 TARGETS["integrators_3d"] = Target(studies=("integrator_study_3d",))
+TARGETS["integrators_stiff_snow"] = Target(studies=("integrator_study_stiff_snow",))
+TARGETS["integrators_coupling"] = Target(studies=("integrator_study_coupling",))
