@@ -201,6 +201,12 @@ STUDIES: dict[str, Study] = {s.name: s for s in [
           ("gt", "explicit_cfl", "plasticitynet_1e-3_study", "return_map_1e-3_study", "plasticitynet_1e-3_capped",
            "return_map_1e-3_capped", "plasticitynet_5e-3_capped", "return_map_5e-3_capped",
            "plasticitynet_1e-3_budget1", "plasticitynet_1e-3_budget2")),
+    # Its 3D snowball, 25 frames: the fall, the impact and the first spreading
+    # (notebooks/results/integrator_study_snow_3d/).
+    Study("integrator_study_snow_3d", "mpm", {"snowball_3d": 25},
+          ("gt", "explicit_2e-5", "explicit_cfl", "plasticitynet_1e-3_study", "return_map_1e-3_study",
+           "plasticitynet_1e-3_capped", "return_map_1e-3_capped", "plasticitynet_5e-3_capped", "return_map_5e-3_capped",
+           "plasticitynet_1e-3_budget1")),
     # The coupling (sand on an elastic FEM disk): coupling_eval's runs, the same 50 frames (so they are
     # shared), with both integrators at a larger capped step and the budget of one solve per step
     # (notebooks/results/integrator_study_coupling/).
@@ -265,4 +271,5 @@ TARGETS["integrators_snow"] = Target(studies=("integrator_study_snow",))
 TARGETS["integrators_stiff"] = Target(studies=("integrator_study_stiff",))
 TARGETS["integrators_3d"] = Target(studies=("integrator_study_3d",))
 TARGETS["integrators_stiff_snow"] = Target(studies=("integrator_study_stiff_snow",))
+TARGETS["integrators_snow_3d"] = Target(studies=("integrator_study_snow_3d",))
 TARGETS["integrators_coupling"] = Target(studies=("integrator_study_coupling",))
