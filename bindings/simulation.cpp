@@ -23,7 +23,7 @@ namespace {
 /// Thrown from between two steps when Python has a pending signal (Ctrl-C).
 struct Interrupted {};
 
-py::dict to_dict(const StepStats& s) {
+py::dict to_dict(const StepRecord& s) {
     py::dict d;
     for_each_step_field([&](const StepField& field, auto member) {
         if (field.key) d[field.key] = s.*member;
@@ -46,8 +46,8 @@ py::dict to_dict(const FrameStats& f) {
 [[noreturn]] void no_mesh() { throw py::value_error("an MPM scene (particles) has no mesh: see positions, velocities"); }
 
 /// One column of the step history as a numpy array: float64, int64 or bool.
-template <typename T>
-py::array column(const std::vector<StepStats>& steps, T StepStats::*member) {
+template <typename T, typename Part>
+py::array column(const std::vector<StepRecord>& steps, T Part::*member) {
     using Out = std::conditional_t<std::is_same_v<T, bool>, bool,
                                    std::conditional_t<std::is_integral_v<T>, std::int64_t, double>>;
     py::array_t<Out> a(static_cast<py::ssize_t>(steps.size()));
@@ -113,7 +113,7 @@ public:
     }
 
     py::dict step() {
-        StepStats s;
+        StepRecord s;
         {
             py::gil_scoped_release release;
             s = sim().step();
@@ -246,7 +246,7 @@ private:
 
     Scene scene_;
     AnySimulation sim_;
-    std::vector<StepStats> history_;  // every step since construction or the last load_checkpoint()
+    std::vector<StepRecord> history_;  // every step since construction or the last load_checkpoint()
 };
 
 /// A live read-only view of a particle array (see the Simulation docstring).

@@ -47,7 +47,7 @@ Measurement time_steps(const pnet::MpmSystem<dim>& system, const pnet::Particles
         double p2g = 0.0, grid = 0.0, g2p = 0.0;
         const auto t0 = std::chrono::steady_clock::now();
         for (long s = 0; s < steps; ++s) {
-            const pnet::StepStats stats = integrator.step(particles, dt, s);
+            const pnet::MpmStepStats stats = integrator.step(particles, dt, s);
             p2g += stats.p2g_seconds;
             grid += stats.grid_seconds;
             g2p += stats.g2p_seconds;

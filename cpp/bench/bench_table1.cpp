@@ -104,7 +104,7 @@ Row measure(const pnet::Scene& scene, pnet::IntegratorSettings settings, int fra
         newton += s.newton_iterations;
         cg_iterations += s.cg_iterations;
         fixed_point += s.fixed_point_iterations;
-        for (const pnet::StepStats& step : sim.last_frame_steps()) {
+        for (const pnet::StepRecord& step : sim.last_frame_steps()) {
             row.reference_updates += step.reference_updates;
             row.network += static_cast<double>(step.network_evaluations);
             row.max_true_residual = std::max(row.max_true_residual, step.true_residual);

@@ -50,10 +50,10 @@ CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(const MpmSystem<dim>& 
 }
 
 template <int dim>
-StepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
-                                               long step_index) {
+CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
+                                                      long step_index) {
     const auto start = std::chrono::steady_clock::now();
-    StepStats stats;
+    CoupledStepStats stats;
     stats.dt = dt;
     const std::string context = "step " + std::to_string(step_index);
 
@@ -204,8 +204,8 @@ void CoupledExplicitIntegrator<dim>::apply_friction(Grid<dim>& grid, const Parti
 }
 
 template <int dim>
-StepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
-                                               long step_index) {
+CoupledStepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
+                                                      long step_index) {
     const auto start = std::chrono::steady_clock::now();
     const std::string context = "step " + std::to_string(step_index);
     // The barrier's forces at the start of the step.
@@ -219,7 +219,7 @@ StepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
     }
     x_start_ = state.x;
     fem_.set_external_force(&node_force_);
-    const StepStats fem_stats = fem_.step(state, dt, step_index);
+    const FemStepStats fem_stats = fem_.step(state, dt, step_index);
     dx_.resize(nodes);
     for (std::size_t i = 0; i < nodes; ++i) dx_[i] = state.x[i] - x_start_[i];
 
@@ -269,7 +269,7 @@ StepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles, FemSta
             throw SimulationError(context + ": a particle would cross the FEM mesh (CCD allows " + std::to_string(t) +
                                   " of the step): the explicit step is too large for the barrier");
     });
-    StepStats stats = mpm_.step(particles, dt, step_index);
+    CoupledStepStats stats = mpm_.step(particles, dt, step_index);
     mpm_.set_grid_hook({});
     stats.substeps = fem_stats.substeps;
     stats.max_grid_speed = std::max(stats.max_grid_speed, fem_stats.max_grid_speed);

@@ -34,9 +34,13 @@
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/mpm/explicit_integrator.hpp"
 #include "pnet/mpm/implicit_integrator.hpp"
+#include "pnet/mpm/mpm_step_stats.hpp"
 #include "pnet/mpm/mpm_system.hpp"
 
 namespace pnet {
+
+/// What a coupled step returns: the particles' fields and the meshes'.
+using CoupledStepStats = StepStatsWith<MpmStepFields, FemStepFields, ContactStepFields>;
 
 /// Coulomb friction of every contact pair of a coupled scene: coefficient mu >= 0 (0: none) and
 /// the slip velocity eps_v > 0 (m/s) below which the implicit integrators smooth it.
@@ -59,7 +63,7 @@ public:
                               CouplingFriction friction = {});
 
     /// Throws SimulationError naming the step on a failed solve or a blow-up.
-    StepStats step(Particles<dim>& particles, FemState<dim>& state, double dt, long step_index);
+    CoupledStepStats step(Particles<dim>& particles, FemState<dim>& state, double dt, long step_index);
 
     CoupledPotential<dim>& potential() { return coupled_; }
     const Grid<dim>& grid() const { return grid_; }
@@ -95,7 +99,7 @@ public:
                               CouplingFriction friction = {});
 
     /// One symplectic Euler step of both (the FEM part in as many substeps as its elements need).
-    StepStats step(Particles<dim>& particles, FemState<dim>& state, double dt, long step_index);
+    CoupledStepStats step(Particles<dim>& particles, FemState<dim>& state, double dt, long step_index);
 
     /// The MPM part's cached stresses (checkpoints: bit-identical resume).
     ExplicitIntegrator<dim>& mpm() { return mpm_; }

@@ -97,10 +97,10 @@ void FemImplicitIntegrator<dim>::set_friction(Friction<dim>* friction, const Con
 constexpr double kStageTolerance = 1e-4;
 
 template <int dim>
-StepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
+FemStepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
     if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
-    StepStats stats;
+    FemStepStats stats;
     stats.dt = dt;
     const long network_before = energy_->network_evaluations();
     const std::size_t n = system_.mesh.nodes();
@@ -274,9 +274,9 @@ constexpr double kLookAhead = 5.0;  // explicit substeps: CCD on this multiple o
 constexpr double kElementSafety = 0.5;
 
 template <int dim>
-StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
+FemStepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
-    StepStats stats;
+    FemStepStats stats;
     stats.dt = dt;
     stats.substeps = 0;
     if (free_mass_.empty()) {
@@ -315,7 +315,7 @@ StepStats FemExplicitIntegrator<dim>::step(FemState<dim>& state, double dt, long
 }
 
 template <int dim>
-double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long step_index, StepStats& stats) {
+double FemExplicitIntegrator<dim>::substep(FemState<dim>& state, double h, long step_index, FemStepStats& stats) {
     const Mesh<dim>& mesh = system_.mesh;
     const std::size_t n = mesh.nodes();
     // The elements' stresses in parallel (an SVD each), gathered onto the nodes in element

@@ -29,7 +29,7 @@
 // velocity in both. When contact's CCD holds the implicit start back from
 // their targets, they become unknowns pulled to the targets by a stiff weight
 // (x10 per stage, as IPC's augmented Lagrangian) until within 1e-9 m, then are
-// put exactly on them (StepStats::kinematic_stages, kinematic_reached).
+// put exactly on them (FemStepFields::kinematic_stages, kinematic_reached).
 #include <memory>
 #include <vector>
 
@@ -37,11 +37,11 @@
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/fem/fem_options.hpp"
 #include "pnet/fem/fem_potential.hpp"
+#include "pnet/fem/fem_step_stats.hpp"
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/implicit_options.hpp"
 #include "pnet/solver/integrators.hpp"
-#include "pnet/solver/step_stats.hpp"
 
 namespace pnet {
 
@@ -96,7 +96,7 @@ public:
     void set_friction(Friction<dim>* friction, const ContactPotential<dim>* contact);
 
     /// Throws SimulationError naming the step on a failed solve.
-    StepStats step(FemState<dim>& state, double dt, long step_index);
+    FemStepStats step(FemState<dim>& state, double dt, long step_index);
 
     FemPotential<dim>& potential() { return potential_; }
 
@@ -141,9 +141,9 @@ public:
     /// rest CFL step at frame 7). Each substep is at most 1 / sqrt(omega_e^2 + omega_c^2)
     /// (element_frequency() of the step's start, Contact::stable_time_step of the
     /// substep's) and closes no gap by more than about a fifth (CCD).
-    /// StepStats::substeps counts them. Throws SimulationError naming the step if a value is
+    /// FemStepFields::substeps counts them. Throws SimulationError naming the step if a value is
     /// not finite or no substep avoids intersection.
-    StepStats step(FemState<dim>& state, double dt, long step_index);
+    FemStepStats step(FemState<dim>& state, double dt, long step_index);
 
     /// Nodal forces (N, per unit depth in 2D) added to the elastic and contact forces of every
     /// substep (not owned; null: none): the MPM-FEM coupling's barrier forces.
@@ -156,7 +156,7 @@ private:
     /// The highest frequency of the free elements at positions x, 1/s.
     double element_frequency(const std::vector<Vec<dim>>& x) const;
     /// Symplectic Euler over at most h; returns the time advanced.
-    double substep(FemState<dim>& state, double h, long step_index, StepStats& stats);
+    double substep(FemState<dim>& state, double h, long step_index, FemStepStats& stats);
 
     const FemSystem<dim>& system_;
     const ContactPotential<dim>* contact_;

@@ -97,9 +97,9 @@ std::size_t clamp_implicit_step(Particles<dim>& particles, const MpmSystem<dim>&
 }
 
 template <int dim>
-StepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
+MpmStepStats ExplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
-    StepStats stats;
+    MpmStepStats stats;
     stats.dt = dt;
     if (!stress_valid_ || scaled_stress_.size() != particles.size()) compute_stress(particles);
     force_matrix_.resize(particles.size());

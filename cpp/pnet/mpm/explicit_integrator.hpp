@@ -29,7 +29,7 @@ public:
     std::string name() const override { return "explicit"; }
 
     /// Advances the particles by dt. `step_index` only names the step in errors.
-    StepStats step(Particles<dim>& particles, double dt, long step_index) override;
+    MpmStepStats step(Particles<dim>& particles, double dt, long step_index) override;
     void reset(const Particles<dim>& particles) override { compute_stress(particles); }
     std::vector<Mat<dim>> checkpoint_state() const override { return scaled_stress_; }
     void restore_checkpoint_state(std::vector<Mat<dim>> state) override { set_cached_stress(std::move(state)); }

@@ -84,9 +84,9 @@ void ImplicitIntegrator<dim>::restore_checkpoint_state(std::vector<Mat<dim>> sta
 }
 
 template <int dim>
-StepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
+MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
     const auto start = std::chrono::steady_clock::now();
-    StepStats stats;
+    MpmStepStats stats;
     stats.dt = dt;
 
     particles_to_grid<dim>(grid_, particles, nullptr);

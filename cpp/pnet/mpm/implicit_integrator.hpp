@@ -72,7 +72,7 @@ public:
     /// Throws SimulationError ("step N: ...") when a Newton solve fails (NaN,
     /// non-descent direction, line-search stall: the particles are left as they
     /// were before the step) or a particle blows up after it.
-    StepStats step(Particles<dim>& particles, double dt, long step_index) override;
+    MpmStepStats step(Particles<dim>& particles, double dt, long step_index) override;
 
     /// The history resets with the particles (the next step is backward Euler's start-up).
     void reset(const Particles<dim>& particles) override;

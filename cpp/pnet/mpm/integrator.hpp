@@ -9,7 +9,7 @@
 
 #include "pnet/math/types.hpp"
 #include "pnet/mpm/particles.hpp"
-#include "pnet/solver/step_stats.hpp"
+#include "pnet/mpm/mpm_step_stats.hpp"
 
 namespace pnet {
 
@@ -22,7 +22,7 @@ public:
     virtual std::string name() const = 0;
 
     /// Advances the particles by dt. `step_index` only names the step in errors.
-    virtual StepStats step(Particles<dim>& particles, double dt, long step_index) = 0;
+    virtual MpmStepStats step(Particles<dim>& particles, double dt, long step_index) = 0;
 
     /// Called when the particles were set from outside (start of a run).
     virtual void reset(const Particles<dim>& /*particles*/) {}

@@ -85,12 +85,12 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
 }
 
 template <int dim>
-StepStats CoupledSimulation<dim>::step() {
+StepRecord CoupledSimulation<dim>::step() {
     const bool limit = dt_ > 0.0 && implicit_;
     const double limited = limit ? advection_time_step(mpm_, particles_, dt_, settings_.mpm.advection_cfl) : 0.0;
     const double dt =
         clip_to_frame(limit ? limited : dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl));
-    StepStats s =
+    StepRecord s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
     s.advection_capped = limit && limited < dt_;
     s.contact_pairs = coupling_->active(particles_.x, state_.x).size();

@@ -32,7 +32,7 @@ public:
 
     /// One step (explicit with dt = 0: the smaller of the MPM CFL step and the FEM elements'),
     /// shortened to land on the end of the frame.
-    StepStats step() override;
+    StepRecord step() override;
     /// Advances to the end of the next frame, then tests for particles inside a mesh.
     FrameStats advance_frame(const std::function<void()>& after_step = {}) override;
 

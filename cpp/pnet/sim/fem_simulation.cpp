@@ -255,10 +255,10 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
 }
 
 template <int dim>
-StepStats FemSimulation<dim>::step() {
+StepRecord FemSimulation<dim>::step() {
     const double dt = clip_to_frame(dt_);
     contact_->reset_timing();
-    StepStats s = implicit_ ? implicit_->step(state_, dt, steps_) : explicit_->step(state_, dt, steps_);
+    StepRecord s = implicit_ ? implicit_->step(state_, dt, steps_) : explicit_->step(state_, dt, steps_);
     s.broad_phase_seconds = contact_->timing().broad_phase_seconds;
     s.ccd_seconds = contact_->timing().ccd_seconds;
     s.contact_pairs = contact_->active_pairs(state_.x);

@@ -76,7 +76,7 @@ public:
     /// One step of the integrator's dt (explicit with dt = 0: the CFL step of
     /// the elements), shortened to land on the end of the frame. Throws
     /// SimulationError on a failed solve or a blow-up.
-    StepStats step() override;
+    StepRecord step() override;
     /// Advances to the end of the next frame (see Simulation::advance_frame),
     /// then tests the meshes for intersection exactly (SimulationError if any).
     FrameStats advance_frame(const std::function<void()>& after_step = {}) override;

@@ -66,13 +66,13 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
 }
 
 template <int dim>
-StepStats Simulation<dim>::step() {
+StepRecord Simulation<dim>::step() {
     const bool implicit = settings_.dt > 0.0 && settings_.method() != Method::Explicit;
     const double limited =
         implicit ? advection_time_step(system_, particles_, settings_.dt, settings_.mpm.advection_cfl) : 0.0;
     const double dt = clip_to_frame(implicit ? limited : settings_.dt > 0.0 ? settings_.dt
                                                                             : cfl_time_step(system_, particles_, settings_.cfl));
-    StepStats s = integrator_->step(particles_, dt, steps_);
+    StepRecord s = integrator_->step(particles_, dt, steps_);
     s.advection_capped = implicit && limited < settings_.dt;
     count_step(dt);
     return s;

@@ -40,7 +40,7 @@ public:
     /// One step of the integrator's dt (or the CFL step), shortened to land on
     /// the end of the current frame; frame() advances when it does. Throws
     /// SimulationError on a blow-up.
-    StepStats step() override;
+    StepRecord step() override;
 
     /// Advances to the end of the next frame by step(). Throws SimulationError
     /// on a blow-up. after_step, when given, runs after every step; an

@@ -140,9 +140,9 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
         run_fixed_point_capped += f.fixed_point_capped_steps;
         stats += stats_csv_row(f, columns);
         double t = f.time;  // the frame's start time, from its step sizes
-        for (const StepStats& s : sim.last_frame_steps()) t -= s.dt;
+        for (const StepRecord& s : sim.last_frame_steps()) t -= s.dt;
         long step = sim.total_steps() - static_cast<long>(sim.last_frame_steps().size());
-        for (const StepStats& s : sim.last_frame_steps()) {
+        for (const StepRecord& s : sim.last_frame_steps()) {
             t += s.dt;
             steps_csv += steps_csv_row(f.frame, step++, t, s, columns);
         }

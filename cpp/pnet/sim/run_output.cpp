@@ -61,7 +61,7 @@ std::string steps_csv_header(const RunColumns& columns) {
     return header + ",integrator\n";
 }
 
-std::string steps_csv_row(int frame, long step, double time, const StepStats& stats, const RunColumns& columns) {
+std::string steps_csv_row(int frame, long step, double time, const StepRecord& stats, const RunColumns& columns) {
     std::string row;
     append_cell(row, frame, "");
     append_cell(row, step, "");

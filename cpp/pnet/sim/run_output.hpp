@@ -25,7 +25,7 @@ std::string stats_csv_row(const FrameStats& frame, const RunColumns& columns);
 /// steps.csv's header line and the row of one step: its frame, its number in the run and the time
 /// at its end (s), then its statistics, then the integrator that took it.
 std::string steps_csv_header(const RunColumns& columns);
-std::string steps_csv_row(int frame, long step, double time, const StepStats& stats, const RunColumns& columns);
+std::string steps_csv_row(int frame, long step, double time, const StepRecord& stats, const RunColumns& columns);
 
 /// The values of column `name` in the rows of a CSV text written by the functions above (header
 /// first), as text. Throws std::invalid_argument if the header has no such column or a row is short.

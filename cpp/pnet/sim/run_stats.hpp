@@ -1,16 +1,31 @@
 #pragma once
-// What each frame of a run did, for every method (MPM, FEM, coupling): the frame statistics a run
-// writes to stats.csv and Python reads as a dict, declared once with their column names
+// What each step and frame of a run did, for every method (MPM, FEM, coupling): the record of a step
+// (StepRecord: every layer's step fields, for_each_step_field) and the frame statistics, which a run
+// writes to steps.csv and stats.csv and Python reads as dicts, declared once with their column names
 // (for_each_frame_field). What the run is set up with: sim/integrator_settings.hpp.
 #include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "pnet/contact/contact_step_stats.hpp"
+#include "pnet/fem/fem_step_stats.hpp"
+#include "pnet/mpm/mpm_step_stats.hpp"
 #include "pnet/sim/integrator_settings.hpp"
 #include "pnet/solver/step_stats.hpp"
 
 namespace pnet {
+
+/// What one step of any method did: the solver's fields and those of MPM, FEM and contact (each method's
+/// integrator returns its own part of it: MpmStepStats, FemStepStats, CoupledStepStats).
+using StepRecord = StepStatsWith<MpmStepFields, FemStepFields, ContactStepFields>;
+
+/// Calls f(StepField, member pointer) for every StepRecord field, in steps.csv's column order: the one list
+/// behind steps.csv (sim/run_output.hpp) and Python's step statistics (bindings).
+template <typename F>
+void for_each_step_field(F&& f) {
+    StepRecord::for_each_field(f);
+}
 
 struct FrameStats {
     int frame = 0;        // frame reached
@@ -24,7 +39,7 @@ struct FrameStats {
     // Implicit integrators: totals over the frame's steps, the largest final
     // Newton residual (m/s), and whether every solve converged.
     long newton_iterations = 0, cg_iterations = 0, line_search_steps = 0, fixed_point_iterations = 0;
-    long network_evaluations = 0;  // plasticitynet: passes of the energy network (StepStats)
+    long network_evaluations = 0;  // plasticitynet: passes of the energy network (StepStats::network_evaluations)
     double max_residual = 0.0;
     bool converged = true;
     long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
@@ -40,7 +55,7 @@ struct FrameStats {
     /// Adds one step of the frame: counts sum, extremes (dt, residual, clamped hardening, contact
     /// pairs, smallest distance) are kept, failures stick. dt_min and min_distance start where the
     /// caller set them (1e300 to take the frame's smallest).
-    void add_step(const StepStats& s) {
+    void add_step(const StepRecord& s) {
         ++steps;
         clamped += s.clamped;
         dt_min = std::min(dt_min, s.dt);

@@ -47,7 +47,7 @@ inline void count_step(double dt, double frame_dt, double& time, int& frame, lon
 /// the frame's and kept in frame_steps, after_step() after each; then finish(stats) adds what the
 /// frame ends with (checks, energies). The wall time covers all of it.
 template <typename Step, typename Finish>
-FrameStats advance_one_frame(const int& frame, const double& time, std::vector<StepStats>& frame_steps, Step&& step,
+FrameStats advance_one_frame(const int& frame, const double& time, std::vector<StepRecord>& frame_steps, Step&& step,
                              Finish&& finish, const std::function<void()>& after_step) {
     const auto start = std::chrono::steady_clock::now();
     FrameStats stats;
@@ -56,7 +56,7 @@ FrameStats advance_one_frame(const int& frame, const double& time, std::vector<S
     stats.min_distance = 1e300;
     frame_steps.clear();
     while (frame < target) {
-        const StepStats s = step();
+        const StepRecord s = step();
         stats.add_step(s);
         frame_steps.push_back(s);
         if (after_step) after_step();
@@ -88,7 +88,7 @@ public:
     /// One step of the integrator's dt (or its stable step), shortened to land on the end of the
     /// current frame; frame() advances when it does. Throws SimulationError on a blow-up or a failed
     /// solve.
-    virtual StepStats step() = 0;
+    virtual StepRecord step() = 0;
     /// Advances to the end of the next frame by step(), then checks what the method guarantees (no
     /// intersection). after_step, when given, runs after every step; an exception it throws (an
     /// interrupt) stops the frame between two steps, with the steps so far in last_frame_steps().
@@ -118,7 +118,7 @@ public:
     double time() const { return time_; }
     long total_steps() const { return steps_; }
     /// Per-step statistics of the last advance_frame(), in step order.
-    const std::vector<StepStats>& last_frame_steps() const { return frame_steps_; }
+    const std::vector<StepRecord>& last_frame_steps() const { return frame_steps_; }
 
 protected:
     /// Throws std::invalid_argument for dt < 0 (0 is the CFL step) or cfl outside (0, 1].
@@ -150,7 +150,7 @@ protected:
     Scene scene_;
     std::string scene_digest_;  // sha256 of the scene's JSON: a checkpoint is only for its scene
     IntegratorSettings settings_;
-    std::vector<StepStats> frame_steps_;
+    std::vector<StepRecord> frame_steps_;
     int frame_ = 0;
     long steps_ = 0;
     double time_ = 0.0;

@@ -1,24 +1,27 @@
 #pragma once
-// What one time step did, for every method (MPM, FEM, coupling): the statistics a run writes to
-// steps.csv and Python reads as a dict, declared once with their column names
-// (for_each_step_field), and the error a step raises when it cannot go on (docs/architecture.md).
+// What one time step did: the statistics of any step (its dt, phases and solves) that a run writes to
+// steps.csv and Python reads as a dict, declared with their column names (StepStats::for_each_field);
+// the record that adds each layer's own fields (StepStatsWith); and the error a step raises when it
+// cannot go on (docs/architecture.md).
 #include <cstddef>
 #include <stdexcept>
+#include <type_traits>
 
 #include "pnet/math/clock.hpp"
 #include "pnet/solver/fixed_point.hpp"
 
 namespace pnet {
 
-/// What one step did (stats.csv, steps.csv, progress).
+/// What any step did, whatever the method (the solver's part of steps.csv): its dt and phases, and the
+/// statistics of its solves. Each method's layer adds its own fields (StepStatsWith below:
+/// mpm/mpm_step_stats.hpp, fem/fem_step_stats.hpp, contact/contact_step_stats.hpp).
 struct StepStats {
     double dt = 0.0;
-    bool advection_capped = false;  // implicit MPM, coupling: the advection limit cut dt below the scene's
-    std::size_t clamped = 0;  // particles pulled back inside the domain
-    double max_grid_speed = 0.0;
+    double max_grid_speed = 0.0;  // the largest speed of the step's unknowns (grid nodes; FEM: mesh nodes), m/s
     double wall_seconds = 0.0;
-    // Phases of wall_seconds: P2G (with binning and, explicit, stress forces),
-    // grid update or implicit solve, G2P (with return mapping, advection and clamping).
+    // Phases of wall_seconds: before the solve (MPM: P2G with binning and, explicit, stress forces),
+    // the grid update or implicit solve, after it (MPM: G2P with return mapping, advection and
+    // clamping; FEM: the return mappings and the position update).
     double p2g_seconds = 0.0, grid_seconds = 0.0, g2p_seconds = 0.0;
     // Implicit integrators (zero for explicit): totals over the step's solves.
     int newton_iterations = 0;
@@ -38,25 +41,16 @@ struct StepStats {
     // value, gradient or Hessian evaluation of every point; ParticleEnergy::network_evaluations). At
     // least one per Newton iteration: the network is on the path of every iteration. 0 for the others.
     long network_evaluations = 0;
-    // FEM: the Newton iterations of the elastic predictor (FemOptions::fem_predictor), which are
-    // part of newton_iterations and evaluate no network.
-    int predictor_iterations = 0;
-    // FEM with kinematic nodes: extra solves that moved them toward their targets, and whether they got there.
-    int kinematic_stages = 0;
-    bool kinematic_reached = true;
-    // FEM contact: CCD queries of the step (line search and starts) and how many shortened a step;
-    // contact pairs closer than dhat and the smallest pair distance (m) at the end of the step.
-    int ccd_queries = 0, ccd_limited = 0;
-    int substeps = 1;  // explicit FEM: substeps the barrier's stability needed
-    double broad_phase_seconds = 0.0, ccd_seconds = 0.0;  // FEM contact (3D): parts of wall_seconds
-    std::size_t contact_pairs = 0;
-    double min_distance = 0.0;
     // Where an implicit step's time went (parts of grid_seconds).
     double energy_seconds = 0.0;     // per-particle energies, stresses and Hessians
     double cg_seconds = 0.0;         // Hessian-vector products and PCG
+
+    /// Calls f(StepField, member pointer) for each field above, in steps.csv's column order.
+    template <typename F>
+    static void for_each_field(F&& f);
 };
 
-/// How one StepStats field is shown: its steps.csv column (nullptr: not in the file), its key in
+/// How one step statistic is shown: its steps.csv column (nullptr: not in the file), its key in
 /// Python's step dicts (nullptr: not shown there), whether it is a FEM column (steps.csv of FEM
 /// and coupled runs only), and the printf format of a floating-point value in the CSV.
 struct StepField {
@@ -66,10 +60,8 @@ struct StepField {
     const char* format = "%.6g";
 };
 
-/// Calls f(StepField, member pointer) for every StepStats field, in steps.csv's column order: the
-/// one list behind steps.csv (sim/run_output.hpp) and Python's step statistics (bindings).
 template <typename F>
-void for_each_step_field(F&& f) {
+void StepStats::for_each_field(F&& f) {
     f(StepField{"dt_s", "dt"}, &StepStats::dt);
     f(StepField{"wall_s", "wall_s"}, &StepStats::wall_seconds);
     f(StepField{"p2g_s", "p2g_s"}, &StepStats::p2g_seconds);
@@ -87,25 +79,37 @@ void for_each_step_field(F&& f) {
     f(StepField{"residual_m_per_s", "residual"}, &StepStats::residual);
     f(StepField{"energy_J", "energy", false, "%.12g"}, &StepStats::energy);
     f(StepField{"converged", "converged"}, &StepStats::converged);
-    f(StepField{"clamped", "clamped"}, &StepStats::clamped);
     f(StepField{"line_search_failed", "line_search_failed"}, &StepStats::line_search_failed);
     f(StepField{"hardening_clamped", "hardening_clamped"}, &StepStats::hardening_clamped);
     f(StepField{"fixed_point_converged", "fixed_point_converged"}, &StepStats::fixed_point_converged);
     f(StepField{"reference_updates", "reference_updates"}, &StepStats::reference_updates);
     f(StepField{"true_residual_m_per_s", "true_residual"}, &StepStats::true_residual);
-    f(StepField{"advection_capped", "advection_capped"}, &StepStats::advection_capped);
-    f(StepField{"predictor_iterations", "predictor_iterations", true}, &StepStats::predictor_iterations);
-    f(StepField{"kinematic_stages", "kinematic_stages", true}, &StepStats::kinematic_stages);
-    f(StepField{"kinematic_reached", "kinematic_reached", true}, &StepStats::kinematic_reached);
-    f(StepField{"ccd_queries", "ccd_queries", true}, &StepStats::ccd_queries);
-    f(StepField{"ccd_limited", "ccd_limited", true}, &StepStats::ccd_limited);
-    f(StepField{"contact_pairs", "contact_pairs", true}, &StepStats::contact_pairs);
-    f(StepField{"min_distance_m", "min_distance", true}, &StepStats::min_distance);
-    f(StepField{"substeps", "substeps", true}, &StepStats::substeps);
-    f(StepField{"broad_phase_s", "broad_phase_s", true}, &StepStats::broad_phase_seconds);
-    f(StepField{"ccd_s", "ccd_s", true}, &StepStats::ccd_seconds);
     f(StepField{nullptr, "max_grid_speed"}, &StepStats::max_grid_speed);
 }
+
+/// A step's statistics with the fields of the layers that took it: StepStats and each Part, a struct
+/// of one layer's fields with its own static for_each_field (MpmStepFields, FemStepFields,
+/// ContactStepFields). A record converts to one with more parts (the fields it lacks keep their
+/// defaults), so a driver above every method keeps the union (sim/step_record.hpp).
+template <typename... Parts>
+struct StepStatsWith : StepStats, Parts... {
+    StepStatsWith() = default;
+    template <typename... Other>
+    StepStatsWith(const StepStatsWith<Other...>& other) : StepStats(other) {  // NOLINT: widening, implicit
+        auto copy = [&](auto* part) {
+            using Part = std::remove_pointer_t<decltype(part)>;
+            if constexpr ((std::is_same_v<Part, Other> || ...)) static_cast<Part&>(*this) = other;
+        };
+        (copy(static_cast<Parts*>(nullptr)), ...);
+    }
+
+    /// StepStats' fields, then each part's, in steps.csv's column order.
+    template <typename F>
+    static void for_each_field(F&& f) {
+        StepStats::for_each_field(f);
+        (Parts::for_each_field(f), ...);
+    }
+};
 
 /// Adds a step's solve statistics (solver/fixed_point.hpp) to its StepStats;
 /// iteration counts add to what is there (a predictor's).

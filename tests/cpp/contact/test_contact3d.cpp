@@ -137,7 +137,7 @@ double slope_speed(double degrees, double mu, double t) {
     const double dt = 2e-3;
     const int steps = static_cast<int>(std::lround(t / dt));
     for (int step = 0; step < steps; ++step) {
-        const StepStats s = implicit.step(state, dt, step);
+        const FemStepStats s = implicit.step(state, dt, step);
         EXPECT_TRUE(s.converged) << "step " << step << ": residual " << s.residual << " m/s after "
                                  << s.newton_iterations << " Newton iterations";
         EXPECT_EQ(contact.first_intersection(state.x), "") << "step " << step;
@@ -170,7 +170,7 @@ TEST(Contact3d, TetrahedralCubeDroppedOnTheGroundRestsWithoutPenetration) {
     int contact_steps = 0;
     double lowest = 1.0;
     for (int step = 0; step < 150; ++step) {
-        const StepStats s = implicit.step(state, 5e-3, step);
+        const FemStepStats s = implicit.step(state, 5e-3, step);
         ASSERT_TRUE(s.converged) << "step " << step;
         const double d = contact.min_distance(state.x);
         ASSERT_GT(d, 0.0) << "step " << step;

@@ -81,7 +81,7 @@ std::pair<double, double> slope_velocities(double degrees, double mu, double t1,
         if (explicit_) {
             explicit_integrator.step(state, dt, step);
         } else {
-            const StepStats s = implicit.step(state, dt, step);
+            const FemStepStats s = implicit.step(state, dt, step);
             EXPECT_TRUE(s.converged) << "step " << step;
         }
         EXPECT_GT(contact.min_distance(state.x), 0.0) << "step " << step;

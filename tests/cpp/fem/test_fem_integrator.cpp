@@ -26,7 +26,7 @@ FemState<2> run_implicit(const FemSystem<2>& system, double dt, int steps, int* 
         std::make_unique<AnalyticElastoplasticEnergy<2>>(system.materials, std::vector<std::string>{"bar"}), nullptr);
     FemState<2> state = FemState<2>::at_rest(system);
     for (int s = 0; s < steps; ++s) {
-        const StepStats stats = integrator.step(state, dt, s);
+        const FemStepStats stats = integrator.step(state, dt, s);
         EXPECT_TRUE(stats.converged) << "step " << s;
         if (newton) *newton += stats.newton_iterations;
     }
@@ -103,7 +103,7 @@ TEST(FemIntegrator, KinematicPlatePressesABlockWithoutPenetration) {
     FemState<2> state = FemState<2>::at_rest(system);
     int staged = 0, newton = 0;
     for (int step = 0; step < 10; ++step) {
-        const StepStats s = integrator.step(state, dt, step);
+        const FemStepStats s = integrator.step(state, dt, step);
         ASSERT_TRUE(s.converged) << "step " << step << ": residual " << s.residual << " Newton " << s.newton_iterations
                                  << " line search failed " << s.line_search_failed << " stages " << s.kinematic_stages;
         EXPECT_TRUE(s.kinematic_reached) << "step " << step;
@@ -144,7 +144,7 @@ TEST(FemIntegrator, ExplicitSubstepsWhereTheBarrierStiffensAndLandsWithoutPenetr
     int most_substeps = 1;
     double lowest = 1.0;
     for (int step = 0; step * dt < 5e-3; ++step) {
-        StepStats stats;
+        FemStepStats stats;
         ASSERT_NO_THROW(stats = integrator.step(state, dt, step)) << "step " << step;
         most_substeps = std::max(most_substeps, stats.substeps);
         lowest = std::min(lowest, contact.min_distance(state.x));

@@ -62,7 +62,7 @@ FemState<2> run(const FemSystem<2>& system, FemMethod method, double dt, double 
     FemState<2> state = FemState<2>::at_rest(system);
     const int steps = static_cast<int>(std::lround(T / dt));
     for (int s = 0; s < steps; ++s) {
-        const StepStats st = integrator.step(state, dt, s);
+        const FemStepStats st = integrator.step(state, dt, s);
         *unconverged += !st.converged;
         if (counts) {
             counts->unconverged += !st.converged;

@@ -485,7 +485,7 @@ TYPED_TEST(ImplicitTest, PlasticityNetEqualsLaggedWithoutPlasticity) {
         } else {
             EXPECT_EQ(fb.fixed_point_iterations, fb.steps) << "one solve per step";
             long updates = 0;
-            for (const StepStats& st : b.last_frame_steps()) updates += st.reference_updates;
+            for (const StepRecord& st : b.last_frame_steps()) updates += st.reference_updates;
             EXPECT_GT(updates, fb.steps) << "F0 followed the iterates";
         }
         double worst = 0.0, motion = 0.0;

@@ -82,7 +82,7 @@ TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
     EXPECT_DOUBLE_EQ(whole.dt_max, 2e-3);
     EXPECT_DOUBLE_EQ(whole.dt_min, 2e-3);
     EXPECT_EQ(whole.advection_capped_steps, 0);
-    for (const StepStats& s : off.last_frame_steps()) EXPECT_FALSE(s.advection_capped);
+    for (const StepRecord& s : off.last_frame_steps()) EXPECT_FALSE(s.advection_capped);
 
     const double cfl = 0.25;
     settings.mpm.advection_cfl = cfl;
@@ -109,7 +109,7 @@ TEST(Simulation, AdvectionLimitCapsTheImplicitStepByTheFastestParticle) {
     // Every step but the frame's last (which may be clipped to the frame's end instead) was cut by
     // the limit below the scene's dt.
     long flagged = 0;
-    for (const StepStats& s : capped.last_frame_steps()) flagged += s.advection_capped;
+    for (const StepRecord& s : capped.last_frame_steps()) flagged += s.advection_capped;
     EXPECT_GE(flagged, cut.steps - 1);
     EXPECT_EQ(cut.advection_capped_steps, flagged);
 }

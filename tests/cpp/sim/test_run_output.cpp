@@ -36,16 +36,18 @@ TEST(RunOutput, HeadersAreTheDocumentedColumns) {
               "network_evaluations,max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,"
               "advection_capped_steps,contact_pairs,min_distance_m,"
               "ccd_queries,ccd_limited\n");
+    // steps.csv: any step's columns (solver/step_stats.hpp), then MPM's, then FEM's and contact's (FEM and
+    // coupled runs).
     EXPECT_EQ(steps_csv_header({2, false, "lagged"}),
               "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
               "line_search_steps,network_evaluations,fixed_point_iterations,fixed_point_change,"
-              "initial_residual_m_per_s,residual_m_per_s,energy_J,converged,clamped,line_search_failed,"
-              "hardening_clamped,fixed_point_converged,reference_updates,true_residual_m_per_s,advection_capped,"
+              "initial_residual_m_per_s,residual_m_per_s,energy_J,converged,line_search_failed,"
+              "hardening_clamped,fixed_point_converged,reference_updates,true_residual_m_per_s,clamped,advection_capped,"
               "integrator\n");
     EXPECT_EQ(steps_csv_header({2, true, "lagged"}),
               steps_csv_header({2, false, "lagged"}).substr(0, steps_csv_header({2, false, "lagged"}).size() - 12) +
-                  ",predictor_iterations,kinematic_stages,kinematic_reached,ccd_queries,ccd_limited,contact_pairs,min_distance_m,"
-                  "substeps,broad_phase_s,ccd_s,integrator\n");
+                  ",predictor_iterations,kinematic_stages,kinematic_reached,substeps,ccd_queries,ccd_limited,"
+                  "contact_pairs,min_distance_m,broad_phase_s,ccd_s,integrator\n");
 }
 
 TEST(RunOutput, RowsMatchTheirHeaders) {
@@ -58,7 +60,7 @@ TEST(RunOutput, RowsMatchTheirHeaders) {
     f.momentum[2] = -2.5;
     f.converged = false;
     f.contact_pairs = 7;
-    StepStats s;
+    StepRecord s;
     s.dt = 1e-3;
     s.energy = 1.0 / 3.0;
     s.converged = false;
@@ -89,6 +91,49 @@ TEST(RunOutput, RowsMatchTheirHeaders) {
 
     EXPECT_THROW(csv_column(stats, "no_such_column"), std::invalid_argument);
     EXPECT_THROW(csv_column("a,b\n1\n", "b"), std::invalid_argument);
+}
+
+// Each method's integrator returns its own layer's record; the run keeps the union. A record widened
+// to the union keeps every field it had and leaves the others at their defaults.
+TEST(RunOutput, AStepRecordKeepsEachLayersFields) {
+    MpmStepStats mpm;
+    mpm.dt = 1e-3;
+    mpm.newton_iterations = 4;
+    mpm.clamped = 3;
+    mpm.advection_capped = true;
+    const StepRecord from_mpm = mpm;
+    EXPECT_EQ(from_mpm.dt, 1e-3);
+    EXPECT_EQ(from_mpm.newton_iterations, 4);
+    EXPECT_EQ(from_mpm.clamped, 3u);
+    EXPECT_TRUE(from_mpm.advection_capped);
+    EXPECT_EQ(from_mpm.substeps, 1);
+    EXPECT_EQ(from_mpm.ccd_queries, 0);
+
+    FemStepStats fem;
+    fem.residual = 2e-4;
+    fem.kinematic_stages = 5;
+    fem.kinematic_reached = false;
+    fem.substeps = 7;
+    fem.ccd_limited = 2;
+    fem.min_distance = 1e-5;
+    const StepRecord from_fem = fem;
+    EXPECT_EQ(from_fem.residual, 2e-4);
+    EXPECT_EQ(from_fem.kinematic_stages, 5);
+    EXPECT_FALSE(from_fem.kinematic_reached);
+    EXPECT_EQ(from_fem.substeps, 7);
+    EXPECT_EQ(from_fem.ccd_limited, 2);
+    EXPECT_EQ(from_fem.min_distance, 1e-5);
+    EXPECT_EQ(from_fem.clamped, 0u);
+    EXPECT_FALSE(from_fem.advection_capped);
+
+    // Every layer's fields are in the record's list, once.
+    std::set<std::string> keys;
+    StepRecord::for_each_field([&](const StepField& field, auto) {
+        if (field.key) keys.insert(field.key);
+    });
+    for (const char* key : {"dt", "newton_iterations", "clamped", "advection_capped", "kinematic_stages", "substeps",
+                            "ccd_queries", "min_distance", "max_grid_speed"})
+        EXPECT_TRUE(keys.count(key)) << key;
 }
 
 TEST(RunOutput, EveryStatisticHasOneNameInEachOutput) {

@@ -1,0 +1,24 @@
+#pragma once
+// What an MPM step (explicit or implicit; the particles of a coupled step) adds to the statistics of
+// any step (solver/step_stats.hpp).
+#include <cstddef>
+
+#include "pnet/solver/step_stats.hpp"
+
+namespace pnet {
+
+struct MpmStepFields {
+    std::size_t clamped = 0;        // particles pulled back inside the domain
+    bool advection_capped = false;  // implicit MPM, coupling: the advection limit cut dt below the scene's
+
+    template <typename F>
+    static void for_each_field(F&& f) {
+        f(StepField{"clamped", "clamped"}, &MpmStepFields::clamped);
+        f(StepField{"advection_capped", "advection_capped"}, &MpmStepFields::advection_capped);
+    }
+};
+
+/// What an MPM integrator's step returns.
+using MpmStepStats = StepStatsWith<MpmStepFields>;
+
+}  // namespace pnet
