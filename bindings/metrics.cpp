@@ -7,6 +7,7 @@
 #include "pnet/contact/collisions/point_facet.hpp"
 #include "pnet/io/ply.hpp"
 #include "pnet/metrics/iou.hpp"
+#include "pnet/metrics/mesh_comparison.hpp"
 #include "pnet/metrics/run_comparison.hpp"
 #include "pnet/nn/model_file.hpp"  // FileNotFoundError
 
@@ -167,6 +168,49 @@ spread_a / spread_b and height_a / height_b (deposit shape of each run, m) - plu
 clamped_a / clamped_b (particle positions at the domain's edge) and dx, the
 grid spacing used (dx = 0: DIR_A's). FileNotFoundError for a missing
 directory, ValueError for runs that cannot be compared (naming the file and field).)doc");
+
+    m.def(
+        "compare_meshes",
+        [](const py::object& dir_a, const py::object& dir_b) {
+            const std::string a = path_string(dir_a), b = path_string(dir_b);
+            for (const std::string& dir : {a, b})
+                if (!std::filesystem::exists(dir))
+                    throw FileNotFoundError(dir + ": no such directory");
+            MeshComparison c;
+            try {
+                py::gil_scoped_release release;
+                c = compare_meshes(pair_runs(a, b));
+            } catch (const RunInputError& e) {
+                throw py::value_error(e.what());
+            }
+            const py::ssize_t n = static_cast<py::ssize_t>(c.frames.size());
+            py::dict d;
+            py::array_t<std::int64_t> frame(n), penetrations(n);
+            for (py::ssize_t k = 0; k < n; ++k) {
+                frame.mutable_data()[k] = c.frames[k].frame;
+                penetrations.mutable_data()[k] = c.frames[k].penetrations;
+            }
+            d["frame"] = frame;
+            const std::pair<const char*, double FrameMeshError::*> fields[] = {
+                {"time", &FrameMeshError::time},         {"mean", &FrameMeshError::mean},
+                {"max", &FrameMeshError::max},           {"mean_pct", &FrameMeshError::mean_pct},
+                {"max_pct", &FrameMeshError::max_pct}};
+            for (const auto& [name, field] : fields) {
+                py::array_t<double> values(n);
+                for (py::ssize_t k = 0; k < n; ++k) values.mutable_data()[k] = c.frames[k].*field;
+                d[name] = values;
+            }
+            d["penetrations"] = penetrations;
+            d["nodes"] = c.nodes;
+            d["size"] = c.size;
+            return d;
+        },
+        py::arg("dir_a"), py::arg("dir_b"),
+        R"doc(Compare the meshes of two `pnet simulate` output directories of FEM or coupled runs frame by
+frame (what `pnet compare` writes to nodal.csv): a dict of arrays over the frames both hold - frame,
+time (s), mean and max nodal distance of the body (m) and both in % of its size, penetrations (a coupled
+run B's particles inside its body; -1 for FEM) - plus nodes (the body's) and size (m).
+FileNotFoundError for a missing directory, ValueError for runs that cannot be compared.)doc");
 
     m.def(
         "inside_count",

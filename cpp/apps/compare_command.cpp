@@ -22,7 +22,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kUsage = "usage: pnet compare DIR_A DIR_B [--out DIR] [--dx DX] [--image]\n";
+constexpr const char* kUsage =
+    "usage: pnet compare DIR_A DIR_B [--out DIR] [--dx DX] [--image]\n"
+    "  compares run B with run A (the reference) frame by frame, into DIR_B/compare_<A> or --out:\n"
+    "  particles (MPM, coupling): iou.csv, iou.png; meshes (FEM, coupling): nodal.csv (docs/metrics.md)\n";
 
 class UsageError : public std::invalid_argument {
 public:
@@ -90,28 +93,46 @@ int compare(const Options& o) {
     if (fs::exists(out, ec) && !fs::is_directory(out, ec))
         throw InputError(out.string() + ": exists and is not a directory");
 
-    // compare_runs compares all frames before anything is written, so a bad frame leaves no partial result.
+    // Every frame is compared before anything is written, so a bad frame leaves no partial result.
     std::function<void(std::size_t, std::size_t)> progress;
     if (isatty(fileno(stderr)))
         progress = [&](std::size_t k, std::size_t n) {
             std::fprintf(stderr, "\rframe %d  (%zu/%zu)   ", pair.common[k - 1], k, n);
         };
-    const RunComparison c = compare_runs(pair, progress);
+    RunComparison c;
+    if (a.particles) {
+        c = compare_runs(pair, progress);
         if (progress) std::fprintf(stderr, "\n");
-    if (c.clamped_a + c.clamped_b > 0)
-        std::fprintf(stderr,
-                     "pnet compare: warning: %zu particle positions in %s and %zu in %s lie outside the domain; "
-                     "their mass was put at its edge\n",
-                     c.clamped_a, a.dir.c_str(), c.clamped_b, b.dir.c_str());
+        if (c.clamped_a + c.clamped_b > 0)
+            std::fprintf(stderr,
+                         "pnet compare: warning: %zu particle positions in %s and %zu in %s lie outside the domain; "
+                         "their mass was put at its edge\n",
+                         c.clamped_a, a.dir.c_str(), c.clamped_b, b.dir.c_str());
+    }
+    MeshComparison meshes;
+    if (a.meshes) {
+        meshes = compare_meshes(pair, progress);
+        if (progress) std::fprintf(stderr, "\n");
+    }
 
     try {
-        write_comparison(out, c, a.name, b.name);
+        if (a.particles) write_comparison(out, c, a.name, b.name);
+        if (a.meshes) write_mesh_comparison(out, meshes);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "pnet compare: %s\n", e.what());
         return 1;
     }
-    std::fputs(comparison_summary(pair, c).c_str(), stdout);
-    std::printf("wrote %s and %s\n", (out / "iou.csv").string().c_str(), (out / "iou.png").string().c_str());
+    if (a.particles) {
+        std::fputs(comparison_summary(pair, c).c_str(), stdout);
+        std::printf("wrote %s and %s\n", (out / "iou.csv").string().c_str(), (out / "iou.png").string().c_str());
+    } else {
+        std::printf("compared %zu frames (%s) of %s and %s\n", pair.common.size(), frame_ranges(pair.common).c_str(),
+                    a.dir.c_str(), b.dir.c_str());
+    }
+    if (a.meshes) {
+        std::fputs(mesh_comparison_summary(meshes).c_str(), stdout);
+        std::printf("wrote %s\n", (out / "nodal.csv").string().c_str());
+    }
     if (o.image) {
         const int frame = pair.common.back();  // the last common frame
         try {

@@ -494,6 +494,48 @@ def test_compare_runs_matches_pnet_compare(tmp_path):
         pns.compare_runs(tmp_path / "a", tmp_path / "empty")
 
 
+def test_compare_meshes_matches_pnet_compare_and_a_numpy_reference(tmp_path):
+    """The meshes' comparison (FEM, coupling) from Python, from `pnet compare` and from numpy agree."""
+    if not PNET.exists():
+        pytest.fail(f"{PNET} is not built (run scripts/setup.sh)")
+    for scene, coupled in (("metal_frame_2d", False), ("sand_fem_coupling_2d", True)):
+        dirs = {}
+        for name, integrator in (("a", "explicit"), ("b", "lagged")):
+            dirs[name] = tmp_path / f"{scene}_{name}"
+            r = subprocess.run([str(PNET), "simulate", str(TINY / f"{scene}.json"), "--integrator", integrator,
+                                "--frames", "2", "--out", str(dirs[name])], capture_output=True, text=True, timeout=600)
+            assert r.returncode == 0, r.stderr
+        result = pns.compare_meshes(dirs["a"], dirs["b"])
+        assert list(result["frame"]) == [0, 1, 2]
+        info = json.loads((dirs["a"] / "run.json").read_text())
+        suffix = "_mesh.ply" if coupled else ".ply"
+        rest = pns.read_mesh_frame(dirs["a"] / f"frame_00000{suffix}")["position"]
+        nodes = len(rest) if coupled else info["mesh_first_node"][1]
+        size = (np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)) if coupled else info["bbox_diagonal"])
+        assert result["nodes"] == nodes and np.isclose(result["size"], size, rtol=1e-12)
+        for k, frame in enumerate(result["frame"]):
+            pa = pns.read_mesh_frame(dirs["a"] / f"frame_{frame:05d}{suffix}")["position"][:nodes]
+            pb = pns.read_mesh_frame(dirs["b"] / f"frame_{frame:05d}{suffix}")["position"][:nodes]
+            d = np.linalg.norm(pa - pb, axis=1)
+            assert np.isclose(result["mean"][k], d.mean(), rtol=1e-12, atol=1e-15)
+            assert np.isclose(result["max_pct"][k], 100 * d.max() / size, rtol=1e-12, atol=1e-12)
+        assert result["max"][-1] > 0  # the two integrators part
+        assert list(result["penetrations"]) == ([0, 0, 0] if coupled else [-1, -1, -1])
+        r = subprocess.run([str(PNET), "compare", str(dirs["a"]), str(dirs["b"]), "--out", str(tmp_path / scene)],
+                           capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr
+        rows = (tmp_path / scene / "nodal.csv").read_text().splitlines()[1:]
+        assert np.allclose([float(row.split(",")[2]) for row in rows], result["mean"], rtol=1e-8, atol=1e-15)
+        assert (tmp_path / scene / "iou.csv").exists() == coupled
+    r = subprocess.run([str(PNET), "simulate", str(TINY / "sand_column_2d.json"), "--integrator", "explicit",
+                        "--frames", "1", "--out", str(tmp_path / "mpm")], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    with pytest.raises(ValueError, match="no meshes"):
+        pns.compare_meshes(tmp_path / "mpm", tmp_path / "mpm")
+    with pytest.raises(ValueError, match="what the frames hold"):
+        pns.compare_meshes(tmp_path / "metal_frame_2d_a", tmp_path / "mpm")
+
+
 def test_a_model_for_other_plasticity_parameters_raises_value_error():
     scene = json.loads((TINY / "sand_column_2d.json").read_text())
     scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = 35

@@ -157,6 +157,33 @@ std::string comparison_summary(const RunPair& pair, const RunComparison& c) {
     return text;
 }
 
+void write_mesh_comparison(const fs::path& out, const MeshComparison& c) {
+    fs::create_directories(out);
+    write_text_atomically((out / "nodal.csv").string(), mesh_comparison_csv(c));
+}
+
+std::string mesh_comparison_summary(const MeshComparison& c) {
+    std::string text;
+    char line[512];
+    const FrameMeshError& last = c.frames.back();
+    const auto worst = std::max_element(c.frames.begin(), c.frames.end(), [](const auto& x, const auto& y) {
+        return x.mean < y.mean;
+    });
+    std::snprintf(line, sizeof line,
+                  "body (%zu nodes, size %.4g m): nodal distance at frame %d mean %.4g m (%.3f%%), max %.4g m "
+                  "(%.3f%%); worst mean %.3f%% at frame %d\n",
+                  c.nodes, c.size, last.frame, last.mean, last.mean_pct, last.max, last.max_pct, worst->mean_pct,
+                  worst->frame);
+    text += line;
+    if (last.penetrations >= 0) {
+        long most = 0;
+        for (const FrameMeshError& f : c.frames) most = std::max(most, f.penetrations);
+        std::snprintf(line, sizeof line, "particles inside the body: at most %ld in a frame\n", most);
+        text += line;
+    }
+    return text;
+}
+
 Image comparison_picture(const RunPair& pair, int frame) {
     const RunInfo& a = pair.a;
     const RunInfo& b = pair.b;
@@ -167,7 +194,7 @@ Image comparison_picture(const RunPair& pair, int frame) {
         const fs::path png = fs::path(run->dir) / name;
         if (fs::exists(png)) panels.push_back(titled(read_png_rgb(png.string()), run->name));
     }
-    if (a.dim == 2) {
+    if (a.dim == 2 && a.particles) {
         const int width = panels.empty() ? 640 : panels.front().width;
         panels.push_back(titled(overlay_2d(a, b, frame, width),
                                 "overlay: blue " + a.name + " only, orange " + b.name + " only, grey both"));

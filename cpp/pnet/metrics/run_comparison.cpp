@@ -62,6 +62,10 @@ void check_consistent(const RunInfo& a, const RunInfo& b) {
         return nlohmann::json(std::vector<double>(p.begin(), p.begin() + dim)).dump();
     };
     if (a.dim != b.dim) throw differs("dim", std::to_string(a.dim), std::to_string(b.dim));
+    auto kind = [](const RunInfo& r) {
+        return std::string(r.particles && r.meshes ? "particles and meshes" : r.meshes ? "meshes" : "particles");
+    };
+    if (a.particles != b.particles || a.meshes != b.meshes) throw differs("what the frames hold", kind(a), kind(b));
     for (int d = 0; d < a.dim; ++d) {
         const double extent = a.domain_max[d] - a.domain_min[d];
         if (!same(a.domain_min[d], b.domain_min[d], extent))
@@ -145,8 +149,21 @@ RunInfo read_run_info(const std::string& dir) {
         if (!(run.view_max[d] > run.view_min[d]))
             throw RunInputError(run.json_file + ": view_max: must exceed view_min on every axis, got " +
                                 j.at("view_max").dump() + " and " + j.at("view_min").dump());
-    run.dx = positive_number(j, run.json_file, "dx");
+    // A run with meshes says how many elements it has; a FEM run has no particles, and no grid.
+    run.meshes = j.contains("elements");
+    run.particles = !run.meshes || j.contains("particles");
+    if (run.particles) run.dx = positive_number(j, run.json_file, "dx");
     run.frame_dt = positive_number(j, run.json_file, "frame_dt");
+    if (run.meshes) {
+        if (j.contains("mesh_first_node")) {  // [0, end of mesh 0, ...]: mesh 0 is the body compared
+            const nlohmann::json& first = j.at("mesh_first_node");
+            if (!first.is_array() || first.size() < 2 || !first[1].is_number_integer() || first[1].get<long>() <= 0)
+                throw RunInputError(run.json_file + ": mesh_first_node: expected [0, n1, ...] with n1 > 0, got " +
+                                    first.dump());
+            run.body_nodes = first[1].get<std::size_t>();
+        }
+        if (j.contains("bbox_diagonal")) run.body_size = positive_number(j, run.json_file, "bbox_diagonal");
+    }
     if (j.contains("run_id")) {
         if (!j.at("run_id").is_string())
             throw RunInputError(run.json_file + ": run_id: expected a string, got " + j.at("run_id").dump());
@@ -154,11 +171,13 @@ RunInfo read_run_info(const std::string& dir) {
     }
 
     // frame_NNNNN.ply: at least 5 digits (%05d); temporary files of an atomic write (".tmp.<pid>") do not match.
-    static const std::regex frame_name(R"(frame_(\d{5,9})\.ply)");
+    static const std::regex frame_name(R"(frame_(\d{5,9})(_mesh)?\.ply)");
     for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
         std::smatch m;
         const std::string name = e.path().filename().string();
-        if (std::regex_match(name, m, frame_name)) run.frames[std::stoi(m[1].str())] = e.path().string();
+        if (!std::regex_match(name, m, frame_name)) continue;
+        const bool mesh_file = m[2].matched || !run.particles;  // FEM: frame_NNNNN.ply holds the meshes
+        (mesh_file ? run.mesh_frames : run.frames)[std::stoi(m[1].str())] = e.path().string();
     }
     if (ec) throw RunInputError(dir + ": cannot list the directory: " + ec.message());
     return run;
@@ -171,26 +190,32 @@ RunPair pair_runs(const std::string& dir_a, const std::string& dir_b, double dx)
     const RunInfo& a = pair.a;
     const RunInfo& b = pair.b;
     check_consistent(a, b);
-    pair.dx = dx > 0.0 ? dx : a.dx;
-    double nodes = 1.0;
-    for (int d = 0; d < a.dim; ++d) nodes *= std::ceil((a.domain_max[d] - a.domain_min[d]) / pair.dx) + 1.0;
-    if (nodes > kMaxGridNodes)
-        throw RunInputError("dx = " + nlohmann::json(pair.dx).dump() + " gives a grid of " +
-                            nlohmann::json(nodes).dump() + " nodes; choose a coarser --dx");
-
-    for (const auto& [frame, path] : a.frames) (b.frames.count(frame) ? pair.common : pair.only_a).push_back(frame);
-    for (const auto& [frame, path] : b.frames)
-        if (!a.frames.count(frame)) pair.only_b.push_back(frame);
+    if (a.particles) {
+        pair.dx = dx > 0.0 ? dx : a.dx;
+        double nodes = 1.0;
+        for (int d = 0; d < a.dim; ++d) nodes *= std::ceil((a.domain_max[d] - a.domain_min[d]) / pair.dx) + 1.0;
+        if (nodes > kMaxGridNodes)
+            throw RunInputError("dx = " + nlohmann::json(pair.dx).dump() + " gives a grid of " +
+                                nlohmann::json(nodes).dump() + " nodes; choose a coarser --dx");
+    }
+    // The frames compared: those of the particles, or of the meshes of a FEM run (a coupled run has both).
+    const auto& frames_a = a.particles ? a.frames : a.mesh_frames;
+    const auto& frames_b = b.particles ? b.frames : b.mesh_frames;
+    for (const auto& [frame, path] : frames_a) (frames_b.count(frame) ? pair.common : pair.only_a).push_back(frame);
+    for (const auto& [frame, path] : frames_b)
+        if (!frames_a.count(frame)) pair.only_b.push_back(frame);
     if (pair.common.empty())
         throw RunInputError("no frame_NNNNN.ply present in both " + a.dir + " (" +
-                            (a.frames.empty() ? "none" : frame_ranges(pair.only_a)) + ") and " + b.dir + " (" +
-                            (b.frames.empty() ? "none" : frame_ranges(pair.only_b)) + ")");
+                            (frames_a.empty() ? "none" : frame_ranges(pair.only_a)) + ") and " + b.dir + " (" +
+                            (frames_b.empty() ? "none" : frame_ranges(pair.only_b)) + ")");
     return pair;
 }
 
 RunComparison compare_runs(const RunPair& pair, const std::function<void(std::size_t, std::size_t)>& progress) {
     const RunInfo& a = pair.a;
     const RunInfo& b = pair.b;
+    if (!a.particles)
+        throw RunInputError(a.json_file + ": the run has no particles (a FEM run: compare its meshes, compare_meshes)");
     RunComparison c;
     c.dir_a = a.dir;
     c.dir_b = b.dir;

@@ -3,11 +3,13 @@
 // in the library so that the Python bindings can call it too.
 //
 // A run directory holds run.json and the frames frame_NNNNN.ply (io/ply.hpp), NNNNN the frame number in
-// 5 to 9 digits. From run.json only dim (2 or 3), domain_min and domain_max (dim numbers each, m; view_min and
-// view_max, the pictures' region, if present), dx (m)
-// and frame_dt (s) are read; frame k is the state at time k frame_dt. Frames are paired by number, both
-// runs' particle mass is rasterized on one grid over the common domain and the two mass fields are
-// compared with iou() (metrics/iou.hpp).
+// 5 to 9 digits: particles (MPM), the meshes (FEM), or particles with the meshes beside them in
+// frame_NNNNN_mesh.ply (coupling). From run.json only dim (2 or 3), domain_min and domain_max (dim numbers
+// each, m; view_min and view_max, the pictures' region, if present), dx (m; runs with particles),
+// frame_dt (s), and for runs with meshes "elements" (their presence), mesh_first_node and bbox_diagonal
+// (FEM) are read; frame k is the state at time k frame_dt. Frames are paired by number. Particles: both
+// runs' mass is rasterized on one grid over the common domain and the two mass fields are compared with
+// iou() (metrics/iou.hpp). Meshes: metrics/mesh_comparison.hpp.
 #include <array>
 #include <cstddef>
 #include <functional>
@@ -33,16 +35,22 @@ struct RunInfo {
     int dim = 0;            // 2 or 3
     std::array<double, 3> domain_min{}, domain_max{};  // m, first dim entries used; max > min on every axis
     std::array<double, 3> view_min{}, view_max{};      // m, the region its pictures show (default: the domain)
-    double dx = 0.0;                                   // the simulation's grid spacing, m
+    double dx = 0.0;                                   // the simulation's grid spacing, m (0: no particles)
     double frame_dt = 0.0;                             // time between frames, s
-    std::map<int, std::string> frames;                 // frame number -> PLY path (dir/frame_NNNNN.ply)
+    bool particles = true;                             // the frames hold particles (MPM, coupling)
+    bool meshes = false;                               // the run has meshes (FEM, coupling)
+    std::size_t body_nodes = 0;     // meshes: the nodes of the first mesh (the compared body; 0: every node)
+    double body_size = 0.0;         // meshes: run.json's bbox_diagonal (m; 0: absent, FEM runs only)
+    std::map<int, std::string> frames;       // frame number -> particle PLY (dir/frame_NNNNN.ply)
+    std::map<int, std::string> mesh_frames;  // frame number -> mesh PLY (FEM: frame_NNNNN.ply; coupling: _mesh)
     std::string run_id;  // run.json's run_id: every frame must carry it; "" (runs before run ids): not checked
 };
 
 /// Reads dir/run.json and lists dir's frame files without opening them; temporary files of an interrupted
 /// atomic write (frame_NNNNN.ply.tmp.<pid>) are not frames. Throws RunInputError if dir is missing or not
 /// a directory, or run.json is unreadable, not JSON, or lacks or has an invalid dim, domain_min,
-/// domain_max, dx or frame_dt; std::filesystem::filesystem_error if listing dir fails partway.
+/// domain_max, dx (runs with particles) or frame_dt; std::filesystem::filesystem_error if listing dir
+/// fails partway.
 RunInfo read_run_info(const std::string& dir);
 
 /// Two runs checked to be comparable, before any frame file is read.
@@ -54,7 +62,8 @@ struct RunPair {
 };
 
 /// Reads both runs (read_run_info) and checks that they can be compared frame by frame: same dim, same
-/// domain and same frame_dt (to 1e-9 relative), and at least one common frame. dx <= 0 takes DIR_A's
+/// domain and same frame_dt (to 1e-9 relative), the same kind of frames (particles, meshes), and at least
+/// one common frame (of particles; FEM: of meshes). dx <= 0 takes DIR_A's
 /// run.json dx. Throws RunInputError if a run cannot be read, if the runs differ (naming DIR_B's run.json
 /// and the field), if no frame is common (listing both runs' frames), or if the grid would exceed 2^27
 /// nodes (compare_runs holds two such grids, 8 bytes a node: 2 GiB).
@@ -88,7 +97,7 @@ struct RunComparison {
     std::vector<FrameIou> frames;  // the common frames, ascending
 };
 
-/// Reads every common frame of both runs, requiring the dim of run.json, rasterizes each frame's particle
+/// Runs with particles: reads every common frame of both runs, requiring the dim of run.json, rasterizes each frame's particle
 /// mass with rasterize_mass on the grid with spacing pair.dx (and kCoarseFactor pair.dx) and origin
 /// domain_min, computes iou() of each pair and deposit_shape() of each frame. All frames are compared before returning. progress(k, n), when given, is called after the
 /// k-th of n frames. Throws RunInputError "<ply path>: ..." for a frame that cannot be read, contradicts

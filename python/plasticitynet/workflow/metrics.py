@@ -1,9 +1,10 @@
 """Comparing a run with its ground truth (docs/metrics.md), one JSON per comparison.
 
-  mpm       `pnet compare`: per frame soft IoU of the B-spline mass fields at dx and 4 dx, binary IoU,
-            the deposit's spread and height (of the last common frame)
-  fem       per frame mean and max nodal distance of the deformable mesh, m and % of the scene's
-            bounding-box diagonal; and the distance to a same-step reference at the last common frame
+Every figure comes from `pnet compare` (cpp/pnet/metrics/: the same code for every family):
+  mpm       iou.csv: per frame soft IoU of the B-spline mass fields at dx and 4 dx, binary IoU, the
+            deposit's spread and height (of the last common frame)
+  fem       nodal.csv: per frame mean and max nodal distance of the deformable mesh, m and % of the
+            scene's bounding-box diagonal; and the distance to a same-step reference at the last common frame
   coupling  the sand as mpm, the body's nodal distance (% of its rest size), and the particles inside
             the body (crossing number in 2D, winding number in 3D; must be 0)
 
@@ -19,9 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..frames import inside_count, read_mesh_ply, read_particle_positions
 from .plan import Plan
-from .runner import frame_numbers
 
 
 def read_csv(path: Path) -> list[dict]:
@@ -63,19 +62,21 @@ def run_figures(run: Path) -> dict:
     }
 
 
-def pnet_compare(plan: Plan, gt: Path, run: Path, out: Path, dx: float | None = None) -> list[dict]:
-    """`pnet compare`'s per-frame rows (iou.csv) of a run against the ground truth."""
+def pnet_compare(plan: Plan, gt: Path, run: Path, out: Path, dx: float | None = None) -> dict[str, list[dict]]:
+    """`pnet compare`'s per-frame rows of a run against the ground truth: "iou" (iou.csv: particles) and
+    "nodal" (nodal.csv: the meshes' body), each empty where the runs have none."""
     cmd = [plan.pnet, "compare", str(gt / "frames"), str(run / "frames"), "--out", str(out)]
     if dx is not None:
         cmd += ["--dx", repr(dx)]
     done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed (exit {done.returncode}):\n{done.stderr}")
-    return [{k: float(v) for k, v in row.items()} for row in read_csv(out / "iou.csv")]
+    return {name: [{k: float(v) for k, v in row.items()} for row in read_csv(out / f"{name}.csv")]
+            for name in ("iou", "nodal")}
 
 
 def mpm_metric(plan: Plan, gt: Path, run: Path, dx: float, compare_dir: Path) -> dict:
-    rows = pnet_compare(plan, gt, run, compare_dir, dx)
+    rows = pnet_compare(plan, gt, run, compare_dir, dx)["iou"]
     out = {"rows": rows}
     if rows:
         soft = [r["soft_iou"] for r in rows]
@@ -93,69 +94,36 @@ def mpm_metric(plan: Plan, gt: Path, run: Path, dx: float, compare_dir: Path) ->
     return out
 
 
-def _mesh_frames(run: Path) -> list[int]:
-    return frame_numbers(run / "frames")
-
-
-def _mesh_file(run: Path, frame: int, coupled: bool) -> Path:
-    return run / "frames" / (f"frame_{frame:05d}_mesh.ply" if coupled else f"frame_{frame:05d}.ply")
-
-
-def nodal_distance(a: Path, b: Path, frame: int, nodes: int | None, coupled: bool = False) -> tuple[float, float]:
-    pa = read_mesh_ply(_mesh_file(a, frame, coupled)).position
-    pb = read_mesh_ply(_mesh_file(b, frame, coupled)).position
-    if nodes is not None:
-        pa, pb = pa[:nodes], pb[:nodes]
-    d = np.linalg.norm(pa - pb, axis=1)
-    return float(d.mean()), float(d.max())
-
-
-def fem_metric(plan: Plan, gt: Path, run: Path, reference: Path | None, frame_dt: float) -> dict:
-    info = json.loads((gt / "frames" / "run.json").read_text())
-    nodes, diagonal = info["mesh_first_node"][1], info["bbox_diagonal"]  # meshes[0]: the deformable body
-    gt_frames = set(_mesh_frames(gt))
-    curve = []
-    for f in _mesh_frames(run):
-        if f > 0 and f in gt_frames:
-            mean, worst = nodal_distance(run, gt, f, nodes)
-            curve.append({"frame": f, "time_s": f * frame_dt, "mean_m": mean, "max_m": worst,
-                          "mean_pct": 100 * mean / diagonal, "max_pct": 100 * worst / diagonal})
+def fem_metric(plan: Plan, gt: Path, run: Path, reference: Path | None, frame_dt: float, compare_dir: Path) -> dict:
+    nodal = [r for r in pnet_compare(plan, gt, run, compare_dir)["nodal"] if r["frame"] > 0]
+    diagonal = json.loads((gt / "frames" / "run.json").read_text())["bbox_diagonal"]
+    curve = [{"frame": int(r["frame"]), "time_s": r["frame"] * frame_dt, "mean_m": r["mean_m"], "max_m": r["max_m"],
+              "mean_pct": r["mean_pct"], "max_pct": r["max_pct"]} for r in nodal]
     out = {"curve": curve, "diagonal_m": diagonal}
     if curve:
         out.update({"final_mean_pct": curve[-1]["mean_pct"], "final_max_pct": curve[-1]["max_pct"],
                     "worst_mean_pct": max(c["mean_pct"] for c in curve), "last_frame": curve[-1]["frame"]})
-    if reference is not None and _mesh_frames(run) and _mesh_frames(reference):
-        last = min(_mesh_frames(run)[-1], _mesh_frames(reference)[-1])
-        mean, worst = nodal_distance(run, reference, last, nodes)
-        out["ref_mean_pct"], out["ref_max_pct"] = 100 * mean / diagonal, 100 * worst / diagonal
+    if reference is not None:
+        # The same-step reference at the last frame both have; its size is the ground truth's (run.json).
+        to_reference = pnet_compare(plan, reference, run, compare_dir / "reference")["nodal"]
+        if to_reference:
+            last = to_reference[-1]
+            out["ref_mean_pct"], out["ref_max_pct"] = 100 * last["mean_m"] / diagonal, 100 * last["max_m"] / diagonal
     return out
 
 
-def boundary_edges(triangles: np.ndarray) -> np.ndarray:
-    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    _, index, counts = np.unique(np.sort(edges, axis=1), axis=0, return_index=True, return_counts=True)
-    return edges[index[counts == 1]]
-
-
-def coupling_metric(plan: Plan, gt: Path, run: Path, dim: int, frame_dt: float, compare_dir: Path) -> dict:
-    sand = {int(r["frame"]): r for r in pnet_compare(plan, gt, run, compare_dir)}
-    rest = read_mesh_ply(_mesh_file(gt, 0, True))
-    size = float(np.linalg.norm(rest.position.max(axis=0) - rest.position.min(axis=0)))
-    boundary = boundary_edges(rest.triangles) if dim == 2 else rest.triangles  # a 3D mesh PLY holds its surface
-    gt_frames = set(_mesh_frames(gt))
+def coupling_metric(plan: Plan, gt: Path, run: Path, frame_dt: float, compare_dir: Path) -> dict:
+    compared = pnet_compare(plan, gt, run, compare_dir)
+    sand = {int(r["frame"]): r for r in compared["iou"]}
+    body = [r for r in compared["nodal"] if r["frame"] > 0]
+    size = body[0]["size_m"] if body else float("nan")
     rows = []
-    for f in _mesh_frames(run):
-        if f == 0 or f not in gt_frames:
-            continue
-        mesh = read_mesh_ply(_mesh_file(run, f, True))
-        particles = read_particle_positions(run / "frames" / f"frame_{f:05d}.ply")[:, :dim]  # 2D: z = 0
-        inside = inside_count(particles, mesh.position, boundary)
-        d = np.linalg.norm(mesh.position - read_mesh_ply(_mesh_file(gt, f, True)).position, axis=1)
+    for r in body:
+        f = int(r["frame"])
         j = sand.get(f, {"soft_iou": 1.0, "soft_iou_coarse": 1.0})
         rows.append({"frame": f, "time_s": f * frame_dt, "jaccard": j["soft_iou"], "jaccard_4dx": j["soft_iou_coarse"],
-                     "disk_mean_m": float(d.mean()), "disk_max_m": float(d.max()),
-                     "disk_mean_pct": 100 * float(d.mean()) / size, "disk_max_pct": 100 * float(d.max()) / size,
-                     "penetrations": inside})
+                     "disk_mean_m": r["mean_m"], "disk_max_m": r["max_m"], "disk_mean_pct": r["mean_pct"],
+                     "disk_max_pct": r["max_pct"], "penetrations": int(r["penetrations"])})
     out = {"rows": rows, "body_size_m": size}
     if rows:
         out.update({"jaccard_min": min(r["jaccard"] for r in rows),
@@ -180,9 +148,9 @@ def compute(plan: Plan, key: str) -> Path:
         values = mpm_metric(plan, gt, run, float(content["dx"]), compare_dir)
     elif job.family == "fem":
         reference = plan.run_dir(job.reference_key) if job.reference_key else None
-        values = fem_metric(plan, gt, run, reference, frame_dt)
+        values = fem_metric(plan, gt, run, reference, frame_dt, compare_dir)
     else:
-        values = coupling_metric(plan, gt, run, int(content.get("dim", 2)), frame_dt, compare_dir)
+        values = coupling_metric(plan, gt, run, frame_dt, compare_dir)
     values.update({"scene": job.scene, "run": job.run, "run_key": job.run_key, "gt_key": job.gt_key,
                    "reference_key": job.reference_key, "figures": run_figures(run)})
     path = plan.metric_file(key)

@@ -322,6 +322,81 @@ TEST(CompareCommand, FramesFromAnotherRunAreRefused) {
     EXPECT_EQ(r.code, 0) << r.err;
 }
 
+/// A FEM (or coupled) run: run.json with meshes, and per frame a 2D mesh of two triangles (the unit square
+/// at (x0, 0), side `side`), its nodes moved by shift(frame) along x in run B. A coupled run also writes
+/// particles: one at the square's centre (inside) and one far from it.
+std::string make_mesh_run(const TempDir& tmp, const std::string& name, bool coupled, const std::vector<int>& frames,
+                          double shift, double side = 0.1) {
+    const std::string dir = tmp.file(name);
+    fs::create_directories(dir);
+    std::ostringstream json;
+    json << "{\"dim\": 2, \"domain_min\": [0, 0], \"domain_max\": [1, 1], \"frame_dt\": 0.02, \"elements\": 2, "
+         << (coupled ? "\"particles\": 2, \"dx\": 0.015625" : "\"mesh_first_node\": [0, 4], \"bbox_diagonal\": 0.5")
+         << "}\n";
+    write_file((fs::path(dir) / "run.json").string(), json.str());
+    for (int f : frames) {
+        PlyMesh m;
+        m.dim = 2;
+        const double x0 = 0.4 + shift * f;
+        m.position = {x0, 0.2, x0 + side, 0.2, x0 + side, 0.2 + side, x0, 0.2 + side};
+        m.velocity.assign(8, 0.0);
+        m.triangles = {0, 1, 2, 0, 2, 3};
+        m.hardening = {0.0, 0.0};
+        std::string path = frame_path(dir, f);
+        if (coupled) {
+            PlyParticles p;
+            p.dim = 2;
+            p.position = {x0 + side / 2, 0.2 + side / 2, 0.9, 0.9};
+            p.velocity.assign(4, 0.0);
+            p.mass = {1e-3, 1e-3};
+            p.hardening = {0.0, 0.0};
+            write_particles_ply(path, p);
+            path = path.substr(0, path.size() - 4) + "_mesh.ply";
+        }
+        write_mesh_ply(path, m);
+    }
+    return dir;
+}
+
+// FEM runs: the first mesh's nodes, node by node, in m and % of run A's bbox_diagonal (docs/metrics.md).
+TEST(CompareCommand, MeshRunsGiveTheNodalDistance) {
+    TempDir tmp;
+    const std::string a = make_mesh_run(tmp, "fem_a", false, {0, 1, 2}, 0.0);
+    const std::string b = make_mesh_run(tmp, "fem_b", false, {0, 1, 2}, 0.01);
+    const Result r = compare({a, b, "--out", tmp.file("out")});
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(read_file(tmp.file("out") + "/nodal.csv"),
+              "frame,time_s,mean_m,max_m,mean_pct,max_pct,size_m\n"
+              "0,0,0,0,0,0,0.5\n"
+              "1,0.02,0.01,0.01,2,2,0.5\n"
+              "2,0.04,0.02,0.02,4,4,0.5\n");
+    EXPECT_FALSE(fs::exists(tmp.file("out") + "/iou.csv"));
+    EXPECT_NE(r.out.find("body (4 nodes, size 0.5 m): nodal distance at frame 2 mean 0.02 m (4.000%)"),
+              std::string::npos)
+        << r.out;
+    // A FEM run is not compared with an MPM one.
+    const std::string mpm = make_run(tmp, "mpm", 2, {0, 1, 2});
+    const Result mixed = compare({a, mpm});
+    EXPECT_EQ(mixed.code, 2);
+    EXPECT_NE(mixed.err.find("what the frames hold is particles but"), std::string::npos) << mixed.err;
+}
+
+// Coupled runs: the particles' IoU, the body's nodal distance (its size from A's first frame) and the
+// particles inside it.
+TEST(CompareCommand, CoupledRunsGiveIouNodalDistanceAndParticlesInside) {
+    TempDir tmp;
+    const std::string a = make_mesh_run(tmp, "cpl_a", true, {0, 1}, 0.0);
+    const std::string b = make_mesh_run(tmp, "cpl_b", true, {0, 1}, 0.05);
+    const Result r = compare({a, b, "--out", tmp.file("out")});
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(tmp.file("out") + "/iou.csv"));
+    const std::string nodal = read_file(tmp.file("out") + "/nodal.csv");
+    EXPECT_EQ(nodal.substr(0, nodal.find('\n')), "frame,time_s,mean_m,max_m,mean_pct,max_pct,size_m,penetrations");
+    EXPECT_NE(nodal.find("\n1,0.02,0.05,0.05,"), std::string::npos) << nodal;  // 0.05 m of a 0.1414 m square
+    EXPECT_NE(nodal.find(",35.3553391,35.3553391,0.141421356,1\n"), std::string::npos) << nodal;
+    EXPECT_NE(r.out.find("particles inside the body: at most 1 in a frame"), std::string::npos) << r.out;
+}
+
 TEST(CompareCommand, UsageErrors) {
     TempDir tmp;
     const std::string a = make_run(tmp, "a", 2, {0});
