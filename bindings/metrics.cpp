@@ -35,6 +35,36 @@ GridField field(const py::handle& obj, const std::string& name) {
     return g;
 }
 
+/// fn(a, b) on two run directories (each must exist: FileNotFoundError), without the GIL; a
+/// RunInputError (runs that cannot be compared) as ValueError.
+template <typename Fn>
+auto compare_directories(const py::object& dir_a, const py::object& dir_b, Fn&& fn) {
+    const std::string a = path_string(dir_a), b = path_string(dir_b);
+    for (const std::string& dir : {a, b})
+        if (!std::filesystem::exists(dir)) throw FileNotFoundError(dir + ": no such directory");
+    try {
+        py::gil_scoped_release release;
+        return fn(a, b);
+    } catch (const RunInputError& e) {
+        throw py::value_error(e.what());
+    }
+}
+
+/// d[name] = the frames' values of each (name, member) field, as a float64 array, and d["frame"].
+template <typename Frame, std::size_t N>
+void add_frame_columns(py::dict& d, const std::vector<Frame>& frames,
+                       const std::pair<const char*, double Frame::*> (&fields)[N]) {
+    const py::ssize_t n = static_cast<py::ssize_t>(frames.size());
+    py::array_t<std::int64_t> frame(n);
+    for (py::ssize_t k = 0; k < n; ++k) frame.mutable_data()[k] = frames[k].frame;
+    d["frame"] = frame;
+    for (const auto& [name, field] : fields) {
+        py::array_t<double> values(n);
+        for (py::ssize_t k = 0; k < n; ++k) values.mutable_data()[k] = frames[k].*field;
+        d[name] = values;
+    }
+}
+
 /// (n, d) float64 rows of a flat array.
 py::array_t<double> rows_of(const std::vector<double>& flat, int dim) {
     const py::ssize_t n = static_cast<py::ssize_t>(flat.size()) / dim;
@@ -126,33 +156,16 @@ quadratic B-spline on the grid of nodes domain_min + i dx: an array of shape
     m.def(
         "compare_runs",
         [](const py::object& dir_a, const py::object& dir_b, double dx) {
-            const std::string a = path_string(dir_a), b = path_string(dir_b);
-            for (const std::string& dir : {a, b})
-                if (!std::filesystem::exists(dir))
-                    throw FileNotFoundError(dir + ": no such directory");
-            RunComparison c;
-            try {
-                py::gil_scoped_release release;
-                c = compare_runs(a, b, dx);
-            } catch (const RunInputError& e) {
-                throw py::value_error(e.what());
-            }
-            const py::ssize_t n = static_cast<py::ssize_t>(c.frames.size());
-            py::array_t<std::int64_t> frame(n);
+            const RunComparison c = compare_directories(
+                dir_a, dir_b, [&](const std::string& a, const std::string& b) { return compare_runs(a, b, dx); });
             py::dict d;
-            for (py::ssize_t k = 0; k < n; ++k) frame.mutable_data()[k] = c.frames[k].frame;
-            d["frame"] = frame;
             const std::pair<const char*, double FrameIou::*> fields[] = {
                 {"time", &FrameIou::time},         {"soft", &FrameIou::soft},
                 {"binary", &FrameIou::binary},     {"plasticinelab", &FrameIou::plasticinelab},
                 {"soft_coarse", &FrameIou::soft_coarse}, {"spread_a", &FrameIou::spread_a},
                 {"spread_b", &FrameIou::spread_b}, {"height_a", &FrameIou::height_a},
                 {"height_b", &FrameIou::height_b}};
-            for (const auto& [name, field] : fields) {
-                py::array_t<double> values(n);
-                for (py::ssize_t k = 0; k < n; ++k) values.mutable_data()[k] = c.frames[k].*field;
-                d[name] = values;
-            }
+            add_frame_columns(d, c.frames, fields);
             d["only_a"] = c.only_a;
             d["only_b"] = c.only_b;
             d["clamped_a"] = c.clamped_a;
@@ -172,34 +185,16 @@ directory, ValueError for runs that cannot be compared (naming the file and fiel
     m.def(
         "compare_meshes",
         [](const py::object& dir_a, const py::object& dir_b) {
-            const std::string a = path_string(dir_a), b = path_string(dir_b);
-            for (const std::string& dir : {a, b})
-                if (!std::filesystem::exists(dir))
-                    throw FileNotFoundError(dir + ": no such directory");
-            MeshComparison c;
-            try {
-                py::gil_scoped_release release;
-                c = compare_meshes(pair_runs(a, b));
-            } catch (const RunInputError& e) {
-                throw py::value_error(e.what());
-            }
-            const py::ssize_t n = static_cast<py::ssize_t>(c.frames.size());
+            const MeshComparison c = compare_directories(
+                dir_a, dir_b, [](const std::string& a, const std::string& b) { return compare_meshes(pair_runs(a, b)); });
             py::dict d;
-            py::array_t<std::int64_t> frame(n), penetrations(n);
-            for (py::ssize_t k = 0; k < n; ++k) {
-                frame.mutable_data()[k] = c.frames[k].frame;
-                penetrations.mutable_data()[k] = c.frames[k].penetrations;
-            }
-            d["frame"] = frame;
             const std::pair<const char*, double FrameMeshError::*> fields[] = {
                 {"time", &FrameMeshError::time},         {"mean", &FrameMeshError::mean},
                 {"max", &FrameMeshError::max},           {"mean_pct", &FrameMeshError::mean_pct},
                 {"max_pct", &FrameMeshError::max_pct}};
-            for (const auto& [name, field] : fields) {
-                py::array_t<double> values(n);
-                for (py::ssize_t k = 0; k < n; ++k) values.mutable_data()[k] = c.frames[k].*field;
-                d[name] = values;
-            }
+            add_frame_columns(d, c.frames, fields);
+            py::array_t<std::int64_t> penetrations(static_cast<py::ssize_t>(c.frames.size()));
+            for (std::size_t k = 0; k < c.frames.size(); ++k) penetrations.mutable_data()[k] = c.frames[k].penetrations;
             d["penetrations"] = penetrations;
             d["nodes"] = c.nodes;
             d["size"] = c.size;
