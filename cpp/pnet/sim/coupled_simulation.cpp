@@ -11,7 +11,7 @@
 #include "pnet/nn/model_file.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/frame_files.hpp"
-#include "pnet/sim/method_energy.hpp"
+#include "pnet/solver/method_energy.hpp"
 
 namespace pnet {
 
@@ -74,7 +74,7 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
         // settings.models: objects first, then meshes; the meshes are elastic.
         std::vector<std::string> where;
         for (const SceneObject& object : scene.objects) where.push_back(scene.file + ": " + object.json_path);
-        MethodEnergy<dim> made = make_method_energy<dim>(settings, mpm_.materials, settings.models, where);
+        MethodEnergy<dim> made = make_method_energy<dim>(settings.method(), {settings.implicit, mpm_.materials, settings.models, where});
         std::unique_ptr<ParticleEnergy<dim>> energy = std::move(made.energy);
         std::vector<const LearnedReturnMap<dim>*> return_maps = std::move(made.return_maps);
         implicit_ = std::make_unique<CoupledImplicitIntegrator<dim>>(mpm_, s, method, settings.implicit, settings.mpm,

@@ -13,7 +13,7 @@
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/sim/frame_files.hpp"
-#include "pnet/sim/method_energy.hpp"
+#include "pnet/solver/method_energy.hpp"
 
 namespace pnet {
 
@@ -245,7 +245,7 @@ FemSimulation<dim>::FemSimulation(const Scene& scene, const IntegratorSettings& 
                 models[k] = models[deformable];
                 where[k] = where[deformable];
             }
-        MethodEnergy<dim> made = make_method_energy<dim>(settings, s.materials, models, where);
+        MethodEnergy<dim> made = make_method_energy<dim>(settings.method(), {settings.implicit, s.materials, models, where});
         std::unique_ptr<ParticleEnergy<dim>> energy = std::move(made.energy);
         built_.system.return_maps = made.return_maps;
         implicit_ = std::make_unique<FemImplicitIntegrator<dim>>(s, method, settings.implicit, std::move(energy),

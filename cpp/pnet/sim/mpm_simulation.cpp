@@ -8,7 +8,7 @@
 #include "pnet/io/checkpoint_arrays.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/frame_files.hpp"
-#include "pnet/sim/method_energy.hpp"
+#include "pnet/solver/method_energy.hpp"
 
 namespace pnet {
 
@@ -58,7 +58,7 @@ Simulation<dim>::Simulation(const Scene& scene, const IntegratorSettings& settin
                                         integrator_names(true, false) + ")");
         std::vector<std::string> where;
         for (const SceneObject& object : scene.objects) where.push_back(scene.file + ": " + object.json_path);
-        MethodEnergy<dim> energy = make_method_energy<dim>(settings, system_.materials, settings.models, where);
+        MethodEnergy<dim> energy = make_method_energy<dim>(settings.method(), {settings.implicit, system_.materials, settings.models, where});
         integrator_ = std::make_unique<ImplicitIntegrator<dim>>(system_, method, settings.implicit, settings.mpm,
                                                                 std::move(energy.energy), energy.return_maps);
     }

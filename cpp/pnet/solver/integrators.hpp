@@ -1,14 +1,23 @@
 #pragma once
-// The integrators, one entry each: its name, what a step solves, which options apply and which model
-// files it reads (docs/solver.md, "The integrators"). The scene reader, `pnet simulate --integrator`
-// and its --help, plasticitynet_sim, bench_table1 and the run's outputs all take the names and the
-// checks from this list; no other place compares an integrator's name as a string.
+// The integrators, one entry each: its name, what a step solves, which options apply, which model
+// files it reads and the energy its steps sum (docs/solver.md, "The integrators"). The scene reader,
+// `pnet simulate --integrator` and its --help, plasticitynet_sim, bench_table1 and the run's outputs all
+// take the names and the checks from this list; no other place compares an integrator's name as a
+// string. A new implicit integrator is a Method and its entry with its energy (integrators.cpp).
 #include <string>
 #include <vector>
 
 #include "pnet/material/material.hpp"
 
 namespace pnet {
+
+template <int dim>
+struct MethodEnergy;  // solver/method_energy.hpp
+template <int dim>
+struct EnergyRequest;
+/// Builds the energy an integrator's steps sum (solver/method_energy.hpp); null for explicit.
+template <int dim>
+using EnergyFactory = MethodEnergy<dim> (*)(const EnergyRequest<dim>&);
 
 /// What a step computes.
 enum class Method {
@@ -34,6 +43,9 @@ struct IntegratorInfo {
     /// step's Hessian pass costs 2.6 of its trial passes, so plasticitynet keeps its Hessian longer
     /// (0.8; docs/integrators.md, "Keeping the Hessian"); the others 0.5 (0 for explicit: no Newton).
     double lazy_hessian;
+    /// The energy its steps sum, over MPM particles, FEM elements or both (null: explicit).
+    EnergyFactory<2> energy_2d = nullptr;
+    EnergyFactory<3> energy_3d = nullptr;
 };
 
 /// plasticitynet's settings per material family, measured (docs/integrators.md): the outer iteration

@@ -50,7 +50,7 @@ FemState<2> run(const FemSystem<2>& system, FemMethod method, double dt, double 
     } else if (method == FemMethod::ReturnMap) {
         energy = std::make_unique<ReturnMappingEnergy<2>>(system.materials, options.tangent_damping);
     } else {
-        // As a scene builds it (sim/method_energy): the network's Hessian with the family's w
+        // As a scene builds it (the registry's energy, solver/integrators.cpp): the network's Hessian with the family's w
         // (plasticitynet_defaults: 0.05 for von Mises) unless the test sets one.
         auto model = std::make_shared<const ModelFile>(load_model_file(std::string(PNET_MODELS_DIR) + "/metal_2d.pt"));
         energy = std::make_unique<NeuralParticleEnergy<2>>(std::vector<std::shared_ptr<const ModelFile>>{model},
