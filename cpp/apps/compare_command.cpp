@@ -14,7 +14,7 @@
 #include "pnet/io/png.hpp"
 #include "pnet/metrics/comparison_report.hpp"
 #include "pnet/metrics/run_comparison.hpp"
-#include "parse_number.hpp"
+#include "command_line.hpp"
 
 namespace pnet::apps {
 
@@ -26,11 +26,6 @@ constexpr const char* kUsage =
     "usage: pnet compare DIR_A DIR_B [--out DIR] [--dx DX] [--image]\n"
     "  compares run B with run A (the reference) frame by frame, into DIR_B/compare_<A> or --out:\n"
     "  particles (MPM, coupling): iou.csv, iou.png; meshes (FEM, coupling): nodal.csv (docs/metrics.md)\n";
-
-class UsageError : public std::invalid_argument {
-public:
-    using std::invalid_argument::invalid_argument;
-};
 
 // A bad --out (exit code 2, like the library's RunInputError for the runs), as opposed to a failure to write the
 // results (1).
@@ -50,10 +45,7 @@ Options parse(int argc, char** argv) {
     std::vector<std::string> dirs;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= argc) throw UsageError(arg + " needs a value");
-            return argv[++i];
-        };
+        auto value = [&] { return option_value(argc, argv, i); };
         if (arg == "--out") {
             o.out = value();
             if (o.out.empty()) throw UsageError("--out: empty path");

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "parse_number.hpp"
+#include "command_line.hpp"
 #include "pnet/io/run_folder.hpp"
 #include "pnet/nn/model_file.hpp"
 #include "pnet/nn/torchscript.hpp"
@@ -106,19 +106,11 @@ struct Options {
     std::optional<double> flip_relaxation_time, floor_friction;  // scene overrides (MPM)
 };
 
-class UsageError : public std::invalid_argument {
-public:
-    using std::invalid_argument::invalid_argument;
-};
-
 Options parse(int argc, char** argv) {
     Options o;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= argc) throw UsageError(arg + " needs a value");
-            return argv[++i];
-        };
+        auto value = [&] { return option_value(argc, argv, i); };
         auto number = [&](const std::string& text) {
             const std::optional<double> v = parse_number(text);
             if (!v) throw UsageError(arg + ": expected a number, got \"" + text + "\"");

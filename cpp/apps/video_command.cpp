@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "parse_number.hpp"
+#include "command_line.hpp"
 #include "pnet/io/png.hpp"
 #include "pnet/io/run_folder.hpp"
 
@@ -30,10 +30,6 @@ namespace fs = std::filesystem;
 
 constexpr const char* kUsage = "usage: pnet video DIR [--out FILE.mp4] [--fps F]\n";
 
-struct InputError : std::invalid_argument {
-    using std::invalid_argument::invalid_argument;
-};
-
 struct Options {
     fs::path dir, out;
     double fps = 0.0;  // 0: from run.json
@@ -43,27 +39,24 @@ Options parse(int argc, char** argv) {
     Options o;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= argc) throw InputError(arg + " needs a value");
-            return argv[++i];
-        };
+        auto value = [&] { return option_value(argc, argv, i); };
         if (arg == "--out") {
             o.out = value();
-            if (o.out.empty()) throw InputError("--out: empty path");
+            if (o.out.empty()) throw UsageError("--out: empty path");
         } else if (arg == "--fps") {
             const std::string text = value();
             o.fps = parse_number(text).value_or(0.0);
             if (!std::isfinite(o.fps) || o.fps <= 0.0 || o.fps > 1000.0)
-                throw InputError("--fps: expected a frame rate in (0, 1000] frames per second, got '" + text + "'");
+                throw UsageError("--fps: expected a frame rate in (0, 1000] frames per second, got '" + text + "'");
         } else if (!arg.empty() && arg[0] == '-') {
-            throw InputError("unknown option " + arg);
+            throw UsageError("unknown option " + arg);
         } else if (o.dir.empty()) {
             o.dir = arg;
         } else {
-            throw InputError("one run folder expected, got a second: " + arg);
+            throw UsageError("one run folder expected, got a second: " + arg);
         }
     }
-    if (o.dir.empty()) throw InputError("no run folder given");
+    if (o.dir.empty()) throw UsageError("no run folder given");
     return o;
 }
 
@@ -104,12 +97,12 @@ void check_one_run(const fs::path& dir, const std::map<long, fs::path>& frames) 
         try {
             text = read_png_text(path.string());
         } catch (const std::runtime_error& e) {
-            throw InputError(e.what());
+            throw UsageError(e.what());
         }
         const auto it = text.find(kPngRunIdKey);
         const std::string got = it == text.end() ? "" : it->second;
         if (got != run_id)
-            throw InputError(path.string() + ": not written by the run in " + (dir / "run.json").string() + " (" +
+            throw UsageError(path.string() + ": not written by the run in " + (dir / "run.json").string() + " (" +
                              (got.empty() ? std::string("no run id") : "run_id " + got) + ", run.json has " + run_id +
                              "); the folder mixes runs: simulate again with --overwrite");
     }
@@ -142,18 +135,18 @@ int video_command(int argc, char** argv) {
     }
     try {
         o = parse(argc, argv);
-        if (!fs::is_directory(o.dir)) throw InputError(o.dir.string() + ": not a folder");
+        if (!fs::is_directory(o.dir)) throw UsageError(o.dir.string() + ": not a folder");
         frames = frames_in(o.dir);
-        if (frames.empty()) throw InputError(o.dir.string() + ": no frame_NNNNN.png images (did the run write PNG?)");
+        if (frames.empty()) throw UsageError(o.dir.string() + ": no frame_NNNNN.png images (did the run write PNG?)");
         long expected = frames.begin()->first;
         for (const auto& [number, path] : frames) {
             if (number != expected)
-                throw InputError(o.dir.string() + ": frame " + std::to_string(expected) +
+                throw UsageError(o.dir.string() + ": frame " + std::to_string(expected) +
                                  ".png is missing (frames must be numbered without gaps)");
             ++expected;
         }
         check_one_run(o.dir, frames);
-    } catch (const InputError& e) {
+    } catch (const UsageError& e) {
         std::fprintf(stderr, "pnet video: %s\n%s", e.what(), kUsage);
         return 2;
     } catch (const fs::filesystem_error& e) {
