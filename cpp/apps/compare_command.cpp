@@ -45,15 +45,10 @@ Options parse(int argc, char** argv) {
     std::vector<std::string> dirs;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
-        auto value = [&] { return option_value(argc, argv, i); };
         if (arg == "--out") {
-            o.out = value();
-            if (o.out.empty()) throw UsageError("--out: empty path");
+            o.out = path_value(argc, argv, i);
         } else if (arg == "--dx") {
-            const std::string text = value();
-            o.dx = parse_number(text).value_or(0.0);
-            if (!std::isfinite(o.dx) || !(o.dx > 0.0))
-                throw UsageError("--dx: expected a positive number, got \"" + text + "\"");
+            o.dx = number_value(argc, argv, i, [](double x) { return std::isfinite(x) && x > 0.0; }, "a positive number");
         } else if (arg == "--image") {
             o.image = true;
         } else if (arg.size() > 1 && arg[0] == '-') {

@@ -39,15 +39,11 @@ Options parse(int argc, char** argv) {
     Options o;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
-        auto value = [&] { return option_value(argc, argv, i); };
         if (arg == "--out") {
-            o.out = value();
-            if (o.out.empty()) throw UsageError("--out: empty path");
+            o.out = path_value(argc, argv, i);
         } else if (arg == "--fps") {
-            const std::string text = value();
-            o.fps = parse_number(text).value_or(0.0);
-            if (!std::isfinite(o.fps) || o.fps <= 0.0 || o.fps > 1000.0)
-                throw UsageError("--fps: expected a frame rate in (0, 1000] frames per second, got '" + text + "'");
+            o.fps = number_value(argc, argv, i, [](double x) { return std::isfinite(x) && x > 0.0 && x <= 1000.0; },
+                                 "a frame rate in (0, 1000] frames per second");
         } else if (!arg.empty() && arg[0] == '-') {
             throw UsageError("unknown option " + arg);
         } else if (o.dir.empty()) {
