@@ -12,18 +12,8 @@ first-order error (the paper Cam-Clay variant is off by ~1e-2).
 import pytest
 import torch
 
-from plasticitynet.materials import (
-    APEX,
-    BRANCH_NAMES,
-    COMPRESSION_TIP,
-    CONE,
-    ELASTIC,
-    ELLIPSE,
-    TENSION_TIP,
-    YIELD,
-    clamp_sigma,
-    unimodular_shift,
-)
+from plasticitynet.materials import BRANCH_NAMES, clamp_sigma, unimodular_shift
+from plasticitynet.materials.branches import APEX, COMPRESSION_TIP, CONE, ELASTIC, ELLIPSE, TENSION_TIP, YIELD
 
 ALL = ["sand", "snow", "snow_paper", "metal", "metal_perfect", "metal_nh", "metal_nh_perfect"]
 IDEMPOTENT = [m for m in ALL if m != "snow_paper"]

@@ -195,6 +195,44 @@ GmshMeshData read_in_child(const std::string& path, int type) {
     return d;
 }
 
+/// Cuts the entity `hole` (a frame's opening) out of the entity `tag` of dimension `dim`; MeshError
+/// naming `context` if gmsh leaves other than one piece.
+void cut_hole(int dim, int tag, int hole, const std::string& context) {
+    gmsh::vectorpair out;
+    std::vector<gmsh::vectorpair> map;
+    gmsh::model::occ::cut({{dim, tag}}, {{dim, hole}}, out, map);
+    if (out.size() != 1) throw MeshError(context + ": gmsh could not cut the frame's hole");
+}
+
+/// Meshes the model's geometry in `dim` dimensions with elements of one size.
+void generate_mesh(int dim, double element_size) {
+    gmsh::model::occ::synchronize();
+    gmsh::option::setNumber("Mesh.CharacteristicLengthMin", element_size);
+    gmsh::option::setNumber("Mesh.CharacteristicLengthMax", element_size);
+    if (dim == 3) gmsh::option::setNumber("Mesh.Algorithm3D", 1);  // Delaunay
+    gmsh::model::mesh::generate(dim);
+}
+
+/// build() (a shape's geometry in gmsh's OpenCASCADE kernel, returning nothing), meshed in `dim`
+/// dimensions with elements of one size; every gmsh error as a MeshError naming `context`.
+template <int dim, typename Build>
+Mesh<dim> mesh_geometry(const std::string& context, double element_size, Build&& build) {
+    std::lock_guard<std::mutex> lock(gmsh_mutex);
+    GmshSession session;
+    try {
+        gmsh::model::add("shape");
+        build();
+        generate_mesh(dim, element_size);
+        return collect<dim>(dim == 2 ? 2 : 4, context);
+    } catch (const MeshError&) {
+        throw;
+    } catch (const std::exception& e) {
+        throw MeshError(context + ": gmsh failed: " + e.what());
+    } catch (...) {
+        throw MeshError(context + ": gmsh failed");
+    }
+}
+
 }  // namespace
 
 Mesh<2> mesh_shape(const Shape2d& shape, const std::string& context) {
@@ -221,39 +259,19 @@ Mesh<2> mesh_shape(const Shape2d& shape, const std::string& context) {
     if (!(shape.element_size > 0.0) || !(shape.element_size <= extent * (1.0 + 1e-9)))
         fail("element_size must be > 0 and at most the shape's size (" + std::to_string(extent) + " m)");
 
-    std::lock_guard<std::mutex> lock(gmsh_mutex);
-    GmshSession session;
-    try {
-        gmsh::model::add("shape");
-        int surface = 0;
+    return mesh_geometry<2>(context, shape.element_size, [&] {
         if (shape.kind == Shape2d::Kind::Disk) {
-            surface = gmsh::model::occ::addDisk(shape.center[0], shape.center[1], 0.0, shape.radius, shape.radius);
-        } else {
-            surface = gmsh::model::occ::addRectangle(shape.min[0], shape.min[1], 0.0, size[0], size[1]);
-            if (shape.kind == Shape2d::Kind::Frame) {
-                const double t = shape.thickness;
-                const int hole = gmsh::model::occ::addRectangle(shape.min[0] + t, shape.min[1] + t, 0.0,
-                                                                size[0] - 2.0 * t, size[1] - 2.0 * t);
-                gmsh::vectorpair out;
-                std::vector<gmsh::vectorpair> map;
-                gmsh::model::occ::cut({{2, surface}}, {{2, hole}}, out, map);
-                if (out.size() != 1) fail("gmsh could not cut the frame's hole");
-                surface = out[0].second;
-            }
+            gmsh::model::occ::addDisk(shape.center[0], shape.center[1], 0.0, shape.radius, shape.radius);
+            return;
         }
-        gmsh::model::occ::synchronize();
-        gmsh::option::setNumber("Mesh.CharacteristicLengthMin", shape.element_size);
-        gmsh::option::setNumber("Mesh.CharacteristicLengthMax", shape.element_size);
-        gmsh::model::mesh::generate(2);
-        return collect<2>(2, context);
-    } catch (const MeshError&) {
-        throw;
-    } catch (const std::exception& e) {
-        fail(std::string("gmsh failed: ") + e.what());
-    } catch (...) {
-        fail("gmsh failed");
-    }
-    return {};
+        const int surface = gmsh::model::occ::addRectangle(shape.min[0], shape.min[1], 0.0, size[0], size[1]);
+        if (shape.kind == Shape2d::Kind::Frame) {
+            const double t = shape.thickness;
+            const int hole = gmsh::model::occ::addRectangle(shape.min[0] + t, shape.min[1] + t, 0.0, size[0] - 2.0 * t,
+                                                            size[1] - 2.0 * t);
+            cut_hole(2, surface, hole, context);
+        }
+    });
 }
 
 Mesh<3> mesh_shape(const Shape3d& shape, const std::string& context) {
@@ -281,41 +299,20 @@ Mesh<3> mesh_shape(const Shape3d& shape, const std::string& context) {
     if (!(shape.element_size > 0.0) || !(shape.element_size <= 4.0 * extent * (1.0 + 1e-9)))
         fail("element_size must be > 0 and at most 4 x the shape's thinnest part (" + std::to_string(extent) + " m)");
 
-    std::lock_guard<std::mutex> lock(gmsh_mutex);
-    GmshSession session;
-    try {
-        gmsh::model::add("shape");
-        int volume = 0;
+    return mesh_geometry<3>(context, shape.element_size, [&] {
         if (shape.kind == Shape3d::Kind::Sphere) {
-            volume = gmsh::model::occ::addSphere(shape.center[0], shape.center[1], shape.center[2], shape.radius);
-        } else {
-            volume = gmsh::model::occ::addBox(shape.min[0], shape.min[1], shape.min[2], size[0], size[1], size[2]);
-            if (shape.kind == Shape3d::Kind::Frame) {
-                // The hole box overshoots both ends along z so that the cut goes cleanly through.
-                const double t = shape.thickness;
-                const int hole = gmsh::model::occ::addBox(shape.min[0] + t, shape.min[1] + t, shape.min[2] - size[2],
-                                                          size[0] - 2.0 * t, size[1] - 2.0 * t, 3.0 * size[2]);
-                gmsh::vectorpair out;
-                std::vector<gmsh::vectorpair> map;
-                gmsh::model::occ::cut({{3, volume}}, {{3, hole}}, out, map);
-                if (out.size() != 1) fail("gmsh could not cut the frame's hole");
-                volume = out[0].second;
-            }
+            gmsh::model::occ::addSphere(shape.center[0], shape.center[1], shape.center[2], shape.radius);
+            return;
         }
-        gmsh::model::occ::synchronize();
-        gmsh::option::setNumber("Mesh.CharacteristicLengthMin", shape.element_size);
-        gmsh::option::setNumber("Mesh.CharacteristicLengthMax", shape.element_size);
-        gmsh::option::setNumber("Mesh.Algorithm3D", 1);  // Delaunay
-        gmsh::model::mesh::generate(3);
-        return collect<3>(4, context);
-    } catch (const MeshError&) {
-        throw;
-    } catch (const std::exception& e) {
-        fail(std::string("gmsh failed: ") + e.what());
-    } catch (...) {
-        fail("gmsh failed");
-    }
-    return {};
+        const int volume = gmsh::model::occ::addBox(shape.min[0], shape.min[1], shape.min[2], size[0], size[1], size[2]);
+        if (shape.kind == Shape3d::Kind::Frame) {
+            // The hole box overshoots both ends along z so that the cut goes cleanly through.
+            const double t = shape.thickness;
+            const int hole = gmsh::model::occ::addBox(shape.min[0] + t, shape.min[1] + t, shape.min[2] - size[2],
+                                                      size[0] - 2.0 * t, size[1] - 2.0 * t, 3.0 * size[2]);
+            cut_hole(3, volume, hole, context);
+        }
+    });
 }
 
 namespace {

@@ -110,16 +110,24 @@ void Preconditioner::apply(const VecX& r, VecX& z) const {
         apply_blocks<3>(inverse_, r, z);
 }
 
+namespace {
+
+/// A Krylov solve's start: d = 0, and |b|; with b = 0 the solve is done (converged, d = 0).
+bool nothing_to_solve(const VecX& b, VecX& d, PcgResult& result, double& b_norm) {
+    d.setZero(b.size());
+    b_norm = b.norm();
+    result.converged = b_norm == 0.0;
+    return result.converged;
+}
+
+}  // namespace
+
 PcgResult solve_pcg(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
                     double relative_tolerance, int max_iterations, PcgWorkspace& work) {
     PcgResult result;
     const Eigen::Index n = b.size();
-    d.setZero(n);
-    const double b_norm = b.norm();
-    if (b_norm == 0.0) {
-        result.converged = true;
-        return result;
-    }
+    double b_norm = 0.0;
+    if (nothing_to_solve(b, d, result, b_norm)) return result;
     VecX &r = work.r, &z = work.z, &p = work.p, &Hp = work.Hp;
     r = b;
     z.resize(n);
@@ -162,12 +170,8 @@ PcgResult solve_bicgstab(const Objective& objective, const VecX& b, const Precon
                          double relative_tolerance, int max_iterations, BicgstabWorkspace& work) {
     PcgResult result;
     const Eigen::Index n = b.size();
-    d.setZero(n);
-    const double b_norm = b.norm();
-    if (b_norm == 0.0) {
-        result.converged = true;
-        return result;
-    }
+    double b_norm = 0.0;
+    if (nothing_to_solve(b, d, result, b_norm)) return result;
     VecX &r = work.r, &r0 = work.r0, &p = work.p, &v = work.v, &s = work.s, &t = work.t, &y = work.y, &z = work.z;
     r = b;
     r0 = b;
