@@ -7,7 +7,8 @@
 #
 # TARGET: fig04 fig05 fig06_10 fig11 fig12 fig13 fig14_16 table1 time_integrator coupling_3d integrators
 #         (its slices integrators_sand, integrators_metal, integrators_snow, integrators_stiff,
-#         integrators_stiff_snow, integrators_3d, integrators_snow_3d, integrators_coupling) sweep_dt sweep_dx
+#         integrators_stiff_snow, integrators_3d, integrators_snow_3d, integrators_metal_3d, integrators_coupling)
+#         sweep_dt sweep_dx
 #         all, or one study (results folder): implicit_eval fem_eval ... (--list prints them).
 # --dry-run      list the jobs that would run, and why, without running them
 # --jobs N       jobs at once (default: every core; each simulation uses `threads` cores, 1 by default)
@@ -17,10 +18,10 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
-known="fig04 fig05 fig06_10 fig11 fig12 fig13 fig14_16 table1 time_integrator coupling_3d integrators integrators_sand integrators_metal integrators_snow integrators_stiff integrators_stiff_snow integrators_3d integrators_snow_3d integrators_coupling sweep_dt sweep_dx all
+known="fig04 fig05 fig06_10 fig11 fig12 fig13 fig14_16 table1 time_integrator coupling_3d integrators integrators_sand integrators_metal integrators_snow integrators_stiff integrators_stiff_snow integrators_3d integrators_snow_3d integrators_metal_3d integrators_coupling sweep_dt sweep_dx all
 implicit_eval implicit_eval_2d representation_ablation regularizer_ablation time_integrator_mpm fem_eval fem_eval_2d coupling_eval coupling_eval_3d
 integrator_study integrator_study_fem integrator_study_sand integrator_study_metal integrator_study_snow
-integrator_study_stiff integrator_study_stiff_snow integrator_study_3d integrator_study_snow_3d integrator_study_coupling"
+integrator_study_stiff integrator_study_stiff_snow integrator_study_3d integrator_study_snow_3d integrator_study_metal_3d integrator_study_coupling"
 known="${known//$'\n'/ }"
 targets=() ; config=() ; extra=() ; dry=0 ; jobs="$(nproc)" ; profile=""
 while (($#)); do
