@@ -232,15 +232,11 @@ FileNotFoundError for a missing directory, ValueError for runs that cannot be co
                 std::vector<std::array<int, dim>> facets_v(static_cast<std::size_t>(f.shape(0)));
                 for (py::ssize_t k = 0; k < f.shape(0); ++k)
                     for (int a = 0; a < dim; ++a) facets_v[k][a] = static_cast<int>(f.data()[k * dim + a]);
-                std::size_t inside = 0;
+                std::vector<Vec<dim>> points_v(static_cast<std::size_t>(p.shape(0)));
+                for (py::ssize_t i = 0; i < p.shape(0); ++i)
+                    for (int a = 0; a < dim; ++a) points_v[i][a] = p.data()[i * dim + a];
                 py::gil_scoped_release release;
-                for (py::ssize_t i = 0; i < p.shape(0); ++i) {
-                    Vec<dim> q;
-                    for (int a = 0; a < dim; ++a) q[a] = p.data()[i * dim + a];
-                    int on = -1;
-                    inside += inside_boundary(q, nodes_v, facets_v, &on);
-                }
-                return inside;
+                return count_inside<dim>(points_v, nodes_v, facets_v);
             };
             return d == 2 ? count(std::integral_constant<int, 2>{}) : count(std::integral_constant<int, 3>{});
         },

@@ -4,10 +4,10 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
-#include <map>
 #include <stdexcept>
 
 #include "pnet/contact/collisions/point_facet.hpp"
+#include "pnet/fem/mesh.hpp"
 #include "pnet/io/ply.hpp"
 
 namespace pnet {
@@ -37,46 +37,42 @@ std::vector<Vec<dim>> points(const std::vector<double>& flat, std::size_t count)
     return out;
 }
 
-/// The closed boundary of a frame's body: 2D, the edges of one triangle only (the elements' outline);
-/// 3D, the frame's triangles (a 3D mesh frame holds the boundary).
+/// The closed boundary of a run's body from one of its mesh frames (the topology is that of every
+/// frame): 2D, the outline of the elements (Mesh::finalize's boundary facets); 3D, the frame's
+/// triangles (a 3D mesh frame holds the boundary).
 template <int dim>
-std::vector<std::array<int, dim>> boundary_facets(const PlyMesh& m) {
+std::vector<std::array<int, dim>> boundary_facets(const PlyMesh& m, const std::string& path) {
     std::vector<std::array<int, dim>> facets;
     if constexpr (dim == 3) {
         for (std::size_t t = 0; t < m.triangles.size(); t += 3)
             facets.push_back({m.triangles[t], m.triangles[t + 1], m.triangles[t + 2]});
     } else {
-        std::map<std::array<int, 2>, std::pair<int, std::array<int, 2>>> edges;  // sorted -> (count, as oriented)
+        Mesh<2> mesh;
+        mesh.x = points<2>(m.position, m.nodes());
         for (std::size_t t = 0; t < m.triangles.size(); t += 3)
-            for (int e = 0; e < 3; ++e) {
-                const std::array<int, 2> edge{m.triangles[t + e], m.triangles[t + (e + 1) % 3]};
-                auto& entry = edges[{std::min(edge[0], edge[1]), std::max(edge[0], edge[1])}];
-                ++entry.first;
-                entry.second = edge;
-            }
-        for (const auto& [key, entry] : edges)
-            if (entry.first == 1) facets.push_back(entry.second);
+            mesh.elements.push_back({m.triangles[t], m.triangles[t + 1], m.triangles[t + 2]});
+        try {
+            mesh.finalize(path);
+        } catch (const MeshError& e) {
+            throw RunInputError(e.what());
+        }
+        facets = std::move(mesh.boundary);
     }
     return facets;
 }
 
+/// How many of B's particles (frame file particle_path) are inside its body (mesh positions, boundary).
 template <int dim>
-long particles_inside(const std::string& particle_path, const PlyMesh& mesh, const RunInfo& run) {
+long particles_inside(const std::string& particle_path, const PlyMesh& mesh,
+                      const std::vector<std::array<int, dim>>& boundary, const RunInfo& run) {
     PlyParticles p;
     try {
         p = read_particles_ply(particle_path, run.dim);
     } catch (const std::runtime_error& e) {
         throw RunInputError(e.what());
     }
-    const std::vector<Vec<dim>> x = points<dim>(mesh.position, mesh.nodes());
-    const std::vector<std::array<int, dim>> facets = boundary_facets<dim>(mesh);
-    const std::vector<Vec<dim>> X = points<dim>(p.position, p.size());
-    long inside = 0;
-    for (const Vec<dim>& q : X) {
-        int on = -1;
-        inside += inside_boundary(q, x, facets, &on);
-    }
-    return inside;
+    return static_cast<long>(
+        count_inside<dim>(points<dim>(p.position, p.size()), points<dim>(mesh.position, mesh.nodes()), boundary));
 }
 
 }  // namespace
@@ -86,6 +82,8 @@ MeshComparison compare_meshes(const RunPair& pair, const std::function<void(std:
     const RunInfo& b = pair.b;
     if (!a.meshes) throw RunInputError(a.json_file + ": the run has no meshes to compare");
     MeshComparison c;
+    std::vector<std::array<int, 2>> boundary_2d;  // B's body, from its first compared frame (coupled runs)
+    std::vector<std::array<int, 3>> boundary_3d;
     for (std::size_t k = 0; k < pair.common.size(); ++k) {
         const int frame = pair.common[k];
         auto mesh_path = [&](const RunInfo& run) {
@@ -138,8 +136,13 @@ MeshComparison compare_meshes(const RunPair& pair, const std::function<void(std:
             const auto found = b.frames.find(frame);
             if (found == b.frames.end())
                 throw RunInputError(b.dir + ": frame " + std::to_string(frame) + " has meshes but no particles");
-            f.penetrations = b.dim == 2 ? particles_inside<2>(found->second, mb, b)
-                                        : particles_inside<3>(found->second, mb, b);
+            if (b.dim == 2) {
+                if (boundary_2d.empty()) boundary_2d = boundary_facets<2>(mb, path_b);
+                f.penetrations = particles_inside<2>(found->second, mb, boundary_2d, b);
+            } else {
+                if (boundary_3d.empty()) boundary_3d = boundary_facets<3>(mb, path_b);
+                f.penetrations = particles_inside<3>(found->second, mb, boundary_3d, b);
+            }
         }
         c.frames.push_back(f);
         if (progress) progress(k + 1, pair.common.size());

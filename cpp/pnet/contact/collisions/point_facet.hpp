@@ -103,4 +103,17 @@ bool inside_boundary(const Vec<2>& p, const std::vector<Vec<2>>& x, const std::v
 bool inside_boundary(const Vec<3>& p, const std::vector<Vec<3>>& x, const std::vector<std::array<int, 3>>& facets,
                      int* facet_on);
 
+/// How many of the points lie inside the region bounded by `facets` (positions x), or on it
+/// (inside_boundary for each).
+template <int dim>
+std::size_t count_inside(const std::vector<Vec<dim>>& points, const std::vector<Vec<dim>>& x,
+                         const std::vector<std::array<int, dim>>& facets) {
+    std::size_t inside = 0;
+    for (const Vec<dim>& p : points) {
+        int on = -1;
+        inside += inside_boundary(p, x, facets, &on);
+    }
+    return inside;
+}
+
 }  // namespace pnet
