@@ -1,6 +1,8 @@
 #pragma once
 // Projection of a small symmetric matrix onto the positive semi-definite cone
 // (eigenvalues clamped at zero), as used by projected Newton (Teran et al. 2005).
+#include <cmath>
+
 #include <Eigen/Core>
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -11,14 +13,21 @@ namespace pnet {
 template <int n>
 Eigen::Matrix<double, n, n> project_psd(const Eigen::Matrix<double, n, n>& A) {
     const Eigen::Matrix<double, n, n> S = 0.5 * (A + A.transpose());
+    if constexpr (n == 2) {
+        // Closed form: eigenvalues m +- r; with one negative, S - l2 I = (l1 - l2) v1 v1^T, so the
+        // clamp l1 v1 v1^T is l1 (S - l2 I) / (2 r).
+        const double a = S(0, 0), b = S(0, 1), c = S(1, 1);
+        if (a >= 0.0 && c >= 0.0 && a * c >= b * b) return S;
+        const double m = 0.5 * (a + c), r = std::hypot(0.5 * (a - c), b);
+        const double l1 = m + r, l2 = m - r;
+        if (!(l1 > 0.0)) return Eigen::Matrix<double, 2, 2>::Zero();
+        if (!(l2 < 0.0)) return S;
+        return (l1 / (2.0 * r)) * (S - l2 * Eigen::Matrix<double, 2, 2>::Identity());
+    }
     // Most Hessians near the reference state are positive definite: a Cholesky
     // factorization (n^3/6 flops) proves it far cheaper than the eigensolver.
     if (Eigen::LLT<Eigen::Matrix<double, n, n>>(S).info() == Eigen::Success) return S;
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, n, n>> eig;
-    if constexpr (n == 2)
-        eig.computeDirect(S);  // closed form, as accurate as the iterative solver in 2x2
-    else
-        eig.compute(S);
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, n, n>> eig(S);
     Eigen::Matrix<double, n, 1> lambda = eig.eigenvalues();
     if (lambda.minCoeff() >= 0.0) return S;
     lambda = lambda.cwiseMax(0.0);

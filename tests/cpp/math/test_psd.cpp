@@ -45,6 +45,36 @@ TEST(ProjectPsd, ClampsNegativeEigenvaluesOnly) {
     check_projection<9>(4);
 }
 
+// The eigenvalue clamp written out, for the closed forms to match.
+template <int n>
+Eigen::Matrix<double, n, n> clamped_by_eigensolver(const Eigen::Matrix<double, n, n>& A) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, n, n>> eig(0.5 * (A + A.transpose()));
+    return eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() * eig.eigenvectors().transpose();
+}
+
+template <int n>
+void check_against_eigensolver(int seed) {
+    test::Random rng(seed);
+    for (int k = 0; k < 200; ++k) {
+        Eigen::Matrix<double, n, n> A = random_symmetric<n>(rng);
+        if (k % 4 == 1) A = -A * A.transpose();                        // negative semi-definite: projects to 0
+        if (k % 4 == 2) A(0, n - 1) = A(n - 1, 0) = 0.0, A(0, 0) = 0.0;  // a zero row and column entry
+        const Eigen::Matrix<double, n, n> expected = clamped_by_eigensolver<n>(A);
+        EXPECT_LT((project_psd<n>(A) - expected).norm(), 1e-12 * std::max(1.0, A.norm())) << A;
+    }
+    // Multiples of the identity (equal eigenvalues) and zero.
+    for (double c : {-2.0, 0.0, 3.0}) {
+        const Eigen::Matrix<double, n, n> I = c * Eigen::Matrix<double, n, n>::Identity();
+        EXPECT_LT((project_psd<n>(I) - clamped_by_eigensolver<n>(I)).norm(), 1e-15);
+    }
+}
+
+TEST(ProjectPsd, IsTheEigenvalueClamp) {
+    check_against_eigensolver<2>(5);
+    check_against_eigensolver<3>(6);
+    check_against_eigensolver<4>(7);
+}
+
 TEST(ProjectPsd, PairBlock) {
     double a = 1.0, b = 3.0;  // eigenvalues 4 and -2
     project_psd_pair(a, b);
