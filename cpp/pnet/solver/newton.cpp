@@ -249,18 +249,17 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
         if (work_search) {
             // Trial points about their own reference: g_trial = R(x + alpha d), and the change of
             // the step's potential is the work of R along the segment, by the trapezoid rule
-            // (exact for a quadratic): Armijo on it, halving alpha.
-            // The full step, taken almost always, gets its Hessian in the same pass.
+            // (exact for a quadratic): Armijo on it, halving alpha. A trial costs a gradient pass;
+            // the accepted iterate's Hessian is prepared at the next iteration's start, if the
+            // iterate is not converged and the last step did not contract enough to keep it (lazy).
             double alpha = 1.0, trial = energy, work = 0.0;
-            bool accepted = false, hessian_at_trial = false;
-            for (int halvings = 0; halvings <= options.max_line_search && !accepted; ++halvings) {
+            bool accepted = false;
+            int halvings = 0;
+            for (; halvings <= options.max_line_search && !accepted; ++halvings) {
                 if (halvings > 0) alpha *= 0.5;
                 x_trial = x + alpha * d;
                 if (objective.rebase(x_trial)) ++stats.rebases;
-                hessian_at_trial = halvings == 0;
-                trial = hessian_at_trial ? objective.value_gradient_hessian(x_trial, g_trial)
-                                         : objective.value_gradient(x_trial, g_trial);
-                stats.hessians += hessian_at_trial;
+                trial = objective.value_gradient(x_trial, g_trial);
                 ++stats.line_search_steps;
                 if (!std::isfinite(trial) || !g_trial.allFinite()) continue;
                 work = 0.5 * alpha * (slope_full + g_trial.dot(d));
@@ -281,12 +280,10 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             x.swap(x_trial);
             g.swap(g_trial);
             energy = trial;
-            if (!hessian_at_trial) {
-                objective.prepare_hessian(x);
-                ++stats.hessians;
-            }
-            objective.hessian_diagonal(diagonal);
+            const double residual_before = residual;
             residual = residual_of(g, options, diagonal);
+            const bool full_step = halvings == 1;
+            hessian_owed = !(lazy && full_step && residual <= options.lazy_hessian * residual_before);
             stats.iterations = it + 1;
             stats.energy = work_energy;
             stats.residual = residual;
