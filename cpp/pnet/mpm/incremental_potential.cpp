@@ -121,12 +121,22 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
     else this->set_forms({&inertia_, &particle_energy_});
     particle_energy_.begin_step(particles.size());
     this->invalidate_pattern();  // a new grid
-    multigrid_built_ = false;
+    multigrid_built_ = multigrid_stale_ = false;
 }
 
 template <int dim>
 void IncrementalPotential<dim>::hessian_prepared(const VecX& /*x*/) {
-    if (!multigrid_on_ || (multigrid_built_ && !multigrid_per_hessian_)) return;
+    if (multigrid_on_ && multigrid_built_ && multigrid_per_hessian_) multigrid_stale_ = true;
+}
+
+template <int dim>
+void IncrementalPotential<dim>::apply_preconditioner(const VecX& r, VecX& z) const {
+    if (!multigrid_built_ || multigrid_stale_) build_multigrid();
+    multigrid_.apply(r, z);
+}
+
+template <int dim>
+void IncrementalPotential<dim>::build_multigrid() const {
     if (!multigrid_built_) {  // this step's grid
         std::vector<int> coordinates(dim * dof_node_.size());
         for (std::size_t k = 0; k < dof_node_.size(); ++k) grid_->coordinates(dof_node_[k], &coordinates[dim * k]);
@@ -139,6 +149,7 @@ void IncrementalPotential<dim>::hessian_prepared(const VecX& /*x*/) {
     }
     multigrid_.set_operator(*assembled, this->hessian_symmetric());
     multigrid_built_ = true;
+    multigrid_stale_ = false;
 }
 
 template <int dim>

@@ -116,17 +116,18 @@ public:
     void set_project_psd(bool project) { particle_energy_.set_project_psd(project); }
 
     /// The linear solve's preconditioner: Galerkin multigrid on the grid's nodes (solver/multigrid.hpp)
-    /// built from the Hessian assembled at the step's first Hessian pass and kept for the step's
-    /// solves (`per_hessian`: rebuilt at every Hessian pass), or none of its own (off: Newton's
-    /// Jacobi or block Jacobi). Hessian products stay matrix-free.
+    /// built from the Hessian assembled when a step's first linear solve applies it (the Hessian
+    /// prepared last) and kept for the step's solves (`per_hessian`: rebuilt after every Hessian
+    /// pass), or none of its own (off: Newton's Jacobi or block Jacobi). A step that needs no linear
+    /// solve builds none. Hessian products stay matrix-free.
     void set_multigrid(bool on, bool per_hessian = false, const MultigridOptions& options = {}) {
         multigrid_on_ = on;
         multigrid_per_hessian_ = per_hessian;
-        multigrid_built_ = false;
+        multigrid_built_ = multigrid_stale_ = false;
         multigrid_ = GridMultigrid(options);
     }
     bool has_preconditioner() const override { return multigrid_on_; }
-    void apply_preconditioner(const VecX& r, VecX& z) const override { multigrid_.apply(r, z); }
+    void apply_preconditioner(const VecX& r, VecX& z) const override;
     const GridMultigrid& multigrid() const { return multigrid_; }
 
     /// Seconds spent in the particle energies (evaluate) and in Hessian-vector
@@ -164,9 +165,12 @@ private:
     std::vector<double> floor_normal_velocity_;  // their v*_y before it was held at 0
     FloorFrictionForm<dim> floor_friction_form_;
     bool multigrid_on_ = false, multigrid_per_hessian_ = false;
-    bool multigrid_built_ = false;  // this step's hierarchy is built
-    GridMultigrid multigrid_;
-    SparseMatrix multigrid_matrix_;
+    // The hierarchy, built on demand from const apply_preconditioner (a cache of the Hessian).
+    void build_multigrid() const;
+    mutable bool multigrid_built_ = false;  // this step's hierarchy is built
+    mutable bool multigrid_stale_ = false;  // rebuild at the next application (per_hessian)
+    mutable GridMultigrid multigrid_;
+    mutable SparseMatrix multigrid_matrix_;
     mutable std::vector<int> assembly_start_;
 };
 

@@ -330,6 +330,15 @@ TYPED_TEST(ImplicitTest, AssembledHessianEqualsTheMatrixFreeProductAndCholeskySo
         MultigridOptions coarse_early;
         coarse_early.coarsest_nodes = 24;  // a tiny scene's grid: coarsen it all the same
         E.set_multigrid(true, false, coarse_early);
+        // A Hessian pass alone builds nothing (a step that converges without a linear solve, a body
+        // in free fall, pays for no hierarchy); the first preconditioner application builds it.
+        E.value_gradient_hessian(f.v, g);
+        EXPECT_FALSE(E.multigrid().ready());
+        VecX z;
+        E.apply_preconditioner(g, z);
+        EXPECT_TRUE(E.multigrid().ready());
+        EXPECT_TRUE(z.allFinite());
+        EXPECT_GT(g.dot(z), 0.0);  // M^-1 is positive definite
         VecX v_multigrid = E.v_star();
         const NewtonStats multigrid = minimize(E, v_multigrid, options);
         const int levels = E.multigrid().levels();
