@@ -17,7 +17,7 @@ std::vector<OptionField<O>> make_fields() {
     OptionField<O> lazy =
         number_or_auto_option("lazy_hessian", "--lazy-hessian", 0.0, false, 1.0, true, &O::lazy_hessian,
                               "keep the last Hessian while each Newton iteration cuts the residual by this factor "
-                              "(0: never); auto: the integrator's measured value (plasticitynet 0.8, the others 0.5)");
+                              "(0: never); auto: the integrator's measured value (plasticitynet 0.8, return_map 0.1, the others 0.5)");
     return {
         number_option("newton_tolerance", "--newton-tol", 0.0, true, kNoBound, false, &O::newton_tolerance,
                       "Newton's tolerance on the mass-weighted velocity residual", "m/s"),

@@ -104,7 +104,7 @@ struct ImplicitOptions {
     // Newton keeps the last Hessian while each iteration cuts the residual by
     // this factor (NewtonOptions::lazy_hessian; 0: a fresh one every
     // iteration); -1 ("auto", the default): the integrator's measured value
-    // (IntegratorInfo::lazy_hessian: plasticitynet 0.8, the others 0.5). 0.5 halved
+    // (IntegratorInfo::lazy_hessian: plasticitynet 0.8, return_map 0.1, the others 0.5). 0.5 halved
     // the energy time on sand_column_2d and cut it by 40% on snowball_2d at dt 1e-3,
     // with as many or fewer Newton iterations.
     double lazy_hessian = -1.0;

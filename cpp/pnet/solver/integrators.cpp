@@ -77,7 +77,7 @@ const std::vector<IntegratorInfo>& integrators() {
         {Method::ReturnMap, "return_map",
          "backward Euler with the return mapping's stress and its consistent tangent (skew part kept for "
          "non-associative flow), Newton with the work line search; the classical implicit solver, no model file",
-         true, false, true, true, true, "tangent_damping", 0.5, return_map_energy<2>, return_map_energy<3>},
+         true, false, true, true, true, "tangent_damping", 0.1, return_map_energy<2>, return_map_energy<3>},
         {Method::Lagged, "lagged",
          "backward Euler on the elastic energy alone; the return mapping after the step (Ziran, HOT)", true, false,
          true, true, false, "", 0.5, lagged_energy<2>, lagged_energy<3>},

@@ -41,7 +41,9 @@ struct IntegratorInfo {
     const char* options;      // the implicit options that apply beyond Newton's and the linear solve's
     /// Newton's lazy Hessian (NewtonOptions::lazy_hessian) that "auto" stands for, measured: a learned
     /// step's Hessian pass costs 2.6 of its trial passes, so plasticitynet keeps its Hessian longer
-    /// (0.8; docs/integrators.md, "Keeping the Hessian"); the others 0.5 (0 for explicit: no Newton).
+    /// (0.8; docs/integrators.md, "Keeping the Hessian"); return_map 0.1 (its work line search keeps a
+    /// tangent only after a near-quadratic step: docs/solver.md, "The work line search's Hessian,
+    /// owed"); the others 0.5 (0 for explicit: no Newton).
     double lazy_hessian;
     /// The energy its steps sum, over MPM particles, FEM elements or both (null: explicit).
     EnergyFactory<2> energy_2d = nullptr;

@@ -625,7 +625,7 @@ TEST(IntegratorSettings, ReadsAndValidatesTheIntegratorBlock) {
     // The lazy Hessian's "auto" (the default) is the integrator's measured value; a number overrides it.
     EXPECT_EQ(ImplicitOptions{}.lazy_hessian, -1.0);
     EXPECT_EQ(ImplicitOptions{}.newton_options(1e-3, Method::PlasticityNet).lazy_hessian, 0.8);
-    EXPECT_EQ(ImplicitOptions{}.newton_options(1e-3, Method::ReturnMap).lazy_hessian, 0.5);
+    EXPECT_EQ(ImplicitOptions{}.newton_options(1e-3, Method::ReturnMap).lazy_hessian, 0.1);
     EXPECT_EQ(ImplicitOptions{}.newton_options(1e-3, Method::Lagged).lazy_hessian, 0.5);
     EXPECT_EQ(o.newton_options(1e-3, Method::PlasticityNet).lazy_hessian, 0.0);
     EXPECT_EQ(ImplicitOptions::from_json({{"lazy_hessian", "auto"}}, "s.json").lazy_hessian, -1.0);
