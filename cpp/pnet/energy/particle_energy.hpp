@@ -35,6 +35,12 @@ public:
     virtual void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
                                const std::vector<int>& object) = 0;
 
+    /// A new step (before its first set_reference): whatever an energy carries from one reference to
+    /// the next within a step (ReturnMappingEnergy's SVD warm start) is dropped, so that a step's
+    /// result depends on its input state alone (a run resumed from a checkpoint equals the
+    /// uninterrupted one).
+    virtual void begin_step() {}
+
     /// psi[p] for every particle of the last set_reference(); for Order >=
     /// Gradient P[p] = dpsi/dF; for Order::Hessian H[p] = d2psi/dF2, projected
     /// to PSD when project_psd (what Newton needs; raw for derivative checks).

@@ -20,11 +20,14 @@ void ReturnMappingEnergy<dim>::set_reference(const std::vector<Mat<dim>>& F0, co
     hardening_ = hardening;
     object_ = object;
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(F0.size());
+    // The last reference's SVDs (the same particles, the last Newton iterate's) start this one's:
+    // polar_svd's warm start. A step's first reference starts cold (begin_step).
+    const bool warm = static_cast<std::ptrdiff_t>(svd0_.size()) == n;
     svd0_.resize(n);
     stress0_.resize(n);
 #pragma omp parallel for schedule(static) if (n >= 64)
     for (std::ptrdiff_t p = 0; p < n; ++p) {
-        svd0_[p] = clamped_svd<dim>(F0[p]);
+        svd0_[p] = warm ? clamped_svd<dim>(F0[p], svd0_[p].V) : clamped_svd<dim>(F0[p]);
         stress0_[p] = materials_[object[p]].elastoplastic_stress(svd0_[p], hardening[p]);
     }
 }

@@ -36,6 +36,7 @@ public:
         return true;
     }
     bool tangent_hessian() const override { return true; }
+    void begin_step() override { svd0_.clear(); }
     bool symmetric_hessian() const override { return symmetric_; }
 
 private:

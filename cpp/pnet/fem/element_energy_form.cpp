@@ -15,6 +15,7 @@ void ElementEnergyForm<dim>::begin_step(const std::vector<Mat<dim>>& plastic_inv
     P_.resize(elements);
     psi_.resize(elements);
     H_.resize(elements);
+    energy_.begin_step();
 }
 
 template <int dim>

@@ -242,6 +242,14 @@ PolarSVD<dim> clamped_svd(const Mat<dim>& F) {
     return svd;
 }
 
+template <int dim>
+PolarSVD<dim> clamped_svd(const Mat<dim>& F, const Mat<dim>& V_start) {
+    require_finite<dim>(F, "deformation gradient F");
+    PolarSVD<dim> svd = polar_svd<dim>(F, V_start);
+    svd.Sigma = clamp_singular_values<dim>(svd.Sigma);
+    return svd;
+}
+
 template class Elasticity<2>;
 template class Elasticity<3>;
 template Tensor4<2> isotropic_dPdF<2>(const PolarSVD<2>&, const Vec<2>&, const Mat<2>&,
@@ -252,6 +260,8 @@ template Vec<2> clamp_singular_values<2>(const Vec<2>&);
 template Vec<3> clamp_singular_values<3>(const Vec<3>&);
 template PolarSVD<2> clamped_svd<2>(const Mat<2>&);
 template PolarSVD<3> clamped_svd<3>(const Mat<3>&);
+template PolarSVD<2> clamped_svd<2>(const Mat<2>&, const Mat<2>&);
+template PolarSVD<3> clamped_svd<3>(const Mat<3>&, const Mat<3>&);
 template void require_finite<2>(const Mat<2>&, const char*);
 template void require_finite<3>(const Mat<3>&, const char*);
 

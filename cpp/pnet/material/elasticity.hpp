@@ -97,6 +97,9 @@ Vec<dim> clamp_singular_values(const Vec<dim>& Sigma);
 /// F has a non-finite entry (named by row and column).
 template <int dim>
 PolarSVD<dim> clamped_svd(const Mat<dim>& F);
+/// The same, the SVD started from V_start (polar_svd's warm start).
+template <int dim>
+PolarSVD<dim> clamped_svd(const Mat<dim>& F, const Mat<dim>& V_start);
 
 /// Throws std::invalid_argument naming `what` and the first non-finite entry.
 template <int dim>

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <utility>
 
+#include <Eigen/Geometry>
+
 namespace pnet {
 
 namespace {
@@ -121,9 +123,15 @@ inline void swap_columns(Mat<3>& A, Mat<3>& V, int i, int j) {
 // to four sweeps reach round-off for any F; an MPM step's F is close to a
 // rotation times a near-identity stretch, where two usually do.
 template <>
-PolarSVD<3> polar_svd<3>(const Mat<3>& F) {
-    Mat<3> A = F.transpose() * F;
-    Mat<3> V = Mat<3>::Identity();
+PolarSVD<2> polar_svd<2>(const Mat<2>& F, const Mat<2>& /*V_start*/) {
+    return polar_svd<2>(F);
+}
+
+namespace {
+
+PolarSVD<3> polar_svd_from(const Mat<3>& F, Mat<3> V) {
+    Mat<3> A = V.transpose() * (F.transpose() * F) * V;
+    A = (0.5 * (A + A.transpose())).eval();  // exactly symmetric, as the rotations assume
     for (int sweep = 0; sweep < 8; ++sweep) {
         const double off = A(0, 1) * A(0, 1) + A(0, 2) * A(0, 2) + A(1, 2) * A(1, 2);
         const double diagonal = A(0, 0) * A(0, 0) + A(1, 1) * A(1, 1) + A(2, 2) * A(2, 2);
@@ -146,6 +154,28 @@ PolarSVD<3> polar_svd<3>(const Mat<3>& F) {
     out.V = V;
     out.Sigma << B(0, 0), B(1, 1), B(2, 2);
     return out;
+}
+
+}  // namespace
+
+template <>
+PolarSVD<3> polar_svd<3>(const Mat<3>& F) {
+    return polar_svd_from(F, Mat<3>::Identity());
+}
+
+template <>
+PolarSVD<3> polar_svd<3>(const Mat<3>& F, const Mat<3>& V_start) {
+    // Gram-Schmidt, keeping the handedness (the sorting's column swaps keep det V = +1).
+    Mat<3> V = Mat<3>::Identity();
+    const double n0 = V_start.col(0).norm();
+    const Vec<3> e1 = V_start.col(1) - V_start.col(0).dot(V_start.col(1)) / (n0 * n0) * V_start.col(0);
+    const double n1 = e1.norm();
+    if (n0 > 1e-6 && n1 > 1e-6 && std::isfinite(n0) && std::isfinite(n1)) {  // else: a degenerate start
+        V.col(0) = V_start.col(0) / n0;
+        V.col(1) = e1 / n1;
+        V.col(2) = V.col(0).cross(V.col(1));
+    }
+    return polar_svd_from(F, V);
 }
 
 }  // namespace pnet

@@ -24,4 +24,11 @@ struct PolarSVD {
 template <int dim>
 PolarSVD<dim> polar_svd(const Mat<dim>& F);
 
+/// The same, started from a rotation V_start near F's V (a nearby F's: the previous Newton iterate's,
+/// the previous step's), which spares the 3x3 Jacobi sweeps most of their work; V_start is
+/// re-orthonormalized first, so a start carried over many calls does not drift. Any start gives
+/// the same decomposition to round-off. d = 2: the closed form, V_start unused.
+template <int dim>
+PolarSVD<dim> polar_svd(const Mat<dim>& F, const Mat<dim>& V_start);
+
 }  // namespace pnet

@@ -15,6 +15,7 @@ void ParticleEnergyForm<dim>::begin_step(std::size_t particles) {
     K_.resize(particles);
     particle_product_.resize(particles);
     energy_seconds_ = multiply_seconds_ = 0.0;
+    energy_.begin_step();
 }
 
 template <int dim>
@@ -165,10 +166,27 @@ void ParticleEnergyForm<dim>::node_blocks(VecX& blocks) const {
 }
 
 template <int dim>
+void ParticleEnergyForm<dim>::node_diagonal(VecX& diagonal) const {
+    // node_blocks' diagonal entries alone (the same sums in the same order).
+    diagonal.setZero(problem_.size());
+    double* out = diagonal.data();
+    problem_.grid().for_each_particle_coloured([&](int p) {
+        const Tensor4<dim>& K = K_[p];
+        const int* dof = problem_.stencil_dofs(p);
+        const Vec<dim>* grad = problem_.stencil_gradients(p);
+        for (int s = 0; s < kStencil; ++s) {
+            const Vec<dim>& g = grad[s];
+            double* D = out + dim * dof[s];
+            for (int a = 0; a < dim; ++a) D[a] += g.dot(K.template block<dim, dim>(a * dim, a * dim) * g);
+        }
+    });
+}
+
+template <int dim>
 void ParticleEnergyForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
-    node_blocks(scratch_);
+    node_diagonal(scratch_);
     const VecX& free = problem_.free_components();
-    for (Eigen::Index i = 0; i < diagonal.size(); ++i) diagonal[i] += scratch_[i * dim + i % dim] * free[i];
+    for (Eigen::Index i = 0; i < diagonal.size(); ++i) diagonal[i] += scratch_[i] * free[i];
 }
 
 template <int dim>

@@ -76,5 +76,39 @@ TYPED_TEST(PolarSvdTest, RecoversKnownSingularValues) {
     }
 }
 
+// A warm start (a nearby F's V, a random rotation, a reflection, a non-orthonormal guess) gives the
+// decomposition of the cold start to round-off.
+TEST(PolarSvd, WarmStartGivesTheSameDecomposition) {
+    test::Random rng(11);
+    auto random_matrix = [&](double scale) {
+        Mat<3> M;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) M(i, j) = rng.uniform(-scale, scale);
+        return M;
+    };
+    int near = 0;
+    for (int k = 0; k < 200; ++k) {
+        const Mat<3> F = (k % 5 == 0 ? Mat<3>(Mat<3>::Identity()) : Mat<3>(Mat<3>::Zero())) + random_matrix(1.0);
+        const PolarSVD<3> cold = polar_svd<3>(F);
+        Mat<3> start;
+        switch (k % 4) {
+            case 0: start = polar_svd<3>(F + random_matrix(1e-3)).V, ++near; break;  // a nearby F's
+            case 1: start = polar_svd<3>(random_matrix(1.0)).V; break;              // any rotation
+            case 2: start = -Mat<3>::Identity(); break;                              // a reflection
+            default: start = Mat<3>::Identity() + random_matrix(0.3); break;        // not orthonormal
+        }
+        const PolarSVD<3> warm = polar_svd<3>(F, start);
+        EXPECT_LT((warm.Sigma - cold.Sigma).norm(), 1e-12 * std::max(1.0, cold.Sigma.norm())) << F;
+        EXPECT_LT((warm.compose(warm.Sigma) - F).norm(), 1e-12 * std::max(1.0, F.norm()));
+        EXPECT_NEAR(warm.U.determinant(), 1.0, 1e-12);
+        EXPECT_NEAR(warm.V.determinant(), 1.0, 1e-12);
+        EXPECT_LT((warm.V.transpose() * warm.V - Mat<3>::Identity()).norm(), 1e-12);
+    }
+    EXPECT_GT(near, 10);
+    // A degenerate start falls back to the cold one.
+    const Mat<3> F = random_matrix(1.0);
+    EXPECT_LT((polar_svd<3>(F, Mat<3>::Zero()).Sigma - polar_svd<3>(F).Sigma).norm(), 1e-12);
+}
+
 }  // namespace
 }  // namespace pnet
