@@ -66,6 +66,12 @@ PolarSVD<2> polar_svd<2>(const Mat<2>& F) {
     return out;
 }
 
+// The closed form needs no start.
+template <>
+PolarSVD<2> polar_svd<2>(const Mat<2>& F, const Mat<2>& /*V_start*/) {
+    return polar_svd<2>(F);
+}
+
 namespace {
 
 /// One Jacobi rotation in the (p, q) plane that zeroes A(p, q) of the
@@ -121,12 +127,8 @@ inline void swap_columns(Mat<3>& A, Mat<3>& V, int i, int j) {
 // and Givens QR of B = F V gives U (a rotation) and R = diag(Sigma) up to
 // round-off: R(0,0), R(1,1) >= 0 and R(2,2) carries the sign of det F. Three
 // to four sweeps reach round-off for any F; an MPM step's F is close to a
-// rotation times a near-identity stretch, where two usually do.
-template <>
-PolarSVD<2> polar_svd<2>(const Mat<2>& F, const Mat<2>& /*V_start*/) {
-    return polar_svd<2>(F);
-}
-
+// rotation times a near-identity stretch, where two usually do. Started from a nearby F's V (the
+// warm start below), they start near convergence.
 namespace {
 
 PolarSVD<3> polar_svd_from(const Mat<3>& F, Mat<3> V) {
