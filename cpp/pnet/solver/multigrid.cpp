@@ -222,8 +222,22 @@ void GridMultigrid::set_operator(const SparseMatrix& A, bool symmetric) {
         level.r.resize(n);
     }
     if (!coarsest_) coarsest_ = std::make_unique<Coarsest>();
+    // A positive semi-definite operator can make the coarsest one singular to round-off (a free
+    // component that nothing but round-off holds); its LDL^T then has zero or negative pivots, and the
+    // V-cycle would not be positive definite. Shifted by a relative 1e-10 of its diagonal (x100 until
+    // every pivot is positive), the coarsest solve stays a positive definite approximation.
+    auto pivots_positive = [&] {
+        if (coarsest_->ldlt.info() != Eigen::Success) return false;
+        const VecX& D = coarsest_->ldlt.vectorD();
+        return D.size() == 0 || D.minCoeff() > 1e-14 * D.cwiseAbs().maxCoeff();
+    };
     coarsest_->ldlt.compute(S);
-    if (coarsest_->ldlt.info() != Eigen::Success)
+    for (double shift = 1e-10; !pivots_positive() && shift <= 1e-4; shift *= 100.0) {
+        SparseMatrix shifted = S;
+        for (Eigen::Index i = 0; i < shifted.rows(); ++i) shifted.coeffRef(i, i) *= 1.0 + shift;
+        coarsest_->ldlt.compute(shifted);
+    }
+    if (!pivots_positive())
         throw std::invalid_argument("GridMultigrid::set_operator: the coarsest operator (" +
                                     std::to_string(S.rows()) + " unknowns) is not positive definite");
     ready_ = true;

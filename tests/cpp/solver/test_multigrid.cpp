@@ -30,8 +30,8 @@ struct GridProblem {
     VecX free;
     SparseMatrix A;
 
-    GridProblem(int cells, double youngs, double dt = 1e-3, double nu = 0.3, bool floor = true) {
-        const double dx = 1.0 / cells, rho = 1000.0;
+    GridProblem(int cells, double youngs, double dt = 1e-3, double nu = 0.3, bool floor = true, double rho = 1000.0) {
+        const double dx = 1.0 / cells;
         const double mu = youngs / (2 * (1 + nu)), lambda = youngs * nu / ((1 + nu) * (1 - 2 * nu));
         const int n1 = cells + 1;
         std::vector<int> dof(static_cast<std::size_t>(n1 * n1), -1);
@@ -202,6 +202,25 @@ TEST(GridMultigrid, IsASymmetricPositiveDefiniteOperator) {
     EXPECT_NEAR(y.dot(Mx), x.dot(My), 1e-10 * std::abs(y.dot(Mx)));
     EXPECT_GT(x.dot(Mx), 0.0);
     EXPECT_GT(y.dot(My), 0.0);
+}
+
+// A positive semi-definite operator with a null space (stiffness without mass or a floor: the rigid
+// translations) makes the coarsest operator singular; the multigrid is still built (its coarsest
+// factorization shifted by a relative 1e-10 of its diagonal) and stays symmetric positive definite
+// (before: a V-cycle with x . M^-1 x = -4e16). The stiff sand column's collapse still stops the
+// multigrid at frame 4-5 with "the coarsest operator is not positive definite", which no relative
+// shift up to 1e-4 cures: not yet understood (docs/solver.md).
+TEST(GridMultigrid, BuildsOnASingularPositiveSemiDefiniteOperator) {
+    const GridProblem problem(24, 1e6, 1e-3, 0.3, false, 0.0);
+    GridMultigrid multigrid;
+    multigrid.set_grid(2, problem.coordinates, problem.free);
+    ASSERT_NO_THROW(multigrid.set_operator(problem.A));
+    test::Random rng(5);
+    VecX x(problem.A.rows()), Mx;
+    for (Eigen::Index i = 0; i < x.size(); ++i) x[i] = rng.uniform(-1.0, 1.0);
+    multigrid.apply(x, Mx);
+    EXPECT_TRUE(Mx.allFinite());
+    EXPECT_GT(x.dot(Mx), 0.0);
 }
 
 TEST(GridMultigrid, OneAndTwoThreadsGiveTheSameResult) {
