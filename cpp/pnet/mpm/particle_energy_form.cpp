@@ -147,39 +147,35 @@ void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) con
 }
 
 template <int dim>
-void ParticleEnergyForm<dim>::node_blocks(VecX& blocks) const {
-    constexpr int kB = dim * dim;
-    blocks.setZero(problem_.size() * dim);
-    double* out = blocks.data();
+template <bool kDiagonalOnly>
+void ParticleEnergyForm<dim>::node_entries(VecX& out) const {
+    // Per node, its d x d block (row-major) or the block's diagonal alone (the same sums in the
+    // same order): d = e_b at the node gives dG = e_b g^T, so entry (a, b) is g^T K[(a, .), (b, .)] g.
+    constexpr int kPerNode = kDiagonalOnly ? dim : dim * dim;
+    out.setZero(problem_.size() / dim * kPerNode);
+    double* values = out.data();
     problem_.grid().for_each_particle_coloured([&](int p) {
         const Tensor4<dim>& K = K_[p];
         const int* dof = problem_.stencil_dofs(p);
         const Vec<dim>* grad = problem_.stencil_gradients(p);
         for (int s = 0; s < kStencil; ++s) {
             const Vec<dim>& g = grad[s];
-            double* B = out + kB * dof[s];  // row-major
-            // d = e_b at this node: dG = e_b g^T, so entry (a, b) is g^T K[(a, .), (b, .)] g.
+            double* B = values + kPerNode * dof[s];
             for (int a = 0; a < dim; ++a)
-                for (int b = 0; b < dim; ++b) B[a * dim + b] += g.dot(K.template block<dim, dim>(a * dim, b * dim) * g);
+                for (int b = kDiagonalOnly ? a : 0; b < (kDiagonalOnly ? a + 1 : dim); ++b)
+                    B[kDiagonalOnly ? a : a * dim + b] += g.dot(K.template block<dim, dim>(a * dim, b * dim) * g);
         }
     });
 }
 
 template <int dim>
+void ParticleEnergyForm<dim>::node_blocks(VecX& blocks) const {
+    node_entries<false>(blocks);
+}
+
+template <int dim>
 void ParticleEnergyForm<dim>::node_diagonal(VecX& diagonal) const {
-    // node_blocks' diagonal entries alone (the same sums in the same order).
-    diagonal.setZero(problem_.size());
-    double* out = diagonal.data();
-    problem_.grid().for_each_particle_coloured([&](int p) {
-        const Tensor4<dim>& K = K_[p];
-        const int* dof = problem_.stencil_dofs(p);
-        const Vec<dim>* grad = problem_.stencil_gradients(p);
-        for (int s = 0; s < kStencil; ++s) {
-            const Vec<dim>& g = grad[s];
-            double* D = out + dim * dof[s];
-            for (int a = 0; a < dim; ++a) D[a] += g.dot(K.template block<dim, dim>(a * dim, a * dim) * g);
-        }
-    });
+    node_entries<true>(diagonal);
 }
 
 template <int dim>

@@ -77,6 +77,9 @@ private:
     void node_blocks(VecX& blocks) const;
     /// Their diagonal entries alone (d per node), for Jacobi and the residual's scaling.
     void node_diagonal(VecX& diagonal) const;
+    /// Both: the blocks, or their diagonals when kDiagonalOnly.
+    template <bool kDiagonalOnly>
+    void node_entries(VecX& out) const;
     /// g += sum_p V0 dt P_p F^E_p^T grad w_ip.
     void scatter_gradient(VecX& g) const;
     /// K_p = V0 dt^2 T_p^T H_p T_p in place of the Hessians H_p.
