@@ -254,8 +254,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             // iterate is not converged and the last step did not contract enough to keep it (lazy).
             double alpha = 1.0, trial = energy, work = 0.0;
             bool accepted = false;
-            int halvings = 0;
-            for (; halvings <= options.max_line_search && !accepted; ++halvings) {
+            for (int halvings = 0; halvings <= options.max_line_search && !accepted; ++halvings) {
                 if (halvings > 0) alpha *= 0.5;
                 x_trial = x + alpha * d;
                 if (objective.rebase(x_trial)) ++stats.rebases;
@@ -282,8 +281,7 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
             energy = trial;
             const double residual_before = residual;
             residual = residual_of(g, options, diagonal);
-            const bool full_step = halvings == 1;
-            hessian_owed = !(lazy && full_step && residual <= options.lazy_hessian * residual_before);
+            hessian_owed = !(lazy && alpha == 1.0 && residual <= options.lazy_hessian * residual_before);
             stats.iterations = it + 1;
             stats.energy = work_energy;
             stats.residual = residual;
