@@ -64,8 +64,10 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     BoundaryConditions solve_boundary = mpm_system_.boundary;
     solve_boundary.slip_walls = false;  // slip walls act after the solve, as in ImplicitIntegrator
     grid_.update_velocity(dt, mpm_system_.gravity, unprojected_floor(solve_boundary));
+    mpm_.set_floor_friction_newton(mpm_options_.floor_friction_solve == "newton");
     mpm_.begin_step(grid_, particles, dt, solve_boundary);
-    if (mpm_system_.boundary.coulomb_floor()) {  // its friction, as in ImplicitIntegrator
+    const bool floor_passes = mpm_system_.boundary.coulomb_floor() && !mpm_.floor_friction_newton();
+    if (floor_passes) {  // its friction, as in ImplicitIntegrator
         mpm_.set_reference(particles.F_elastic);
         mpm_.floor_friction_contacts();
     }
@@ -96,12 +98,11 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     if (alpha < 1.0) v_ *= alpha;
 
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
-    solve.floor_friction_in_solve = mpm_options_.floor_friction_in_solve;
     solve.work_line_search = mpm_energy_->tangent_hessian();
     const long network_before = mpm_energy_->network_evaluations();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     solve_floor_friction_passes<dim>(
-        coupled_, v_, newton, solve, context, work_, mpm_system_.boundary.coulomb_floor(),
+        coupled_, v_, newton, solve, context, work_, floor_passes ? kFloorFrictionSolves : 1,
         [&](const VecX& v) {
             const VecX grid_v = v.head(coupled_.grid_size());
             mpm_.floor_friction_contacts(&grid_v);

@@ -13,9 +13,19 @@
 // which lies above D (f0(sqrt(q)) is concave in q) and has its gradient there, so every pass lowers
 // D plus the rest of the potential, and Newton sees a smooth quadratic instead of friction's kink (with
 // D itself Newton stalled on stick-slip switches: most steps of a granular collapse ran out of
-// iterations). The passes, each with the J_k and s_k of the last solution, are the implicit
-// integrators' (IncrementalPotential::floor_friction_contacts, kFloorFrictionSolves).
+// iterations). The passes, each with the J_k and s_k of the last solution, are MpmOptions::
+// floor_friction_solve "passes" (IncrementalPotential::floor_friction_contacts, kFloorFrictionSolves).
+//
+// The default ("newton", begin_newton) puts the friction itself in the one solve's residual,
+//
+//   r_k += mu J_k(v) f1(|u_k|) u_k / |u_k|,   J_k(v) = the floor's reaction on node k at v,
+//
+// so the solve stops on Coulomb's law at its tolerance, and its Jacobian gets the majorizer's curvature
+// in the slip and the force's derivative through J_k, mu f1 u_k / |u_k| dJ_k/dv: the normal impulse
+// follows the material's stress, and without that term Newton converged linearly on the sliding nodes.
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "pnet/solver/triplet_hessian.hpp"
 
@@ -35,16 +45,48 @@ public:
     void begin_step(std::vector<Contact> contacts, const VecX& free) {
         contacts_ = std::move(contacts);
         free_ = &free;
+        newton_ = false;
     }
+
+    /// The friction itself instead of a pass's quadratic (the semi-smooth Newton on the floor): the
+    /// force mu J_k(v) f1(|u_k|) u_k / |u_k| at every v, with J_k(v) = g_k,y - m_k vn_k read from the
+    /// gradient the forms before this one summed (the impulse the floor gives node k at v: the
+    /// material's stress and the node's inertia against it), and its Jacobian with J's own
+    /// derivative, mu f1 u_k / |u_k| (H_psi d)_k,y, from `held_product` (the product the particles'
+    /// form leaves out of the held rows, ParticleEnergyForm::held_product). Not a potential: its
+    /// Hessian is not symmetric, and value() is the IPC dissipation with J held.
+    void begin_newton(const std::vector<int>& dofs, const std::vector<double>& normal_velocity, const VecX& mass,
+                      double mu, double eps_v, const VecX& free, const VecX& held_product);
+    bool newton() const { return newton_; }
+
+    /// A contact node of begin_newton(), as the last gradient left it.
+    struct NewtonContact {
+        int dof;
+        double normal_momentum;  // m_k vn_k: what the floor stops of node k's momentum
+        double impulse = 0.0;    // J_k at the last gradient's v (<= 0: the floor pulls, no friction)
+        Eigen::Matrix<double, dim - 1, 1> slip;      // u_k there
+        Eigen::Matrix<double, dim - 1, 1> coupling;  // mu f1 u / |u| (0 where J <= 0): d force / d J
+    };
+    const std::vector<NewtonContact>& newton_contacts() const { return newton_contacts_; }
     const std::vector<Contact>& contacts() const { return contacts_; }
 
     double value(const VecX& v) override;
     double add_gradient(const VecX& v, VecX& g) override;
     void prepare_hessian(const VecX& v) override;
+    double add_gradient_hessian(const VecX& v, VecX& g) override;
+    void add_hessian_multiply(const VecX& d, VecX& out) const override;
+    bool symmetric_hessian() const override { return !newton_; }
 
 private:
     std::vector<Contact> contacts_;
     const VecX* free_ = nullptr;
+    // The semi-smooth Newton (begin_newton): per contact node, its dof, m_k vn_k, and at the last
+    // gradient's v the impulse J_k and the force's coefficient mu f1(|u|) / |u| (times J in the force).
+    bool newton_ = false;
+    double mu_ = 0.0, eps_v_ = 1.0;
+    const VecX* held_product_ = nullptr;
+    std::vector<NewtonContact> newton_contacts_;
+    VecX gradient_at_;  // the v of the last gradient
 };
 
 }  // namespace pnet

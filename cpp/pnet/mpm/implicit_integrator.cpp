@@ -97,6 +97,7 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     BoundaryConditions solve_boundary = system_.boundary;
     solve_boundary.slip_walls = false;
     grid_.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
+    potential_.set_floor_friction_newton(mpm_options_.floor_friction_solve == "newton");
     potential_.begin_step(grid_, particles, dt, solve_boundary);
     const bool bdf2 = options_.time_integrator == "bdf2";
     if (bdf2 && rate_.size() == particles.size()) {  // BDF2 once there is history
@@ -110,7 +111,8 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
         potential_.use_bdf2(history_u_, history_v_, system_.gravity, omega);
     }
 
-    if (system_.boundary.coulomb_floor()) {  // its friction, lagged to the start-of-step stress
+    const bool floor_passes = system_.boundary.coulomb_floor() && !potential_.floor_friction_newton();
+    if (floor_passes) {  // its friction, lagged to the start-of-step stress
         potential_.set_reference(particles.F_elastic);
         potential_.floor_friction_contacts();
     }
@@ -127,13 +129,13 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     v_ = potential_.v_star();
     const long network_before = energy_->network_evaluations();
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
-    solve.floor_friction_in_solve = mpm_options_.floor_friction_in_solve;
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
-    // On a Coulomb floor, the first pass has the contacts of the start-of-step stress (above).
+    // On a Coulomb floor in passes, the first pass has the contacts of the start-of-step stress (above).
     solve_floor_friction_passes<dim>(
-        potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, system_.boundary.coulomb_floor(),
+        potential_, v_, newton, solve, "step " + std::to_string(step_index), work_,
+        floor_passes ? kFloorFrictionSolves : 1,
         [&](const VecX& v) { potential_.floor_friction_contacts(&v); },
         [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped()); }, stats);
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).

@@ -117,6 +117,9 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
             }
         }
     floor_friction_form_.begin_step({}, free);
+    if (bc.coulomb_floor() && floor_friction_newton_)
+        floor_friction_form_.begin_newton(floor_dofs_, floor_normal_velocity_, mass, bc.floor_friction,
+                                          0.1 * grid.dx(), free, particle_energy_.held_product());
     if (bc.coulomb_floor()) this->set_forms({&inertia_, &particle_energy_, &floor_friction_form_});
     else this->set_forms({&inertia_, &particle_energy_});
     particle_energy_.begin_step(particles.size());
@@ -213,7 +216,7 @@ void IncrementalPotential<dim>::assemble_by_nodes(SparseMatrix& out) const {
 
 template <int dim>
 std::size_t IncrementalPotential<dim>::floor_friction_contacts(const VecX* v) {
-    if (floor_dofs_.empty()) return 0;
+    if (floor_dofs_.empty() || floor_friction_form_.newton()) return floor_dofs_.size();
     // J_k = m_k (0 - v*_k,y) + dPsi/dv_k,y: the impulse the floor gives node k against the material's
     // inertia, gravity and stress. The first pass takes the start-of-step stress (v = 0 gives F = F^E,
     // where every energy's gradient is the elastic stress of F^E: the impulse explicit MPM's grid update

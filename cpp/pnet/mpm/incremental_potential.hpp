@@ -71,6 +71,10 @@ public:
     /// Returns the nodes in contact. No-op without a Coulomb floor.
     std::size_t floor_friction_contacts(const VecX* v = nullptr);
     const FloorFrictionForm<dim>& floor_friction_form() const { return floor_friction_form_; }
+    /// The Coulomb floor's friction itself in the solve (FloorFrictionForm::begin_newton: one solve,
+    /// no passes) from the next begin_step(); floor_friction_contacts() is then a no-op.
+    void set_floor_friction_newton(bool on) { floor_friction_newton_ = on; }
+    bool floor_friction_newton() const { return floor_friction_newton_; }
 
     /// v* on the unknowns: the starting point of the solve.
     const VecX& v_star() const { return inertia_.target(); }
@@ -164,6 +168,7 @@ private:
     std::vector<int> floor_dofs_;            // nodes held on the Coulomb floor (normal component)
     std::vector<double> floor_normal_velocity_;  // their v*_y before it was held at 0
     FloorFrictionForm<dim> floor_friction_form_;
+    bool floor_friction_newton_ = false;
     bool multigrid_on_ = false, multigrid_per_hessian_ = false;
     // The hierarchy, built on demand from const apply_preconditioner (a cache of the Hessian).
     void build_multigrid() const;

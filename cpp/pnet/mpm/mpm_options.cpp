@@ -7,8 +7,9 @@ const std::vector<OptionField<MpmOptions>>& mpm_option_fields() {
     static const std::vector<OptionField<O>> fields = {
         number_option("advection_cfl", "--advection-cfl", 0.0, false, 1.0, false, &O::advection_cfl,
                       "MPM: cap a step so that no particle moves more than this many cells (0: off)"),
-        boolean_option("floor_friction_in_solve", "--floor-friction-in-solve", &O::floor_friction_in_solve,
-                       "a Coulomb floor's friction follows the Newton iterates in one solve (no: three passes)"),
+        choice_option("floor_friction_solve", "--floor-friction-solve", {"newton", "passes"}, &O::floor_friction_solve,
+                      "a Coulomb floor's friction: in the one Newton solve's residual and Jacobian, or three "
+                      "majorize-minimize passes"),
         choice_option("linear_solver", nullptr, {"pcg", "cholesky"}, &O::linear_solver,
                       "MPM's linear solve: matrix-free PCG or CHOLMOD on the assembled Hessian"),
     };

@@ -22,12 +22,13 @@ struct MpmOptions {
     // v dt / dx = 0.99) spreads 54% less than the ground truth, at 5e-4 (0.49) 20% less. On by
     // default at kDefaultAdvectionCfl (docs/solver.md, "The advection limit", measured).
     double advection_cfl = kDefaultAdvectionCfl;
-    // A Coulomb floor (MPM, coupling) under plasticitynet and return_map: true, its friction's contacts
-    // follow the Newton iterates within the step's one solve (ReferenceSolveOptions::
-    // floor_friction_in_solve), at 0.3x the Newton tolerance for the same accuracy; false (the default):
-    // three majorize-minimize passes of whole solves, as lagged always takes. At the same accuracy the
-    // two cost about the same on the sand column (docs/methods.md, measured), so the passes stay.
-    bool floor_friction_in_solve = false;
+    // A Coulomb floor (MPM, coupling; every implicit integrator): "newton" (the default), the friction
+    // itself in the one solve's residual, mu J_k(v) f1(|u_k|) u_k / |u_k| with the normal impulse J_k at
+    // the iterate, and in its Jacobian with J's derivative (FloorFrictionForm::begin_newton); "passes",
+    // kFloorFrictionSolves majorize-minimize passes of whole solves, each with the contacts of the last
+    // (docs/methods.md). On the sand column the one solve takes 2.9 Newton iterations per step against
+    // the passes' 4.5 (docs/solver.md, "The Coulomb floor in one solve").
+    std::string floor_friction_solve = "newton";
     // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the solver's
     // preconditioner) or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept
     // while the active grid is the same).

@@ -108,8 +108,10 @@ void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) con
     const auto start = std::chrono::steady_clock::now();
     const VecX& free = problem_.free_components();
     masked_ = d.cwiseProduct(free);
+    if (held_product_.size() != d.size()) held_product_.setZero(d.size());
     const double* dm = masked_.data();
     double* o = out.data();
+    double* held = held_product_.data();
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(K_.size());
     const std::ptrdiff_t nodes = static_cast<std::ptrdiff_t>(problem_.nodes());
     const int* entry_start = problem_.node_entry_start();
@@ -139,7 +141,8 @@ void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) con
             }
             for (int a = 0; a < dim; ++a) {
                 const Eigen::Index i = dim * k + a;
-                o[i] += sum[a] * free[i];
+                if (free[i] > 0.0) o[i] += sum[a];
+                else held[i] = sum[a];
             }
         }
     }

@@ -68,6 +68,11 @@ public:
     /// (k kPairOffsets + o) d^2, row-major. Valid until the next call.
     void compute_pair_blocks() const;
     const std::vector<int>& pair_dofs() const { return pair_dof_; }
+    /// The last product's rows on the fixed components (H d there, d masked to the free ones), which
+    /// add_hessian_multiply leaves out of `out`: how a held component's reaction changes along d (the
+    /// Coulomb floor's normal impulse, FloorFrictionForm::begin_newton). Entries on free components
+    /// are stale.
+    const VecX& held_product() const { return held_product_; }
     const std::vector<double>& pair_blocks() const { return pair_block_; }
 
 private:
@@ -91,7 +96,7 @@ private:
     std::vector<Mat<dim>> F_, P_;
     std::vector<double> psi_;
     std::vector<Tensor4<dim>> K_;  // the Hessian of psi, then K_p (prepare_hessian)
-    mutable VecX masked_, scratch_;
+    mutable VecX masked_, scratch_, held_product_;
     mutable std::vector<Eigen::Matrix<double, kM, 1>> particle_product_;  // K_p dG_p
     // compute_pair_blocks(): per node and neighbour offset, the neighbour's dof and the d x d block.
     mutable std::vector<int> pair_dof_;

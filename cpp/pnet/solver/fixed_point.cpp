@@ -48,8 +48,8 @@ template <int dim>
 class FollowingReference final : public Objective {
 public:
     FollowingReference(ReferencedObjective<dim>& objective, ReferenceSolveWork<dim>& work,
-                       const std::function<void()>& after_reference, const std::function<void(const VecX&)>& follow)
-        : objective_(objective), work_(work), after_reference_(after_reference), follow_(follow) {}
+                       const std::function<void()>& after_reference)
+        : objective_(objective), work_(work), after_reference_(after_reference) {}
 
     Eigen::Index size() const override { return objective_.size(); }
     double value(const VecX& x) override { return objective_.value(x); }
@@ -77,7 +77,6 @@ public:
         }
         work_.F0.swap(work_.F);
         objective_.set_reference(work_.F0);
-        if (follow_) follow_(x);
         if (after_reference_) after_reference_();
         ++updates_;
         return true;
@@ -90,7 +89,6 @@ private:
     ReferencedObjective<dim>& objective_;
     ReferenceSolveWork<dim>& work_;
     const std::function<void()>& after_reference_;
-    const std::function<void(const VecX&)>& follow_;
     int updates_ = 0;
     double last_change_ = 0.0;
 };
@@ -106,9 +104,8 @@ template <int dim>
 ReferenceSolveStats solve_following_reference(ReferencedObjective<dim>& objective, VecX& v,
                                               const NewtonOptions& newton, const ReferenceSolveOptions& options,
                                               const std::string& context, ReferenceSolveWork<dim>& work,
-                                              const std::function<void()>& after_reference,
-                                              const std::function<void(const VecX&)>& follow) {
-    FollowingReference<dim> following(objective, work, after_reference, follow);
+                                              const std::function<void()>& after_reference) {
+    FollowingReference<dim> following(objective, work, after_reference);
     NewtonOptions solve_newton = newton;
     solve_newton.rebase = true;
     solve_newton.work_line_search = options.work_line_search;
@@ -136,10 +133,9 @@ ReferenceSolveStats solve_following_reference(ReferencedObjective<dim>& objectiv
 template <int dim>
 ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
                                          const ReferenceSolveOptions& options, const std::string& context,
-                                         ReferenceSolveWork<dim>& work, const std::function<void()>& after_reference,
-                                         const std::function<void(const VecX&)>& follow) {
+                                         ReferenceSolveWork<dim>& work, const std::function<void()>& after_reference) {
     if (follows_iterate(options))
-        return solve_following_reference(objective, v, newton, options, context, work, after_reference, follow);
+        return solve_following_reference(objective, v, newton, options, context, work, after_reference);
     ReferenceSolveStats stats;
     const bool fixed_point = options.fixed_point;
     const int solves = fixed_point ? options.max_solves : 1;
@@ -211,11 +207,9 @@ ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, Ve
 
 template ReferenceSolveStats solve_with_reference<2>(ReferencedObjective<2>&, VecX&, const NewtonOptions&,
                                                      const ReferenceSolveOptions&, const std::string&,
-                                                     ReferenceSolveWork<2>&, const std::function<void()>&,
-                                                     const std::function<void(const VecX&)>&);
+                                                     ReferenceSolveWork<2>&, const std::function<void()>&);
 template ReferenceSolveStats solve_with_reference<3>(ReferencedObjective<3>&, VecX&, const NewtonOptions&,
                                                      const ReferenceSolveOptions&, const std::string&,
-                                                     ReferenceSolveWork<3>&, const std::function<void()>&,
-                                                     const std::function<void(const VecX&)>&);
+                                                     ReferenceSolveWork<3>&, const std::function<void()>&);
 
 }  // namespace pnet

@@ -65,10 +65,6 @@ struct ReferenceSolveOptions {
     // Newton tolerance; NewtonOptions::relative_tolerance); the loop ends only on a solve converged to
     // the Newton tolerance, and only such a solve's v is returned. 0: exact solves.
     double inexact_forcing = 0.0;
-    // A Coulomb floor's friction within the one solve of a reference-following Newton (outer Newton):
-    // its contacts move to the iterates with F0 (solve_floor_friction_passes). false (ImplicitOptions'
-    // default): the majorize-minimize passes of whole solves (kFloorFrictionSolves).
-    bool floor_friction_in_solve = false;
 };
 
 /// Totals over the step's solves.
@@ -112,23 +108,19 @@ struct ReferenceSolveWork {
 };
 
 /// Whether solve_with_reference() follows the iterate with the reference within one Newton solve
-/// (options.fixed_point with the Newton outer iteration), where `follow` applies.
+/// (options.fixed_point with the Newton outer iteration).
 inline bool follows_iterate(const ReferenceSolveOptions& options) {
     return options.fixed_point && options.outer == OuterIteration::Newton;
 }
 
 /// Solves the step from v (updated). `after_reference`, if given, runs after
-/// every set_reference (statistics of the energy's reference). `follow`, if given and the solve follows
-/// the iterate (follows_iterate()), runs with the iterate after every set_reference too: lagged terms of
-/// the objective other than F0 (a Coulomb floor's contacts) move with it, and the next value, gradient
-/// and Hessian are the objective's at its new lag. Throws NewtonError from the solves, and, with
+/// every set_reference (statistics of the energy's reference). Throws NewtonError from the solves, and, with
 /// fail_on_unconverged, for a solve that ends above its tolerance ("<context>: the Newton solve did not
 /// converge ...").
 template <int dim>
 ReferenceSolveStats solve_with_reference(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
                                          const ReferenceSolveOptions& options, const std::string& context,
                                          ReferenceSolveWork<dim>& work,
-                                         const std::function<void()>& after_reference = {},
-                                         const std::function<void(const VecX&)>& follow = {});
+                                         const std::function<void()>& after_reference = {});
 
 }  // namespace pnet
