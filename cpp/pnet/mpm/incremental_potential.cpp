@@ -169,11 +169,9 @@ void IncrementalPotential<dim>::assemble_by_nodes(SparseMatrix& out) const {
     const Eigen::Index n = this->size();
     const VecX& free = this->free_;
     VecX diagonal = inertia_.mass();  // m_i, and the floor's friction stiffness
-    if (!floor_friction_form_.contacts().empty()) {
-        std::vector<Triplet> floor;
-        floor_friction_form_.add_hessian_triplets(floor);
-        for (const Triplet& t : floor) diagonal[t.row()] += t.value();  // diagonal entries only
-    }
+    std::vector<Triplet> floor;  // none without a Coulomb floor
+    floor_friction_form_.add_hessian_triplets(floor);
+    for (const Triplet& t : floor) diagonal[t.row()] += t.value();  // diagonal entries only
     std::vector<int>& start = assembly_start_;
     start.assign(nodes + 1, 0);
     for (std::ptrdiff_t k = 0; k < nodes; ++k) {

@@ -297,6 +297,15 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionInOneSolveCarriesTheImpulsesDer
             if (contacts[k].impulse > 0.0)
                 coupling = std::max(coupling, mu * std::abs(Jp[k] - contacts[k].impulse) / h / std::max(scale, 1e-30));
     }
+    // The multigrid's operator (assemble_by_nodes: H^T) has the floor's friction on its diagonal too.
+    SparseMatrix assembled;
+    E.assemble_by_nodes(assembled);
+    VecX diagonal;
+    E.hessian_diagonal(diagonal);
+    for (const auto& c : contacts)
+        if (c.impulse > 0.0)
+            EXPECT_NEAR(assembled.coeff(dim * c.dof, dim * c.dof), diagonal[dim * c.dof], 1e-9 * diagonal[dim * c.dof])
+                << "contact node " << c.dof;
     std::cout << "floor friction in one solve: worst relative error of H d " << worst
               << ", largest friction change through J " << coupling << " of the largest entry\n";
     EXPECT_LT(worst, 1e-5);
