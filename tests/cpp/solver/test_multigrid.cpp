@@ -208,9 +208,8 @@ TEST(GridMultigrid, IsASymmetricPositiveDefiniteOperator) {
 // A positive semi-definite operator with a null space (stiffness without mass or a floor: the rigid
 // translations) makes the coarsest operator singular; the multigrid is still built (its coarsest
 // factorization shifted by a relative 1e-10 of its diagonal) and stays symmetric positive definite
-// (before: a V-cycle with x . M^-1 x = -4e16). The stiff sand column's collapse still stops the
-// multigrid at frame 4-5 with "the coarsest operator is not positive definite", which no relative
-// shift up to 1e-4 cures: not yet understood (docs/solver.md).
+// (before: a V-cycle with x . M^-1 x = -4e16). (The stiff sand column's "coarsest operator is not
+// positive definite" at frame 4-5 was another matter: BuildsOnAnOperatorWhoseRowsSpanManyScales.)
 TEST(GridMultigrid, BuildsOnASingularPositiveSemiDefiniteOperator) {
     const GridProblem problem(24, 1e6, 1e-3, 0.3, false, 0.0);
     GridMultigrid multigrid;
