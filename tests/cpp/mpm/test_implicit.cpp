@@ -17,6 +17,8 @@
 #include "pnet/mpm/implicit_integrator.hpp"
 #include "pnet/metrics/deposit_shape.hpp"
 #include "pnet/mpm/transfer.hpp"
+#include "pnet/mpm/floor_friction_passes.hpp"
+#include "pnet/mpm/mpm_options.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/solver/fixed_point.hpp"
@@ -1162,8 +1164,22 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveStopsASlidingBoxA
     EXPECT_NEAR(large.distance, one.distance, 0.1 * expected);
 }
 
+// The floor's default (floor_friction_solve "auto"): one solve per step in 2D, the three passes in 3D
+// (where one solve stopped at the default tolerance ended below the scene's floor: mpm_options.hpp).
+TYPED_TEST(ImplicitTest, TheCoulombFloorsDefaultIsOneSolveIn2DAndThePassesIn3D) {
+    constexpr int dim = TypeParam::value;
+    IntegratorSettings settings;
+    settings.name = "return_map";
+    settings.dt = 1e-3;
+    EXPECT_EQ(settings.mpm.floor_friction_solve, "auto");
+    EXPECT_EQ(floor_friction_in_one_solve(settings.mpm, dim), dim == 2);
+    Simulation<dim> sim(sliding_box<dim>(), settings);
+    const FrameStats frame = sim.advance_frame();
+    EXPECT_EQ(frame.fixed_point_iterations, (dim == 2 ? 1 : kFloorFrictionSolves) * frame.steps);
+}
+
 // The sand column collapsing on a floor of its own friction (tan 30 deg), 0.2 s at 1e-3 s under return_map:
-// the friction within one solve (the default) at the default Newton tolerance spreads the column as far
+// the friction within one solve (the 2D default) at the default Newton tolerance spreads the column as far
 // as the three passes with a tight solve (1e-7 m/s).
 TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveEndsWhereTightPassesDo) {
     constexpr int dim = TypeParam::value;
