@@ -45,7 +45,7 @@ double FloorFrictionForm<dim>::value(const VecX& v) {
         for (const NewtonContact& c : newton_contacts_) {
             Eigen::Matrix<double, dim - 1, 1> u;
             for (int t = 0; t < dim - 1; ++t) u[t] = v[dim * c.dof + tangential_axis<dim>(t)];
-            if (c.impulse > 0.0) e += mu_ * c.impulse * friction_f0(u.norm(), eps_v_);
+            if (c.held_impulse > 0.0) e += mu_ * c.held_impulse * friction_f0(u.norm(), eps_v_);
         }
         return e;
     }
@@ -67,7 +67,7 @@ double FloorFrictionForm<dim>::add_gradient(const VecX& v, VecX& g) {
             if (!(c.impulse > 0.0)) continue;
             const double s = c.slip.norm();
             const double force = mu_ * c.impulse * friction_f1_over_x(s, eps_v_);
-            e += mu_ * c.impulse * friction_f0(s, eps_v_);
+            if (c.held_impulse > 0.0) e += mu_ * c.held_impulse * friction_f0(s, eps_v_);
             for (int t = 0; t < dim - 1; ++t) g[dim * c.dof + tangential_axis<dim>(t)] += force * c.slip[t];
         }
         gradient_at_ = v;
@@ -92,6 +92,7 @@ void FloorFrictionForm<dim>::prepare_hessian(const VecX& v) {
                                    "the same v (call add_gradient there first)");
         for (NewtonContact& c : newton_contacts_) {
             c.coupling.setZero();
+            c.held_impulse = c.impulse;
             if (!(c.impulse > 0.0)) continue;  // the floor pulls on nothing: no friction, one-sided in J
             // In the slip, the majorizer's curvature mu J f1(s) / s (not the friction's own, which is 0
             // along a 2D slip above eps_v: Newton then cycled between stick and slip, docs/solver.md).
@@ -115,9 +116,9 @@ void FloorFrictionForm<dim>::prepare_hessian(const VecX& v) {
 
 template <int dim>
 double FloorFrictionForm<dim>::add_gradient_hessian(const VecX& v, VecX& g) {
-    const double e = add_gradient(v, g);  // the impulses first: the Hessian's friction needs them
-    prepare_hessian(v);
-    return e;
+    add_gradient(v, g);  // the impulses first: the Hessian's friction needs them
+    prepare_hessian(v);  // and holds them for the value
+    return value(v);
 }
 
 template <int dim>

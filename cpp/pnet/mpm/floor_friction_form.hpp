@@ -54,7 +54,10 @@ public:
     /// material's stress and the node's inertia against it), and its Jacobian with J's own
     /// derivative, mu f1 u_k / |u_k| (H_psi d)_k,y, from `held_product` (the product the particles'
     /// form leaves out of the held rows, ParticleEnergyForm::held_product). Not a potential: its
-    /// Hessian is not symmetric, and value() is the IPC dissipation with J held.
+    /// Hessian is not symmetric. Its value (for an energy line search) is the IPC dissipation
+    /// mu J_k f0(|u_k|) with J_k held at the last Hessian's iterate, so that an iterate's energy and its
+    /// trial points' compare the same function; with J taken at each trial point instead, the
+    /// learned energy's line search failed near the tolerance (29 of 738 steps of the sand column).
     void begin_newton(const std::vector<int>& dofs, const std::vector<double>& normal_velocity, const VecX& mass,
                       double mu, double eps_v, const VecX& free, const VecX& held_product);
     bool newton() const { return newton_; }
@@ -64,6 +67,7 @@ public:
         int dof;
         double normal_momentum;  // m_k vn_k: what the floor stops of node k's momentum
         double impulse = 0.0;    // J_k at the last gradient's v (<= 0: the floor pulls, no friction)
+        double held_impulse = 0.0;  // J_k at the last Hessian's v: the value's (below)
         Eigen::Matrix<double, dim - 1, 1> slip;      // u_k there
         Eigen::Matrix<double, dim - 1, 1> coupling;  // mu f1 u / |u| (0 where J <= 0): d force / d J
     };
