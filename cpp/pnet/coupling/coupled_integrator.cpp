@@ -64,7 +64,7 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     BoundaryConditions solve_boundary = mpm_system_.boundary;
     solve_boundary.slip_walls = false;  // slip walls act after the solve, as in ImplicitIntegrator
     grid_.update_velocity(dt, mpm_system_.gravity, unprojected_floor(solve_boundary));
-    mpm_.set_floor_friction_newton(floor_friction_in_one_solve(mpm_options_, dim));
+    mpm_.set_floor_friction_newton(floor_friction_in_one_solve(mpm_options_, dim, mpm_energy_->tangent_hessian()));
     mpm_.begin_step(grid_, particles, dt, solve_boundary);
     const bool floor_passes = mpm_system_.boundary.coulomb_floor() && !mpm_.floor_friction_newton();
     if (floor_passes) {  // its friction, as in ImplicitIntegrator

@@ -97,7 +97,7 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     BoundaryConditions solve_boundary = system_.boundary;
     solve_boundary.slip_walls = false;
     grid_.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
-    potential_.set_floor_friction_newton(floor_friction_in_one_solve(mpm_options_, dim));
+    potential_.set_floor_friction_newton(floor_friction_in_one_solve(mpm_options_, dim, energy_->tangent_hessian()));
     potential_.begin_step(grid_, particles, dt, solve_boundary);
     const bool bdf2 = options_.time_integrator == "bdf2";
     if (bdf2 && rate_.size() == particles.size()) {  // BDF2 once there is history

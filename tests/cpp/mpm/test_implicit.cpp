@@ -1179,18 +1179,22 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveStopsASlidingBoxA
     EXPECT_NEAR(large.distance, one.distance, 0.1 * expected);
 }
 
-// The floor's default (floor_friction_solve "auto"): one solve per step in 2D, the three passes in 3D
-// (where one solve stopped at the default tolerance ended below the scene's floor: mpm_options.hpp).
-TYPED_TEST(ImplicitTest, TheCoulombFloorsDefaultIsOneSolveIn2DAndThePassesIn3D) {
+// The floor's default (floor_friction_solve "auto"): one solve per step in 2D under return_map's work
+// line search, the three passes in 3D (where one solve stopped at the default tolerance ended below
+// the scene's floor) and under an energy line search (lagged's here; mpm_options.hpp).
+TYPED_TEST(ImplicitTest, TheCoulombFloorsDefaultIsOneSolveIn2DUnderTheWorkLineSearch) {
     constexpr int dim = TypeParam::value;
-    IntegratorSettings settings;
-    settings.name = "return_map";
-    settings.dt = 1e-3;
-    EXPECT_EQ(settings.mpm.floor_friction_solve, "auto");
-    EXPECT_EQ(floor_friction_in_one_solve(settings.mpm, dim), dim == 2);
-    Simulation<dim> sim(sliding_box<dim>(), settings);
-    const FrameStats frame = sim.advance_frame();
-    EXPECT_EQ(frame.fixed_point_iterations, (dim == 2 ? 1 : kFloorFrictionSolves) * frame.steps);
+    for (const std::string integrator : {"return_map", "lagged"}) {
+        IntegratorSettings settings;
+        settings.name = integrator;
+        settings.dt = 1e-3;
+        EXPECT_EQ(settings.mpm.floor_friction_solve, "auto");
+        const bool one_solve = dim == 2 && integrator == "return_map";
+        EXPECT_EQ(floor_friction_in_one_solve(settings.mpm, dim, integrator == "return_map"), one_solve);
+        Simulation<dim> sim(sliding_box<dim>(), settings);
+        const FrameStats frame = sim.advance_frame();
+        EXPECT_EQ(frame.fixed_point_iterations, (one_solve ? 1 : kFloorFrictionSolves) * frame.steps) << integrator;
+    }
 }
 
 // The sand column collapsing on a floor of its own friction (tan 30 deg), 0.2 s at 1e-3 s under return_map:
