@@ -16,13 +16,16 @@
 // iterations). The passes, each with the J_k and s_k of the last solution, are MpmOptions::
 // floor_friction_solve "passes" (IncrementalPotential::floor_friction_contacts, kFloorFrictionSolves).
 //
-// The default ("newton", begin_newton) puts the friction itself in the one solve's residual,
+// floor_friction_solve "newton" (begin_newton; "auto" in 2D under the work line search, MpmOptions)
+// puts the friction itself in the one solve's residual,
 //
 //   r_k += mu J_k(v) f1(|u_k|) u_k / |u_k|,   J_k(v) = the floor's reaction on node k at v,
 //
 // so the solve stops on Coulomb's law at its tolerance, and its Jacobian gets the majorizer's curvature
 // in the slip and the force's derivative through J_k, mu f1 u_k / |u_k| dJ_k/dv: the normal impulse
 // follows the material's stress, and without that term Newton converged linearly on the sliding nodes.
+// That term lives in the matrix-free product only: an assembled Hessian (CHOLMOD, incomplete Cholesky,
+// the multigrid's operator) carries the slip's curvature alone.
 #include <vector>
 
 #include <Eigen/Core>
