@@ -1,8 +1,9 @@
 #pragma once
 // The solves of an implicit MPM step (ImplicitIntegrator, CoupledIntegrator): one; on a Coulomb floor
 // (floor_friction_form.hpp) one with the friction itself in the residual (MpmOptions::
-// floor_friction_solve "newton", the default), or kFloorFrictionSolves majorize-minimize passes
-// ("passes"), each pass after the first with the floor's contacts taken from the last solution.
+// floor_friction_solve "newton"; "auto", the default, in 2D under the work line search), or
+// kFloorFrictionSolves majorize-minimize passes ("passes"), each pass after the first with the floor's
+// contacts taken from the last solution.
 #include <functional>
 #include <string>
 

@@ -68,7 +68,8 @@ public:
     /// majorize-minimize pass per solve. Without `v`, the first pass: the normal impulses J_k of the
     /// start-of-step stress (set the reference state to the particles' F^E first, so that the energy's
     /// gradient there is the elastic stress) and the slips of v*; with `v`, those of that solution.
-    /// Returns the nodes in contact. No-op without a Coulomb floor.
+    /// Returns the nodes in contact. No-op without a Coulomb floor, and in the one-solve mode
+    /// (set_floor_friction_newton), where the friction follows every iterate by itself.
     std::size_t floor_friction_contacts(const VecX* v = nullptr);
     const FloorFrictionForm<dim>& floor_friction_form() const { return floor_friction_form_; }
     /// The Coulomb floor's friction itself in the solve (FloorFrictionForm::begin_newton: one solve,
