@@ -101,12 +101,25 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     solve.work_line_search = mpm_energy_->tangent_hessian();
     const long network_before = mpm_energy_->network_evaluations();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
-    solve_floor_friction_passes<dim>(
-        coupled_, v_, newton, solve, context, work_, floor_passes ? kFloorFrictionSolves : 1,
+    // Under "auto" a failed one solve on the floor is solved again by the passes (ImplicitIntegrator).
+    const bool one_solve = mpm_system_.boundary.coulomb_floor() && mpm_.floor_friction_newton();
+    std::function<void(VecX&)> retry;
+    if (one_solve && floor_friction_retries(mpm_options_)) {
+        const VecX v_start = v_;
+        retry = [&, v_start](VecX& v) {
+            mpm_.floor_friction_to_passes();
+            mpm_.set_reference(particles.F_elastic);
+            mpm_.floor_friction_contacts();
+            v = v_start;
+        };
+    }
+    stats.floor_friction_retried = solve_on_coulomb_floor<dim>(
+        coupled_, v_, newton, solve, context, work_, !floor_passes,
         [&](const VecX& v) {
             const VecX grid_v = v.head(coupled_.grid_size());
             mpm_.floor_friction_contacts(&grid_v);
         },
+        retry,
         [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped()); }, stats);
     stats.network_evaluations = mpm_energy_->network_evaluations() - network_before;
     stats.ccd_queries = coupled_.ccd_queries();

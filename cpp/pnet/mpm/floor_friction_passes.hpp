@@ -4,6 +4,8 @@
 // floor_friction_solve "newton"; "auto", the default, in 2D under the work line search), or
 // kFloorFrictionSolves majorize-minimize passes ("passes"), each pass after the first with the floor's
 // contacts taken from the last solution.
+// Under "auto" a one solve that fails (its line search, its iteration cap, or a NewtonError) is solved
+// again by the passes from the step's start (solve_on_coulomb_floor).
 #include <functional>
 #include <string>
 
@@ -27,7 +29,7 @@ void solve_floor_friction_passes(ReferencedObjective<dim>& objective, VecX& v, c
                                  const ReferenceSolveOptions& options, const std::string& context,
                                  ReferenceSolveWork<dim>& work, int passes, Relag&& relag,
                                  const std::function<void()>& after_reference, StepStats& stats) {
-    int fixed_point_solves = 0;
+    int fixed_point_solves = stats.fixed_point_iterations;
     NewtonOptions pass_newton = newton;
     for (int pass = 0; pass < passes; ++pass) {
         if (pass > 0) {
@@ -44,6 +46,40 @@ void solve_floor_friction_passes(ReferencedObjective<dim>& objective, VecX& v, c
         fixed_point_solves += s.solves;
     }
     stats.fixed_point_iterations = fixed_point_solves;
+}
+
+/// A step's solve on a Coulomb floor solved in one Newton solve (`one_solve`; without a floor, or with
+/// the passes, solve_floor_friction_passes alone). When `retry` is set and the one solve fails (its
+/// line search failed, it stopped unconverged, or it threw NewtonError), `retry(v)` puts v and the
+/// objective back where the passes' first solve starts (the step's v*, the floor's contacts of the
+/// start-of-step stress) and the step is solved again by kFloorFrictionSolves passes. The failed
+/// solve's iterations stay in `stats` (what the step cost). Returns whether the passes took over.
+template <int dim, typename Relag>
+bool solve_on_coulomb_floor(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
+                            const ReferenceSolveOptions& options, const std::string& context,
+                            ReferenceSolveWork<dim>& work, bool one_solve, Relag&& relag,
+                            const std::function<void(VecX&)>& retry, const std::function<void()>& after_reference,
+                            StepStats& stats) {
+    if (!one_solve || !retry) {
+        solve_floor_friction_passes<dim>(objective, v, newton, options, context, work,
+                                         one_solve ? 1 : kFloorFrictionSolves, relag, after_reference, stats);
+        return false;
+    }
+    bool failed = false;
+    try {
+        const ReferenceSolveStats s =
+            solve_with_reference<dim>(objective, v, newton, options, context, work, after_reference);
+        record_solve(s, stats);
+        stats.fixed_point_iterations = s.solves;
+        failed = !s.converged || s.line_search_failed;
+    } catch (const NewtonError&) {
+        failed = true;  // a solve that threw left no counts; the passes' own error, if any, is the one shown
+    }
+    if (!failed) return false;
+    retry(v);
+    solve_floor_friction_passes<dim>(objective, v, newton, options, context, work, kFloorFrictionSolves, relag,
+                                     after_reference, stats);
+    return true;
 }
 
 }  // namespace pnet

@@ -133,10 +133,20 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     // The elastic energy has no reference state: lagged passes the particles' F^E.
     if (!solve.fixed_point) potential_.set_reference(particles.F_elastic);
     // On a Coulomb floor in passes, the first pass has the contacts of the start-of-step stress (above).
-    solve_floor_friction_passes<dim>(
-        potential_, v_, newton, solve, "step " + std::to_string(step_index), work_,
-        floor_passes ? kFloorFrictionSolves : 1,
-        [&](const VecX& v) { potential_.floor_friction_contacts(&v); },
+    // Under "auto" a one solve that fails is solved again by the passes, from v* and the floor's
+    // contacts of the start-of-step stress.
+    const bool one_solve = system_.boundary.coulomb_floor() && potential_.floor_friction_newton();
+    std::function<void(VecX&)> retry;
+    if (one_solve && floor_friction_retries(mpm_options_))
+        retry = [&](VecX& v) {
+            potential_.floor_friction_to_passes();
+            potential_.set_reference(particles.F_elastic);
+            potential_.floor_friction_contacts();
+            v = potential_.v_star();
+        };
+    stats.floor_friction_retried = solve_on_coulomb_floor<dim>(
+        potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, !floor_passes,
+        [&](const VecX& v) { potential_.floor_friction_contacts(&v); }, retry,
         [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped()); }, stats);
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).
     potential_.write_velocity(potential_.displacement_rate(v_), grid_);

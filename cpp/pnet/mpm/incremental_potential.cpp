@@ -213,6 +213,14 @@ void IncrementalPotential<dim>::assemble_by_nodes(SparseMatrix& out) const {
 }
 
 template <int dim>
+void IncrementalPotential<dim>::floor_friction_to_passes() {
+    floor_friction_newton_ = false;
+    floor_friction_form_.begin_step({}, this->free_);
+    this->invalidate_pattern();  // the one solve's friction had its own nonsymmetric entries
+    multigrid_built_ = multigrid_stale_ = false;
+}
+
+template <int dim>
 std::size_t IncrementalPotential<dim>::floor_friction_contacts(const VecX* v) {
     if (floor_dofs_.empty() || floor_friction_form_.newton()) return floor_dofs_.size();
     // J_k = m_k (0 - v*_k,y) + dPsi/dv_k,y: the impulse the floor gives node k against the material's

@@ -75,6 +75,10 @@ public:
     /// The Coulomb floor's friction itself in the solve (FloorFrictionForm::begin_newton: one solve,
     /// no passes) from the next begin_step(); floor_friction_contacts() is then a no-op.
     void set_floor_friction_newton(bool on) { floor_friction_newton_ = on; }
+    /// Leaves the one solve for the passes within this step (its solve failed, solve_on_coulomb_floor):
+    /// the floor's friction form starts again without contacts, for floor_friction_contacts() to set the
+    /// first pass's, and the multigrid (whose operator held the one solve's friction) is built anew.
+    void floor_friction_to_passes();
     bool floor_friction_newton() const { return floor_friction_newton_; }
 
     /// v* on the unknowns: the starting point of the solve.

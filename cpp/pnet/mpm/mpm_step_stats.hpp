@@ -10,11 +10,15 @@ namespace pnet {
 struct MpmStepFields {
     std::size_t clamped = 0;        // particles pulled back inside the domain
     bool advection_capped = false;  // implicit MPM, coupling: the advection limit cut dt below the scene's
+    // implicit MPM, coupling: the Coulomb floor's one solve failed and the passes solved the step again
+    // (floor_friction_solve "auto", floor_friction_passes.hpp)
+    bool floor_friction_retried = false;
 
     template <typename F>
     static void for_each_field(F&& f) {
         f(StepField{"clamped", "clamped"}, &MpmStepFields::clamped);
         f(StepField{"advection_capped", "advection_capped"}, &MpmStepFields::advection_capped);
+        f(StepField{"floor_friction_retried", "floor_friction_retried"}, &MpmStepFields::floor_friction_retried);
     }
 };
 
