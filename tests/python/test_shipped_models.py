@@ -99,3 +99,25 @@ def test_parametric_model_beside_its_dedicated_one():
         box = entries[f"{name}.pt"]["errors"]["parameter_map"]
         assert len(box["points"]) == box["bins"] ** len(box["fields"]), name
         assert box["max_over_mean"] <= 2.0, f"{name}: worst bin {box['max_over_mean']:.2f}x the mean"
+
+
+def test_flow_curvature_puts_its_state_on_the_yield_cone(capsys):
+    """scripts/flow_curvature.py (docs/integrators.md, "The stiff column"): at delta = 0 its state is on the
+    Drucker-Prager cone (the return mapping's loading stiffness along the shear far below the unloading,
+    elastic one), past it both sides are the same plastic stiffness; a von Mises model is refused."""
+    import importlib.util
+
+    script = MODELS.parent / "scripts" / "flow_curvature.py"
+    spec = importlib.util.spec_from_file_location("flow_curvature", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.main(["--model", str(MODELS / "sand_2d.pt"), "--E", "3.537e5", "--deltas", "0", "1e-4"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[2:]]
+    (d0, net0, load0, unload0, _), (d1, net1, load1, unload1, _) = [[float(x) for x in r] for r in rows]
+    assert (d0, d1) == (0.0, 1e-4)
+    assert load0 < 0.05 * unload0, "on the cone: plastic on loading, elastic on unloading"
+    assert abs(load1 - unload1) <= 0.01 * unload1, "past the cone both sides flow"
+    assert net0 > 0.0 and net1 > 0.0
+    with pytest.raises(SystemExit):
+        module.main(["--model", str(MODELS / "metal_2d.pt")])
+    assert "needs a drucker_prager energy" in capsys.readouterr().err
