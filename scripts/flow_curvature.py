@@ -17,6 +17,7 @@ Both from the simulator's C++ runtime (plasticitynet_sim.load_model: hessian(), 
 stiffness. docs/integrators.md ("The stiff column") has the shipped sand model's figures.
 
     .venv/bin/python scripts/flow_curvature.py [--model models/sand_2d.pt] [--E 3.537e7] [--pressure-strain 1e-3]
+        [--deltas 0 1e-4 ...] [--trust-model]
 """
 
 from __future__ import annotations
@@ -35,13 +36,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="Young's modulus of the scene, Pa (default: stiff/sand_column_2d's %(default)g)")
     parser.add_argument("--pressure-strain", type=float, default=1e-3,
                         help="-a, the volumetric log strain per axis of the state on the cone (default: %(default)g)")
+    parser.add_argument("--trust-model", action="store_true",
+                        help="load a model no MANIFEST beside it pins (TorchScript is code: only one you trust)")
     parser.add_argument("--deltas", type=float, nargs="+", default=[0.0, 1e-5, 1e-4, 1e-3, 1e-2],
                         help="log strains past the cone along the shear (default: %(default)s)")
     args = parser.parse_args(argv)
 
     import plasticitynet_sim as pns
 
-    model = pns.load_model(args.model, E=args.E)
+    model = pns.load_model(args.model, E=args.E, trusted=args.trust_model)
     material = model.metadata["material"]
     plasticity = material["plasticity"]
     if plasticity.get("model") != "drucker_prager":
