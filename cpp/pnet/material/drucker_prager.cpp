@@ -52,26 +52,6 @@ Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, ReturnBranch* b
 }
 
 template <int dim>
-Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, Mat<dim>& jacobian) const {
-    const double tr_eps = eps.sum();
-    if (tr_eps > 0.0) {  // the apex: Z = 1 whatever eps
-        jacobian.setZero();
-        return Vec<dim>::Zero();
-    }
-    const Vec<dim> eps_hat = eps - tr_eps / dim * Vec<dim>::Ones();
-    const double L = eps_hat.norm();
-    const double c = alpha_ * (dim * lambda_ + 2.0 * mu_) / (2.0 * mu_);
-    const double dgamma = L + c * tr_eps;
-    jacobian.setIdentity();
-    if (!(dgamma > 0.0)) return eps;  // inside the cone
-    const Vec<dim> n = eps_hat / L;
-    const Mat<dim> nn = n * n.transpose();
-    const Mat<dim> P = Mat<dim>::Identity() - Mat<dim>::Constant(1.0 / dim);
-    jacobian -= nn + c * n * Vec<dim>::Ones().transpose() + (dgamma / L) * (P - nn);
-    return eps - dgamma * n;
-}
-
-template <int dim>
 ReturnResult<dim> DruckerPrager<dim>::project(const Vec<dim>& Sigma, double hardening) const {
     ReturnBranch branch;
     const Vec<dim> eps_Z = project_strain(Sigma.array().log().matrix(), &branch);

@@ -29,11 +29,6 @@ public:
     /// The same projection in Hencky strain: log Z from eps = log Sigma (no log or exp: the
     /// consistent tangent evaluates it 2d + 1 times per point).
     Vec<dim> project_strain(const Vec<dim>& eps, ReturnBranch* branch = nullptr) const;
-    /// The same and its Jacobian d(log Z)/d eps in `jacobian`, in closed form: I inside the cone, 0 at the
-    /// apex, and on the cone, with n = dev(eps) / ||dev eps||, P = I - 1 1^T / d and c = alpha (d lambda +
-    /// 2 mu) / (2 mu): I - n n^T - c n 1^T - dgamma / ||dev eps|| (P - n n^T) (not symmetric: the flow is
-    /// not associative). What the consistent tangent needs (Material::elastoplastic_tangent).
-    Vec<dim> project_strain(const Vec<dim>& eps, Mat<dim>& jacobian) const;
 
     /// y(tau) = ||dev tau|| + alpha tr(tau), Pa; <= 0 inside the elastic cone.
     double yield_function(const Vec<dim>& tau) const;

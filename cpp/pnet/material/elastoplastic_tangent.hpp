@@ -5,9 +5,8 @@
 //
 // for any isotropic return mapping Z (the material library's or a learned one) and elasticity tau.
 // The return-mapped Kirchhoff stress tau_Z(eps) = tau(Z(exp eps, h)) is differentiated in the
-// principal log-strains in closed form where the return mapping has one (Drucker-Prager's cone and
-// apex, von Mises's radial return with StVK-Hencky) and by central differences otherwise (Cam-Clay's
-// scalar solve, a network, von Mises on another elasticity); the rotational part comes from the difference
+// principal log-strains by central differences (a return mapping has no closed-form derivative
+// in general: Cam-Clay's scalar solve, a network); the rotational part comes from the difference
 // quotients (tau_i - tau_j) / (Sigma_i - Sigma_j), exactly as for a hyperelastic energy
 // (isotropic_dPdF). Non-associative flow (Drucker-Prager, Cam-Clay) makes dtau_Z/deps
 // non-symmetric. Its symmetric part gives the tangent (projected to PSD on request); with keep_skew
@@ -62,14 +61,5 @@ void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil);
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd,
                                              bool keep_skew = false);
-
-/// The tangent from the return-mapped principal Kirchhoff stress tau at eps = log Sigma and its
-/// Jacobian dtau/deps (d x d; not symmetric for non-associative flow), for return mappings whose
-/// derivative is known in closed form (Drucker-Prager, von Mises in Hencky strain: Material::
-/// elastoplastic_tangent, no stencil). elastoplastic_tangent_of_stress differences its stencil into
-/// dtau/deps and calls this.
-template <int dim>
-Tensor4<dim> elastoplastic_tangent_of_jacobian(const PolarSVD<dim>& svd, const Vec<dim>& tau, const Mat<dim>& dtau_deps,
-                                               bool project_psd, bool keep_skew = false);
 
 }  // namespace pnet

@@ -239,24 +239,9 @@ Mat<dim> Material<dim>::elastoplastic_stress(const PolarSVD<dim>& svd, double ha
 template <int dim>
 Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening, bool project_psd,
                                                   bool keep_skew) const {
-    // Closed-form return mappings: tau(Z) and dtau/deps = (dtau/d log Z)(d log Z/d eps), no stencil.
-    const Vec<dim> eps = svd.Sigma.array().log().matrix();
-    Vec<dim> eps_Z;
-    Mat<dim> dZ;
-    bool closed = false;
-    if (const auto* model = std::get_if<DruckerPrager<dim>>(&plasticity_)) {
-        eps_Z = model->project_strain(eps, dZ);
-        closed = true;
-    } else if (const auto* model = std::get_if<VonMises<dim>>(&plasticity_)) {
-        closed = model->project_strain(eps, hardening, eps_Z, dZ);
-    }
-    if (closed)
-        return elastoplastic_tangent_of_jacobian<dim>(
-            svd, elasticity_.tau_of_strain(eps_Z),
-            Mat<dim>(elasticity_.dtau_deps(eps_Z.array().exp().matrix()) * dZ), project_psd, keep_skew);
     constexpr int k = kTangentStencil<dim>;
     Vec<dim> strain[k], tau[k];
-    tangent_strain_stencil<dim>(eps, strain);
+    tangent_strain_stencil<dim>(svd.Sigma.array().log().matrix(), strain);
     std::visit(
         [&](const auto& model) {
             using Model = std::decay_t<decltype(model)>;

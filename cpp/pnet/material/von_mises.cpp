@@ -108,25 +108,6 @@ Vec<dim> VonMises<dim>::project_strain(const Vec<dim>& eps, double h) const {
     return dgamma > 0.0 ? Vec<dim>(eps - dgamma / L * eps_hat) : eps;
 }
 
-template <int dim>
-bool VonMises<dim>::project_strain(const Vec<dim>& eps, double h, Vec<dim>& eps_Z, Mat<dim>& jacobian) const {
-    if (!closed_form()) return false;
-    const Vec<dim> eps_hat = eps - eps.sum() / dim * Vec<dim>::Ones();
-    const double L = eps_hat.norm();
-    const double dgamma = plastic_multiplier(eps, eps_hat, L, h);
-    jacobian.setIdentity();
-    if (!(dgamma > 0.0)) {
-        eps_Z = eps;
-        return true;
-    }
-    const Vec<dim> n = eps_hat / L;
-    const Mat<dim> nn = n * n.transpose();
-    const Mat<dim> P = Mat<dim>::Identity() - Mat<dim>::Constant(1.0 / dim);
-    jacobian -= nn + (dgamma / L) * (P - nn);
-    eps_Z = eps - dgamma * n;
-    return true;
-}
-
 template class VonMises<2>;
 template class VonMises<3>;
 

@@ -29,11 +29,6 @@ public:
     /// log Z from eps = log Sigma, without the hardening update (the consistent tangent's
     /// 2d + 1 evaluations at a fixed h; no log or exp in the closed form). Requires h >= 0.
     Vec<dim> project_strain(const Vec<dim>& eps, double h) const;
-    /// The same and its Jacobian d(log Z)/d eps in `jacobian`, where the return is closed-form (StVK-Hencky,
-    /// eq. 22): I inside the yield surface, and on it, with n = dev(eps) / ||dev eps|| and
-    /// P = I - 1 1^T / d, I - n n^T - (dgamma / ||dev eps||) (P - n n^T). Returns false (and leaves both
-    /// unset) for the other elasticities, whose return is a scalar solve.
-    bool project_strain(const Vec<dim>& eps, double h, Vec<dim>& eps_Z, Mat<dim>& jacobian) const;
 
     /// y(Sigma, h) = ||dev tau(Sigma)||^2 - (2 mu h)^2, Pa^2 (eq. 25).
     double yield_function(const Vec<dim>& Sigma, double h) const;
