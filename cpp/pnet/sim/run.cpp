@@ -120,7 +120,7 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
     long run_steps = 0, run_unconverged = 0;
     double run_worst_residual = 0.0;
     std::size_t run_hardening_clamped = 0;
-    long run_fixed_point_capped = 0;
+    long run_fixed_point_capped = 0, run_floor_retried = 0;
     while (sim.frame() < frames) {
         FrameStats f;
         try {
@@ -138,6 +138,7 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
         if (f.unconverged_steps > 0) run_worst_residual = std::max(run_worst_residual, f.max_residual);
         run_hardening_clamped = std::max(run_hardening_clamped, f.hardening_clamped);
         run_fixed_point_capped += f.fixed_point_capped_steps;
+        run_floor_retried += f.floor_friction_retried_steps;
         stats += stats_csv_row(f, columns);
         double t = f.time;  // the frame's start time, from its step sizes
         for (const StepRecord& s : sim.last_frame_steps()) t -= s.dt;
@@ -186,6 +187,11 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
                 "steps.csv)\n",
                 run_fixed_point_capped, run_steps, settings.implicit.fixed_point_tolerance,
                 settings.implicit.max_fixed_point_iterations);
+        if (run_floor_retried > 0)
+            std::printf(
+                "note: in %ld of %ld steps the Coulomb floor's one solve failed and its three passes solved the "
+                "step again (floor_friction_retried in steps.csv)\n",
+                run_floor_retried, run_steps);
         if (run_hardening_clamped > 0)
             std::printf(
                 "note: up to %zu particles in a step had a hardening state outside the range the model was "
