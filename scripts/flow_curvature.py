@@ -62,9 +62,10 @@ def main(argv: list[str] | None = None) -> int:
     n = np.zeros(d)
     n[0], n[1] = 1.0 / math.sqrt(2.0), -1.0 / math.sqrt(2.0)
     N = np.diag(n)  # the shear direction in F (principal frame, F diagonal)
+    v = N.reshape(-1)
+    t = 1e-7  # the one-sided difference's step
 
-    def stiffness(F0: np.ndarray, sign: float, t: float = 1e-7) -> float:
-        P0 = model.stress(F0[None])[0]
+    def stiffness(F0: np.ndarray, P0: np.ndarray, sign: float) -> float:
         P1 = model.stress((F0 + sign * t * N)[None])[0]
         return float(sign * np.sum((P1 - P0) * N) / t)
 
@@ -74,9 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     for delta in args.deltas:
         F0 = np.diag(np.exp(a + (beta + delta) * n))
         H = model.hessian(F0[None], F0[None], w=0.0)[0]
-        v = N.reshape(-1)
         network = float(v @ H @ v)
-        loading, unloading = stiffness(F0, +1.0), stiffness(F0, -1.0)
+        P0 = model.stress(F0[None])[0]
+        loading, unloading = stiffness(F0, P0, +1.0), stiffness(F0, P0, -1.0)
         print(f"{delta:8.0e} {network:12.4e} {loading:12.4e} {unloading:12.4e} {network / loading:16.1f}")
     return 0
 

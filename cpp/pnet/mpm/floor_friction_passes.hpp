@@ -22,7 +22,8 @@ namespace pnet {
 inline constexpr int kFloorFrictionSolves = 3;
 
 /// Solves the step from v (solve_with_reference) in `passes` solves, the solves recorded in `stats`
-/// (Newton and CG iterations summed, the fixed-point solves of all passes); `relag(v)` sets the floor's
+/// (Newton and CG iterations summed, the fixed-point solves of all passes added to those `stats` already
+/// counts: a failed one solve's, solve_on_coulomb_floor); `relag(v)` sets the floor's
 /// contacts from v before each pass after the first. A failed Newton solve throws SimulationError.
 template <int dim, typename Relag>
 void solve_floor_friction_passes(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
