@@ -34,7 +34,10 @@ NeuralElastoplasticEnergy<dim>::NeuralElastoplasticEnergy(const ModelFile& model
       w_(options.regularizer_weight),
       mu_train_(training_material_.description().elastic.mu()),
       hessian_kind_(options.hessian),
-      hessian_precision_(options.hessian_precision) {
+      hessian_precision_(options.hessian_precision),
+      reuse_(options.network_reuse) {
+    if (!(std::isfinite(reuse_) && reuse_ >= 0.0))
+        throw std::invalid_argument("network_reuse must be a tolerance >= 0, got " + std::to_string(reuse_));
     if (hessian_kind_ == Options::Hessian::Auto) {
         // The tangent for every material (docs/solver.md, measured); w = 0 for associative flow,
         // where the tangent is the exact Jacobian, and a damping otherwise.
@@ -133,15 +136,20 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
     // below, while trial points are valued as differences from F0 (value()); a double pass at another
     // point takes a double offset first (ensure_offset()).
     const bool single = single_at_reference();
-    ++network_passes_;
+    if (hessian && reusing()) return correction_with_reuse(hessian);
+    count_pass(n);
     net_.evaluate(F0_.data(), hessian ? FusedMlp::Order::Hessian : FusedMlp::Order::Gradient, net_value_.data(),
                   net_gradient_.data(), hessian, single ? FusedMlp::Precision::Single : FusedMlp::Precision::Double);
+    if (reuse_ > 0.0) {  // no cached Hessian is Newton's at this reference, and c is the network's
+        cache_current_.assign(n, 0);
+        c_exact_.assign(n, 1);
+    }
     offset_exact_ = !single;
     if (form == EnergyForm::LocalIdentity || form == EnergyForm::GlobalIdentity) {
         // c = grad_F N(I, slot, h), the rejected forms' correction at the identity.
         identity_value_.resize(n);
         identity_gradient_.resize(n * kM);
-        ++network_passes_;
+        count_pass(n);
         net_.evaluate(identity_.data(), FusedMlp::Order::Gradient, identity_value_.data(), identity_gradient_.data());
     }
 #pragma omp parallel for schedule(static) if (count >= 64)
@@ -163,9 +171,109 @@ void NeuralElastoplasticEnergy<dim>::ensure_correction(double* hessian) const {
 }
 
 template <int dim>
+void NeuralElastoplasticEnergy<dim>::correction_with_reuse(double* hessian) const {
+    const std::size_t n = F0_.size();
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+    if (cache_F0_.size() != n) {  // a new set of particles: nothing cached
+        cache_F0_.assign(n, Mat<dim>::Zero());
+        cache_h_.assign(n, 0.0);
+        cache_valid_.assign(n, 0);
+        cache_hessian_.resize(n);
+        cache_gradient_.resize(n);
+    }
+    cache_current_.assign(n, 1);
+    c_exact_.assign(n, 1);
+    rows_.clear();
+    for (std::size_t p = 0; p < n; ++p) {
+        const bool covered = cache_valid_[p] && (F0_[p] - cache_F0_[p]).cwiseAbs().maxCoeff() <= reuse_ &&
+                             (!has_hardening_ || std::abs(network_h_[p] - cache_h_[p]) <= reuse_);
+        if (!covered) rows_.push_back(static_cast<int>(p));
+        c_exact_[p] = !covered;
+    }
+    const std::size_t m = rows_.size();
+    count_pass(m, n);
+    if (m > 0) {
+        rows_value_.resize(m);
+        rows_gradient_.resize(m * kM);
+        rows_hessian_.resize(m * kM * kM);
+        net_.evaluate_rows(rows_.data(), m, F0_.data(), FusedMlp::Order::Hessian, rows_value_.data(),
+                           rows_gradient_.data(), rows_hessian_.data(), FusedMlp::Precision::Single);
+        const std::ptrdiff_t mm = static_cast<std::ptrdiff_t>(m);
+#pragma omp parallel for schedule(static) if (mm >= 256)
+        for (std::ptrdiff_t i = 0; i < mm; ++i) {
+            const int p = rows_[i];
+            cache_F0_[p] = F0_[p];
+            cache_h_[p] = has_hardening_ ? network_h_[p] : 0.0;
+            cache_valid_[p] = 1;
+            cache_gradient_[p] = Eigen::Map<const Eigen::Matrix<double, kM, 1>>(&rows_gradient_[i * kM]);
+            cache_hessian_[p] = Eigen::Map<const Eigen::Matrix<double, kM, kM>>(&rows_hessian_[i * kM * kM]);
+        }
+    }
+#pragma omp parallel for schedule(static) if (count >= 256)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        // grad N(F0) = grad N(F0c) + Hess N(F0c) (F0 - F0c) (exact where the row was just evaluated).
+        Eigen::Matrix<double, kM, 1> shift;
+        for (int k = 0; k < kM; ++k) shift[k] = F0_[p](k / dim, k % dim) - cache_F0_[p](k / dim, k % dim);
+        const Eigen::Matrix<double, kM, 1> g = cache_gradient_[p] + cache_hessian_[p] * shift;
+        for (int k = 0; k < kM; ++k) c_[p][k] = g[k] - stress_[p](k / dim, k % dim);
+        Eigen::Map<Eigen::Matrix<double, kM, kM>>(hessian + p * kM * kM) = cache_hessian_[p];
+    }
+    correction_ready_ = true;
+    offset_exact_ = false;  // N(F0) is not known: a double pass elsewhere takes its own (ensure_offset)
+    buffers_at_reference_ = false;
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::exact_correction(const Mat<dim>* F) const {
+    if (c_exact_.size() != F0_.size()) return;  // no Hessian kept since the last full pass
+    rows_.clear();
+    for (std::size_t p = 0; p < F0_.size(); ++p)
+        if (!c_exact_[p] && (!F || (F[p] - F0_[p]).cwiseAbs().maxCoeff() > reuse_)) rows_.push_back(static_cast<int>(p));
+    const std::size_t k = rows_.size();
+    if (k == 0) return;
+    count_pass(k, 0);
+    rows_value_.resize(k);
+    rows_gradient_.resize(k * kM);
+    net_.evaluate_rows(rows_.data(), k, F0_.data(), FusedMlp::Order::Gradient, rows_value_.data(),
+                       rows_gradient_.data(), nullptr, FusedMlp::Precision::Single);
+    for (std::size_t i = 0; i < k; ++i) {
+        const int p = rows_[i];
+        for (int j = 0; j < kM; ++j) c_[p][j] = rows_gradient_[i * kM + j] - stress_[p](j / dim, j % dim);
+        c_exact_[p] = 1;
+    }
+}
+
+template <int dim>
+void NeuralElastoplasticEnergy<dim>::change_with_reuse(const Mat<dim>* F) const {
+    const std::size_t n = F0_.size();
+    exact_correction(F);  // c of the kept particles the network values now
+    rows_.clear();
+    for (std::size_t p = 0; p < n; ++p)
+        if (!cache_current_[p] || (F[p] - F0_[p]).cwiseAbs().maxCoeff() > reuse_) rows_.push_back(static_cast<int>(p));
+    const std::size_t m = rows_.size();
+    count_pass(m, n);
+    if (m > 0) {
+        rows_value_.resize(m);
+        net_.difference_rows(rows_.data(), m, F, F0_.data(), rows_value_.data(), FusedMlp::Precision::Single);
+    }
+    // The expansion where the network was not evaluated: grad N(F0) : dF + dF : Hess N : dF / 2, with
+    // grad N(F0) = c + Ptilde(F0) (finish() subtracts c : dF again, leaving Ptilde(F0) : dF).
+    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(n);
+#pragma omp parallel for schedule(static) if (count >= 1024)
+    for (std::ptrdiff_t p = 0; p < count; ++p) {
+        Eigen::Matrix<double, kM, 1> dF;
+        for (int k = 0; k < kM; ++k) dF[k] = F[p](k / dim, k % dim) - F0_[p](k / dim, k % dim);
+        double g_dF = 0.0;
+        for (int k = 0; k < kM; ++k) g_dF += (c_[p][k] + stress_[p](k / dim, k % dim)) * dF[k];
+        net_value_[p] = g_dF + 0.5 * dF.dot(cache_hessian_[p] * dF);
+    }
+    for (std::size_t i = 0; i < m; ++i) net_value_[rows_[i]] = rows_value_[i];
+}
+
+template <int dim>
 void NeuralElastoplasticEnergy<dim>::ensure_offset() const {
     if (offset_exact_) return;
-    ++network_passes_;
+    count_pass(size());
     net_.evaluate(F0_.data(), FusedMlp::Order::Value, offset_.data());
     offset_exact_ = true;
 }
@@ -230,14 +338,20 @@ void NeuralElastoplasticEnergy<dim>::value(const Mat<dim>* F, double* psi) const
     ensure_correction();
     if (at_reference(F)) return finish(F, psi, nullptr);
     buffers_at_reference_ = false;
-    ++network_passes_;
     if (iterate_at_reference_ && single_at_reference()) {
         // A trial point of a line search from the reference (the rebased Newton's every one), whose
         // value is 0 exactly: N(F) - N(F0) in one float pass of the change.
-        net_.difference(F, F0_.data(), net_value_.data(), FusedMlp::Precision::Single);
+        if (reuse_ > 0.0 && cache_current_.size() == size()) {
+            change_with_reuse(F);
+        } else {
+            count_pass(size());
+            net_.difference(F, F0_.data(), net_value_.data(), FusedMlp::Precision::Single);
+        }
         return finish(F, psi, nullptr, true);
     }
     ensure_offset();
+    exact_correction(nullptr);
+    count_pass(size());
     net_.evaluate(F, FusedMlp::Order::Value, net_value_.data());
     finish(F, psi, nullptr);
 }
@@ -255,8 +369,9 @@ void NeuralElastoplasticEnergy<dim>::value_gradient(const Mat<dim>* F, double* p
     ensure_correction();
     if (at_reference(F)) return finish(F, psi, gradient);
     ensure_offset();
+    exact_correction(nullptr);
     buffers_at_reference_ = false;
-    ++network_passes_;
+    count_pass(size());
     net_.evaluate(F, FusedMlp::Order::Gradient, net_value_.data(), net_gradient_.data());
     finish(F, psi, gradient);
 }
@@ -307,7 +422,13 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
     // Hess_F N is symmetric, so the row-major output is also the column-major
     // Eigen matrix.
     iterate_at_reference_ = exactly_at_reference(F);
-    if (!correction_ready_ && metadata_.energy_form == EnergyForm::Eq8 && is_reference(F)) {
+    if (iterate_at_reference_ && reusing()) {
+        // At the reference under network_reuse: the cached Hessians where they cover F0 (also at a
+        // reference whose correction stands, a Coulomb floor's next pass), the network elsewhere.
+        correction_ready_ = false;
+        ensure_correction(reinterpret_cast<double*>(hessian));
+        values_at_reference(psi, gradient);
+    } else if (!correction_ready_ && metadata_.energy_form == EnergyForm::Eq8 && is_reference(F)) {
         // At the reference before its correction: N, grad N and Hess N at F0 in one pass, which gives
         // c and the offset too (the Newton outer iteration's iterates).
         ensure_correction(reinterpret_cast<double*>(hessian));
@@ -315,7 +436,7 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
     } else if (iterate_at_reference_ && single_at_reference()) {
         // At a reference whose correction stands (a Coulomb floor's next pass starts there): the
         // Hessian pass in float, Psi and its gradient exact there.
-        ++network_passes_;
+        count_pass(size());
         net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
                       reinterpret_cast<double*>(hessian), FusedMlp::Precision::Single);
         buffers_at_reference_ = false;
@@ -323,8 +444,9 @@ void NeuralElastoplasticEnergy<dim>::value_gradient_hessian(const Mat<dim>* F, d
     } else {
         ensure_correction();
         ensure_offset();
+        exact_correction(nullptr);
         buffers_at_reference_ = false;
-        ++network_passes_;
+        count_pass(size());
         net_.evaluate(F, FusedMlp::Order::Hessian, net_value_.data(), net_gradient_.data(),
                       reinterpret_cast<double*>(hessian));
         finish(F, psi, gradient);

@@ -88,12 +88,24 @@ public:
         /// Every other evaluation (a Newton iterate away from its reference: the paper's fixed point),
         /// and every one of the other energy forms, is double.
         FusedMlp::Precision hessian_precision = FusedMlp::Precision::Double;
+        /// Under the single-precision passes at the reference (hessian_precision Single, eq. 8 relative
+        /// to its reference: the rebased Newton), a tolerance tau on F (largest entry) below which the
+        /// network is not evaluated again: a particle whose reference F0 (and hardening input) is within
+        /// tau of the one its Hessian was taken at keeps that Hessian, its grad N(F0) for c extrapolated
+        /// by it; and a line search's trial point within tau of F0 is valued by the energy's second-order
+        /// expansion E [Ptilde(F0) : dF + dF : (Hess N + w mu) : dF / 2] (the cubic term it leaves out is
+        /// tau / (the network's length scale) of the quadratic one). 0: every pass over every particle.
+        double network_reuse = 0.0;
     };
 
     /// Throws std::invalid_argument (naming the model file) unless `model` is a
     /// dim-D energy with a compiled kernel, E > 0, w >= 0 and Options::material
     /// (if set) one the model was trained for.
     NeuralElastoplasticEnergy(const ModelFile& model, const Options& options);
+
+    /// A new time step: the Hessians network_reuse keeps are dropped, so that a step's result depends on
+    /// its input state alone (a run resumed from a checkpoint equals the uninterrupted one).
+    void begin_step() { cache_F0_.clear(); }
 
     /// Starts an optimization: the reference state (F0, h) of n particles and
     /// their constants c. h is ignored by models without hardening input.
@@ -130,8 +142,13 @@ public:
     void set_damping(double lambda) { damping_ = lambda; }
     double regularizer_weight() const { return w_; }
     /// Passes of the network over the points since construction (each a value, gradient or Hessian
-    /// evaluation of every point of the batch): what the integrator's network counter reports.
+    /// evaluation of the batch, or of the part of it network_reuse does not cover): what the
+    /// integrator's network counter reports.
     long network_passes() const { return network_passes_; }
+    /// Points the network evaluated since construction (rows over all passes, a gradient pass for c
+    /// included), and points it would have evaluated without network_reuse.
+    long network_rows() const { return network_rows_; }
+    long network_rows_without_reuse() const { return network_rows_full_; }
     bool has_hardening() const { return has_hardening_; }
     const LearnedReturnMap<dim>* learned_return_map() const { return return_map_.get(); }
 
@@ -173,6 +190,42 @@ private:
     mutable std::vector<double> identity_value_, identity_gradient_;
     std::size_t hardening_clamped_ = 0;
     mutable long network_passes_ = 0;
+    mutable long network_rows_ = 0, network_rows_full_ = 0;
+    // Options::network_reuse: the tolerance, and per particle the F0 and network hardening input its
+    // cached Hess N (raw: at the training E, before w mu and the projection) and grad N were taken at.
+    double reuse_ = 0.0;
+    mutable std::vector<Mat<dim>> cache_F0_;
+    mutable std::vector<double> cache_h_;
+    mutable std::vector<char> cache_valid_;
+    mutable std::vector<Eigen::Matrix<double, kM, kM>> cache_hessian_;
+    mutable std::vector<Eigen::Matrix<double, kM, 1>> cache_gradient_;
+    // Whether particle p's cached Hessian is the one Newton got at the present reference (its trial
+    // points may then be valued by the expansion).
+    mutable std::vector<char> cache_current_;
+    // Whether particle p's c is the network's at the present reference: not where its Hessian was kept
+    // (its c then extrapolates grad N by the kept Hessian, which does not see the F0 slot's change; the
+    // expansion does not depend on c, and a trial point valued by the network takes c exactly first).
+    mutable std::vector<char> c_exact_;
+    mutable std::vector<int> rows_;  // the particles a partial pass evaluates
+    mutable std::vector<double> rows_value_, rows_gradient_, rows_hessian_;
+    bool reusing() const { return reuse_ > 0.0 && single_at_reference(); }
+    /// Counts a pass of the network over `rows` of the `of` points it would evaluate without reuse
+    /// (none: no pass).
+    void count_pass(std::size_t rows, std::size_t of) const {
+        network_passes_ += rows > 0;
+        network_rows_ += static_cast<long>(rows);
+        network_rows_full_ += static_cast<long>(of);
+    }
+    void count_pass(std::size_t rows) const { count_pass(rows, rows); }
+    /// ensure_correction()'s pass under network_reuse: the Hessian pass over the particles whose cache
+    /// does not cover F0, the cached Hessians and the extrapolated grad N(F0) for the others.
+    void correction_with_reuse(double* hessian) const;
+    /// c = grad N(F0) - Ptilde(F0) from a gradient pass over the kept particles whose c is extrapolated
+    /// (those whose F is farther than the tolerance from F0; null F: all of them).
+    void exact_correction(const Mat<dim>* F) const;
+    /// value()'s pass of the change under network_reuse: the network on the trial points farther than
+    /// the tolerance from F0, the expansion on the others; N(F) - N(F0) in net_value_.
+    void change_with_reuse(const Mat<dim>* F) const;
     // Work arrays, sized by set_reference(): one evaluation at a time per object
     // (each evaluation is itself threaded).
     mutable std::vector<double> net_value_, net_gradient_;

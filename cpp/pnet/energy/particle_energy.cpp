@@ -43,7 +43,8 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
                                                 const std::vector<std::string>& context,
                                                 const std::vector<double>& regularizer_weights,
                                                 typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian,
-                                                double tangent_damping, FusedMlp::Precision hessian_precision) {
+                                                double tangent_damping, FusedMlp::Precision hessian_precision,
+                                                double network_reuse) {
     if (models.size() != materials.size() || context.size() != materials.size() ||
         regularizer_weights.size() != materials.size())
         throw std::invalid_argument("NeuralParticleEnergy: one model, context and weight per object are needed");
@@ -64,7 +65,7 @@ NeuralParticleEnergy<dim>::NeuralParticleEnergy(const std::vector<std::shared_pt
                                                                         /*relative_to_reference=*/true, hessian,
                                                                         scene, tangent_damping,
                                                                         /*nonsymmetric_tangent=*/true,
-                                                                        hessian_precision});
+                                                                        hessian_precision, network_reuse});
         } catch (const std::invalid_argument& e) {
             throw std::invalid_argument(context[k] + ": " + e.what());
         }

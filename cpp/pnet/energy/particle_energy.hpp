@@ -113,10 +113,15 @@ public:
                          const std::vector<double>& regularizer_weights,
                          typename NeuralElastoplasticEnergy<dim>::Options::Hessian hessian,
                          double tangent_damping = kDefaultTangentDamping,
-                         FusedMlp::Precision hessian_precision = FusedMlp::Precision::Double);
+                         FusedMlp::Precision hessian_precision = FusedMlp::Precision::Double,
+                         double network_reuse = 0.0);
 
     void set_reference(const std::vector<Mat<dim>>& F0, const std::vector<double>& hardening,
                        const std::vector<int>& object) override;
+    /// Drops the Hessians each object's network_reuse keeps (NeuralElastoplasticEnergy::begin_step).
+    void begin_step() override {
+        for (Group& g : objects_) g.energy->begin_step();
+    }
     void evaluate(const std::vector<Mat<dim>>& F, typename ParticleEnergy<dim>::Order order, double* psi, Mat<dim>* P,
                   Tensor4<dim>* H, bool project_psd = true) override;
 

@@ -112,6 +112,23 @@ void EnergyNetwork<dim>::set_rows(const Mat<dim>* F, std::vector<double>& rows) 
 }
 
 template <int dim>
+void EnergyNetwork<dim>::pack_rows(const int* rows, std::size_t count, const Mat<dim>* F,
+                                   std::vector<double>& packed) const {
+    packed.resize(count * input_width_);
+    const bool principal = representation_ == EnergyRepresentation::Principal;
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(count);
+#pragma omp parallel for schedule(static) if (n >= 1024)
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+        const int p = rows[i];
+        double* x = &packed[i * input_width_];
+        std::copy(&inputs_[p * input_width_], &inputs_[(p + 1) * input_width_], x);
+        const Mat<dim> G = principal ? Mat<dim>(U_[p].transpose() * F[p] * V_[p]) : F[p];
+        for (int a = 0; a < dim; ++a)
+            for (int b = 0; b < dim; ++b) x[a * dim + b] = G(a, b);
+    }
+}
+
+template <int dim>
 void EnergyNetwork<dim>::difference(const Mat<dim>* F, const Mat<dim>* from, double* change,
                                     FusedMlp::Precision precision) const {
     set_rows(from, from_inputs_);
@@ -120,37 +137,56 @@ void EnergyNetwork<dim>::difference(const Mat<dim>* F, const Mat<dim>* from, dou
 }
 
 template <int dim>
+void EnergyNetwork<dim>::difference_rows(const int* rows, std::size_t count, const Mat<dim>* F, const Mat<dim>* from,
+                                         double* change, FusedMlp::Precision precision) const {
+    if (count == 0) return;
+    pack_rows(rows, count, from, packed_from_);
+    pack_rows(rows, count, F, packed_);
+    mlp(precision).difference(packed_.data(), packed_from_.data(), count, change);
+}
+
+template <int dim>
+void EnergyNetwork<dim>::evaluate_rows(const int* rows, std::size_t count, const Mat<dim>* F, FusedMlp::Order order,
+                                       double* value, double* gradient, double* hessian,
+                                       FusedMlp::Precision precision) const {
+    if (count == 0) return;
+    pack_rows(rows, count, F, packed_);
+    mlp(precision).evaluate(packed_.data(), count, order, value, gradient, hessian);
+    to_frame_of_F(rows, count, order, gradient, hessian);
+}
+
+template <int dim>
 void EnergyNetwork<dim>::evaluate(const Mat<dim>* F, FusedMlp::Order order, double* value, double* gradient,
                                   double* hessian, FusedMlp::Precision precision) const {
-    const FusedMlp& mlp = this->mlp(precision);
-    const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size_);
-    const bool principal = representation_ == EnergyRepresentation::Principal;
     set_rows(F, inputs_);
-    if (!principal || order == FusedMlp::Order::Value) {
-        mlp.evaluate(inputs_.data(), size_, order, value, gradient, hessian);
-        return;
-    }
+    mlp(precision).evaluate(inputs_.data(), size_, order, value, gradient, hessian);
+    to_frame_of_F(nullptr, size_, order, gradient, hessian);
+}
+
+template <int dim>
+void EnergyNetwork<dim>::to_frame_of_F(const int* rows, std::size_t count, FusedMlp::Order order, double* gradient,
+                                       double* hessian) const {
+    if (representation_ != EnergyRepresentation::Principal || order == FusedMlp::Order::Value) return;
     const bool second = order == FusedMlp::Order::Hessian;
-    mlp_gradient_.resize(size_ * kM);
-    if (second) mlp_hessian_.resize(size_ * kM * kM);
-    mlp.evaluate(inputs_.data(), size_, order, value, mlp_gradient_.data(), second ? mlp_hessian_.data() : nullptr);
     using Map = Eigen::Matrix<double, kM, kM, Eigen::RowMajor>;
-#pragma omp parallel for schedule(static) if (count >= 256)
-    for (std::ptrdiff_t p = 0; p < count; ++p) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(count);
+#pragma omp parallel for schedule(static) if (n >= 256)
+    for (std::ptrdiff_t i = 0; i < n; ++i) {
+        const std::size_t p = rows ? static_cast<std::size_t>(rows[i]) : static_cast<std::size_t>(i);
         const Mat<dim>& U = U_[p];
         const Mat<dim>& V = V_[p];
-        const Mat<dim> gF = U * row_matrix<dim>(&mlp_gradient_[p * kM]) * V.transpose();
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j) gradient[p * kM + i * dim + j] = gF(i, j);
+        const Mat<dim> gF = U * row_matrix<dim>(&gradient[i * kM]) * V.transpose();
+        for (int a = 0; a < dim; ++a)
+            for (int b = 0; b < dim; ++b) gradient[i * kM + a * dim + b] = gF(a, b);
         if (!second) continue;
-        Map M;  // vec G = M vec F: M((ij), (kl)) = U_ki V_lj
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j)
+        Map M;  // vec G = M vec F: M((ab), (kl)) = U_ka V_lb
+        for (int a = 0; a < dim; ++a)
+            for (int b = 0; b < dim; ++b)
                 for (int k = 0; k < dim; ++k)
-                    for (int l = 0; l < dim; ++l) M(i * dim + j, k * dim + l) = U(k, i) * V(l, j);
-        const Eigen::Map<const Map> HG(&mlp_hessian_[p * kM * kM]);
-        Eigen::Map<Map> HF(hessian + p * kM * kM);
-        HF.noalias() = M.transpose() * (HG * M);
+                    for (int l = 0; l < dim; ++l) M(a * dim + b, k * dim + l) = U(k, a) * V(l, b);
+        Eigen::Map<Map> H(hessian + i * kM * kM);
+        const Map HG = H;
+        H.noalias() = M.transpose() * (HG * M);
     }
 }
 

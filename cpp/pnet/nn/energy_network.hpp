@@ -52,6 +52,16 @@ public:
     void difference(const Mat<dim>* F, const Mat<dim>* from, double* change,
                     FusedMlp::Precision precision = FusedMlp::Precision::Double) const;
 
+    /// evaluate() and difference() on the listed rows only (`rows`: count ascending row indices;
+    /// F and from are indexed by row, as above): the i-th listed row's results are at value[i],
+    /// gradient[i kM], hessian[i kM kM] and change[i]. The same arithmetic as the whole batch's,
+    /// so a row's result does not depend on which other rows are listed.
+    void evaluate_rows(const int* rows, std::size_t count, const Mat<dim>* F, FusedMlp::Order order, double* value,
+                       double* gradient = nullptr, double* hessian = nullptr,
+                       FusedMlp::Precision precision = FusedMlp::Precision::Double) const;
+    void difference_rows(const int* rows, std::size_t count, const Mat<dim>* F, const Mat<dim>* from,
+                         double* change, FusedMlp::Precision precision = FusedMlp::Precision::Double) const;
+
     /// The MLP's input for one forward() row [vec F, vec F0, (h), (u)] of a model
     /// file (`parameters` entries u): what the loader checks forward() against.
     static void mlp_input(EnergyRepresentation representation, bool has_hardening, const double* forward_row,
@@ -73,7 +83,12 @@ private:
     mutable std::vector<double> inputs_, from_inputs_;  // the MLP's rows (the F slot set per evaluation)
     /// Writes the F slot of `rows` (inputs_ or from_inputs_, whose other slots are the reference's).
     void set_rows(const Mat<dim>* F, std::vector<double>& rows) const;
-    mutable std::vector<double> mlp_gradient_, mlp_hessian_;  // Principal: in G, before the change of frame
+    /// The MLP inputs of the listed rows (a copy of the reference's with F's slot), packed.
+    void pack_rows(const int* rows, std::size_t count, const Mat<dim>* F, std::vector<double>& packed) const;
+    /// The change of frame of the MLP's gradient and Hessian in G to F, for the listed rows (null: all).
+    void to_frame_of_F(const int* rows, std::size_t count, FusedMlp::Order order, double* gradient,
+                       double* hessian) const;
+    mutable std::vector<double> packed_, packed_from_;  // evaluate_rows, difference_rows
 };
 
 }  // namespace pnet

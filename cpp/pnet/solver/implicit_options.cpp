@@ -42,6 +42,9 @@ std::vector<OptionField<O>> make_fields() {
             "hessian_precision", "--hessian-precision", {"single", "double"}, &O::hessian_precision,
             "plasticitynet: the arithmetic of the network's passes at Newton's iterate (its Hessian) and from "
             "it (the line search's values, as changes from the iterate)"),
+        number_option("network_reuse", "--network-reuse", 0.0, false, kNoBound, false, &O::network_reuse,
+                      "plasticitynet: a particle's network Hessian is kept while its reference F moves less than "
+                      "this (largest entry), and a line search's point this close is valued by the expansion"),
         number_option("fixed_point_tolerance", "--fixed-point-tol", 0.0, false, kNoBound, false,
                       &O::fixed_point_tolerance, "plasticitynet's fixed point: max_p |F_p(v) - F0_p|"),
         integer_option("max_fixed_point_iterations", "--fixed-point-iterations", 1, 100000,

@@ -28,7 +28,7 @@ MethodEnergy<dim> plasticitynet_energy(const EnergyRequest<dim>& r) {
     for (const Material<dim>& m : r.materials) w.push_back(o.resolved_regularizer_weight(m.description().plasticity));
     auto neural = std::make_unique<NeuralParticleEnergy<dim>>(per_object, r.materials, places(r.where, ".model"), w,
                                                               o.neural_hessian<dim>(), o.tangent_damping,
-                                                              o.network_hessian_precision());
+                                                              o.network_hessian_precision(), o.network_reuse);
     MethodEnergy<dim> out;
     for (std::size_t k = 0; k < r.materials.size(); ++k)
         out.return_maps.push_back(o.learned_return_map ? neural->object_energy(k).learned_return_map() : nullptr);

@@ -7,6 +7,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <fstream>
+#include <iostream>
 #include <optional>
 #include <utility>
 #include <nlohmann/json.hpp>
@@ -352,6 +353,9 @@ TEST(NeuralElastoplasticEnergy, RejectsBadConfiguration) {
     EXPECT_THROW((NeuralElastoplasticEnergy<3>(model, {1.0, 1.0})), std::invalid_argument);
     EXPECT_THROW((NeuralElastoplasticEnergy<2>(model, {-1.0, 1.0})), std::invalid_argument);
     EXPECT_THROW((NeuralElastoplasticEnergy<2>(model, {1.0, -1.0})), std::invalid_argument);
+    NeuralElastoplasticEnergy<2>::Options negative_reuse{1.0, 1.0};
+    negative_reuse.network_reuse = -1e-3;
+    EXPECT_THROW((NeuralElastoplasticEnergy<2>(model, negative_reuse)), std::invalid_argument);
     const ModelFile rm = load_model_file(kModels + "/metal_nh_rm_2d.pt");
     EXPECT_THROW((NeuralElastoplasticEnergy<2>(rm, {1.0, 1.0})), std::invalid_argument);
 }
@@ -538,6 +542,87 @@ TEST(NeuralElastoplasticEnergy, SinglePrecisionHessianAtTheReference) {
     check_single_precision_hessian<2>("sand_2d.pt");
     check_single_precision_hessian<2>("metal_2d.pt");
     check_single_precision_hessian<3>("snow_3d.pt");
+}
+
+// Options::network_reuse (the rebased Newton's passes at the reference, in float): a particle whose
+// reference moved less than the tolerance keeps the Hessian of its last network pass and is not
+// evaluated again, its gradient at the reference still E Ptilde(F0) exactly; a particle that moved
+// farther is evaluated as without reuse. A line search's trial point within the tolerance of the
+// reference is valued by the energy's second-order expansion, one farther by the network.
+// A kept Hessian's particle valued by the network takes its c from a gradient pass first (the kept
+// Hessian cannot extrapolate grad N(F0): it does not see the change of the network's F0 input).
+template <int dim>
+void check_network_reuse(const std::string& file) {
+    const double shift = 4e-4;
+    SCOPED_TRACE(file);
+    const ModelFile model = load_model_file(kModels + "/" + file);
+    const double E = 3.0e5, tolerance = 1e-3;
+    using Options = typename NeuralElastoplasticEnergy<dim>::Options;
+    Options every_options{E, 0.1, true};
+    every_options.hessian_precision = FusedMlp::Precision::Single;
+    Options reuse_options = every_options;
+    reuse_options.network_reuse = tolerance;
+    NeuralElastoplasticEnergy<dim> every(model, every_options), reuse(model, reuse_options);
+    const std::size_t n = 20, half = n / 2;
+    const Batch<dim> b = make_batch<dim>(model.metadata, n, 41);
+    std::vector<double> psi(n), psi_reuse(n);
+    std::vector<Mat<dim>> grad(n), grad_reuse(n);
+    std::vector<Tensor4<dim>> H(n), H_reuse(n), H_first(n);
+    every.set_reference(b.F0.data(), b.h.data(), n);
+    reuse.set_reference(b.F0.data(), b.h.data(), n);
+    every.value_gradient_hessian(b.F0.data(), psi.data(), grad.data(), H.data(), false);
+    reuse.value_gradient_hessian(b.F0.data(), psi_reuse.data(), grad_reuse.data(), H_first.data(), false);
+    EXPECT_EQ(reuse.network_rows(), static_cast<long>(n)) << "nothing cached yet: every particle";
+    for (std::size_t p = 0; p < n; ++p)
+        EXPECT_LE((H_first[p] - H[p]).cwiseAbs().maxCoeff(), 1e-12 * H[p].cwiseAbs().maxCoeff()) << p;
+
+    // The next reference: the first half moved `shift` (within the tolerance), the second half 4e-3.
+    std::vector<Mat<dim>> F0(n);
+    for (std::size_t p = 0; p < n; ++p) F0[p] = b.F0[p] + Mat<dim>::Constant(p < half ? shift : 4e-3);
+    every.set_reference(F0.data(), b.h.data(), n);
+    reuse.set_reference(F0.data(), b.h.data(), n);
+    every.value_gradient_hessian(F0.data(), psi.data(), grad.data(), H.data(), false);
+    reuse.value_gradient_hessian(F0.data(), psi_reuse.data(), grad_reuse.data(), H_reuse.data(), false);
+    EXPECT_EQ(reuse.network_rows(), static_cast<long>(n + half)) << "only the particles that moved farther";
+    EXPECT_EQ(reuse.network_rows_without_reuse(), static_cast<long>(2 * n));
+    for (std::size_t p = 0; p < n; ++p) {
+        const Mat<dim> P = reuse.elastoplastic_stress(F0[p], b.h[p]);
+        EXPECT_EQ(psi_reuse[p], 0.0);
+        EXPECT_LE((grad_reuse[p] - P).cwiseAbs().maxCoeff(), 1e-12 * E) << "particle " << p;
+        const Tensor4<dim>& expected = p < half ? H_first[p] : H[p];  // kept, or taken again
+        EXPECT_LE((H_reuse[p] - expected).cwiseAbs().maxCoeff(), 1e-12 * expected.cwiseAbs().maxCoeff()) << p;
+    }
+
+    // Trial points within the tolerance: every particle valued by the expansion, no pass; its error is
+    // the cubic term and the kept Hessian's change over the shift, a fraction of the quadratic term.
+    // Beyond it: every particle valued by the network, the same value as without reuse (to float's
+    // rounding of c), after one gradient pass over the kept particles for their c.
+    for (double t : {1e-2, 1.0}) {
+        std::vector<Mat<dim>> Ft(n);
+        double largest_step = 0.0;
+        for (std::size_t p = 0; p < n; ++p) {
+            Ft[p] = F0[p] + t * (b.F[p] - b.F0[p]);
+            largest_step = std::max(largest_step, (Ft[p] - F0[p]).cwiseAbs().maxCoeff());
+        }
+        const long rows = reuse.network_rows();
+        every.value(Ft.data(), psi.data());
+        reuse.value(Ft.data(), psi_reuse.data());
+        const bool near = largest_step <= tolerance;
+        EXPECT_EQ(near, t == 1e-2);
+        EXPECT_EQ(reuse.network_rows(), rows + (near ? 0L : static_cast<long>(n + half))) << "t " << t;
+        for (std::size_t p = 0; p < n; ++p) {
+            const auto dF = flatten<dim>(Ft[p] - F0[p]);
+            const double quadratic = 0.5 * std::abs(dF.dot(H[p] * dF));
+            EXPECT_NEAR(psi_reuse[p], psi[p], (near ? 0.05 * quadratic : 0.0) + 1e-6 * E * t)
+                << "t " << t << ", particle " << p;
+        }
+    }
+}
+
+TEST(NeuralElastoplasticEnergy, NetworkReuseWithinItsTolerance) {
+    check_network_reuse<2>("sand_2d.pt");
+    check_network_reuse<2>("metal_2d.pt");
+    check_network_reuse<3>("snow_3d.pt");
 }
 
 // --- Python cross-check ----------------------------------------------------------

@@ -319,10 +319,12 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionInOneSolveCarriesTheImpulsesDer
     E.assemble_by_nodes(assembled);
     VecX diagonal;
     E.hessian_diagonal(diagonal);
-    for (const auto& c : contacts)
-        if (c.impulse > 0.0)
+    for (const auto& c : contacts) {
+        if (c.impulse > 0.0) {
             EXPECT_NEAR(assembled.coeff(dim * c.dof, dim * c.dof), diagonal[dim * c.dof], 1e-9 * diagonal[dim * c.dof])
                 << "contact node " << c.dof;
+        }
+    }
     std::cout << "floor friction in one solve: worst relative error of H d " << worst
               << ", largest friction change through J " << coupling << " of the largest entry\n";
     EXPECT_LT(worst, 1e-5);
