@@ -62,6 +62,12 @@ def test_plasticitynet_evaluates_its_network_on_every_newton_iteration(name, fra
         newton = newton - steps["predictor_iterations"]
     assert newton.sum() > 0, "no Newton iteration: nothing was checked"
     assert np.all(network >= newton), f"network passes {network} below Newton iterations {newton}"
+    # Each step's first pass covers every point (network_reuse keeps Hessians within a step only), and
+    # no step evaluates more points than its passes over all of them.
+    points, everywhere = steps["network_points"], network * (len(sim.velocities) if not sim.is_fem else 1)
+    assert np.all(points > 0)
+    if not sim.is_fem:
+        assert np.all(points >= len(sim.velocities)) and np.all(points <= everywhere), (points, everywhere)
     # return_map on the same scene passes the network zero times.
     _, _, classical = run(tiny(name), "return_map", frames)
     assert classical["newton_iterations"].sum() > 0 and classical["network_evaluations"].sum() == 0

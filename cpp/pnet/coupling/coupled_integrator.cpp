@@ -99,7 +99,7 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
 
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
     solve.work_line_search = mpm_energy_->tangent_hessian();
-    const long network_before = mpm_energy_->network_evaluations();
+    const long network_before = mpm_energy_->network_evaluations(), points_before = mpm_energy_->network_points();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     // Under "auto" a failed one solve on the floor is solved again by the passes (ImplicitIntegrator).
     const bool one_solve = mpm_system_.boundary.coulomb_floor() && mpm_.floor_friction_newton();
@@ -122,6 +122,7 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
         retry,
         [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped()); }, stats);
     stats.network_evaluations = mpm_energy_->network_evaluations() - network_before;
+    stats.network_points = mpm_energy_->network_points() - points_before;
     stats.ccd_queries = coupled_.ccd_queries();
     stats.ccd_limited = coupled_.ccd_limited() + (alpha < 1.0);
     stats.energy_seconds = mpm_.energy_seconds();

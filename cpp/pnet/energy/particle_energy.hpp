@@ -69,6 +69,8 @@ public:
     /// Passes of a learned energy's network over the points since construction (0 for energies
     /// without one): the integrators report its change per step (StepStats::network_evaluations).
     virtual long network_evaluations() const { return 0; }
+    /// The points those passes evaluated, summed over the passes (StepStats::network_points).
+    virtual long network_points() const { return 0; }
 };
 
 /// psi(F) of the elasticity model of each particle's material.
@@ -146,6 +148,11 @@ public:
         long passes = 0;
         for (const Group& g : objects_) passes += g.energy->network_passes();
         return passes;
+    }
+    long network_points() const override {
+        long points = 0;
+        for (const Group& g : objects_) points += g.energy->network_rows();
+        return points;
     }
 
 private:

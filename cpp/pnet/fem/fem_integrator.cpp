@@ -102,7 +102,7 @@ FemStepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, l
     if (friction_) friction_->lag(*friction_contact_, state.x);  // normal forces and tangents of the start
     FemStepStats stats;
     stats.dt = dt;
-    const long network_before = energy_->network_evaluations();
+    const long network_before = energy_->network_evaluations(), points_before = energy_->network_points();
     const std::size_t n = system_.mesh.nodes();
     // The potential is over v with x(v) = x^ + h v (fem_integrator.hpp): backward Euler x^ = x^n, h = dt;
     // BDF2, once the state has history, x^ = ((1 + w)^2 x^n - w^2 x^{n-1}) / (1 + 2 w), h = beta dt with
@@ -260,6 +260,7 @@ FemStepStats FemImplicitIntegrator<dim>::step(FemState<dim>& state, double dt, l
     }
     stats.max_grid_speed = max_speed;
     stats.network_evaluations = energy_->network_evaluations() - network_before;
+    stats.network_points = energy_->network_points() - points_before;
     fem_return_mapping(system_, state);
     stats.grid_seconds = std::chrono::duration<double>(after_solve - start).count();
     stats.g2p_seconds = seconds_since(after_solve);

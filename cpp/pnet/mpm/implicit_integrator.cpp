@@ -127,7 +127,7 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     potential_.set_assemble(mpm_options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();
-    const long network_before = energy_->network_evaluations();
+    const long network_before = energy_->network_evaluations(), points_before = energy_->network_points();
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
@@ -155,6 +155,7 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     for (Eigen::Index k = 0; k < v_.size() / dim; ++k) max_speed = std::max(max_speed, v_.segment<dim>(dim * k).norm());
     stats.max_grid_speed = max_speed;
     stats.network_evaluations = energy_->network_evaluations() - network_before;
+    stats.network_points = energy_->network_points() - points_before;
     stats.energy_seconds = potential_.energy_seconds();
     stats.cg_seconds = potential_.multiply_seconds();
     const auto after_solve = std::chrono::steady_clock::now();

@@ -40,6 +40,7 @@ struct FrameStats {
     // Newton residual (m/s), and whether every solve converged.
     long newton_iterations = 0, cg_iterations = 0, line_search_steps = 0, fixed_point_iterations = 0;
     long network_evaluations = 0;  // plasticitynet: passes of the energy network (StepStats::network_evaluations)
+    long network_points = 0;       // ... and the points they evaluated (StepStats::network_points)
     double max_residual = 0.0;
     bool converged = true;
     long unconverged_steps = 0;          // steps whose solve ended above the Newton tolerance
@@ -67,6 +68,7 @@ struct FrameStats {
         line_search_steps += s.line_search_steps;
         fixed_point_iterations += s.fixed_point_iterations;
         network_evaluations += s.network_evaluations;
+        network_points += s.network_points;
         max_residual = std::max(max_residual, s.residual);
         converged = converged && s.converged;
         unconverged_steps += !s.converged;
@@ -117,6 +119,7 @@ void for_each_frame_field(F&& f) {
       [](const FrameStats& s) { return s.fixed_point_iterations; });
     f(FrameField{"network_evaluations", "network_evaluations", "%ld"},
       [](const FrameStats& s) { return s.network_evaluations; });
+    f(FrameField{"network_points", "network_points", "%ld"}, [](const FrameStats& s) { return s.network_points; });
     f(FrameField{"max_residual_m_per_s", "max_residual", "%.6g"}, [](const FrameStats& s) { return s.max_residual; });
     f(FrameField{"converged", "converged", "%d"}, [](const FrameStats& s) { return s.converged; });
     f(FrameField{"unconverged_steps", "unconverged_steps", "%ld"},

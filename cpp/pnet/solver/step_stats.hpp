@@ -41,6 +41,10 @@ struct StepStats {
     // value, gradient or Hessian evaluation of every point; ParticleEnergy::network_evaluations). At
     // least one per Newton iteration: the network is on the path of every iteration. 0 for the others.
     long network_evaluations = 0;
+    // plasticitynet: the points (particles, elements) those passes evaluated, summed over the passes:
+    // passes x points where every pass covers every point, fewer where network_reuse keeps a point's
+    // Hessian or values a trial point by the energy's expansion (ParticleEnergy::network_points).
+    long network_points = 0;
     // Where an implicit step's time went (parts of grid_seconds).
     double energy_seconds = 0.0;     // per-particle energies, stresses and Hessians
     double cg_seconds = 0.0;         // Hessian-vector products and PCG
@@ -73,6 +77,7 @@ void StepStats::for_each_field(F&& f) {
     f(StepField{"cg_iterations", "cg_iterations"}, &StepStats::cg_iterations);
     f(StepField{"line_search_steps", "line_search_steps"}, &StepStats::line_search_steps);
     f(StepField{"network_evaluations", "network_evaluations"}, &StepStats::network_evaluations);
+    f(StepField{"network_points", "network_points"}, &StepStats::network_points);
     f(StepField{"fixed_point_iterations", "fixed_point_iterations"}, &StepStats::fixed_point_iterations);
     f(StepField{"fixed_point_change", "fixed_point_change"}, &StepStats::fixed_point_change);
     f(StepField{"initial_residual_m_per_s", "initial_residual"}, &StepStats::initial_residual);
