@@ -211,7 +211,10 @@ void NeuralElastoplasticEnergy<dim>::correction_with_reuse(double* hessian) cons
     }
 #pragma omp parallel for schedule(static) if (count >= 256)
     for (std::ptrdiff_t p = 0; p < count; ++p) {
-        // grad N(F0) = grad N(F0c) + Hess N(F0c) (F0 - F0c) (exact where the row was just evaluated).
+        // Where the row was just evaluated, c is exact. Where its Hessian was kept, c is provisional:
+        // grad N(F0c) + Hess N(F0c) (F0 - F0c) misses how grad N moves with the network's F0 input
+        // (first order in the shift). The expansion of a near trial point does not depend on c, and a
+        // trial point the network values takes c from a gradient pass first (exact_correction).
         Eigen::Matrix<double, kM, 1> shift;
         for (int k = 0; k < kM; ++k) shift[k] = F0_[p](k / dim, k % dim) - cache_F0_[p](k / dim, k % dim);
         const Eigen::Matrix<double, kM, 1> g = cache_gradient_[p] + cache_hessian_[p] * shift;
