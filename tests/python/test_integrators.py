@@ -73,6 +73,18 @@ def test_plasticitynet_evaluates_its_network_on_every_newton_iteration(name, fra
     assert classical["newton_iterations"].sum() > 0 and classical["network_evaluations"].sum() == 0
 
 
+def test_network_reuse_zero_evaluates_every_particle_at_every_pass():
+    """`network_reuse` reaches the energy: at 0 every pass covers every particle; at the default the
+    network evaluates fewer points over the frame, and the steps converge to the same tolerance."""
+    sim, _, every = run(tiny("sand_column_2d"), "plasticitynet", 1, solver={"network_reuse": 0.0})
+    n = len(sim.velocities)
+    assert np.array_equal(every["network_points"], every["network_evaluations"] * n)
+    _, _, reused = run(tiny("sand_column_2d"), "plasticitynet", 1)
+    assert np.all(reused["network_points"] >= n), "each step's first pass covers every particle"
+    assert reused["network_points"].sum() < every["network_points"].sum()
+    assert reused["converged"].all() and every["converged"].all()
+
+
 @pytest.mark.parametrize("name", ["sand_column_2d", "metal_frame_2d"])
 def test_two_networks_give_different_paths_and_frames(name):
     _, a, steps_a = run(tiny(name), "plasticitynet", 1)
