@@ -90,8 +90,8 @@ struct ImplicitOptions {
     // plasticitynet under the rebased Newton: a tolerance on F below which the network is not evaluated
     // again for a particle (its Hessian kept while its reference moves less, a line search's trial
     // point that close to the reference valued by the energy's second-order expansion; 0: never reused;
-    // NeuralElastoplasticEnergy::Options::network_reuse). 3e-4: measured in docs/integrators.md.
-    double network_reuse = 3e-4;
+    // NeuralElastoplasticEnergy::Options::network_reuse). 1e-4: measured in docs/integrators.md.
+    double network_reuse = 1e-4;
     // FEM `analytic` only, a diagnostic: > 0 adds w mu/2 ||F - F0||^2 about a reference to the
     // closed-form energy and solves with plasticitynet's predictor and outer iteration on F0, the
     // learned energy's solve without its learning error (AnalyticElastoplasticEnergy).
