@@ -98,33 +98,31 @@ void EnergyNetwork<dim>::set_reference(const Mat<dim>* F0, const double* h, std:
 }
 
 template <int dim>
+void EnergyNetwork<dim>::write_F_slot(std::size_t p, const Mat<dim>& F, double* x) const {
+    const Mat<dim> G = representation_ == EnergyRepresentation::Principal ? Mat<dim>(U_[p].transpose() * F * V_[p]) : F;
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j) x[i * dim + j] = G(i, j);
+}
+
+template <int dim>
 void EnergyNetwork<dim>::set_rows(const Mat<dim>* F, std::vector<double>& rows) const {
     if (&rows != &inputs_) rows = inputs_;  // the reference's slots
     const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(size_);
-    const bool principal = representation_ == EnergyRepresentation::Principal;
 #pragma omp parallel for schedule(static) if (count >= 1024)
-    for (std::ptrdiff_t p = 0; p < count; ++p) {
-        double* x = &rows[p * input_width_];
-        const Mat<dim> G = principal ? Mat<dim>(U_[p].transpose() * F[p] * V_[p]) : F[p];
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j) x[i * dim + j] = G(i, j);
-    }
+    for (std::ptrdiff_t p = 0; p < count; ++p) write_F_slot(p, F[p], &rows[p * input_width_]);
 }
 
 template <int dim>
 void EnergyNetwork<dim>::pack_rows(const int* rows, std::size_t count, const Mat<dim>* F,
                                    std::vector<double>& packed) const {
     packed.resize(count * input_width_);
-    const bool principal = representation_ == EnergyRepresentation::Principal;
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(count);
 #pragma omp parallel for schedule(static) if (n >= 1024)
     for (std::ptrdiff_t i = 0; i < n; ++i) {
         const int p = rows[i];
         double* x = &packed[i * input_width_];
         std::copy(&inputs_[p * input_width_], &inputs_[(p + 1) * input_width_], x);
-        const Mat<dim> G = principal ? Mat<dim>(U_[p].transpose() * F[p] * V_[p]) : F[p];
-        for (int a = 0; a < dim; ++a)
-            for (int b = 0; b < dim; ++b) x[a * dim + b] = G(a, b);
+        write_F_slot(p, F[p], x);
     }
 }
 

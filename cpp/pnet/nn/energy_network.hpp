@@ -83,6 +83,8 @@ private:
     mutable std::vector<double> inputs_, from_inputs_;  // the MLP's rows (the F slot set per evaluation)
     /// Writes the F slot of `rows` (inputs_ or from_inputs_, whose other slots are the reference's).
     void set_rows(const Mat<dim>* F, std::vector<double>& rows) const;
+    /// Writes row p's F slot at x: G = U_p^T F V_p (Principal) or F itself.
+    void write_F_slot(std::size_t p, const Mat<dim>& F, double* x) const;
     /// The MLP inputs of the listed rows (a copy of the reference's with F's slot), packed.
     void pack_rows(const int* rows, std::size_t count, const Mat<dim>* F, std::vector<double>& packed) const;
     /// The change of frame of the MLP's gradient and Hessian in G to F, for the listed rows (null: all).
