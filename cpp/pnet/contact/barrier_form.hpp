@@ -1,14 +1,19 @@
 #pragma once
-// The IPC barrier as a form (docs/methods.md): B(x(v)) with x(v) = x^n + dt v, the nodal
-// positions a step of velocities v reaches, over a ContactPotential (collisions/
-// contact_potential.hpp: the mesh's pairs and the ground). Its gradient in v is dt dB/dx, its
-// Hessian dt^2 d2B/dx2 (PSD-projected per pair), and max_step() the CCD filter on the motion
-// x -> x + dt d, so that no iterate intersects. The pairs change with x, so its Hessian is
-// summed apart from the fixed-pattern forms (Form::changing_pattern()).
+// The IPC barrier as a form (docs/methods.md): B(x(v)), the contact potential (collisions/
+// contact_potential.hpp: a mesh's pairs, the ground, stand-alone points) of the positions a step
+// of unknowns v reaches, whatever moves the contact's vertices (ContactVertices): a mesh's nodes
+// with their own velocities (MeshVertices, x = x^n + dt v), and in a coupled step MPM particles
+// with their grid stencils too (coupling/coupled_vertices.hpp). Every vertex moves linearly,
+//   x_j(v) = x_j^n + dt sum_k w_jk v_(u_jk),
+// so a pair's gradient in v is dt J^T dB/dx and its Hessian dt^2 J^T (d2B/dx2) J, J the weights
+// of the pair's vertices (PSD-projected per pair). The Hessian is kept per pair (its stacked
+// matrix): its products, diagonals and triplets come from those. max_step() is the CCD filter on
+// the motion x -> x + dt J d, so that no iterate intersects. The pairs change with x, so the
+// Hessian is summed apart from the fixed-pattern forms (Form::changing_pattern()).
 #include <vector>
 
 #include "pnet/contact/collisions/contact_potential.hpp"
-#include "pnet/solver/triplet_hessian.hpp"
+#include "pnet/solver/form.hpp"
 
 namespace pnet {
 
@@ -24,33 +29,116 @@ struct CcdCount {
     }
 };
 
+/// How a contact's vertices follow a step's unknowns v: x_j(v) = x_j^n + dt sum_k w_jk v_(u_jk),
+/// vertex j moving with the unknown nodes u_jk (the index of their first component in v) and
+/// weights w_jk.
 template <int dim>
-class BarrierForm final : public TripletHessianForm {
+class ContactVertices {
 public:
-    explicit BarrierForm(const ContactPotential<dim>& contact) : TripletHessianForm(dim), contact_(contact) {}
+    /// The most unknown nodes one vertex moves with: an MPM particle's quadratic B-spline stencil.
+    static constexpr int kMaxUnknowns = dim == 2 ? 9 : 27;
 
-    /// The step: positions x^n (referenced, as is `free`, the problem's 1 / 0 mask) and dt.
-    void begin_step(const std::vector<Vec<dim>>& x_start, double dt, const VecX& free);
-    /// x^n + dt v.
-    void positions(const VecX& v, std::vector<Vec<dim>>& x) const;
+    virtual ~ContactVertices() = default;
+    virtual double dt() const = 0;
+    /// x(v), every vertex.
+    virtual void positions(const VecX& v, std::vector<Vec<dim>>& x) const = 0;
+    /// The motion of a direction d: dx_j = dt sum_k w_jk d_(u_jk).
+    virtual void motion(const VecX& d, std::vector<Vec<dim>>& dx) const = 0;
+    /// Vertex j's unknown nodes and weights (index, weight: at least kMaxUnknowns entries); returns
+    /// how many. Nodes of weight 0 may be left out.
+    virtual int unknowns(int vertex, Eigen::Index* index, double* weight) const = 0;
+};
+
+/// A mesh's nodes, each moving with its own velocity: x = x^n + dt v (v: dim values per node).
+template <int dim>
+class MeshVertices final : public ContactVertices<dim> {
+public:
+    /// The step: positions x^n (referenced) and dt.
+    void begin_step(const std::vector<Vec<dim>>& x_start, double dt) {
+        x_start_ = &x_start;
+        dt_ = dt;
+    }
+    double dt() const override { return dt_; }
+    void positions(const VecX& v, std::vector<Vec<dim>>& x) const override;
+    void motion(const VecX& d, std::vector<Vec<dim>>& dx) const override;
+    int unknowns(int vertex, Eigen::Index* index, double* weight) const override {
+        index[0] = dim * static_cast<Eigen::Index>(vertex);
+        weight[0] = 1.0;
+        return 1;
+    }
+
+private:
+    const std::vector<Vec<dim>>* x_start_ = nullptr;
+    double dt_ = 0.0;
+};
+
+template <int dim>
+class BarrierForm final : public Form {
+public:
+    using Terms = ContactPairTerms<dim>;
+    using Hessian = decltype(Terms::hessian);
+    /// The most unknown nodes one pair reaches.
+    static constexpr int kPairUnknowns = (dim + 1) * ContactVertices<dim>::kMaxUnknowns;
+
+    /// contact, vertices and free (the problem's 1 / 0 mask of free components) are referenced.
+    BarrierForm(const ContactPotential<dim>& contact, const ContactVertices<dim>& vertices, const VecX& free)
+        : contact_(contact), vertices_(vertices), free_(free) {}
+
+    /// A new step: no pairs, no CCD queries.
+    void begin_step();
 
     double value(const VecX& v) override;
     double add_gradient(const VecX& v, VecX& g) override;
     void prepare_hessian(const VecX& v) override;
     double max_step(const VecX& v, const VecX& d) override;
+    void add_hessian_multiply(const VecX& d, VecX& out) const override;
+    void add_hessian_diagonal(VecX& diagonal) const override;
+    void add_hessian_block_diagonal(VecX& blocks) const override;
+    void add_hessian_triplets(std::vector<Triplet>& triplets) const override;
+    bool changing_pattern() const override { return true; }
 
     /// Project the pairs' Hessians to PSD (default; false: exact, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
     const CcdCount& ccd() const { return ccd_; }
+    /// The pairs active at the last gradient.
+    std::size_t pairs() const { return gradient_pairs_; }
+    /// The pairs of the Hessian prepared last (their vertices), in order.
+    const std::vector<Terms>& hessian_pairs() const { return hessians_; }
+
+    /// f(H, scale, count, index, weight, slot) for every pair of the Hessian prepared last: its
+    /// stacked Hessian H (kappa dt^2 H is its Hessian in v through the weights), scale = kappa dt^2,
+    /// and the unknown nodes it reaches: index (first component in v), weight, slot (the pair's
+    /// vertex the node moves).
+    template <typename F>
+    void for_each_pair_hessian(F&& f) const;
 
 private:
     const ContactPotential<dim>& contact_;
-    const std::vector<Vec<dim>>* x_start_ = nullptr;
-    const VecX* free_ = nullptr;
-    double dt_ = 0.0;
+    const ContactVertices<dim>& vertices_;
+    const VecX& free_;
     std::vector<Vec<dim>> x_, dx_;
+    std::vector<Terms> terms_, hessians_;
+    std::size_t gradient_pairs_ = 0;
+    double hessian_scale_ = 0.0;
     bool project_psd_ = true;
     CcdCount ccd_;
 };
+
+template <int dim>
+template <typename F>
+void BarrierForm<dim>::for_each_pair_hessian(F&& f) const {
+    Eigen::Index index[kPairUnknowns];
+    double weight[kPairUnknowns];
+    int slot[kPairUnknowns];
+    for (const Terms& t : hessians_) {
+        int count = 0;
+        for (int k = 0; k < t.count; ++k) {
+            const int n = vertices_.unknowns(t.node[k], index + count, weight + count);
+            for (int i = 0; i < n; ++i) slot[count + i] = k;
+            count += n;
+        }
+        f(t.hessian, hessian_scale_, count, index, weight, slot);
+    }
+}
 
 }  // namespace pnet

@@ -15,7 +15,8 @@ ElementRest<dim>::ElementRest(const Mesh<dim>& mesh, const std::vector<double>& 
         Mat<dim> Dm;
         for (int a = 0; a < dim; ++a) Dm.col(a) = mesh.x[mesh.elements[e][a + 1]] - mesh.x[mesh.elements[e][0]];
         volume[e] = Dm.determinant() / (dim == 2 ? 2.0 : 6.0);
-        if (!(volume[e] > 0.0)) throw std::invalid_argument("ElementRest: element " + std::to_string(e) + " is not positive");
+        if (!(volume[e] > 0.0))
+            throw std::invalid_argument("ElementRest: element " + std::to_string(e) + " is not positive");
         const Mat<dim> Dm_inv = Dm.inverse();
         Vec<dim> sum = Vec<dim>::Zero();
         for (int a = 1; a <= dim; ++a) {
@@ -55,9 +56,10 @@ void FemPotential<dim>::update_forms() {
 
 template <int dim>
 void FemPotential<dim>::set_contact(const ContactPotential<dim>* contact) {
-    barrier_ = contact ? std::make_unique<BarrierForm<dim>>(*contact) : nullptr;
+    barrier_ = contact ? std::make_unique<BarrierForm<dim>>(*contact, vertices_, this->free_) : nullptr;
     if (barrier_) {
-        barrier_->begin_step(x_start_, dt_, this->free_);
+        vertices_.begin_step(x_start_, dt_);
+        barrier_->begin_step();
         barrier_->set_project_psd(project_psd_);
     }
     update_forms();
@@ -102,7 +104,8 @@ void FemPotential<dim>::begin_step(const std::vector<Vec<dim>>& x_start, const V
             residual_mass_[k] = free[k] * mass[k];
         }
     elements_.begin_step(plastic_inverse);
-    if (barrier_) barrier_->begin_step(x_start_, dt_, free);
+    vertices_.begin_step(x_start_, dt_);
+    if (barrier_) barrier_->begin_step();
     if (friction_) friction_->begin_step(dt_, free);
 }
 
@@ -128,8 +131,7 @@ void FemPotential<dim>::harden_fixed() {
 
 template <int dim>
 void FemPotential<dim>::positions(const VecX& v, std::vector<Vec<dim>>& x) const {
-    x.resize(x_start_.size());
-    for (std::size_t i = 0; i < x.size(); ++i) x[i] = x_start_[i] + dt_ * v.template segment<dim>(dim * i);
+    vertices_.positions(v, x);
 }
 
 template <int dim>

@@ -37,9 +37,9 @@ namespace pnet {
 /// Per-element rest quantities of a mesh.
 template <int dim>
 struct ElementRest {
-    std::vector<double> volume;                          // V0_e, m^d
-    std::vector<std::array<Vec<dim>, dim + 1>> grad;     // g_ea, 1/m
-    std::vector<double> node_mass;                       // lumped: rho V0 / (d + 1) from each element, kg
+    std::vector<double> volume;                       // V0_e, m^d
+    std::vector<std::array<Vec<dim>, dim + 1>> grad;  // g_ea, 1/m
+    std::vector<double> node_mass;                    // lumped: rho V0 / (d + 1) from each element, kg
 
     /// From the rest mesh and a density per element (kg/m^d).
     ElementRest(const Mesh<dim>& mesh, const std::vector<double>& density);
@@ -119,6 +119,7 @@ private:
     const ElementRest<dim>& rest_;
     InertiaForm inertia_;
     ElementEnergyForm<dim> elements_;
+    MeshVertices<dim> vertices_;  // the barrier's: x^n + dt v
     std::unique_ptr<BarrierForm<dim>> barrier_;
     std::unique_ptr<FrictionForm<dim>> friction_;
     FormSum contact_;  // the barrier and friction, summed as one (their value, then the others')

@@ -69,8 +69,9 @@ std::string join(const Array& nodes) {
 }  // namespace
 
 template <int dim>
-Contact<dim>::Contact(const std::vector<Facet>& facets, const std::vector<Vec<dim>>& rest, double dhat, double kappa)
-    : facets_(facets), dhat_(dhat), kappa_(kappa), barrier_{dhat * dhat} {
+Contact<dim>::Contact(const std::vector<Facet>& facets, const std::vector<Vec<dim>>& rest, double dhat, double kappa,
+                      ContactPoints points)
+    : facets_(facets), points_(points), dhat_(dhat), kappa_(kappa), barrier_{dhat * dhat} {
     if (!(dhat > 0.0) || !(kappa > 0.0)) throw std::invalid_argument("Contact: dhat and kappa must be > 0");
     if (dim == 3 && rest.empty() && !facets.empty())
         throw std::invalid_argument("Contact: 3D contact needs the rest positions (the edge-edge mollifier)");
@@ -90,6 +91,28 @@ Contact<dim>::Contact(const std::vector<Facet>& facets, const std::vector<Vec<di
     nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
     if (dim == 3)
         for (const auto& e : edges_) edge_rest_sq_.push_back((rest[e[1]] - rest[e[0]]).squaredNorm());
+    if (points_.first >= 0 && !nodes_.empty() && nodes_.back() >= points_.first)
+        throw std::invalid_argument("Contact: the stand-alone points start at " + std::to_string(points_.first) +
+                                    ", before the last boundary node " + std::to_string(nodes_.back()));
+    if (points_.only && points_.first < 0)
+        throw std::invalid_argument("Contact: only the stand-alone points' pairs, but no points");
+}
+
+template <int dim>
+template <typename F>
+void Contact<dim>::for_each_query_vertex(const std::vector<Vec<dim>>& x, F&& f) const {
+    if (!points_.only)
+        for (int node : nodes_) f(node, false);
+    if (points_.first >= 0)
+        for (int p = points_.first; p < static_cast<int>(x.size()); ++p) f(p, true);
+}
+
+template <int dim>
+template <typename F>
+void Contact<dim>::for_each_moving_vertex(const std::vector<Vec<dim>>& x, F&& f) const {
+    for (int node : nodes_) f(node);
+    if (points_.first >= 0)
+        for (int p = points_.first; p < static_cast<int>(x.size()); ++p) f(p);
 }
 
 template <int dim>
@@ -122,7 +145,7 @@ void Contact<dim>::for_each_candidate(const std::vector<Vec<dim>>& x, const std:
     facet_grid_.build(lo_, hi_, HashGrid<dim>::suggested_cell(lo_, hi_, 1e-9));
     candidates_.clear();
     std::vector<int>& found = found_;
-    for (int node : nodes_) {
+    for_each_query_vertex(x, [&](int node, bool point) {
         Vec<dim> lo = x[node], hi = x[node];
         if (dx) {
             lo = lo.cwiseMin(x[node] + (*dx)[node]);
@@ -131,41 +154,44 @@ void Contact<dim>::for_each_candidate(const std::vector<Vec<dim>>& x, const std:
         facet_grid_.query(lo, hi, found);
         for (int t : found) {
             const Facet& facet = facets_[t];
-            if (std::find(facet.begin(), facet.end(), node) != facet.end()) continue;
+            if (!point && std::find(facet.begin(), facet.end(), node) != facet.end()) continue;
             candidates_.push_back(Pair{Kind::PointFacet, node, t});
         }
+        if (point) return;
         for (std::size_t h = 0; h < half_spaces_.size(); ++h)
             candidates_.push_back(Pair{Kind::PointPlane, node, static_cast<int>(h)});
-    }
-    if constexpr (dim == 3) {
-        const std::size_t ne = edges_.size();
-        edge_lo_.resize(ne);
-        edge_hi_.resize(ne);
-        grown_lo_.resize(ne);
-        grown_hi_.resize(ne);
-        for (std::size_t e = 0; e < ne; ++e) {
-            box(edges_[e].data(), 2, edge_lo_[e], edge_hi_[e]);
-            grown_lo_[e] = edge_lo_[e].array() - margin;
-            grown_hi_[e] = edge_hi_[e].array() + margin;
-        }
-        edge_grid_.build(grown_lo_, grown_hi_, HashGrid<dim>::suggested_cell(grown_lo_, grown_hi_, 1e-9));
-        for (std::size_t e = 0; e < ne; ++e) {
-            edge_grid_.query(edge_lo_[e], edge_hi_[e], found);
-            const auto& ea = edges_[e];
-            for (int other : found) {
-                if (other <= static_cast<int>(e)) continue;
-                const auto& eb = edges_[other];
-                if (ea[0] == eb[0] || ea[0] == eb[1] || ea[1] == eb[0] || ea[1] == eb[1]) continue;
-                candidates_.push_back(Pair{Kind::EdgeEdge, static_cast<int>(e), other});
+    });
+    if constexpr (dim == 3)
+        if (!points_.only) {
+            const std::size_t ne = edges_.size();
+            edge_lo_.resize(ne);
+            edge_hi_.resize(ne);
+            grown_lo_.resize(ne);
+            grown_hi_.resize(ne);
+            for (std::size_t e = 0; e < ne; ++e) {
+                box(edges_[e].data(), 2, edge_lo_[e], edge_hi_[e]);
+                grown_lo_[e] = edge_lo_[e].array() - margin;
+                grown_hi_[e] = edge_hi_[e].array() + margin;
+            }
+            edge_grid_.build(grown_lo_, grown_hi_, HashGrid<dim>::suggested_cell(grown_lo_, grown_hi_, 1e-9));
+            for (std::size_t e = 0; e < ne; ++e) {
+                edge_grid_.query(edge_lo_[e], edge_hi_[e], found);
+                const auto& ea = edges_[e];
+                for (int other : found) {
+                    if (other <= static_cast<int>(e)) continue;
+                    const auto& eb = edges_[other];
+                    if (ea[0] == eb[0] || ea[0] == eb[1] || ea[1] == eb[0] || ea[1] == eb[1]) continue;
+                    candidates_.push_back(Pair{Kind::EdgeEdge, static_cast<int>(e), other});
+                }
             }
         }
-    }
     this->timing_.broad_phase_seconds += seconds_since(start);
     for (const Pair& pair : candidates_) f(pair);
 }
 
 template <int dim>
-typename Contact<dim>::Terms Contact<dim>::terms(const Pair& pair, const std::vector<Vec<dim>>& x, int order) const {
+typename Contact<dim>::Terms Contact<dim>::terms(const Pair& pair, const std::vector<Vec<dim>>& x, int order,
+                                                 bool project_psd) const {
     using PF = PointFacet<dim>;
     Terms t;
     switch (pair.kind) {
@@ -181,7 +207,8 @@ typename Contact<dim>::Terms Contact<dim>::terms(const Pair& pair, const std::ve
             if (order >= 1) t.gradient = barrier_.first(t.s) * PF::gradient(p, x, facet, c);
             if (order >= 2) {
                 const typename PF::Gradient ds = PF::gradient(p, x, facet, c);
-                t.hessian = barrier_.second(t.s) * ds * ds.transpose() + barrier_.first(t.s) * PF::hessian(p, x, facet, c);
+                t.hessian =
+                    barrier_.second(t.s) * ds * ds.transpose() + barrier_.first(t.s) * PF::hessian(p, x, facet, c);
             }
             break;
         }
@@ -225,9 +252,18 @@ typename Contact<dim>::Terms Contact<dim>::terms(const Pair& pair, const std::ve
                 // d2b/dx2 = (4 s b'' + 2 b') n n^T.
                 t.hessian.setZero();
                 t.hessian.template topLeftCorner<dim, dim>() =
-                    (4.0 * d * d * barrier_.second(d * d) + 2.0 * barrier_.first(d * d)) * h.normal * h.normal.transpose();
+                    (4.0 * d * d * barrier_.second(d * d) + 2.0 * barrier_.first(d * d)) * h.normal *
+                    h.normal.transpose();
             }
             break;
+        }
+    }
+    if (order >= 2 && project_psd) {
+        if (t.count == dim + 1) {
+            t.hessian = pnet::project_psd<kStacked>(t.hessian);
+        } else {
+            const Mat<dim> H = t.hessian.template topLeftCorner<dim, dim>();
+            t.hessian.template topLeftCorner<dim, dim>() = pnet::project_psd<dim>(H);
         }
     }
     return t;
@@ -237,7 +273,7 @@ template <int dim>
 double Contact<dim>::displacement_since_list(const std::vector<Vec<dim>>& x) const {
     if (!list_valid_ || list_x_.size() != x.size()) return std::numeric_limits<double>::infinity();
     double worst = 0.0;
-    for (int node : nodes_) worst = std::max(worst, (x[node] - list_x_[node]).squaredNorm());
+    for_each_moving_vertex(x, [&](int node) { worst = std::max(worst, (x[node] - list_x_[node]).squaredNorm()); });
     return std::sqrt(worst);
 }
 
@@ -316,20 +352,22 @@ template <int dim>
 void Contact<dim>::add_hessian(const std::vector<Vec<dim>>& x, double scale,
                                std::vector<Eigen::Triplet<double>>& triplets, bool project_psd) const {
     for (const Pair& pair : active(x)) {
-        Terms t = terms(pair, x, 2);
+        const Terms t = terms(pair, x, 2, project_psd);
         const int n = dim * t.count;
-        if (t.count == dim + 1) {
-            if (project_psd) t.hessian = pnet::project_psd<kStacked>(t.hessian);
-        } else {
-            Mat<dim> H = t.hessian.template topLeftCorner<dim, dim>();
-            if (project_psd) H = pnet::project_psd<dim>(H);
-            t.hessian.template topLeftCorner<dim, dim>() = H;
-        }
         const double c = scale * kappa_;
         for (int r = 0; r < n; ++r)
             for (int q = 0; q < n; ++q)
-                triplets.emplace_back(dim * t.node[r / dim] + r % dim, dim * t.node[q / dim] + q % dim, c * t.hessian(r, q));
+                triplets.emplace_back(dim * t.node[r / dim] + r % dim, dim * t.node[q / dim] + q % dim,
+                                      c * t.hessian(r, q));
     }
+}
+
+template <int dim>
+void Contact<dim>::pair_terms(const std::vector<Vec<dim>>& x, int order, bool project_psd,
+                              std::vector<Terms>& out) const {
+    const std::vector<Pair>& pairs = active(x);
+    out.resize(pairs.size());
+    for (std::size_t k = 0; k < pairs.size(); ++k) out[k] = terms(pairs[k], x, order, project_psd);
 }
 
 template <int dim>
@@ -364,7 +402,7 @@ double Contact<dim>::max_step(const std::vector<Vec<dim>>& x, const std::vector<
     // while 2 D <= kListMargin dhat. Of those, exactly the pairs whose swept boxes overlap (the
     // broad phase's own test) are checked, so the result does not depend on the list's age.
     double step = 0.0;
-    for (int node : nodes_) step = std::max(step, dx[node].squaredNorm());
+    for_each_moving_vertex(x, [&](int node) { step = std::max(step, dx[node].squaredNorm()); });
     const double reach = displacement_since_list(x) + std::sqrt(step);
     if (2.0 * reach <= kListMargin * dhat_) {
         const Clock::time_point broad = Clock::now();
@@ -471,10 +509,10 @@ std::vector<FrictionPair<dim>> Contact<dim>::lagged_pairs(const std::vector<Vec<
 template <int dim>
 double Contact<dim>::min_distance(const std::vector<Vec<dim>>& x) const {
     Vec<dim> lo = x[nodes_.empty() ? 0 : nodes_[0]], hi = lo;
-    for (int node : nodes_) {
+    for_each_moving_vertex(x, [&](int node) {
         lo = lo.cwiseMin(x[node]);
         hi = hi.cwiseMax(x[node]);
-    }
+    });
     const double extent = std::max((hi - lo).norm(), dhat_);
     double d = kNoImpact;
     for (double margin = dhat_;; margin *= 10.0) {
@@ -495,23 +533,26 @@ std::size_t Contact<dim>::active_pairs(const std::vector<Vec<dim>>& x) const {
 
 template <int dim>
 std::string Contact<dim>::first_intersection(const std::vector<Vec<dim>>& x) const {
-    for (int node : nodes_)
-        for (std::size_t h = 0; h < half_spaces_.size(); ++h)
-            if (!(half_spaces_[h].normal.dot(x[node] - half_spaces_[h].origin) > 0.0))
-                return "node " + std::to_string(node) + " and half-space " + std::to_string(h);
+    if (!points_.only)
+        for (int node : nodes_)
+            for (std::size_t h = 0; h < half_spaces_.size(); ++h)
+                if (!(half_spaces_[h].normal.dot(x[node] - half_spaces_[h].origin) > 0.0))
+                    return "node " + std::to_string(node) + " and half-space " + std::to_string(h);
     std::string found;
     for_each_candidate(x, nullptr, 0.0, [&](const Pair& pair) {
         if (!found.empty() || pair.kind == Kind::PointPlane) return;
         if (pair.kind == Kind::PointFacet) {
+            const bool point = points_.first >= 0 && pair.a >= points_.first;
             if (!(PointFacet<dim>::distance_sq(x[pair.a], x, facets_[pair.b]) > 0.0))
-                found = "node " + std::to_string(pair.a) + " and " + PointFacet<dim>::kFacetName + " " +
-                        join(facets_[pair.b]);
+                found = (point ? "point " + std::to_string(pair.a - points_.first) : "node " + std::to_string(pair.a)) +
+                        " and " + PointFacet<dim>::kFacetName + " " + join(facets_[pair.b]);
         } else if (!(terms(pair, x, 0).s > 0.0)) {
             found = "edge " + join(edges_[pair.a]) + " and edge " + join(edges_[pair.b]);
         }
     });
     if (!found.empty()) return found;
     // Boundary edges through facets: the facets' boxes (the broad phase above) against each edge's.
+    if (points_.only) return "";
     std::vector<int> near;
     for (const auto& edge : edges_) {
         facet_grid_.query(x[edge[0]].cwiseMin(x[edge[1]]), x[edge[0]].cwiseMax(x[edge[1]]), near);

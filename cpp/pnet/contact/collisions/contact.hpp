@@ -8,7 +8,10 @@
 //   edge-edge    (3D) every two boundary edges without a common node (9 cases), m IPC's
 //                mollifier of |e_a x e_b|^2 below 1e-3 |e_a|^2 |e_b|^2 (rest lengths), which
 //                keeps the energy C1 where nearly parallel edges change case;
-//   point-plane  every boundary node against every half-space (the ground), m = 1.
+//   point-plane  every boundary node against every half-space (the ground), m = 1;
+//   points       the stand-alone points (ContactPoints: MPM particles, as ipc-toolkit treats
+//                codimensional vertices) as point-facet pairs against every boundary facet,
+//                m = 1; a point meets no half-space and no other point.
 // As in IPC, a node near a shared edge or corner of several facets meets each of them: the
 // duplicate pairs only scale the barrier there, and every one is an exact barrier. Each pair's
 // Hessian is projected to PSD before assembly; max_step() is the CCD filter (additive CCD,
@@ -32,16 +35,27 @@
 
 namespace pnet {
 
+/// Stand-alone points: the positions of x from index `first` on (after the mesh's nodes), on no
+/// facet, as many as x holds. Each meets every boundary facet and nothing else. `only`: the
+/// Contact forms their pairs and no others (the particles of a coupled step against a body whose
+/// contact with itself and the ground is another Contact's). first < 0: no points.
+struct ContactPoints {
+    int first = -1;
+    bool only = false;
+};
+
 template <int dim>
 class Contact final : public ContactPotential<dim> {
 public:
     using Facet = typename PointFacet<dim>::Facet;
+    using Terms = ContactPairTerms<dim>;
 
     /// facets: the mesh's outward boundary facets (Mesh<dim>::boundary: edges in 2D, triangles
     /// in 3D); its edges and nodes are derived. rest: the rest positions of all nodes (3D: the
     /// edge-edge mollifier's thresholds; unused in 2D, may be empty). dhat > 0 (m), kappa > 0
-    /// (the barrier stiffness, J/m^4: b is in m^4).
-    Contact(const std::vector<Facet>& facets, const std::vector<Vec<dim>>& rest, double dhat, double kappa);
+    /// (the barrier stiffness, J/m^4: b is in m^4). points: the stand-alone points, if any.
+    Contact(const std::vector<Facet>& facets, const std::vector<Vec<dim>>& rest, double dhat, double kappa,
+            ContactPoints points = {});
     /// 2D: no rest positions needed.
     Contact(const std::vector<Facet>& facets, double dhat, double kappa) : Contact(facets, {}, dhat, kappa) {}
 
@@ -57,6 +71,8 @@ public:
     double add_gradient(const std::vector<Vec<dim>>& x, double scale, Eigen::VectorXd& g) const override;
     void add_hessian(const std::vector<Vec<dim>>& x, double scale, std::vector<Eigen::Triplet<double>>& triplets,
                      bool project_psd) const override;
+    void pair_terms(const std::vector<Vec<dim>>& x, int order, bool project_psd,
+                    std::vector<Terms>& terms) const override;
     double max_step(const std::vector<Vec<dim>>& x, const std::vector<Vec<dim>>& dx) const override;
 
     /// The largest stable explicit step of the barrier at x, s: 1 / omega_max over the active
@@ -72,12 +88,14 @@ public:
     std::size_t active_pairs(const std::vector<Vec<dim>>& x) const override;
     /// A node on a facet, two touching edges (3D), a node on or below a half-space, or a boundary
     /// edge crossing a facet (no common node), as text ("node 12 and edge 30-31", "edge 3-4 and
-    /// triangle 30-31-35"), or "": a start state must have none. (A body wholly inside another
+    /// triangle 30-31-35", "point 4 and edge 2-3": a stand-alone point, counted from the first),
+    /// or "": a start state must have none. (A body wholly inside another
     /// crosses no facet: the caller tests containment.) Orientation predicates without tolerance.
     std::string first_intersection(const std::vector<Vec<dim>>& x) const override;
 
     const std::vector<std::array<int, 2>>& edges() const { return edges_; }
     const std::vector<Facet>& facets() const { return facets_; }
+    const ContactPoints& points() const { return points_; }
 
 private:
     static constexpr int kStacked = dim * (dim + 1);  // a point-facet or edge-edge pair's positions
@@ -87,15 +105,16 @@ private:
         int a, b;  // PointFacet: node, facet; EdgeEdge: edge, edge; PointPlane: node, half-space
     };
     /// A pair's barrier at x: the value m b(s), and when asked (order 1, 2) its gradient and
-    /// Hessian in the stacked positions of its nodes (node[0..count)).
-    struct Terms {
-        std::array<int, dim + 1> node{};
-        int count = 0;
-        double s = 0.0, value = 0.0;
-        Eigen::Matrix<double, kStacked, 1> gradient;
-        Eigen::Matrix<double, kStacked, kStacked> hessian;
-    };
-    Terms terms(const Pair& pair, const std::vector<Vec<dim>>& x, int order) const;
+    /// Hessian in the stacked positions of its nodes (node[0..count)); order 2 with project_psd:
+    /// the Hessian projected to PSD.
+    Terms terms(const Pair& pair, const std::vector<Vec<dim>>& x, int order, bool project_psd = false) const;
+    /// f(vertex, is_point) for the vertices that meet facets: the boundary nodes (unless
+    /// points_.only), then the stand-alone points of x.
+    template <typename F>
+    void for_each_query_vertex(const std::vector<Vec<dim>>& x, F&& f) const;
+    /// f(vertex) for every vertex whose motion moves a pair: the boundary nodes and the points.
+    template <typename F>
+    void for_each_moving_vertex(const std::vector<Vec<dim>>& x, F&& f) const;
 
     /// Calls f(pair) for every candidate pair whose boxes (swept over dx when given, grown by
     /// margin) overlap, in the fixed order above.
@@ -111,6 +130,7 @@ private:
     std::vector<double> edge_rest_sq_;       // |e|^2 at rest (3D)
     std::vector<int> nodes_;                 // boundary nodes, ascending
     std::vector<HalfSpace<dim>> half_spaces_;
+    ContactPoints points_;
     double dhat_, kappa_;
     Barrier barrier_;
     // Broad-phase work (a Contact is used by one thread at a time).

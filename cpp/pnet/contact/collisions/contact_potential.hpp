@@ -35,7 +35,21 @@ struct FrictionPair {
     double normal_force = 0.0;
 };
 
-/// The contact potential of positions x (all nodes of a mesh, m), added to an
+/// One active pair's barrier at x, without the stiffness kappa (ContactPotential::pair_terms()): its
+/// vertices node[0..count) (a point-facet pair: the point, then the facet's nodes; edge-edge: the two
+/// edges' nodes; point-plane: the node), its squared distance s, the barrier m b(s) (m: the edge-edge
+/// mollifier, else 1) and, when asked, its gradient and Hessian in the stacked positions of its vertices.
+template <int dim>
+struct ContactPairTerms {
+    static constexpr int kStacked = dim * (dim + 1);
+    std::array<int, dim + 1> node{};
+    int count = 0;
+    double s = 0.0, value = 0.0;
+    Eigen::Matrix<double, kStacked, 1> gradient;
+    Eigen::Matrix<double, kStacked, kStacked> hessian;
+};
+
+/// The contact potential of positions x (all vertices: a mesh's nodes, then any stand-alone points, m), added to an
 /// objective's value, gradient and Hessian with a scale (the chain rule of
 /// x = x^n + dt v gives dt and dt^2).
 template <int dim>
@@ -48,6 +62,10 @@ public:
     /// Triplets of scale d2B/dx2, PSD-projected per pair when project_psd.
     virtual void add_hessian(const std::vector<Vec<dim>>& x, double scale,
                              std::vector<Eigen::Triplet<double>>& triplets, bool project_psd) const = 0;
+    /// Each pair active at x with its terms (order 0: value; 1: and gradient; 2: and Hessian,
+    /// projected to PSD when project_psd), in the fixed order of the sums, into `terms` (resized).
+    virtual void pair_terms(const std::vector<Vec<dim>>& x, int order, bool project_psd,
+                            std::vector<ContactPairTerms<dim>>& terms) const = 0;
     /// The largest t in (0, 1] such that x + t dx keeps every pair apart (1 if nothing collides).
     virtual double max_step(const std::vector<Vec<dim>>& x, const std::vector<Vec<dim>>& dx) const = 0;
     /// The largest stable explicit step of the barrier forces at x (s), given each node's mass
