@@ -22,30 +22,31 @@ void MeshVertices<dim>::motion(const VecX& d, std::vector<Vec<dim>>& dx) const {
 template <int dim>
 void BarrierForm<dim>::begin_step() {
     terms_.clear();
-    hessians_.clear();
+    this->hessians_.clear();
     gradient_pairs_ = 0;
     ccd_ = CcdCount{};
 }
 
 template <int dim>
 double BarrierForm<dim>::value(const VecX& v) {
-    vertices_.positions(v, x_);
+    this->vertices_.positions(v, x_);
     return contact_.value(x_);
 }
 
 template <int dim>
 double BarrierForm<dim>::add_gradient(const VecX& v, VecX& g) {
-    vertices_.positions(v, x_);
+    const ContactVertices<dim>& vertices = this->vertices_;
+    vertices.positions(v, x_);
     contact_.pair_terms(x_, 1, false, terms_);
     gradient_pairs_ = terms_.size();
-    const double c = vertices_.dt() * contact_.kappa();
+    const double c = vertices.dt() * contact_.kappa();
     Eigen::Index index[ContactVertices<dim>::kMaxUnknowns];
     double weight[ContactVertices<dim>::kMaxUnknowns];
     double sum = 0.0;
     for (const Terms& t : terms_) {
         sum += t.value;
         for (int k = 0; k < t.count; ++k) {
-            const int n = vertices_.unknowns(t.node[k], index, weight);
+            const int n = vertices.unknowns(t.node[k], index, weight);
             for (int i = 0; i < n; ++i)
                 g.template segment<dim>(index[i]) += (c * weight[i]) * t.gradient.template segment<dim>(dim * k);
         }
@@ -55,20 +56,21 @@ double BarrierForm<dim>::add_gradient(const VecX& v, VecX& g) {
 
 template <int dim>
 void BarrierForm<dim>::prepare_hessian(const VecX& v) {
-    vertices_.positions(v, x_);
-    contact_.pair_terms(x_, 2, project_psd_, hessians_);
-    hessian_scale_ = vertices_.dt() * vertices_.dt() * contact_.kappa();
+    const double dt = this->vertices_.dt();
+    this->vertices_.positions(v, x_);
+    contact_.pair_terms(x_, 2, project_psd_, this->hessians_);
+    this->hessian_scale_ = dt * dt * contact_.kappa();
 }
 
 template <int dim>
 double BarrierForm<dim>::max_step(const VecX& v, const VecX& d) {
-    vertices_.positions(v, x_);
-    vertices_.motion(d, dx_);
+    this->vertices_.positions(v, x_);
+    this->vertices_.motion(d, dx_);
     return ccd_.record(contact_.max_step(x_, dx_));
 }
 
 template <int dim>
-void BarrierForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) const {
+void VertexPairForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) const {
     using Stacked = decltype(Terms::gradient);
     for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
                               const double* weight, const int* slot) {
@@ -85,7 +87,7 @@ void BarrierForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) const {
 }
 
 template <int dim>
-void BarrierForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
+void VertexPairForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
     for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
                               const double* weight, const int* slot) {
         for (int i = 0; i < count; ++i)
@@ -96,7 +98,7 @@ void BarrierForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
 }
 
 template <int dim>
-void BarrierForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
+void VertexPairForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
     for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
                               const double* weight, const int* slot) {
         for (int i = 0; i < count; ++i)
@@ -109,7 +111,7 @@ void BarrierForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
 }
 
 template <int dim>
-void BarrierForm<dim>::add_hessian_triplets(std::vector<Triplet>& triplets) const {
+void VertexPairForm<dim>::add_hessian_triplets(std::vector<Triplet>& triplets) const {
     // Row by row of the pair's stacked Hessian (each vertex's unknowns, then its components), so
     // that a mesh's triplets come in the order of Contact::add_hessian.
     for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
@@ -128,6 +130,8 @@ void BarrierForm<dim>::add_hessian_triplets(std::vector<Triplet>& triplets) cons
 
 template class MeshVertices<2>;
 template class MeshVertices<3>;
+template class VertexPairForm<2>;
+template class VertexPairForm<3>;
 template class BarrierForm<2>;
 template class BarrierForm<3>;
 

@@ -47,6 +47,16 @@ public:
     /// Vertex j's unknown nodes and weights (index, weight: at least kMaxUnknowns entries); returns
     /// how many. Nodes of weight 0 may be left out.
     virtual int unknowns(int vertex, Eigen::Index* index, double* weight) const = 0;
+
+    /// Vertex j's velocity sum_k w_jk v_(u_jk).
+    Vec<dim> velocity(int vertex, const VecX& v) const {
+        Eigen::Index index[kMaxUnknowns];
+        double weight[kMaxUnknowns];
+        const int n = unknowns(vertex, index, weight);
+        Vec<dim> u = Vec<dim>::Zero();
+        for (int k = 0; k < n; ++k) u += weight[k] * v.template segment<dim>(index[k]);
+        return u;
+    }
 };
 
 /// A mesh's nodes, each moving with its own velocity: x = x^n + dt v (v: dim values per node).
@@ -72,61 +82,79 @@ private:
     double dt_ = 0.0;
 };
 
+/// A form whose terms are pairs of contact vertices (the barrier's; lagged friction's in a coupled
+/// step): each pair's Hessian in its vertices' stacked positions, kept with those vertices, and
+/// through ContactVertices the Hessian's products, diagonals and triplets in v.
 template <int dim>
-class BarrierForm final : public Form {
+class VertexPairForm : public Form {
 public:
     using Terms = ContactPairTerms<dim>;
     using Hessian = decltype(Terms::hessian);
     /// The most unknown nodes one pair reaches.
     static constexpr int kPairUnknowns = (dim + 1) * ContactVertices<dim>::kMaxUnknowns;
 
-    /// contact, vertices and free (the problem's 1 / 0 mask of free components) are referenced.
-    BarrierForm(const ContactPotential<dim>& contact, const ContactVertices<dim>& vertices, const VecX& free)
-        : contact_(contact), vertices_(vertices), free_(free) {}
+    /// vertices and free (the problem's 1 / 0 mask of free components) are referenced.
+    VertexPairForm(const ContactVertices<dim>& vertices, const VecX& free) : vertices_(vertices), free_(free) {}
 
-    /// A new step: no pairs, no CCD queries.
-    void begin_step();
-
-    double value(const VecX& v) override;
-    double add_gradient(const VecX& v, VecX& g) override;
-    void prepare_hessian(const VecX& v) override;
-    double max_step(const VecX& v, const VecX& d) override;
     void add_hessian_multiply(const VecX& d, VecX& out) const override;
     void add_hessian_diagonal(VecX& diagonal) const override;
     void add_hessian_block_diagonal(VecX& blocks) const override;
     void add_hessian_triplets(std::vector<Triplet>& triplets) const override;
     bool changing_pattern() const override { return true; }
 
+    /// The pairs of the Hessian prepared last (their vertices and stacked Hessians), in order.
+    const std::vector<Terms>& hessian_pairs() const { return hessians_; }
+
+    /// f(H, scale, count, index, weight, slot) for every pair of the Hessian prepared last: its
+    /// stacked Hessian H (scale H is its Hessian in the pair's motion per unit v), and the unknown
+    /// nodes it reaches: index (first component in v), weight, slot (which of the pair's vertices
+    /// the node moves).
+    template <typename F>
+    void for_each_pair_hessian(F&& f) const;
+
+protected:
+    const ContactVertices<dim>& vertices_;
+    const VecX& free_;
+    std::vector<Terms> hessians_;  // node, count and hessian of each pair
+    double hessian_scale_ = 0.0;
+};
+
+template <int dim>
+class BarrierForm final : public VertexPairForm<dim> {
+public:
+    using Terms = ContactPairTerms<dim>;
+
+    /// contact, vertices and free (the problem's 1 / 0 mask of free components) are referenced.
+    BarrierForm(const ContactPotential<dim>& contact, const ContactVertices<dim>& vertices, const VecX& free)
+        : VertexPairForm<dim>(vertices, free), contact_(contact) {}
+
+    /// A new step: no pairs, no CCD queries.
+    void begin_step();
+
+    double value(const VecX& v) override;
+    double add_gradient(const VecX& v, VecX& g) override;
+    /// The pairs' Hessians, scaled by kappa dt^2 in v.
+    void prepare_hessian(const VecX& v) override;
+    double max_step(const VecX& v, const VecX& d) override;
+
     /// Project the pairs' Hessians to PSD (default; false: exact, for derivative checks).
     void set_project_psd(bool project) { project_psd_ = project; }
     const CcdCount& ccd() const { return ccd_; }
     /// The pairs active at the last gradient.
     std::size_t pairs() const { return gradient_pairs_; }
-    /// The pairs of the Hessian prepared last (their vertices), in order.
-    const std::vector<Terms>& hessian_pairs() const { return hessians_; }
-
-    /// f(H, scale, count, index, weight, slot) for every pair of the Hessian prepared last: its
-    /// stacked Hessian H (kappa dt^2 H is its Hessian in v through the weights), scale = kappa dt^2,
-    /// and the unknown nodes it reaches: index (first component in v), weight, slot (the pair's
-    /// vertex the node moves).
-    template <typename F>
-    void for_each_pair_hessian(F&& f) const;
 
 private:
     const ContactPotential<dim>& contact_;
-    const ContactVertices<dim>& vertices_;
-    const VecX& free_;
     std::vector<Vec<dim>> x_, dx_;
-    std::vector<Terms> terms_, hessians_;
+    std::vector<Terms> terms_;
     std::size_t gradient_pairs_ = 0;
-    double hessian_scale_ = 0.0;
     bool project_psd_ = true;
     CcdCount ccd_;
 };
 
 template <int dim>
 template <typename F>
-void BarrierForm<dim>::for_each_pair_hessian(F&& f) const {
+void VertexPairForm<dim>::for_each_pair_hessian(F&& f) const {
     Eigen::Index index[kPairUnknowns];
     double weight[kPairUnknowns];
     int slot[kPairUnknowns];

@@ -15,14 +15,11 @@
 namespace pnet {
 
 template <int dim>
-CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
-                                                          ImplicitMethod method, const ImplicitOptions& options,
-                                                          const MpmOptions& mpm_options,
-                                                          const CouplingOptions& coupling_options,
-                                                          std::unique_ptr<ParticleEnergy<dim>> mpm_energy,
-                                                          std::vector<const LearnedReturnMap<dim>*> return_maps,
-                                                          const ContactPotential<dim>* fem_contact,
-                                                          const ParticleContact<dim>& contact, CouplingFriction friction)
+CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(
+    const MpmSystem<dim>& mpm, const FemSystem<dim>& fem, ImplicitMethod method, const ImplicitOptions& options,
+    const MpmOptions& mpm_options, const CouplingOptions& coupling_options,
+    std::unique_ptr<ParticleEnergy<dim>> mpm_energy, std::vector<const LearnedReturnMap<dim>*> return_maps,
+    const ContactPotential<dim>* fem_contact, const ContactPotential<dim>& contact, CouplingFriction friction)
     : mpm_system_(mpm),
       fem_system_(fem),
       method_(method),
@@ -41,8 +38,9 @@ CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(const MpmSystem<dim>& 
       fem_(fem.mesh, fem.rest, fem_energy_),
       coupled_(mpm_, fem_, contact) {
     if (options_.time_integrator != "backward_euler")
-        throw std::invalid_argument("integrator.time_integrator: \"" + options_.time_integrator +
-                                    "\" is implemented for MPM and FEM scenes; MPM-FEM coupling steps are backward Euler");
+        throw std::invalid_argument(
+            "integrator.time_integrator: \"" + options_.time_integrator +
+            "\" is implemented for MPM and FEM scenes; MPM-FEM coupling steps are backward Euler");
     if (!return_maps_.empty() && return_maps_.size() != mpm.materials.size())
         throw std::invalid_argument("CoupledImplicitIntegrator: one return map (or null) per object is needed");
     fem_.set_contact(fem_contact);
@@ -74,13 +72,15 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
 
     const std::size_t nodes = fem_system_.mesh.nodes();
     VecX v_star_fem(dim * nodes);
-    for (std::size_t i = 0; i < nodes; ++i) v_star_fem.template segment<dim>(dim * i) = state.v[i] + dt * fem_system_.gravity;
+    for (std::size_t i = 0; i < nodes; ++i)
+        v_star_fem.template segment<dim>(dim * i) = state.v[i] + dt * fem_system_.gravity;
     fem_.begin_step(state.x, v_star_fem, dt, state.plastic_inverse, {});
     fem_.set_material_state(fem_system_.element_object, state.hardening);
     fem_.set_reference({});  // elastic: no reference
     coupled_.begin_step();
     if (friction_.mu > 0.0) {  // lagged at the start of the step
-        coupled_.set_friction(contact_.lagged_pairs(particles.x, state.x), friction_.mu, friction_.eps_v);
+        CoupledVertices<dim>::join(state.x, particles.x, contact_x_);
+        coupled_.set_friction(contact_.lagged_pairs(contact_x_), friction_.mu, friction_.eps_v);
         if (fem_contact_) mesh_friction_.lag(*fem_contact_, state.x);
     }
 
@@ -119,8 +119,8 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
             const VecX grid_v = v.head(coupled_.grid_size());
             mpm_.floor_friction_contacts(&grid_v);
         },
-        retry,
-        [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped()); }, stats);
+        retry, [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped()); },
+        stats);
     stats.network_evaluations = mpm_energy_->network_evaluations() - network_before;
     stats.network_points = mpm_energy_->network_points() - points_before;
     stats.ccd_queries = coupled_.ccd_queries();
@@ -164,7 +164,8 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
 template <int dim>
 CoupledExplicitIntegrator<dim>::CoupledExplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
                                                           const ContactPotential<dim>* fem_contact,
-                                                          const ParticleContact<dim>& contact, CouplingFriction friction)
+                                                          const ContactPotential<dim>& contact,
+                                                          CouplingFriction friction)
     : mpm_system_(mpm),
       fem_system_(fem),
       mpm_(mpm),
@@ -184,9 +185,11 @@ template <int dim>
 void CoupledExplicitIntegrator<dim>::apply_friction(Grid<dim>& grid, const Particles<dim>& particles,
                                                     FemState<dim>& state, double h) const {
     const std::vector<double>& node_mass = fem_system_.rest.node_mass;
-    for (const ParticleFrictionPair<dim>& f : friction_pairs_) {
-        // The particle's velocity from its stencil and 1 / m_eff, then the facet point's.
-        const StencilNodes<dim> st(grid, particles.x[f.particle]);
+    const int nodes = static_cast<int>(state.x.size());
+    for (const FrictionPair<dim>& f : friction_pairs_) {
+        // The particle's velocity from its stencil and 1 / m_eff, then the facet point's (the pair's
+        // other vertices, weighted -c_j).
+        const StencilNodes<dim> st(grid, particles.x[f.node[0] - nodes]);
         Vec<dim> relative = Vec<dim>::Zero();
         double inverse_mass = 0.0;
         st.for_each([&](std::int64_t node, double w, const Vec<dim>&, const Vec<dim>&) {
@@ -195,10 +198,9 @@ void CoupledExplicitIntegrator<dim>::apply_friction(Grid<dim>& grid, const Parti
             relative += w * n.momentum;
             inverse_mass += w * w / n.mass;
         });
-        const auto& facet = contact_.facets()[f.facet];
-        for (int j = 0; j < dim; ++j) {
-            relative -= f.weight[j] * state.v[facet[j]];
-            if (node_mass[facet[j]] > 0.0) inverse_mass += f.weight[j] * f.weight[j] / node_mass[facet[j]];
+        for (int j = 1; j < f.count; ++j) {
+            relative += f.weight[j] * state.v[f.node[j]];
+            if (node_mass[f.node[j]] > 0.0) inverse_mass += f.weight[j] * f.weight[j] / node_mass[f.node[j]];
         }
         const Eigen::Matrix<double, dim - 1, 1> u = f.tangent.transpose() * relative;
         const double speed = u.norm();
@@ -213,8 +215,8 @@ void CoupledExplicitIntegrator<dim>::apply_friction(Grid<dim>& grid, const Parti
             grid.coordinates(node, coord);
             grid.apply_boundary(coord, n.momentum, mpm_system_.boundary);
         });
-        for (int j = 0; j < dim; ++j)
-            if (node_mass[facet[j]] > 0.0) state.v[facet[j]] -= (f.weight[j] / node_mass[facet[j]]) * J;
+        for (int j = 1; j < f.count; ++j)
+            if (node_mass[f.node[j]] > 0.0) state.v[f.node[j]] += (f.weight[j] / node_mass[f.node[j]]) * J;
     }
 }
 
@@ -223,15 +225,16 @@ CoupledStepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles,
                                                       long step_index) {
     const auto start = std::chrono::steady_clock::now();
     const std::string context = "step " + std::to_string(step_index);
-    // The barrier's forces at the start of the step.
-    contact_.gradient(particles.x, state.x, pairs_, gradients_);
-    if (friction_.mu > 0.0) friction_pairs_ = contact_.lagged_pairs(particles.x, state.x);
+    // The barrier's forces at the start of the step: -kappa dB/dx of each pair's vertices (the
+    // particle first, then the facet's nodes).
     const std::size_t nodes = state.x.size();
+    CoupledVertices<dim>::join(state.x, particles.x, contact_x_);
+    contact_.pair_terms(contact_x_, 1, false, pairs_);
+    if (friction_.mu > 0.0) friction_pairs_ = contact_.lagged_pairs(contact_x_);
+    const double kappa = contact_.kappa();
     node_force_.assign(nodes, Vec<dim>::Zero());
-    for (std::size_t k = 0; k < pairs_.size(); ++k) {
-        const auto& facet = contact_.facets()[pairs_[k].facet];
-        for (int j = 0; j < dim; ++j) node_force_[facet[j]] -= gradients_[k].template segment<dim>(dim * (j + 1));
-    }
+    for (const ContactPairTerms<dim>& t : pairs_)
+        for (int j = 1; j < t.count; ++j) node_force_[t.node[j]] -= kappa * t.gradient.template segment<dim>(dim * j);
     x_start_ = state.x;
     fem_.set_external_force(&node_force_);
     const FemStepStats fem_stats = fem_.step(state, dt, step_index);
@@ -240,9 +243,9 @@ CoupledStepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles,
 
     mpm_.set_grid_hook([&](Grid<dim>& grid, double h) {
         // Barrier impulses on the particles' stencil nodes, then their boundary conditions again.
-        for (std::size_t k = 0; k < pairs_.size(); ++k) {
-            const Vec<dim> f = -gradients_[k].template head<dim>();
-            const StencilNodes<dim> st(grid, particles.x[pairs_[k].particle]);
+        for (const ContactPairTerms<dim>& t : pairs_) {
+            const Vec<dim> f = -kappa * t.gradient.template head<dim>();
+            const StencilNodes<dim> st(grid, particles.x[t.node[0] - nodes]);
             st.for_each([&](std::int64_t node, double w, const Vec<dim>&, const Vec<dim>&) {
                 typename Grid<dim>::Node& n = grid.node(node);
                 if (!(n.mass > 0.0)) return;
@@ -261,14 +264,15 @@ CoupledStepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles,
             lo = lo.cwiseMin(x_start_[i]).cwiseMin(state.x[i]);
             hi = hi.cwiseMax(x_start_[i]).cwiseMax(state.x[i]);
         }
-        near_X_.clear();
-        near_dX_.clear();
+        // The contact's positions: the mesh's nodes, then the particles near it.
+        contact_x_.assign(x_start_.begin(), x_start_.end());
+        contact_dx_.assign(dx_.begin(), dx_.end());
         double grid_speed = 0.0;
         for (int block : grid.active_blocks())
             for (int k = 0; k < Grid<dim>::kBlockNodes; ++k)
-                grid_speed = std::max(grid_speed,
-                                      grid.node(static_cast<std::int64_t>(block) * Grid<dim>::kBlockNodes + k)
-                                          .momentum.norm());
+                grid_speed =
+                    std::max(grid_speed,
+                             grid.node(static_cast<std::int64_t>(block) * Grid<dim>::kBlockNodes + k).momentum.norm());
         const double margin = h * grid_speed + contact_.dhat();
         for (std::size_t p = 0; p < particles.size(); ++p) {
             const Vec<dim>& X = particles.x[p];
@@ -276,10 +280,10 @@ CoupledStepStats CoupledExplicitIntegrator<dim>::step(Particles<dim>& particles,
             Vec<dim> v;
             Mat<dim> C, G;
             gather_velocity(grid, X, v, C, G);
-            near_X_.push_back(X);
-            near_dX_.push_back(h * v);
+            contact_x_.push_back(X);
+            contact_dx_.push_back(h * v);
         }
-        const double t = contact_.max_step(near_X_, near_dX_, x_start_, dx_);
+        const double t = contact_.max_step(contact_x_, contact_dx_);
         if (t < 1.0)
             throw SimulationError(context + ": a particle would cross the FEM mesh (CCD allows " + std::to_string(t) +
                                   " of the step): the explicit step is too large for the barrier");

@@ -1,7 +1,8 @@
 #pragma once
 // Time integrators of MPM-FEM coupling (BFEMP; docs/methods.md), 2D and 3D: MPM
 // particles (sand, snow: any MPM material) and elastic FEM bodies meeting
-// through the particle / mesh barrier (particle_contact.hpp) and its lagged
+// through the particle / mesh barrier (a Contact whose stand-alone points are
+// the particles, contact/collisions/contact.hpp) and its lagged
 // friction (Coulomb coefficient mu: the scene's contact.friction, which also
 // holds between the meshes and the ground).
 //
@@ -30,7 +31,6 @@
 #include "pnet/contact/friction.hpp"
 #include "pnet/coupling/coupled_potential.hpp"
 #include "pnet/coupling/coupling_options.hpp"
-#include "pnet/coupling/particle_contact.hpp"
 #include "pnet/fem/fem_integrator.hpp"
 #include "pnet/mpm/explicit_integrator.hpp"
 #include "pnet/mpm/implicit_integrator.hpp"
@@ -59,7 +59,7 @@ public:
                               const ImplicitOptions& options, const MpmOptions& mpm_options,
                               const CouplingOptions& coupling_options, std::unique_ptr<ParticleEnergy<dim>> mpm_energy,
                               std::vector<const LearnedReturnMap<dim>*> return_maps,
-                              const ContactPotential<dim>* fem_contact, const ParticleContact<dim>& contact,
+                              const ContactPotential<dim>* fem_contact, const ContactPotential<dim>& contact,
                               CouplingFriction friction = {});
 
     /// Throws SimulationError naming the step on a failed solve or a blow-up.
@@ -78,9 +78,10 @@ private:
     std::unique_ptr<ParticleEnergy<dim>> mpm_energy_;
     std::vector<const LearnedReturnMap<dim>*> return_maps_;
     const ContactPotential<dim>* fem_contact_;
-    const ParticleContact<dim>& contact_;
+    const ContactPotential<dim>& contact_;  // the particles against the meshes
     CouplingFriction friction_;
-    Friction<dim> mesh_friction_;  // the meshes' own pairs (ground, between meshes)
+    Friction<dim> mesh_friction_;      // the meshes' own pairs (ground, between meshes)
+    std::vector<Vec<dim>> contact_x_;  // the contact's positions: the mesh's nodes, then the particles
     Grid<dim> grid_;
     IncrementalPotential<dim> mpm_;
     ElasticParticleEnergy<dim> fem_energy_;
@@ -95,7 +96,7 @@ template <int dim>
 class CoupledExplicitIntegrator {
 public:
     CoupledExplicitIntegrator(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
-                              const ContactPotential<dim>* fem_contact, const ParticleContact<dim>& contact,
+                              const ContactPotential<dim>* fem_contact, const ContactPotential<dim>& contact,
                               CouplingFriction friction = {});
 
     /// One symplectic Euler step of both (the FEM part in as many substeps as its elements need).
@@ -115,13 +116,12 @@ private:
     const FemSystem<dim>& fem_system_;
     ExplicitIntegrator<dim> mpm_;
     FemExplicitIntegrator<dim> fem_;
-    const ParticleContact<dim>& contact_;
+    const ContactPotential<dim>& contact_;
     CouplingFriction friction_;
     Friction<dim> mesh_friction_;
-    std::vector<typename ParticleContact<dim>::Pair> pairs_;
-    std::vector<typename ParticleContact<dim>::Gradient> gradients_;
-    std::vector<ParticleFrictionPair<dim>> friction_pairs_;
-    std::vector<Vec<dim>> node_force_, x_start_, dx_, near_X_, near_dX_;
+    std::vector<ContactPairTerms<dim>> pairs_;  // the barrier's at the step's start
+    std::vector<FrictionPair<dim>> friction_pairs_;
+    std::vector<Vec<dim>> node_force_, x_start_, dx_, contact_x_, contact_dx_;
 };
 
 using CoupledImplicitIntegrator2d = CoupledImplicitIntegrator<2>;

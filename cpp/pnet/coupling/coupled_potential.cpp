@@ -16,13 +16,15 @@ struct CoupledPotential<dim>::FemFactor {
 };
 
 template <int dim>
-CoupledPotential<dim>::CoupledPotential(IncrementalPotential<dim>& mpm, FemPotential<dim>& fem, const Contact& contact)
+CoupledPotential<dim>::CoupledPotential(IncrementalPotential<dim>& mpm, FemPotential<dim>& fem,
+                                        const ContactPotential<dim>& contact)
     : mpm_(mpm),
       fem_(fem),
       mpm_form_(mpm),
       fem_form_(fem),
-      barrier_(mpm, fem, contact, this->free_),
-      friction_(mpm, fem, contact, this->free_),
+      vertices_(mpm, fem),
+      barrier_(contact, vertices_, this->free_),
+      friction_(vertices_, this->free_),
       fem_factor_(std::make_unique<FemFactor>()) {
     contact_.set_forms({&barrier_, &friction_});
     this->set_forms({&mpm_form_, &fem_form_, &contact_});
@@ -48,14 +50,6 @@ void CoupledPotential<dim>::begin_step() {
 }
 
 template <int dim>
-void CoupledPotential<dim>::positions(const VecX& v, std::vector<Vec<dim>>& X, std::vector<Vec<dim>>& x) const {
-    vg_ = v.head(mpm_.size());
-    vf_ = v.tail(fem_.size());
-    mpm_.particle_positions(vg_, X);
-    fem_.positions(vf_, x);
-}
-
-template <int dim>
 void CoupledPotential<dim>::deformation(const VecX& v, std::vector<Mat<dim>>& F) const {
     vg_ = v.head(mpm_.size());
     mpm_.deformation(vg_, F);
@@ -78,7 +72,7 @@ void CoupledPotential<dim>::hessian_prepared(const VecX& /*v*/) {
     mpm_.hessian_diagonal(grid_diagonal);
     const SparseMatrix& Hf = *fem_.hessian_matrix();
     triplets_.clear();  // the pairs' FEM terms, added to Hf below
-    using Hessian = typename Contact::Hessian;
+    using Hessian = typename BarrierForm<dim>::Hessian;
     const auto add_pair = [&](const Hessian& H, double scale, int count, const Eigen::Index* index,
                               const double* weight, const int* slot) {
         for (int i = 0; i < count; ++i) {
@@ -113,17 +107,17 @@ void CoupledPotential<dim>::hessian_prepared(const VecX& /*v*/) {
     // The FEM block only preconditions PCG: its factorization is kept through the step's Newton
     // iterations while the barrier's pairs are the same ones (the stiff body's Hessian hardly
     // changes; the pairs' terms do, and a new pair set gets a new factorization).
-    const std::vector<typename Contact::Pair>& pairs = barrier_.hessian_pairs();
-    const bool same_pairs =
-        factorized_this_step_ && pairs.size() == factor_pairs_.size() &&
-        std::equal(pairs.begin(), pairs.end(), factor_pairs_.begin(),
-                   [](const auto& a, const auto& b) { return a.particle == b.particle && a.facet == b.facet; });
+    const std::vector<ContactPairTerms<dim>>& pairs = barrier_.hessian_pairs();
+    const bool same_pairs = factorized_this_step_ && pairs.size() == factor_pairs_.size() &&
+                            std::equal(pairs.begin(), pairs.end(), factor_pairs_.begin(),
+                                       [](const auto& a, const auto& b) { return a.node == b; });
     inverse_grid_diagonal_ = grid_diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
     diagonal_.resize(ng + nf);
     diagonal_ << grid_diagonal, fem_block_.diagonal();
     if (same_pairs) return;
     factorized_this_step_ = true;
-    factor_pairs_ = pairs;
+    factor_pairs_.clear();
+    for (const ContactPairTerms<dim>& t : pairs) factor_pairs_.push_back(t.node);
     const bool same = static_cast<Eigen::Index>(f.outer.size()) == nf + 1 &&
                       static_cast<Eigen::Index>(f.inner.size()) == fem_block_.nonZeros() &&
                       std::equal(f.outer.begin(), f.outer.end(), fem_block_.outerIndexPtr()) &&

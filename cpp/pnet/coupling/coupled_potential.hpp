@@ -9,8 +9,10 @@
 //
 // E_mpm the MPM incremental potential (inertia + learned or elastic particle
 // energy, mpm/incremental_potential.hpp), E_fem the FEM one (inertia + element
-// energy + its own contact, fem/fem_potential.hpp), B the particle / mesh
-// boundary barrier and D the lagged particle-mesh friction (particle_mesh_forms.hpp).
+// energy + its own contact, fem/fem_potential.hpp), B the particle / mesh boundary
+// barrier (the one barrier form, contact/barrier_form.hpp, over a Contact whose
+// stand-alone points are the particles, moved by CoupledVertices) and D the lagged
+// particle-mesh friction (particle_mesh_forms.hpp).
 // The coupled step is a Problem (solver/problem.hpp) of three forms: the MPM and
 // FEM problems, each as one form on its part of v (ProblemForm), and the
 // particle-mesh contact (barrier + friction, summed as one). Every part is PSD
@@ -28,6 +30,7 @@
 
 #include <Eigen/SparseCore>
 
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/coupling/particle_mesh_forms.hpp"
 #include "pnet/solver/form_sum.hpp"
 #include "pnet/solver/problem.hpp"
@@ -37,9 +40,9 @@ namespace pnet {
 template <int dim>
 class CoupledPotential final : public Problem<dim> {
 public:
-    using Contact = ParticleContact<dim>;
-
-    CoupledPotential(IncrementalPotential<dim>& mpm, FemPotential<dim>& fem, const Contact& contact);
+    /// contact: the mesh's boundary facets with the particles as stand-alone points after its
+    /// nodes (ContactPoints{nodes, true}), positions as CoupledVertices orders them.
+    CoupledPotential(IncrementalPotential<dim>& mpm, FemPotential<dim>& fem, const ContactPotential<dim>& contact);
     ~CoupledPotential() override;
     CoupledPotential(const CoupledPotential&) = delete;  // its forms refer to its members
     CoupledPotential& operator=(const CoupledPotential&) = delete;
@@ -58,7 +61,7 @@ public:
     /// Lagged particle-mesh friction for this step (after begin_step()): the pairs of
     /// Contact::lagged_pairs() at the step's start, the Coulomb coefficient mu >= 0 and the
     /// slip velocity eps_v > 0 (m/s) below which it is smoothed. mu = 0: none.
-    void set_friction(std::vector<ParticleFrictionPair<dim>> pairs, double mu, double eps_v) {
+    void set_friction(std::vector<FrictionPair<dim>> pairs, double mu, double eps_v) {
         friction_.set_pairs(std::move(pairs), mu, eps_v);
     }
     std::size_t friction_pairs() const { return friction_.size(); }
@@ -71,8 +74,8 @@ public:
     const VecX& residual_mass() const { return residual_mass_; }
     Eigen::Index grid_size() const { return mpm_.size(); }
 
-    /// The particles' and the mesh's positions at v.
-    void positions(const VecX& v, std::vector<Vec<dim>>& X, std::vector<Vec<dim>>& x) const;
+    /// The contact's positions at v: the mesh's nodes, then the particles.
+    void positions(const VecX& v, std::vector<Vec<dim>>& x) const { vertices_.positions(v, x); }
 
     // ReferencedObjective: the MPM particles (the FEM body is elastic).
     void deformation(const VecX& v, std::vector<Mat<dim>>& F) const override;
@@ -90,7 +93,7 @@ public:
     /// CCD queries since begin_step() and how many shortened a step; the pairs at the last evaluation.
     int ccd_queries() const { return barrier_.ccd().queries; }
     int ccd_limited() const { return barrier_.ccd().limited; }
-    std::size_t pairs() const { return barrier_.pairs().size(); }
+    std::size_t pairs() const { return barrier_.pairs(); }
 
 private:
     /// BlockPreconditioned: the diagonal and the FEM block's factorization.
@@ -99,17 +102,18 @@ private:
     IncrementalPotential<dim>& mpm_;
     FemPotential<dim>& fem_;
     ProblemForm<dim> mpm_form_, fem_form_;
-    ParticleBarrierForm<dim> barrier_;
+    CoupledVertices<dim> vertices_;
+    BarrierForm<dim> barrier_;
     ParticleFrictionForm<dim> friction_;
     FormSum contact_;  // barrier + friction
     VecX v_star_, residual_mass_;
-    mutable VecX vg_, vf_;
+    mutable VecX vg_;
     std::vector<Eigen::Triplet<double>> triplets_;
     SparseMatrix fem_block_, pair_block_;
     VecX diagonal_, inverse_grid_diagonal_;
     struct FemFactor;
     std::unique_ptr<FemFactor> fem_factor_;
-    std::vector<typename Contact::Pair> factor_pairs_;  // the pairs of the FEM block's factorization
+    std::vector<std::array<int, dim + 1>> factor_pairs_;  // the pairs of the FEM block's factorization
     bool factorized_this_step_ = false;
     LinearSolve solve_ = LinearSolve::BlockPreconditioned;
 };

@@ -47,8 +47,9 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
                                           Eigen::VectorXd::Zero(dim), Eigen::VectorXd::Zero(dim))
                     .kappa;
     }
-    coupling_ = std::make_unique<ParticleContact<dim>>(s.mesh.boundary, dhat, kappa);
-    const std::string inside = coupling_->first_penetration(particles_.x, s.mesh.x);
+    coupling_ = std::make_unique<Contact<dim>>(s.mesh.boundary, std::vector<Vec<dim>>{}, dhat, kappa,
+                                               ContactPoints{static_cast<int>(s.mesh.nodes()), true});
+    const std::string inside = first_inside<dim>(particles_.x, s.mesh.x, s.mesh.boundary, "particle");
     if (!inside.empty())
         throw SceneError(scene.file + ": objects and meshes overlap at the start: " + inside +
                          " (particles are numbered in object order)");
@@ -69,32 +70,40 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
         dt_ = settings.dt;
         const Method method = settings.method();
         if (!integrator_info(method).particles || !integrator_info(method).meshes)
-            throw std::invalid_argument("the " + settings.name + " integrator is not for particles beside meshes "
+            throw std::invalid_argument("the " + settings.name +
+                                        " integrator is not for particles beside meshes "
                                         "(expected explicit, plasticitynet, return_map or lagged)");
         // settings.models: objects first, then meshes; the meshes are elastic.
         std::vector<std::string> where;
         for (const SceneObject& object : scene.objects) where.push_back(scene.file + ": " + object.json_path);
-        MethodEnergy<dim> made = make_method_energy<dim>(settings.method(), {settings.implicit, mpm_.materials, settings.models, where});
+        MethodEnergy<dim> made =
+            make_method_energy<dim>(settings.method(), {settings.implicit, mpm_.materials, settings.models, where});
         std::unique_ptr<ParticleEnergy<dim>> energy = std::move(made.energy);
         std::vector<const LearnedReturnMap<dim>*> return_maps = std::move(made.return_maps);
-        implicit_ = std::make_unique<CoupledImplicitIntegrator<dim>>(mpm_, s, method, settings.implicit, settings.mpm,
-                                                                     settings.coupling,
-                                                                     std::move(energy), std::move(return_maps),
-                                                                     fem_contact_.get(), *coupling_, friction);
+        implicit_ = std::make_unique<CoupledImplicitIntegrator<dim>>(
+            mpm_, s, method, settings.implicit, settings.mpm, settings.coupling, std::move(energy),
+            std::move(return_maps), fem_contact_.get(), *coupling_, friction);
     }
+}
+
+template <int dim>
+const std::vector<Vec<dim>>& CoupledSimulation<dim>::contact_positions() const {
+    CoupledVertices<dim>::join(state_.x, particles_.x, contact_x_);
+    return contact_x_;
 }
 
 template <int dim>
 StepRecord CoupledSimulation<dim>::step() {
     const bool limit = dt_ > 0.0 && implicit_;
     const double limited = limit ? advection_time_step(mpm_, particles_, dt_, settings_.mpm.advection_cfl) : 0.0;
-    const double dt =
-        clip_to_frame(limit ? limited : dt_ > 0.0 ? dt_ : explicit_->cfl_time_step(particles_, settings_.cfl));
+    const double dt = clip_to_frame(limit       ? limited
+                                    : dt_ > 0.0 ? dt_
+                                                : explicit_->cfl_time_step(particles_, settings_.cfl));
     StepRecord s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
     s.advection_capped = limit && limited < dt_;
-    s.contact_pairs = coupling_->active(particles_.x, state_.x).size();
-    s.min_distance = coupling_->min_distance(particles_.x, state_.x);
+    s.contact_pairs = coupling_->active_pairs(contact_positions());
+    s.min_distance = coupling_->min_distance(contact_positions());
     count_step(dt);
     return s;
 }
@@ -104,7 +113,7 @@ FrameStats CoupledSimulation<dim>::advance_frame(const std::function<void()>& af
     return advance_one_frame(
         [&] { return step(); },
         [&](FrameStats& stats) {
-            const std::string inside = coupling_->first_penetration(particles_.x, state_.x);
+            const std::string inside = first_inside<dim>(particles_.x, state_.x, mesh().boundary, "particle");
             if (!inside.empty()) throw SimulationError("frame " + std::to_string(frame_) + ": " + inside);
             const std::string pair = fem_contact_->first_intersection(state_.x);
             if (!pair.empty())
@@ -128,11 +137,12 @@ template <int dim>
 void CoupledSimulation<dim>::save_checkpoint(const std::string& path) const {
     write_sealed_checkpoint(path, [&](std::ostream& out) {
         const std::vector<Mat<dim>> stress = explicit_ ? explicit_->mpm().checkpoint_state() : std::vector<Mat<dim>>{};
-        write_checkpoint_preamble(out, kMagic,
-                                  {static_cast<std::int64_t>(particles_.size()), static_cast<std::int64_t>(state_.x.size()),
-                                   static_cast<std::int64_t>(state_.hardening.size()),
-                                   static_cast<std::int64_t>(stress.size()), frame_, steps_},
-                                  settings_.name);
+        write_checkpoint_preamble(
+            out, kMagic,
+            {static_cast<std::int64_t>(particles_.size()), static_cast<std::int64_t>(state_.x.size()),
+             static_cast<std::int64_t>(state_.hardening.size()), static_cast<std::int64_t>(stress.size()), frame_,
+             steps_},
+            settings_.name);
         write_array(out, particles_.x);
         write_array(out, particles_.v);
         write_array(out, particles_.C);
@@ -201,8 +211,8 @@ template <int dim>
 nlohmann::json CoupledSimulation<dim>::contact_state() const {
     return {{"dhat", coupling_->dhat()},
             {"kappa", coupling_->kappa()},
-            {"min_distance", coupling_->min_distance(particles_.x, state_.x)},
-            {"active_pairs", coupling_->active(particles_.x, state_.x).size()},
+            {"min_distance", coupling_->min_distance(contact_positions())},
+            {"active_pairs", coupling_->active_pairs(contact_positions())},
             {"penetrations", penetrations()}};
 }
 

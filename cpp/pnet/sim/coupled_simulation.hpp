@@ -1,20 +1,18 @@
 #pragma once
 // An MPM-FEM coupled run of a scene (BFEMP; docs/methods.md, docs/scenes.md): particle
 // objects (MPM) and meshes (FEM, elastic) in one 2D or 3D scene, meeting through the
-// particle / mesh barrier and its friction (the scene's contact.friction). The particles use the grid, materials and boundary
-// conditions of an MPM run of the same objects (make_mpm_system,
-// sample_particles), the meshes those of a FEM run (make_fem_system, with its
-// own contact: ground, between meshes). Integrators: explicit (the ground
-// truth, both symplectic Euler at one step), plasticitynet and lagged (the
-// particles' energy; the meshes are elastic in both). Every frame ends with a
-// test that no particle is inside a mesh (SimulationError if one is).
+// particle / mesh barrier and its friction (the scene's contact.friction). The particles use the grid, materials and
+// boundary conditions of an MPM run of the same objects (make_mpm_system, sample_particles), the meshes those of a FEM
+// run (make_fem_system, with its own contact: ground, between meshes). Integrators: explicit (the ground truth, both
+// symplectic Euler at one step), plasticitynet and lagged (the particles' energy; the meshes are elastic in both).
+// Every frame ends with a test that no particle is inside a mesh (SimulationError if one is).
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "pnet/contact/collisions/contact.hpp"
 #include "pnet/coupling/coupled_integrator.hpp"
-#include "pnet/coupling/particle_contact.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 #include "pnet/sim/simulation_base.hpp"
@@ -41,11 +39,14 @@ public:
     const FemState<dim>& state() const override { return state_; }
     const FemSceneSystem<dim>& scene_system() const override { return fem_; }
     const Mesh<dim>& mesh() const override { return fem_.system.mesh; }
-    const ParticleContact<dim>& coupling() const { return *coupling_; }
+    /// The particles against the meshes: a Contact whose stand-alone points are the particles.
+    const Contact<dim>& coupling() const { return *coupling_; }
+    /// Its positions now: the meshes' nodes, then the particles.
+    const std::vector<Vec<dim>>& contact_positions() const;
     double step_size() const { return dt_; }
 
     /// Particles inside a mesh or on its boundary now (must be 0).
-    std::size_t penetrations() const { return coupling_->penetrations(particles_.x, state_.x); }
+    std::size_t penetrations() const { return count_inside<dim>(particles_.x, state_.x, mesh().boundary); }
 
     /// Atomic; load refuses another scene, integrator or size (std::invalid_argument) and a missing
     /// file (FileNotFoundError).
@@ -65,7 +66,8 @@ private:
     FemSceneSystem<dim> fem_;
     FemState<dim> state_;
     std::unique_ptr<ContactPotential<dim>> fem_contact_;
-    std::unique_ptr<ParticleContact<dim>> coupling_;
+    std::unique_ptr<Contact<dim>> coupling_;
+    mutable std::vector<Vec<dim>> contact_x_;
     std::unique_ptr<CoupledImplicitIntegrator<dim>> implicit_;
     std::unique_ptr<CoupledExplicitIntegrator<dim>> explicit_;
     double dt_ = 0.0;

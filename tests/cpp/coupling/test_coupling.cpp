@@ -40,18 +40,19 @@ Scene tiny_with_disk_at(double y, double vy) {
 // The top particle row of the tiny bed (lattice spacing dx / 2 = 1/128 m, bed to 0.1 m).
 constexpr double kBedTop = 0.09765625;
 
-TEST(ParticleContact2d, CcdStopsAParticleBeforeTheEdgeAndPenetrationIsDetected) {
+TEST(ContactPoints2d, CcdStopsAParticleBeforeTheEdgeAndPenetrationIsDetected) {
     const std::vector<std::array<int, 2>> edges = {{0, 1}, {1, 2}, {2, 0}};  // a triangle, counter-clockwise
     const std::vector<Vec<2>> x = {Vec<2>(0, 0), Vec<2>(1, 0), Vec<2>(0, 1)};
-    const ParticleContact2d contact(edges, 0.01, 1.0);
+    const Contact2d contact(edges, {}, 0.01, 1.0, ContactPoints{3, true});
     const std::vector<Vec<2>> outside = {Vec<2>(0.3, -0.2)}, inside = {Vec<2>(0.2, 0.2)};
     // Moving up by 0.4 crosses the bottom edge at t = 0.5: CCD stops short of it.
-    const double t = contact.max_step(outside, {Vec<2>(0, 0.4)}, x, {Vec<2>::Zero(), Vec<2>::Zero(), Vec<2>::Zero()});
+    const double t = contact.max_step({x[0], x[1], x[2], outside[0]},
+                                      {Vec<2>::Zero(), Vec<2>::Zero(), Vec<2>::Zero(), Vec<2>(0, 0.4)});
     EXPECT_GT(t, 0.0);
     EXPECT_LT(t, 0.5);
-    EXPECT_EQ(contact.first_penetration(outside, x), "");
-    EXPECT_EQ(contact.penetrations(inside, x), 1u);
-    EXPECT_NE(contact.first_penetration(inside, x).find("particle 0 inside the mesh"), std::string::npos);
+    EXPECT_EQ(first_inside<2>(outside, x, edges), "");
+    EXPECT_EQ(count_inside<2>(inside, x, edges), 1u);
+    EXPECT_EQ(first_inside<2>(inside, x, edges, "particle"), "particle 0 inside the mesh");
 }
 
 /// The parts of a coupled implicit step on the tiny scene with the disk just above the bed
@@ -147,17 +148,19 @@ TEST(CoupledPotential, NewtonLowersTheEnergyAndKeepsEveryParticleOutsideTheDisk)
             if (s.converged) break;
         }
         EXPECT_LT(iterations, 30);
-        std::vector<Vec<2>> X, x;
-        f.coupled.positions(v, X, x);
-        EXPECT_EQ(f.contact.penetrations(X, x), 0u);
-        EXPECT_GT(f.contact.min_distance(X, x), 0.0);
+        std::vector<Vec<2>> x;
+        f.coupled.positions(v, x);
+        const std::size_t nodes = f.fem.system.mesh.nodes();
+        const std::vector<Vec<2>> mesh(x.begin(), x.begin() + nodes), particles(x.begin() + nodes, x.end());
+        EXPECT_EQ(count_inside<2>(particles, mesh, f.fem.system.mesh.boundary), 0u);
+        EXPECT_GT(f.contact.min_distance(x), 0.0);
     }
 }
 
 TEST(CoupledSimulation, TinySceneRunsWithExplicitReturnMapAndLaggedWithoutPenetration) {
     const Scene scene = load_scene(kTiny);
-    for (const auto& [integrator, dt] : std::vector<std::pair<std::string, double>>{
-             {"lagged", 1e-3}, {"return_map", 1e-3}, {"explicit", 1e-5}}) {
+    for (const auto& [integrator, dt] :
+         std::vector<std::pair<std::string, double>>{{"lagged", 1e-3}, {"return_map", 1e-3}, {"explicit", 1e-5}}) {
         SCOPED_TRACE(integrator);
         CoupledSimulation2d sim(scene, settings_for(scene, integrator, dt));
         std::size_t most_pairs = 0;
@@ -195,8 +198,7 @@ TEST(CoupledSimulation, ABlockRestingOnTheBedStaysAtRest) {
     EXPECT_LT(sink, 0.1 * scene.dx) << "the block sank";
     EXPECT_LT(speed, 0.02) << "the block is not at rest";
     EXPECT_EQ(sim.penetrations(), 0u);
-    EXPECT_GT(sim.coupling().active(sim.particles().x, sim.state().x).size(), 0u)
-        << "the block does not rest on the bed";
+    EXPECT_GT(sim.coupling().active_pairs(sim.contact_positions()), 0u) << "the block does not rest on the bed";
 }
 
 TEST(CoupledSimulation, OneAndTwoThreadsGiveIdenticalFrames) {

@@ -1,9 +1,9 @@
-// MPM-FEM coupling in 3D and particle-mesh friction (docs/methods.md): the point-edge and
-// point-triangle barriers' derivatives and lagged friction pairs, CCD and the winding-number inside test; the coupled incremental
-// potential with lagged friction against finite differences in 2D and 3D (the matrix-free
-// product against the assembled Hessian); friction that drags the sand under a sliding block,
-// implicit and explicit; the 3D tiny scene without penetration, with 1 and 2 threads identical
-// and a checkpoint that resumes bit-identically.
+// MPM-FEM coupling in 3D and particle-mesh friction (docs/methods.md): the particles as the
+// Contact's stand-alone points, the point-edge and point-triangle barriers' derivatives and lagged friction pairs, CCD
+// and the winding-number inside test; the coupled incremental potential with lagged friction against finite differences
+// in 2D and 3D (the matrix-free product against the assembled Hessian); friction that drags the sand under a sliding
+// block, implicit and explicit; the 3D tiny scene without penetration, with 1 and 2 threads identical and a checkpoint
+// that resumes bit-identically.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -33,70 +33,66 @@ Scene edited(const char* file, double y, const std::vector<double>& velocity, do
     return scene_from_json(j, "edited.json", "");
 }
 
-/// The barrier of particle p against one facet (corners: its nodes' positions) against finite
-/// differences, and its lagged friction pair: the closest point's weights, a tangent basis
-/// orthogonal to the normal, a positive normal force.
+/// The barrier of particle p (a stand-alone point of the Contact, after the facet's nodes) against
+/// one facet (corners: its nodes' positions) against finite differences, and its lagged friction
+/// pair: the closest point's weights, a tangent basis orthogonal to the normal, a positive normal
+/// force.
 template <int dim>
-void check_barrier(const ParticleContact<dim>& contact, const Vec<dim>& p, const std::vector<Vec<dim>>& corners,
+void check_barrier(const Contact<dim>& contact, const Vec<dim>& p, const std::vector<Vec<dim>>& corners,
                    test::FdStats& stats) {
     SCOPED_TRACE(p.transpose());
     constexpr int n = dim * (dim + 1);
+    // q: the pair's stacked positions (the point, then the facet's nodes).
     Eigen::VectorXd q(n);
     q.template head<dim>() = p;
     for (int j = 0; j < dim; ++j) q.template segment<dim>(dim * (j + 1)) = corners[j];
-    auto unpack = [](const Eigen::VectorXd& y, std::vector<Vec<dim>>& X, std::vector<Vec<dim>>& x) {
-        X = {y.template head<dim>()};
-        x.clear();
+    auto unpack = [](const Eigen::VectorXd& y) {
+        std::vector<Vec<dim>> x;
         for (int j = 0; j < dim; ++j) x.push_back(y.template segment<dim>(dim * (j + 1)));
+        x.push_back(y.template head<dim>());
+        return x;
     };
-    std::vector<Vec<dim>> X, x;
-    unpack(q, X, x);
-    std::vector<typename ParticleContact<dim>::Pair> pairs;
-    std::vector<typename ParticleContact<dim>::Gradient> gradients;
-    std::vector<typename ParticleContact<dim>::Hessian> hessians;
-    contact.gradient(X, x, pairs, gradients);
-    ASSERT_EQ(pairs.size(), 1u);
-    auto energy = [&](const Eigen::VectorXd& y) {
-        std::vector<Vec<dim>> Xy, xy;
-        unpack(y, Xy, xy);
-        return contact.value(Xy, xy);
-    };
-    EXPECT_TRUE(test::check_gradient(energy, gradients[0], q, stats, 1e-7, 1e-5,
-                                     1e-4 * gradients[0].cwiseAbs().maxCoeff()));
-    contact.hessians(X, x, false, pairs, hessians);
+    const std::vector<Vec<dim>> x = unpack(q);
+    std::vector<ContactPairTerms<dim>> terms;
+    contact.pair_terms(x, 1, false, terms);
+    ASSERT_EQ(terms.size(), 1u);
+    EXPECT_EQ(terms[0].node[0], dim);  // the point first
+    const Eigen::VectorXd g = contact.kappa() * terms[0].gradient;
+    auto energy = [&](const Eigen::VectorXd& y) { return contact.value(unpack(y)); };
+    EXPECT_TRUE(test::check_gradient(energy, g, q, stats, 1e-7, 1e-5, 1e-4 * g.cwiseAbs().maxCoeff()));
+    contact.pair_terms(x, 2, false, terms);
+    const Eigen::MatrixXd H = contact.kappa() * terms[0].hessian;
     auto gradient = [&](const Eigen::VectorXd& y) {
-        std::vector<Vec<dim>> Xy, xy;
-        unpack(y, Xy, xy);
-        std::vector<typename ParticleContact<dim>::Pair> py;
-        std::vector<typename ParticleContact<dim>::Gradient> gy;
-        contact.gradient(Xy, xy, py, gy);
-        return Eigen::VectorXd(gy.at(0));
+        std::vector<ContactPairTerms<dim>> ty;
+        contact.pair_terms(unpack(y), 1, false, ty);
+        return Eigen::VectorXd(contact.kappa() * ty.at(0).gradient);
     };
-    EXPECT_TRUE(test::check_jacobian(gradient, hessians[0], q, stats, 1e-7, 1e-4,
-                                     1e-4 * hessians[0].cwiseAbs().maxCoeff()));
-    const auto lagged = contact.lagged_pairs(X, x);
+    EXPECT_TRUE(test::check_jacobian(gradient, H, q, stats, 1e-7, 1e-4, 1e-4 * H.cwiseAbs().maxCoeff()));
+    const auto lagged = contact.lagged_pairs(x);
     ASSERT_EQ(lagged.size(), 1u);
+    EXPECT_EQ(lagged[0].weight[0], 1.0);
     Vec<dim> closest = Vec<dim>::Zero();
-    for (int j = 0; j < dim; ++j) closest += lagged[0].weight[j] * x[j];
-    EXPECT_NEAR((X[0] - closest).norm(), std::sqrt(PointFacet<dim>::distance_sq(X[0], x, contact.facets()[0])), 1e-14);
-    EXPECT_LT((lagged[0].tangent.transpose() * (X[0] - closest)).norm(), 1e-14);
-    EXPECT_LT((lagged[0].tangent.transpose() * lagged[0].tangent -
-               Eigen::Matrix<double, dim - 1, dim - 1>::Identity()).norm(), 1e-14);
+    for (int j = 0; j < dim; ++j) closest -= lagged[0].weight[j + 1] * x[lagged[0].node[j + 1]];
+    EXPECT_NEAR((p - closest).norm(), std::sqrt(PointFacet<dim>::distance_sq(p, x, contact.facets()[0])), 1e-14);
+    EXPECT_LT((lagged[0].tangent.transpose() * (p - closest)).norm(), 1e-14);
+    EXPECT_LT((lagged[0].tangent.transpose() * lagged[0].tangent - Eigen::Matrix<double, dim - 1, dim - 1>::Identity())
+                  .norm(),
+              1e-14);
     EXPECT_GT(lagged[0].normal_force, 0.0);
 }
 
-TEST(ParticleContact2d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
+TEST(ContactPoints2d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
     // One edge from (0, 0) to (1, 0); particles above its interior and beyond either end.
-    const ParticleContact2d contact({{0, 1}}, 0.1, 1e3);
+    const Contact2d contact({{0, 1}}, {}, 0.1, 1e3, ContactPoints{2, true});
     test::FdStats stats;
     for (const Vec<2>& p : {Vec<2>(0.4, 0.05), Vec<2>(-0.03, 0.04), Vec<2>(1.05, 0.02), Vec<2>(0.7, -0.06)})
         check_barrier<2>(contact, p, {Vec<2>(0, 0), Vec<2>(1, 0)}, stats);
     EXPECT_EQ(stats.checks, 4 * (6 + 36));
 }
 
-TEST(ParticleContact3d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
+TEST(ContactPoints3d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCase) {
     // One triangle in the plane y = 0; particles above its interior, an edge and a corner.
-    const ParticleContact3d contact({{0, 1, 2}}, 0.1, 1e3);
+    const Contact3d contact({{0, 1, 2}}, {}, 0.1, 1e3, ContactPoints{3, true});
     test::FdStats stats;
     for (const Vec<3>& p : {Vec<3>(0.2, 0.05, 0.2), Vec<3>(0.5, 0.04, -0.03), Vec<3>(-0.02, 0.06, -0.03),
                             Vec<3>(0.55, 0.03, 0.55), Vec<3>(0.3, -0.07, 0.1)})
@@ -104,27 +100,49 @@ TEST(ParticleContact3d, BarrierGradientAndHessianMatchFiniteDifferencesInEveryCa
     EXPECT_EQ(stats.checks, 5 * (12 + 144));
 }
 
-TEST(ParticleContact3d, CcdStopsAParticleBeforeATriangleAndTheWindingNumberFindsInsidePoints) {
-    // A closed tetrahedron, outward oriented.
+TEST(ContactPoints3d, CcdStopsAParticleBeforeATriangleAndTheWindingNumberFindsInsidePoints) {
+    // A closed tetrahedron, outward oriented; the particle is the stand-alone point after its nodes.
     const std::vector<Vec<3>> x = {Vec<3>(0, 0, 0), Vec<3>(1, 0, 0), Vec<3>(0, 1, 0), Vec<3>(0, 0, 1)};
     const std::vector<std::array<int, 3>> triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-    const ParticleContact3d contact(triangles, 0.01, 1.0);
+    const Contact3d contact(triangles, {}, 0.01, 1.0, ContactPoints{4, true});
     const std::vector<Vec<3>> outside = {Vec<3>(0.2, -0.2, 0.2)}, inside = {Vec<3>(0.1, 0.1, 0.1)};
-    const std::vector<Vec<3>> still(4, Vec<3>::Zero());
+    std::vector<Vec<3>> positions = x, motion(4, Vec<3>::Zero());
+    positions.push_back(outside[0]);
     // Moving up by 0.4 crosses the face y = 0 at t = 0.5: CCD stops short of it.
-    const double t = contact.max_step(outside, {Vec<3>(0, 0.4, 0)}, x, still);
+    motion.push_back(Vec<3>(0, 0.4, 0));
+    const double t = contact.max_step(positions, motion);
     EXPECT_GT(t, 0.0);
     EXPECT_LT(t, 0.5);
-    EXPECT_EQ(contact.max_step(outside, {Vec<3>(0, 0.1, 0)}, x, still), 1.0);
-    EXPECT_EQ(contact.first_penetration(outside, x), "");
-    EXPECT_EQ(contact.penetrations(inside, x), 1u);
-    EXPECT_NE(contact.first_penetration(inside, x).find("particle 0 inside the mesh"), std::string::npos);
+    motion.back() = Vec<3>(0, 0.1, 0);
+    EXPECT_EQ(contact.max_step(positions, motion), 1.0);
+    EXPECT_EQ(first_inside<3>(outside, x, triangles), "");
+    EXPECT_EQ(count_inside<3>(inside, x, triangles), 1u);
+    EXPECT_EQ(first_inside<3>(inside, x, triangles, "particle"), "particle 0 inside the mesh");
     // Reversed orientation: still inside; a point on a face is reported on it.
     std::vector<std::array<int, 3>> reversed = triangles;
     for (auto& f : reversed) std::swap(f[1], f[2]);
-    EXPECT_EQ(ParticleContact3d(reversed, 0.01, 1.0).penetrations(inside, x), 1u);
-    EXPECT_NE(contact.first_penetration({Vec<3>(0.2, 0.0, 0.2)}, x).find("particle 0 on triangle 0-1-3"),
-              std::string::npos);
+    EXPECT_EQ(count_inside<3>(inside, x, reversed), 1u);
+    EXPECT_EQ(first_inside<3>({Vec<3>(0.2, 0.0, 0.2)}, x, triangles, "particle"), "particle 0 on triangle 0-1-3");
+}
+
+TEST(ContactPoints2d, PointsMeetOnlyFacetsAndAreNamedAsPoints) {
+    // A square's boundary on the ground y = 0, and two stand-alone points: one touching the top
+    // edge, one below the ground (points meet no half-space) and far from the square.
+    const std::vector<std::array<int, 2>> edges = {{0, 1}, {1, 2}, {2, 3}, {3, 0}};
+    std::vector<Vec<2>> x = {Vec<2>(0, 0.001), Vec<2>(1, 0.001), Vec<2>(1, 1),
+                             Vec<2>(0, 1),     Vec<2>(0.5, 1.0), Vec<2>(3, -1)};
+    Contact2d all(edges, {}, 0.01, 1.0, ContactPoints{4, false});
+    all.add_half_space(HalfSpace2d{});
+    // The square's bottom nodes against the ground (2 pairs) and the first point against the top
+    // edge it touches; the second point meets nothing, though below the ground.
+    EXPECT_EQ(all.active_pairs(x), 3u);
+    EXPECT_EQ(all.first_intersection(x), "point 0 and edge 2-3");
+    Contact2d only(edges, {}, 0.01, 1.0, ContactPoints{4, true});
+    only.add_half_space(HalfSpace2d{});
+    EXPECT_EQ(only.active_pairs(x), 1u);
+    x[4] = Vec<2>(0.5, 1.005);
+    EXPECT_EQ(only.first_intersection(x), "");
+    EXPECT_THROW(Contact2d(edges, {}, 0.01, 1.0, ContactPoints{3, true}), std::invalid_argument);
 }
 
 using test::CoupledFixture;
@@ -169,7 +187,8 @@ void check_coupled_derivatives(CoupledFixture<dim>& f, double tolerance) {
         // error that size is noise, so the denominator is at least that over the tolerance.
         const double scale = std::max(1e-4 * H.col(k).cwiseAbs().maxCoeff(), 5e-7 * g.cwiseAbs().maxCoeff());
         ASSERT_TRUE(test::check_jacobian(along, H.col(k), t0, stats, 1e-6, tolerance, scale))
-            << "column " << k << " (largest entry " << H.col(k).cwiseAbs().maxCoeff() << ", |g|_inf " << g.cwiseAbs().maxCoeff() << ")";
+            << "column " << k << " (largest entry " << H.col(k).cwiseAbs().maxCoeff() << ", |g|_inf "
+            << g.cwiseAbs().maxCoeff() << ")";
         auto along_value = [&](const Eigen::VectorXd& t) {
             VecX y = v;
             y[k] = t[0];
@@ -181,9 +200,10 @@ void check_coupled_derivatives(CoupledFixture<dim>& f, double tolerance) {
             << "component " << k;
     }
     EXPECT_GT(stats.checks, 1000);
-    std::printf("coupled potential with friction, %dD: %zu friction pairs, %d finite-difference comparisons "
-                "(largest relative error %.2e)\n",
-                dim, f.coupled.friction_pairs(), stats.checks, stats.max_error);
+    std::printf(
+        "coupled potential with friction, %dD: %zu friction pairs, %d finite-difference comparisons "
+        "(largest relative error %.2e)\n",
+        dim, f.coupled.friction_pairs(), stats.checks, stats.max_error);
 }
 
 TEST(CoupledPotential, WithFrictionMatchesFiniteDifferencesIn2d) {
@@ -204,8 +224,12 @@ TEST(CoupledPotential, WithFrictionMatchesFiniteDifferencesIn3d) {
 std::pair<double, double> slide(const std::string& integrator, double dt, double mu) {
     nlohmann::json j = scene_to_json(load_scene(kTiny2d));
     const double dhat = 0.5 * j["dx"].get<double>(), top = 0.09765625 + 0.96 * dhat;
-    j["meshes"][0] = {{"shape", "box"},       {"min", {0.4, top}},  {"max", {0.5, top + 0.02}},
-                      {"element_size", 0.01}, {"material", j["meshes"][0]["material"]}, {"velocity", {1.0, 0.0}}};
+    j["meshes"][0] = {{"shape", "box"},
+                      {"min", {0.4, top}},
+                      {"max", {0.5, top + 0.02}},
+                      {"element_size", 0.01},
+                      {"material", j["meshes"][0]["material"]},
+                      {"velocity", {1.0, 0.0}}};
     j["contact"]["friction"] = mu;
     const Scene scene = scene_from_json(j, "slide.json", "");
     CoupledSimulation<2> sim(scene, settings_for(scene, integrator, dt));
@@ -213,7 +237,8 @@ std::pair<double, double> slide(const std::string& integrator, double dt, double
     EXPECT_EQ(sim.penetrations(), 0u);
     double vx = 0.0, momentum = 0.0;
     for (const Vec<2>& v : sim.state().v) vx += v[0] / sim.state().v.size();
-    for (std::size_t p = 0; p < sim.particles().size(); ++p) momentum += sim.particles().mass[p] * sim.particles().v[p][0];
+    for (std::size_t p = 0; p < sim.particles().size(); ++p)
+        momentum += sim.particles().mass[p] * sim.particles().v[p][0];
     return {vx, momentum};
 }
 

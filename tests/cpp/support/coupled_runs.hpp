@@ -41,7 +41,11 @@ struct CoupledFixture {
     ElasticParticleEnergy<dim> fem_energy{fem.system.materials};
     IncrementalPotential<dim> mpm_potential{mpm_energy};
     FemPotential<dim> fem_potential{fem.system.mesh, fem.system.rest, fem_energy};
-    ParticleContact<dim> contact{fem.system.mesh.boundary, 0.5 * scene.dx, 1e6};
+    Contact<dim> contact{fem.system.mesh.boundary,
+                         {},
+                         0.5 * scene.dx,
+                         1e6,
+                         ContactPoints{static_cast<int>(fem.system.mesh.nodes()), true}};
     CoupledPotential<dim> coupled{mpm_potential, fem_potential, contact};
     double dt = 1e-3;
 
@@ -59,7 +63,9 @@ struct CoupledFixture {
         fem_potential.set_material_state(fem.system.element_object, state.hardening);
         fem_potential.set_reference({});
         coupled.begin_step();
-        coupled.set_friction(contact.lagged_pairs(particles.x, state.x), mu, eps_v);
+        std::vector<Vec<dim>> x;
+        CoupledVertices<dim>::join(state.x, particles.x, x);
+        coupled.set_friction(contact.lagged_pairs(x), mu, eps_v);
     }
 };
 

@@ -73,7 +73,7 @@ Contact<dim>::Contact(const std::vector<Facet>& facets, const std::vector<Vec<di
                       ContactPoints points)
     : facets_(facets), points_(points), dhat_(dhat), kappa_(kappa), barrier_{dhat * dhat} {
     if (!(dhat > 0.0) || !(kappa > 0.0)) throw std::invalid_argument("Contact: dhat and kappa must be > 0");
-    if (dim == 3 && rest.empty() && !facets.empty())
+    if (dim == 3 && rest.empty() && !facets.empty() && !points.only)
         throw std::invalid_argument("Contact: 3D contact needs the rest positions (the edge-edge mollifier)");
     constexpr int n = PointFacet<dim>::kNodes;
     for (const Facet& f : facets_) {
@@ -89,7 +89,7 @@ Contact<dim>::Contact(const std::vector<Facet>& facets, const std::vector<Vec<di
     edges_.erase(std::unique(edges_.begin(), edges_.end()), edges_.end());
     std::sort(nodes_.begin(), nodes_.end());
     nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
-    if (dim == 3)
+    if (dim == 3 && !rest.empty())
         for (const auto& e : edges_) edge_rest_sq_.push_back((rest[e[1]] - rest[e[0]]).squaredNorm());
     if (points_.first >= 0 && !nodes_.empty() && nodes_.back() >= points_.first)
         throw std::invalid_argument("Contact: the stand-alone points start at " + std::to_string(points_.first) +

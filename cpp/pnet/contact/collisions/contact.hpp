@@ -52,7 +52,7 @@ public:
 
     /// facets: the mesh's outward boundary facets (Mesh<dim>::boundary: edges in 2D, triangles
     /// in 3D); its edges and nodes are derived. rest: the rest positions of all nodes (3D: the
-    /// edge-edge mollifier's thresholds; unused in 2D, may be empty). dhat > 0 (m), kappa > 0
+    /// edge-edge mollifier's thresholds; unused in 2D and with points.only, may be empty). dhat > 0 (m), kappa > 0
     /// (the barrier stiffness, J/m^4: b is in m^4). points: the stand-alone points, if any.
     Contact(const std::vector<Facet>& facets, const std::vector<Vec<dim>>& rest, double dhat, double kappa,
             ContactPoints points = {});

@@ -5,10 +5,11 @@
 // case, the squared distance with its gradient and Hessian in the stacked positions
 // (p, facet nodes) in R^{dim (dim + 1)}, additive CCD, the closest point's barycentric
 // weights (lagged friction) and whether a point lies inside a closed boundary. Code written
-// once over PointFacet<dim> (the particle / mesh barrier of MPM-FEM coupling,
-// coupling/particle_contact.hpp) runs in both dimensions; each member forwards to the
-// primitive's own file (distance/, ccd/).
+// once over PointFacet<dim> (Contact's point-facet pairs, a mesh's nodes and stand-alone points:
+// contact.hpp) runs in both dimensions; each member forwards to the primitive's own file
+// (distance/, ccd/).
 #include <array>
+#include <string>
 #include <vector>
 
 #include "pnet/contact/ccd/point_edge.hpp"
@@ -25,8 +26,8 @@ struct PointFacet;
 
 template <>
 struct PointFacet<2> {
-    static constexpr int kNodes = 2;             // an edge
-    static constexpr int kStacked = 6;           // (p, a, b)
+    static constexpr int kNodes = 2;    // an edge
+    static constexpr int kStacked = 6;  // (p, a, b)
     using Facet = std::array<int, 2>;
     using Case = PointEdgeCase;
     using Gradient = Vec6;
@@ -59,8 +60,8 @@ struct PointFacet<2> {
 
 template <>
 struct PointFacet<3> {
-    static constexpr int kNodes = 3;             // a triangle
-    static constexpr int kStacked = 12;          // (p, a, b, c)
+    static constexpr int kNodes = 3;     // a triangle
+    static constexpr int kStacked = 12;  // (p, a, b, c)
     using Facet = std::array<int, 3>;
     using Case = PointTriangleCase;
     using Gradient = Vec12;
@@ -103,17 +104,57 @@ bool inside_boundary(const Vec<2>& p, const std::vector<Vec<2>>& x, const std::v
 bool inside_boundary(const Vec<3>& p, const std::vector<Vec<3>>& x, const std::vector<std::array<int, 3>>& facets,
                      int* facet_on);
 
+/// Calls f(k) for each point that may lie inside the region bounded by `facets` (positions x) or
+/// on it: those within the facets' bounding box, in order; f returns false to stop.
+template <int dim, typename F>
+void for_each_point_in_box(const std::vector<Vec<dim>>& points, const std::vector<Vec<dim>>& x,
+                           const std::vector<std::array<int, dim>>& facets, F&& f) {
+    if (facets.empty()) return;
+    Vec<dim> lo = x[facets[0][0]], hi = lo;
+    for (const auto& facet : facets)
+        for (int node : facet) {
+            lo = lo.cwiseMin(x[node]);
+            hi = hi.cwiseMax(x[node]);
+        }
+    for (std::size_t k = 0; k < points.size(); ++k) {
+        if ((points[k].array() < lo.array()).any() || (points[k].array() > hi.array()).any()) continue;
+        if (!f(k)) return;
+    }
+}
+
 /// How many of the points lie inside the region bounded by `facets` (positions x), or on it
 /// (inside_boundary for each).
 template <int dim>
 std::size_t count_inside(const std::vector<Vec<dim>>& points, const std::vector<Vec<dim>>& x,
                          const std::vector<std::array<int, dim>>& facets) {
     std::size_t inside = 0;
-    for (const Vec<dim>& p : points) {
+    for_each_point_in_box<dim>(points, x, facets, [&](std::size_t k) {
         int on = -1;
-        inside += inside_boundary(p, x, facets, &on);
-    }
+        inside += inside_boundary(points[k], x, facets, &on);
+        return true;
+    });
     return inside;
+}
+
+/// The first point inside the region bounded by `facets` (positions x) or on it, as text ("point
+/// 12 inside the mesh", "point 12 on edge 3-4"; `name` in place of "point"), or "".
+template <int dim>
+std::string first_inside(const std::vector<Vec<dim>>& points, const std::vector<Vec<dim>>& x,
+                         const std::vector<std::array<int, dim>>& facets, const std::string& name = "point") {
+    std::string found;
+    for_each_point_in_box<dim>(points, x, facets, [&](std::size_t k) {
+        int on = -1;
+        if (!inside_boundary(points[k], x, facets, &on)) return true;
+        found = name + " " + std::to_string(k);
+        if (on < 0) {
+            found += " inside the mesh";
+            return false;
+        }
+        found += std::string(" on ") + PointFacet<dim>::kFacetName + " ";
+        for (int j = 0; j < dim; ++j) found += (j ? "-" : "") + std::to_string(facets[on][j]);
+        return false;
+    });
+    return found;
 }
 
 }  // namespace pnet
