@@ -104,7 +104,7 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     // Under "auto" a failed one solve on the floor is solved again by the passes (ImplicitIntegrator).
     const bool one_solve = mpm_system_.boundary.coulomb_floor() && mpm_.floor_friction_newton();
     std::function<void(VecX&)> retry;
-    if (one_solve && floor_friction_retries(mpm_options_)) {
+    if (one_solve) {
         const VecX v_start = v_;
         retry = [&, v_start](VecX& v) {
             mpm_.floor_friction_to_passes();
@@ -114,7 +114,7 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
         };
     }
     stats.floor_friction_retried = solve_on_coulomb_floor<dim>(
-        coupled_, v_, newton, solve, context, work_, !floor_passes,
+        coupled_, v_, newton, solve, mpm_options_, context, work_, !floor_passes,
         [&](const VecX& v) {
             const VecX grid_v = v.head(coupled_.grid_size());
             mpm_.floor_friction_contacts(&grid_v);

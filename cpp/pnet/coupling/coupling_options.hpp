@@ -17,6 +17,13 @@ struct CouplingOptions {
 };
 
 /// Every key of CouplingOptions.
-const std::vector<OptionField<CouplingOptions>>& coupling_option_fields();
+inline const std::vector<OptionField<CouplingOptions>>& coupling_option_fields() {
+    using O = CouplingOptions;
+    static const std::vector<OptionField<O>> fields = {
+        choice_option("coupled_solver", nullptr, {"block", "cholesky"}, &O::coupled_solver,
+                      "MPM-FEM coupling's linear solve: PCG with an exact FEM block, or CHOLMOD on the whole Hessian"),
+    };
+    return fields;
+}
 
 }  // namespace pnet

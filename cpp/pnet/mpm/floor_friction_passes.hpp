@@ -9,6 +9,7 @@
 #include <functional>
 #include <string>
 
+#include "pnet/mpm/mpm_options.hpp"
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/newton.hpp"
 #include "pnet/solver/step_stats.hpp"
@@ -50,18 +51,19 @@ void solve_floor_friction_passes(ReferencedObjective<dim>& objective, VecX& v, c
 }
 
 /// A step's solve on a Coulomb floor solved in one Newton solve (`one_solve`; without a floor, or with
-/// the passes, solve_floor_friction_passes alone). When `retry` is set and the one solve fails (its
-/// line search failed, it stopped unconverged, or it threw NewtonError), `retry(v)` puts v and the
-/// objective back where the passes' first solve starts (the step's v*, the floor's contacts of the
-/// start-of-step stress) and the step is solved again by kFloorFrictionSolves passes. The failed
-/// solve's iterations stay in `stats` (what the step cost). Returns whether the passes took over.
+/// the passes, solve_floor_friction_passes alone). When `retry` is set (a floor in one solve) and the
+/// MPM options let a failed one solve be solved again (floor_friction_retries), and it fails (its line
+/// search failed, it stopped unconverged, or it threw NewtonError), `retry(v)` puts v and the objective
+/// back where the passes' first solve starts (the step's v*, the floor's contacts of the start-of-step stress) and the
+/// step is solved again by kFloorFrictionSolves passes. The failed solve's iterations stay in `stats` (what the step
+/// cost). Returns whether the passes took over.
 template <int dim, typename Relag>
 bool solve_on_coulomb_floor(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
-                            const ReferenceSolveOptions& options, const std::string& context,
-                            ReferenceSolveWork<dim>& work, bool one_solve, Relag&& relag,
+                            const ReferenceSolveOptions& options, const MpmOptions& mpm_options,
+                            const std::string& context, ReferenceSolveWork<dim>& work, bool one_solve, Relag&& relag,
                             const std::function<void(VecX&)>& retry, const std::function<void()>& after_reference,
                             StepStats& stats) {
-    if (!one_solve || !retry) {
+    if (!one_solve || !retry || !floor_friction_retries(mpm_options)) {
         solve_floor_friction_passes<dim>(objective, v, newton, options, context, work,
                                          one_solve ? 1 : kFloorFrictionSolves, relag, after_reference, stats);
         return false;

@@ -137,7 +137,7 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     // contacts of the start-of-step stress.
     const bool one_solve = system_.boundary.coulomb_floor() && potential_.floor_friction_newton();
     std::function<void(VecX&)> retry;
-    if (one_solve && floor_friction_retries(mpm_options_))
+    if (one_solve)
         retry = [&](VecX& v) {
             potential_.floor_friction_to_passes();
             potential_.set_reference(particles.F_elastic);
@@ -145,7 +145,7 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
             v = potential_.v_star();
         };
     stats.floor_friction_retried = solve_on_coulomb_floor<dim>(
-        potential_, v_, newton, solve, "step " + std::to_string(step_index), work_, !floor_passes,
+        potential_, v_, newton, solve, mpm_options_, "step " + std::to_string(step_index), work_, !floor_passes,
         [&](const VecX& v) { potential_.floor_friction_contacts(&v); }, retry,
         [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped()); }, stats);
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).

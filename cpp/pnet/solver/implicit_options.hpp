@@ -32,7 +32,7 @@ struct ImplicitOptions {
     double newton_acceleration_tolerance = 1.0;
     int max_newton_iterations = 50;
     int max_cg_iterations = 500;
-    double cg_tolerance = 0.1;            // largest relative PCG residual (inexact Newton)
+    double cg_tolerance = 0.1;  // largest relative PCG residual (inexact Newton)
     // plasticitynet: how the reference F0 follows F(v) (solver/fixed_point.hpp, docs/solver.md):
     // "newton", F0 = F(v) at every Newton iterate, one solve converged on the true residual; or
     // "fixed_point", the paper's eq. 10, a full solve per F0 (the keys fixed_point_* below); "auto"
@@ -162,6 +162,75 @@ struct ImplicitOptions {
 
 /// Every key of ImplicitOptions, in the order --help lists them (the other layers' options:
 /// sim/integrator_settings.hpp).
-const std::vector<OptionField<ImplicitOptions>>& implicit_option_fields();
+inline const std::vector<OptionField<ImplicitOptions>>& implicit_option_fields() {
+    using O = ImplicitOptions;
+    static const std::vector<OptionField<O>> fields = []() -> std::vector<OptionField<O>> {
+        OptionField<O> regularizer = number_or_auto_option(
+            "regularizer_weight", "--regularizer", 0.0, false, kNoBound, false, &O::regularizer_weight,
+            "plasticitynet: w of the paper's eq. 11 (0: the ablation); auto: the material "
+            "family's measured w");
+        OptionField<O> lazy = number_or_auto_option(
+            "lazy_hessian", "--lazy-hessian", 0.0, false, 1.0, true, &O::lazy_hessian,
+            "keep the last Hessian while each Newton iteration cuts the residual by this factor "
+            "(0: never); auto: the integrator's measured value (plasticitynet 0.8, return_map 0.1, the others 0.5)");
+        return {
+            number_option("newton_tolerance", "--newton-tol", 0.0, true, kNoBound, false, &O::newton_tolerance,
+                          "Newton's tolerance on the mass-weighted velocity residual", "m/s"),
+            number_option("newton_acceleration_tolerance", nullptr, 0.0, false, kNoBound, false,
+                          &O::newton_acceleration_tolerance, "a step of dt stops at min(newton_tolerance, this x dt)",
+                          "m/s^2; 0: newton_tolerance alone"),
+            integer_option("max_newton_iterations", nullptr, 1, 1000000, &O::max_newton_iterations,
+                           "Newton's iteration cap"),
+            number_option("cg_tolerance", "--cg-tol", 0.0, true, 1.0, true, &O::cg_tolerance,
+                          "the largest relative residual of a Newton step's linear solve (inexact Newton)"),
+            integer_option("max_cg_iterations", nullptr, 1, 1000000, &O::max_cg_iterations,
+                           "the linear solve's iteration cap"),
+            choice_option("outer_iteration", "--outer-iteration", {"auto", "newton", "fixed_point"},
+                          &O::outer_iteration,
+                          "plasticitynet: the reference F0 follows every Newton iterate (newton) or a whole solve (the "
+                          "paper's fixed_point); auto: the one measured faster"),
+            choice_option("time_integrator", "--time-integrator", {"backward_euler", "bdf2"}, &O::time_integrator,
+                          "the time discretization of the implicit step"),
+            choice_option("hessian", "--hessian", {"auto", "network", "tangent"}, &O::hessian,
+                          "Newton's Hessian: auto, the integrator's own (plasticitynet: the network's; return_map: the "
+                          "consistent tangent)"),
+            choice_option(
+                "hessian_precision", "--hessian-precision", {"single", "double"}, &O::hessian_precision,
+                "plasticitynet: the arithmetic of the network's passes at Newton's iterate (its Hessian) and from "
+                "it (the line search's values, as changes from the iterate)"),
+            number_option("network_reuse", "--network-reuse", 0.0, false, kNoBound, false, &O::network_reuse,
+                          "plasticitynet: a particle's network Hessian is kept while its reference F moves less than "
+                          "this (largest entry), and a line search's point this close is valued by the expansion"),
+            number_option("fixed_point_tolerance", "--fixed-point-tol", 0.0, false, kNoBound, false,
+                          &O::fixed_point_tolerance, "plasticitynet's fixed point: max_p |F_p(v) - F0_p|"),
+            integer_option("max_fixed_point_iterations", "--fixed-point-iterations", 1, 100000,
+                           &O::max_fixed_point_iterations, "plasticitynet's fixed point: the most solves per step"),
+            integer_option("fixed_point_anderson", "--fixed-point-anderson", 0, 100, &O::fixed_point_anderson,
+                           "Anderson acceleration of the fixed point over this many iterates (0: the plain iteration)"),
+            boolean_option("fixed_point_keep_hessian", "--fixed-point-keep-hessian", &O::fixed_point_keep_hessian,
+                           "later solves of the fixed point start from the Hessian the last one prepared"),
+            number_option("fixed_point_inexact", "--fixed-point-inexact", 0.0, false, 1.0, true,
+                          &O::fixed_point_inexact,
+                          "inexact inner solves while F0 still moves: the forcing factor (0: exact solves)"),
+            regularizer,
+            number_option("tangent_damping", "--tangent-damping", 0.0, false, kNoBound, false, &O::tangent_damping,
+                          "the damping w mu of sand's and snow's tangent Hessian"),
+            number_option("analytic_regularizer", "--analytic-regularizer", 0.0, false, kNoBound, false,
+                          &O::analytic_regularizer,
+                          "FEM analytic: + W mu/2 |F - F0|^2 under plasticitynet's outer iteration (a diagnostic)"),
+            choice_option("preconditioner", "--preconditioner", {"jacobi", "block_jacobi", "ichol", "multigrid"},
+                          &O::preconditioner, "the linear solve's preconditioner (ichol, multigrid: MPM)"),
+            choice_option("multigrid_rebuild", "--multigrid-rebuild", {"step", "hessian"}, &O::multigrid_rebuild,
+                          "preconditioner multigrid: built once per step, or at every Hessian pass"),
+            lazy,
+            boolean_option("fail_on_unconverged", "--fail-on-unconverged", &O::fail_on_unconverged,
+                           "a step whose solve ends unconverged is an error", {}),
+            boolean_option("learned_return_map", "--return-map", &O::learned_return_map,
+                           "plasticitynet: a model's learned return mapping, or the material's exact one",
+                           {"learned", "exact"}),
+        };
+    }();
+    return fields;
+}
 
 }  // namespace pnet
