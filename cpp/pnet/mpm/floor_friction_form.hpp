@@ -14,7 +14,7 @@
 // D plus the rest of the potential, and Newton sees a smooth quadratic instead of friction's kink (with
 // D itself Newton stalled on stick-slip switches: most steps of a granular collapse ran out of
 // iterations). The passes, each with the J_k and s_k of the last solution, are MpmOptions::
-// floor_friction_solve "passes" (IncrementalPotential::floor_friction_contacts, kFloorFrictionSolves).
+// floor_friction_solve "passes" (IncrementalPotential::floor_friction_contacts, MpmOptions::floor_friction_passes).
 //
 // floor_friction_solve "newton" (begin_newton; "auto" in 2D under the work line search, MpmOptions)
 // puts the friction itself in the one solve's residual,

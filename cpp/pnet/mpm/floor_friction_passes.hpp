@@ -2,7 +2,7 @@
 // The solves of an implicit MPM step (ImplicitIntegrator, CoupledIntegrator): one; on a Coulomb floor
 // (floor_friction_form.hpp) one with the friction itself in the residual (MpmOptions::
 // floor_friction_solve "newton"; "auto", the default, in 2D under the work line search), or
-// kFloorFrictionSolves majorize-minimize passes ("passes"), each pass after the first with the floor's
+// MpmOptions::floor_friction_passes majorize-minimize passes ("passes"), each pass after the first with the floor's
 // contacts taken from the last solution.
 // Under "auto" a one solve that fails (its line search, its iteration cap, or a NewtonError) is solved
 // again by the passes from the step's start (solve_on_coulomb_floor).
@@ -16,16 +16,13 @@
 
 namespace pnet {
 
-/// Passes on a Coulomb floor under floor_friction_solve "passes" (docs/methods.md). Each pass after the
-/// first takes at least one Newton step: it changes the friction on the floor's nodes only, which the
-/// residual over every node could hide below the tolerance, and the pass would then keep the last
-/// pass's friction.
-inline constexpr int kFloorFrictionSolves = 3;
-
-/// Solves the step from v (solve_with_reference) in `passes` solves, the solves recorded in `stats`
-/// (Newton and CG iterations summed, the fixed-point solves of all passes added to those `stats` already
-/// counts: a failed one solve's, solve_on_coulomb_floor); `relag(v)` sets the floor's
-/// contacts from v before each pass after the first. A failed Newton solve throws SimulationError.
+/// Solves the step from v (solve_with_reference) in `passes` solves (docs/methods.md), the solves recorded
+/// in `stats` (Newton and CG iterations summed, the fixed-point solves of all passes added to those `stats`
+/// already counts: a failed one solve's, solve_on_coulomb_floor); `relag(v)` sets the floor's contacts
+/// from v before each pass after the first. Each pass after the first takes at least one Newton step: it
+/// changes the friction on the floor's nodes only, which the residual over every node could hide below
+/// the tolerance, and the pass would then keep the last pass's friction. A failed Newton solve throws
+/// SimulationError.
 template <int dim, typename Relag>
 void solve_floor_friction_passes(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
                                  const ReferenceSolveOptions& options, const std::string& context,
@@ -55,8 +52,8 @@ void solve_floor_friction_passes(ReferencedObjective<dim>& objective, VecX& v, c
 /// MPM options let a failed one solve be solved again (floor_friction_retries), and it fails (its line
 /// search failed, it stopped unconverged, or it threw NewtonError), `retry(v)` puts v and the objective
 /// back where the passes' first solve starts (the step's v*, the floor's contacts of the start-of-step stress) and the
-/// step is solved again by kFloorFrictionSolves passes. The failed solve's iterations stay in `stats` (what the step
-/// cost). Returns whether the passes took over.
+/// step is solved again by the options' floor_friction_passes. The failed solve's iterations stay in `stats` (what the
+/// step cost). Returns whether the passes took over.
 template <int dim, typename Relag>
 bool solve_on_coulomb_floor(ReferencedObjective<dim>& objective, VecX& v, const NewtonOptions& newton,
                             const ReferenceSolveOptions& options, const MpmOptions& mpm_options,
@@ -65,7 +62,8 @@ bool solve_on_coulomb_floor(ReferencedObjective<dim>& objective, VecX& v, const 
                             StepStats& stats) {
     if (!one_solve || !retry || !floor_friction_retries(mpm_options)) {
         solve_floor_friction_passes<dim>(objective, v, newton, options, context, work,
-                                         one_solve ? 1 : kFloorFrictionSolves, relag, after_reference, stats);
+                                         one_solve ? 1 : mpm_options.floor_friction_passes, relag, after_reference,
+                                         stats);
         return false;
     }
     bool failed = false;
@@ -80,8 +78,8 @@ bool solve_on_coulomb_floor(ReferencedObjective<dim>& objective, VecX& v, const 
     }
     if (!failed) return false;
     retry(v);
-    solve_floor_friction_passes<dim>(objective, v, newton, options, context, work, kFloorFrictionSolves, relag,
-                                     after_reference, stats);
+    solve_floor_friction_passes<dim>(objective, v, newton, options, context, work, mpm_options.floor_friction_passes,
+                                     relag, after_reference, stats);
     return true;
 }
 

@@ -25,10 +25,13 @@ struct MpmOptions {
     // A Coulomb floor (MPM, coupling; every implicit integrator): "newton", the friction itself in the
     // one solve's residual, mu J_k(v) f1(|u_k|) u_k / |u_k| with the normal impulse J_k at the iterate,
     // and in its Jacobian with J's derivative (FloorFrictionForm::begin_newton); "passes",
-    // kFloorFrictionSolves majorize-minimize passes of whole solves, each with the contacts of the last
+    // floor_friction_passes majorize-minimize passes of whole solves, each with the contacts of the last
     // (docs/methods.md); "auto" (the default): newton in 2D under the work line search, where a step
     // whose one solve fails is solved again by the passes, else passes (floor_friction_in_one_solve).
     std::string floor_friction_solve = "auto";
+    // The majorize-minimize passes (whole solves) of a step on a Coulomb floor under "passes", and of a
+    // step whose one solve failed under "auto".
+    int floor_friction_passes = 3;
     // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the solver's
     // preconditioner) or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept
     // while the active grid is the same).
@@ -68,6 +71,8 @@ inline const std::vector<OptionField<MpmOptions>>& mpm_option_fields() {
                       "a Coulomb floor's friction: in the one Newton solve's residual and Jacobian (newton), or "
                       "three majorize-minimize passes (passes); auto: newton in 2D under the work line search "
                       "(return_map; a step it fails solved again by passes), else passes"),
+        integer_option("floor_friction_passes", "--floor-friction-passes", 1, 100, &O::floor_friction_passes,
+                       "a Coulomb floor's passes per step (floor_friction_solve passes, or after a failed one solve)"),
         choice_option("linear_solver", nullptr, {"pcg", "cholesky"}, &O::linear_solver,
                       "MPM's linear solve: matrix-free PCG or CHOLMOD on the assembled Hessian"),
     };

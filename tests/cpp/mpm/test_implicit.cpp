@@ -1175,7 +1175,7 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsFrictionWithinOneSolveStopsASlidingBoxA
               << " (" << static_cast<double>(passes.solves) / passes.steps << "), one solve at 4e-3 " << large.distance
               << "\n";
     EXPECT_EQ(one.solves, one.steps) << "one solve per step";
-    EXPECT_EQ(passes.solves, 3 * passes.steps) << "kFloorFrictionSolves passes";
+    EXPECT_EQ(passes.solves, 3 * passes.steps) << "MpmOptions{}.floor_friction_passes passes";
     EXPECT_NEAR(one.distance, expected, 0.1 * expected);
     EXPECT_NEAR(one.distance, passes.distance, 0.03 * expected);
     EXPECT_NEAR(large.distance, one.distance, 0.1 * expected);
@@ -1196,7 +1196,7 @@ TYPED_TEST(ImplicitTest, TheCoulombFloorsDefaultIsOneSolveIn2DUnderTheWorkLineSe
         Simulation<dim> sim(sliding_box<dim>(), settings);
         const FrameStats frame = sim.advance_frame();
         EXPECT_EQ(frame.floor_friction_retried_steps, 0) << integrator;
-        EXPECT_EQ(frame.fixed_point_iterations, (one_solve ? 1 : kFloorFrictionSolves) * frame.steps) << integrator;
+        EXPECT_EQ(frame.fixed_point_iterations, (one_solve ? 1 : MpmOptions{}.floor_friction_passes) * frame.steps) << integrator;
     }
 }
 
@@ -1218,8 +1218,43 @@ TEST(ImplicitFloorTest, AFailedOneSolveOnTheCoulombFloorIsSolvedAgainByThePasses
         ASSERT_GT(frame.steps, 0);
         const bool retries = mode == "auto";
         EXPECT_EQ(frame.floor_friction_retried_steps, retries ? frame.steps : 0) << mode;
-        EXPECT_EQ(frame.fixed_point_iterations, (retries ? 1 + kFloorFrictionSolves : 1) * frame.steps) << mode;
+        EXPECT_EQ(frame.fixed_point_iterations, (retries ? 1 + MpmOptions{}.floor_friction_passes : 1) * frame.steps) << mode;
         for (const StepRecord& s : sim.last_frame_steps()) EXPECT_EQ(s.floor_friction_retried, retries) << mode;
+    }
+}
+
+// floor_friction_passes sets how many passes a step on the Coulomb floor takes ("passes", and after a
+// failed one solve under "auto"); the scene key refuses fewer than one, naming itself.
+TEST(ImplicitFloorTest, FloorFrictionPassesSetsThePassesPerStep) {
+    constexpr int dim = 2;
+    for (const int passes : {1, 2, 5}) {
+        IntegratorSettings settings;
+        settings.name = "return_map";
+        settings.dt = 1e-3;
+        settings.mpm.floor_friction_solve = "passes";
+        settings.mpm.floor_friction_passes = passes;
+        Simulation<dim> sim(sliding_box<dim>(), settings);
+        const FrameStats frame = sim.advance_frame();
+        ASSERT_GT(frame.steps, 0);
+        EXPECT_EQ(frame.fixed_point_iterations, passes * frame.steps) << passes << " passes";
+        EXPECT_TRUE(frame.converged) << passes << " passes";
+    }
+    IntegratorSettings settings;
+    settings.name = "return_map";
+    settings.dt = 1e-3;
+    settings.mpm.floor_friction_passes = 2;
+    settings.implicit.max_newton_iterations = 1;  // every one solve fails: 1 + 2 solves per step
+    settings.implicit.newton_tolerance = 1e-9;
+    Simulation<dim> sim(sliding_box<dim>(), settings);
+    const FrameStats frame = sim.advance_frame();
+    EXPECT_EQ(frame.fixed_point_iterations, 3 * frame.steps);
+    MpmOptions options;
+    try {
+        read_options(mpm_option_fields(), options, nlohmann::json{{"floor_friction_passes", 0}},
+                     "scene.json: integrator");
+        ADD_FAILURE() << "0 passes accepted";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("integrator.floor_friction_passes"), std::string::npos) << e.what();
     }
 }
 
