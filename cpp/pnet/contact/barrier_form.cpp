@@ -87,27 +87,29 @@ void VertexPairForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) const {
 }
 
 template <int dim>
-void VertexPairForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
-    for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
-                              const double* weight, const int* slot) {
-        for (int i = 0; i < count; ++i)
-            for (int a = 0; a < dim; ++a)
-                if (free_[index[i] + a] > 0.0)
-                    diagonal[index[i] + a] += scale * weight[i] * weight[i] * H(dim * slot[i] + a, dim * slot[i] + a);
-    });
-}
-
-template <int dim>
-void VertexPairForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
+template <typename F>
+void VertexPairForm<dim>::for_each_node_block_entry(F&& f) const {
     for_each_pair_hessian([&](const Hessian& H, double scale, int count, const Eigen::Index* index,
                               const double* weight, const int* slot) {
         for (int i = 0; i < count; ++i)
             for (int a = 0; a < dim; ++a)
                 for (int b = 0; b < dim; ++b)
                     if (free_[index[i] + a] > 0.0 && free_[index[i] + b] > 0.0)
-                        blocks[dim * index[i] + a * dim + b] +=
-                            scale * weight[i] * weight[i] * H(dim * slot[i] + a, dim * slot[i] + b);
+                        f(index[i], a, b, scale * weight[i] * weight[i] * H(dim * slot[i] + a, dim * slot[i] + b));
     });
+}
+
+template <int dim>
+void VertexPairForm<dim>::add_hessian_diagonal(VecX& diagonal) const {
+    for_each_node_block_entry([&](Eigen::Index node, int a, int b, double h) {
+        if (a == b) diagonal[node + a] += h;
+    });
+}
+
+template <int dim>
+void VertexPairForm<dim>::add_hessian_block_diagonal(VecX& blocks) const {
+    for_each_node_block_entry(
+        [&](Eigen::Index node, int a, int b, double h) { blocks[dim * node + a * dim + b] += h; });
 }
 
 template <int dim>

@@ -113,6 +113,10 @@ public:
     void for_each_pair_hessian(F&& f) const;
 
 protected:
+    /// f(node, a, b, value) for each entry of the unknown nodes' diagonal blocks (free components).
+    template <typename F>
+    void for_each_node_block_entry(F&& f) const;
+
     const ContactVertices<dim>& vertices_;
     const VecX& free_;
     std::vector<Terms> hessians_;  // node, count and hessian of each pair
