@@ -4,8 +4,9 @@
     scripts/bit_identity.py OLD_PNET NEW_PNET [--scenes scenes/tiny/*.json] [--frames 2] [--work DIR]
 
 Runs every scene with both binaries (the scene's own integrator, one thread) and compares, frame by
-frame, the PLY files' data (the run id a newer build writes into the header aside), and stats.csv and
-steps.csv without their wall-clock columns. Prints one line per scene and exits 1 if any differs.
+frame, the PLY files' data (the run id a newer build writes into the header aside; where they differ,
+the largest difference of a position), and stats.csv and steps.csv without their wall-clock columns.
+Prints one line per scene and exits 1 if any differs.
 """
 
 from __future__ import annotations
@@ -14,11 +15,17 @@ import argparse
 import csv
 import io
 import re
-import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "python"))
+
+from plasticitynet import launch  # noqa: E402  (the one launcher of pnet simulate)
+
+launch.with_simulator()  # the frames are read by plasticitynet_sim
+
+from plasticitynet import frames as frame_files  # noqa: E402
 TIMING = re.compile(r"(^|_)(wall|p2g|solve|g2p|energy|cg|broad_phase|ccd)_s$")
 
 
@@ -31,11 +38,20 @@ def table(path: Path) -> list[dict]:
     return [{k: v for k, v in r.items() if not TIMING.search(k)} for r in rows]
 
 
+def largest_move(old: Path, new: Path) -> float:
+    """The largest difference of a position between two frames of the same kind (m)."""
+    if old.name.endswith("_mesh.ply"):
+        a, b = frame_files.read_mesh_ply(old).position, frame_files.read_mesh_ply(new).position
+    else:
+        a, b = frame_files.read_particle_positions(old), frame_files.read_particle_positions(new)
+    return float(abs(a - b).max()) if a.shape == b.shape else float("inf")
+
+
 def run(pnet: Path, scene: Path, frames: int, out: Path) -> None:
-    command = [str(pnet), "simulate", str(scene), "--frames", str(frames), "--threads", "1", "--out", str(out)]
-    result = subprocess.run(command, capture_output=True, text=True)
-    if result.returncode != 0:
-        sys.exit(f"{' '.join(command)} failed ({result.returncode}):\n{result.stderr}")
+    command = launch.simulate_command(pnet, scene, out, frames=frames, threads=1, overwrite=out.exists())
+    finished = launch.run(command)
+    if finished.status != 0:
+        sys.exit(f"{' '.join(command)} failed ({finished.status}):\n{finished.output}")
 
 
 def main() -> int:
@@ -50,14 +66,15 @@ def main() -> int:
     for scene in args.scenes:
         old, new = args.work / "old" / scene.stem, args.work / "new" / scene.stem
         for pnet, out in ((args.old, old), (args.new, new)):
-            subprocess.run(["rm", "-rf", str(out)], check=True)
             run(pnet, scene, args.frames, out)
         frames = sorted(p.name for p in old.glob("frame_*.ply"))
         problems = []
         if frames != sorted(p.name for p in new.glob("frame_*.ply")):
             problems.append("different frame files")
-        problems += [f"{name} differs" for name in frames if (new / name).exists()
-                     and frame_data(old / name) != frame_data(new / name)]
+        differ = [name for name in frames if (new / name).exists() and frame_data(old / name) != frame_data(new / name)]
+        if differ:
+            move = max(largest_move(old / name, new / name) for name in differ)
+            problems.append(f"{len(differ)} frame files differ, positions by at most {move:.3g} m")
         for name in ("stats.csv", "steps.csv"):
             if table(old / name) != table(new / name):
                 problems.append(f"{name} differs")
