@@ -1,0 +1,60 @@
+#pragma once
+// The adjoint of an implicit FEM rollout (issue 57's first part; docs/adjoint.md): the gradient of a
+// loss L(x^N, v^N) of the last state with respect to the start's positions and velocities and to the
+// Young's modulus of the material, for elastic bodies under backward Euler with IPC contact (the
+// ground, between bodies), without friction.
+//
+// A converged step solves R(v; x^n, v^n, E) = M (v - v^n - dt g) + dt grad Psi(x^n + dt v) = 0 (Psi the
+// elastic energy and the barrier), and x^{n+1} = x^n + dt v^{n+1}. Its Jacobian in v is the Hessian
+// H = M + dt^2 Hess Psi (unprojected: the exact derivative, not the PSD one Newton steps with), so the
+// step's adjoint, from the cotangents (xb, vb) of x^{n+1} and v^{n+1}, is
+//   lambda = H^-1 (vb + dt xb),
+//   xb^n = xb - dR/dx^n^T lambda = xb - (vb + dt xb - M lambda) / dt   (dR/dx^n = dt Hess Psi = (H - M) / dt),
+//   vb^n = M lambda                                                     (dR/dv^n = -M),
+//   Eb  -= lambda . dR/dE = lambda . g_el / E                           (Psi_el is linear in E at fixed nu:
+//                                                                        g_el = dt grad_x Psi_el, the element
+//                                                                        form's gradient in v).
+// Memory: every step's start is kept (a tape, steps + 1 states); the forward steps are the
+// integrator's own (FemImplicitIntegrator, `lagged`: backward Euler on the elastic energy), solved to
+// the options' tolerance, which the gradient's accuracy follows (state it with a result).
+// Refused, naming what: plastic materials, kinematic nodes, BDF2, friction, more than one material.
+#include <memory>
+#include <vector>
+
+#include "pnet/fem/fem_integrator.hpp"
+
+namespace pnet {
+
+/// dL/d(start state) and dL/dE of a rollout.
+template <int dim>
+struct FemRolloutGradient {
+    std::vector<Vec<dim>> x, v;   // per node: dL/dx^0 (1/m), dL/dv^0 (s/m) times L's unit
+    double youngs_modulus = 0.0;  // dL/dE (1/Pa times L's unit)
+};
+
+template <int dim>
+class FemAdjoint {
+public:
+    /// system: elastic, one material, no kinematic nodes (std::invalid_argument naming the field
+    /// otherwise); contact may be null (no friction is applied); options: the forward steps' solver
+    /// (the Newton tolerance sets how exact the gradient is).
+    FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact, const ImplicitOptions& options);
+
+    /// Runs `steps` backward Euler steps of dt from `start`, keeping every step's start; returns the last state.
+    FemState<dim> forward(const FemState<dim>& start, double dt, int steps);
+
+    /// The gradient of L through the last forward() run, given dL/dx^N and dL/dv^N per node.
+    FemRolloutGradient<dim> backward(const std::vector<Vec<dim>>& dL_dx, const std::vector<Vec<dim>>& dL_dv) const;
+
+    /// The states kept by forward() (steps + 1).
+    const std::vector<FemState<dim>>& tape() const { return tape_; }
+
+private:
+    const FemSystem<dim>& system_;
+    const ContactPotential<dim>* contact_;
+    ImplicitOptions options_;
+    std::vector<FemState<dim>> tape_;
+    double dt_ = 0.0;
+};
+
+}  // namespace pnet
