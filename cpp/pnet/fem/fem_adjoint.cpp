@@ -47,18 +47,40 @@ FemState<dim> FemAdjoint<dim>::forward(const FemState<dim>& start, double dt, in
 template <int dim>
 FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<Vec<dim>>& dL_dx,
                                                   const std::vector<Vec<dim>>& dL_dv) const {
+    if (tape_.empty()) throw std::logic_error("FemAdjoint::backward: forward() first");
+    std::vector<std::vector<Vec<dim>>> xs(tape_.size()), vs(tape_.size());
+    xs.back() = dL_dx;
+    vs.back() = dL_dv;
+    if (dL_dx.empty() || dL_dv.empty())
+        throw std::invalid_argument("FemAdjoint::backward: dL/dx and dL/dv need one entry per node (" +
+                                    std::to_string(system_.mesh.nodes()) + ")");
+    return backward(xs, vs);
+}
+
+template <int dim>
+FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<Vec<dim>>>& dL_dx,
+                                                  const std::vector<std::vector<Vec<dim>>>& dL_dv) const {
     const std::size_t nodes = system_.mesh.nodes();
     if (tape_.empty()) throw std::logic_error("FemAdjoint::backward: forward() first");
-    if (dL_dx.size() != nodes || dL_dv.size() != nodes)
-        throw std::invalid_argument("FemAdjoint::backward: dL/dx and dL/dv need one entry per node (" +
-                                    std::to_string(nodes) + ")");
+    if (dL_dx.size() != tape_.size() || dL_dv.size() != tape_.size())
+        throw std::invalid_argument("FemAdjoint::backward: one dL/dx and one dL/dv per kept state (" +
+                                    std::to_string(tape_.size()) + ", the start and every step's end)");
+    for (std::size_t k = 0; k < tape_.size(); ++k)
+        if ((!dL_dx[k].empty() && dL_dx[k].size() != nodes) || (!dL_dv[k].empty() && dL_dv[k].size() != nodes))
+            throw std::invalid_argument("FemAdjoint::backward: state " + std::to_string(k) +
+                                        ": dL/dx and dL/dv need one entry per node (" + std::to_string(nodes) +
+                                        ") or none");
     const Eigen::Index n = static_cast<Eigen::Index>(dim * nodes);
-    VecX xb(n), vb(n), mass(n);
-    for (std::size_t i = 0; i < nodes; ++i) {
-        xb.template segment<dim>(dim * i) = dL_dx[i];
-        vb.template segment<dim>(dim * i) = dL_dv[i];
-        mass.template segment<dim>(dim * i).setConstant(system_.rest.node_mass[i]);
-    }
+    VecX xb = VecX::Zero(n), vb = VecX::Zero(n), mass(n);
+    for (std::size_t i = 0; i < nodes; ++i) mass.template segment<dim>(dim * i).setConstant(system_.rest.node_mass[i]);
+    // Adds state k's own cotangents to those flowing back into it.
+    auto add_state = [&](std::size_t k) {
+        for (std::size_t i = 0; i < nodes; ++i) {
+            if (!dL_dx[k].empty()) xb.template segment<dim>(dim * i) += dL_dx[k][i];
+            if (!dL_dv[k].empty()) vb.template segment<dim>(dim * i) += dL_dv[k][i];
+        }
+    };
+    add_state(tape_.size() - 1);
     const double E = system_.materials[0].description().elastic.E;
     ElasticParticleEnergy<dim> energy(system_.materials);
     FemPotential<dim> potential(system_.mesh, system_.rest, energy);  // the step's R and H
@@ -94,6 +116,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<Vec<dim>>& d
         out.youngs_modulus -= lambda.dot(gradient) / E;
         xb -= (rhs - m_lambda) / dt_;
         vb = m_lambda;
+        add_state(k);
     }
     out.x.resize(nodes);
     out.v.resize(nodes);

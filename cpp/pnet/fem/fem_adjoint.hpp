@@ -1,8 +1,8 @@
 #pragma once
 // The adjoint of an implicit FEM rollout (issue 57's first part; docs/adjoint.md): the gradient of a
-// loss L(x^N, v^N) of the last state with respect to the start's positions and velocities and to the
-// Young's modulus of the material, for elastic bodies under backward Euler with IPC contact (the
-// ground, between bodies), without friction.
+// loss L of the rollout's states (the last one's, or any step's) with respect to the start's positions and velocities
+// and to the Young's modulus of the material, for elastic bodies under backward Euler with IPC contact (the ground,
+// between bodies), without friction.
 //
 // A converged step solves R(v; x^n, v^n, E) = M (v - v^n - dt g) + dt grad Psi(x^n + dt v) = 0 (Psi the
 // elastic energy and the barrier), and x^{n+1} = x^n + dt v^{n+1}. Its Jacobian in v is the Hessian
@@ -45,6 +45,10 @@ public:
 
     /// The gradient of L through the last forward() run, given dL/dx^N and dL/dv^N per node.
     FemRolloutGradient<dim> backward(const std::vector<Vec<dim>>& dL_dx, const std::vector<Vec<dim>>& dL_dv) const;
+    /// The same for a loss of several states: dL_dx[k], dL_dv[k] of the state after step k (k = 0: the
+    /// start; steps + 1 entries, each empty for none or one entry per node).
+    FemRolloutGradient<dim> backward(const std::vector<std::vector<Vec<dim>>>& dL_dx,
+                                     const std::vector<std::vector<Vec<dim>>>& dL_dv) const;
 
     /// The states kept by forward() (steps + 1).
     const std::vector<FemState<dim>>& tape() const { return tape_; }

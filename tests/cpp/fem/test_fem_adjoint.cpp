@@ -54,11 +54,15 @@ struct Rollout {
     }
 };
 
-/// L = a . x^N + b . v^N.
+/// L = a . x^N + b . v^N + c . x^(N/2): the last state's positions and velocities and a middle state's
+/// positions.
 template <int dim>
-double loss(const FemState<dim>& last, const std::vector<Vec<dim>>& a, const std::vector<Vec<dim>>& b) {
+double loss(const FemAdjoint<dim>& rollout, const std::vector<Vec<dim>>& a, const std::vector<Vec<dim>>& b,
+            const std::vector<Vec<dim>>& c) {
+    const FemState<dim>& last = rollout.tape().back();
+    const FemState<dim>& middle = rollout.tape()[rollout.tape().size() / 2];
     double L = 0.0;
-    for (std::size_t i = 0; i < a.size(); ++i) L += a[i].dot(last.x[i]) + b[i].dot(last.v[i]);
+    for (std::size_t i = 0; i < a.size(); ++i) L += a[i].dot(last.x[i]) + b[i].dot(last.v[i]) + c[i].dot(middle.x[i]);
     return L;
 }
 
@@ -67,22 +71,28 @@ void check_rollout_gradient() {
     Rollout<dim> r(1e5);
     test::Random rng(7);
     const std::size_t nodes = r.system.mesh.nodes();
-    std::vector<Vec<dim>> a(nodes), b(nodes);
-    for (std::size_t i = 0; i < nodes; ++i)
-        for (int c = 0; c < dim; ++c) {
-            a[i][c] = rng.uniform(-1.0, 1.0);
-            b[i][c] = rng.uniform(-1.0, 1.0);
-        }
+    std::vector<Vec<dim>> a(nodes), b(nodes), c(nodes);
+    for (std::size_t i = 0; i < nodes; ++i) {
+        a[i] = rng.template uniform_vec<dim>(-1.0, 1.0);
+        b[i] = rng.template uniform_vec<dim>(-1.0, 1.0);
+        c[i] = rng.template uniform_vec<dim>(-1.0, 1.0);
+    }
     const FemState<dim> start = r.start();
     r.adjoint.forward(start, r.kDt, r.kSteps);
     double min_distance = 1e9;
     for (const FemState<dim>& s : r.adjoint.tape()) min_distance = std::min(min_distance, r.contact.min_distance(s.x));
     ASSERT_LT(min_distance, 1e-3) << "the box never came within dhat of the ground";
-    const FemRolloutGradient<dim> g = r.adjoint.backward(a, b);
+    const std::size_t states = r.adjoint.tape().size();
+    std::vector<std::vector<Vec<dim>>> dL_dx(states), dL_dv(states);
+    dL_dx.back() = a;
+    dL_dv.back() = b;
+    dL_dx[states / 2] = c;
+    const FemRolloutGradient<dim> g = r.adjoint.backward(dL_dx, dL_dv);
 
     auto run = [&](double E, const FemState<dim>& s) {
         Rollout<dim> q(E);
-        return loss<dim>(q.adjoint.forward(s, q.kDt, q.kSteps), a, b);
+        q.adjoint.forward(s, q.kDt, q.kSteps);
+        return loss<dim>(q.adjoint, a, b, c);
     };
     // Young's modulus.
     const double hE = 1e-4 * r.E;
@@ -135,7 +145,7 @@ TEST(FemAdjoint, RefusesWhatItDoesNotDifferentiate) {
     EXPECT_THROW(FemAdjoint<2>(box, nullptr, options), std::invalid_argument);
     options.time_integrator = "backward_euler";
     FemAdjoint<2> adjoint(box, nullptr, options);
-    EXPECT_THROW(adjoint.backward({}, {}), std::logic_error);  // forward() first
+    EXPECT_THROW(adjoint.backward(std::vector<Vec<2>>{}, std::vector<Vec<2>>{}), std::logic_error);  // forward() first
     adjoint.forward(FemState<2>::at_rest(box), 1e-3, 2);
     EXPECT_THROW(adjoint.backward({Vec<2>::Zero()}, {Vec<2>::Zero()}), std::invalid_argument);
 }
