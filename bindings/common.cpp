@@ -90,6 +90,12 @@ py::object to_python(const nlohmann::json& j) {
 
 namespace pnet::bindings {
 
+Scene scene_of(const py::object& scene) {
+    if (py::isinstance<Scene>(scene)) return scene.cast<Scene>();
+    if (py::isinstance<py::dict>(scene)) return scene_from_json(to_json(scene, "<dict>"), "<dict>", "");
+    return load_scene(path_string(scene));
+}
+
 std::string path_string(const py::handle& obj) {
     return py::module_::import("os").attr("fspath")(obj).cast<std::string>();
 }

@@ -14,6 +14,7 @@
 
 #include "pnet/math/types.hpp"
 #include "pnet/metrics/iou.hpp"
+#include "pnet/scene/scene.hpp"
 
 namespace pnet::bindings {
 
@@ -25,6 +26,7 @@ void define_simulation(py::module_& m);
 void define_models(py::module_& m);
 void define_materials(py::module_& m);
 void define_metrics(py::module_& m);
+void define_adjoint(py::module_& m);
 
 /// A float64 array of the given trailing shape (n leading, any n unless n >= 0):
 /// Python lists and tuples are converted to float64; numpy arrays must already
@@ -36,6 +38,19 @@ py::array_t<double, py::array::c_style> batch_array(const py::handle& obj, const
 
 /// Shape as text, e.g. "(n, 2, 2)" or "(5, 3)".
 std::string shape_text(py::ssize_t n, const std::vector<py::ssize_t>& tail);
+
+/// Rows of d-vectors as a new (count, d) float64 array.
+template <int d>
+py::array_t<double> rows(const std::vector<Vec<d>>& v) {
+    py::array_t<double> a({static_cast<py::ssize_t>(v.size()), static_cast<py::ssize_t>(d)});
+    double* out = a.mutable_data();
+    for (std::size_t i = 0; i < v.size(); ++i)
+        for (int k = 0; k < d; ++k) out[d * i + k] = v[i][k];
+    return a;
+}
+
+/// A scene given as a Scene, a dict with the scene files' schema, or a path.
+Scene scene_of(const py::object& scene);
 
 /// Batch of dim x dim matrices from an (n, dim, dim) array (entry [p, i, j] = F_p(i, j)).
 template <int dim>

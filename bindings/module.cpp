@@ -23,4 +23,5 @@ vec(F) basis, entry (i*d + j, k*d + l). Arrays passed in must be float64.
     define_models(m);
     define_simulation(m);
     define_metrics(m);
+    define_adjoint(m);
 }

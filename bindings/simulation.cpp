@@ -71,7 +71,7 @@ class PySimulation {
 public:
     PySimulation(const py::object& scene, const py::object& integrator, const py::object& dt, const py::object& cfl,
                  const py::object& solver, bool trust_models)
-        : scene_(to_scene(scene)) {
+        : scene_(scene_of(scene)) {
         IntegratorSettings settings =
             integrator_settings(scene_, integrator.is_none() ? std::string() : to_text(integrator, "integrator"));
         if (!dt.is_none()) settings.dt = to_number(dt, "dt");
@@ -227,12 +227,6 @@ public:
     }
 
 private:
-    static Scene to_scene(const py::object& scene) {
-        if (py::isinstance<Scene>(scene)) return scene.cast<Scene>();
-        if (py::isinstance<py::dict>(scene)) return scene_from_json(to_json(scene, "<dict>"), "<dict>", "");
-        return load_scene(path_string(scene));
-    }
-
     static std::string key_list(const nlohmann::json& options) {
         std::string s;
         for (const auto& [key, value] : options.items()) s += (s.empty() ? "" : ", ") + key;
@@ -268,16 +262,6 @@ py::array particle_view(const py::object& self, Member member) {
             return view(array.data(), {n}, {record}, self);
         }
     });
-}
-
-/// Rows of `count` d-vectors as a new (count, d) float64 array.
-template <int d>
-py::array_t<double> rows(const std::vector<Vec<d>>& v) {
-    py::array_t<double> a({static_cast<py::ssize_t>(v.size()), static_cast<py::ssize_t>(d)});
-    double* out = a.mutable_data();
-    for (std::size_t i = 0; i < v.size(); ++i)
-        for (int k = 0; k < d; ++k) out[d * i + k] = v[i][k];
-    return a;
 }
 
 /// Rows of node indices (elements, boundary facets) as an (m, k) int64 array.

@@ -1,0 +1,150 @@
+// Gradients of simulated outcomes (issue 57; docs/adjoint.md): FemRollout, the adjoint of an implicit
+// FEM rollout of elastic bodies (cpp/pnet/fem/fem_adjoint.hpp) as numpy calls.
+// plasticitynet.adjoint wraps it as a torch.autograd.Function.
+#include <memory>
+
+#include "common.hpp"
+#include "pnet/fem/fem_adjoint.hpp"
+#include "pnet/sim/fem_simulation.hpp"
+
+namespace pnet::bindings {
+
+namespace {
+
+template <int dim>
+std::vector<Vec<dim>> to_points(const py::handle& obj, const std::string& name, py::ssize_t n) {
+    const py::array_t<double, py::array::c_style> a = batch_array(obj, name, {dim}, n);
+    std::vector<Vec<dim>> p(static_cast<std::size_t>(n));
+    for (py::ssize_t i = 0; i < n; ++i)
+        for (int c = 0; c < dim; ++c) p[i][c] = a.data()[i * dim + c];
+    return p;
+}
+
+struct Rollout {
+    virtual ~Rollout() = default;
+    virtual py::dict start() const = 0;
+    virtual py::dict forward(int steps, double dt, const py::object& x0, const py::object& v0) = 0;
+    virtual py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const = 0;
+    virtual double youngs_modulus() const = 0;
+    virtual int nodes() const = 0;
+};
+
+template <int dim>
+struct RolloutOf final : Rollout {
+    Scene scene;
+    FemSceneSystem<dim> fem;
+    std::unique_ptr<ContactPotential<dim>> contact;
+    FemAdjoint<dim> adjoint;
+    FemState<dim> initial;
+
+    RolloutOf(Scene s, const ImplicitOptions& options)
+        : scene(std::move(s)),
+          fem(make_fem_system<dim>(scene)),
+          contact(make_fem_contact<dim>(scene, fem)),
+          adjoint(fem.system, contact.get(), options),
+          initial(FemState<dim>::at_rest(fem.system)) {
+        if (scene.contact.friction > 0.0)
+            throw py::value_error(scene.file + ": contact.friction: the adjoint is of frictionless contact (0)");
+        for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+            for (int i = fem.first_node[k]; i < fem.first_node[k + 1]; ++i)
+                initial.v[i] = scene.meshes[k].velocity.template head<dim>();
+    }
+    int nodes() const override { return static_cast<int>(fem.system.mesh.nodes()); }
+    double youngs_modulus() const override { return fem.system.materials[0].description().elastic.E; }
+    py::dict start() const override {
+        py::dict d;
+        d["x"] = rows<dim>(initial.x);
+        d["v"] = rows<dim>(initial.v);
+        return d;
+    }
+    py::dict forward(int steps, double dt, const py::object& x0, const py::object& v0) override {
+        FemState<dim> s = initial;
+        if (!x0.is_none()) s.x = to_points<dim>(x0, "x0", nodes());
+        if (!v0.is_none()) s.v = to_points<dim>(v0, "v0", nodes());
+        const std::string inside = contact->first_intersection(s.x);
+        if (!inside.empty()) throw py::value_error("x0: the start intersects: " + inside);
+        {
+            py::gil_scoped_release release;
+            adjoint.forward(s, dt, steps);
+        }
+        py::list x, v;
+        for (const FemState<dim>& state : adjoint.tape()) {
+            x.append(rows<dim>(state.x));
+            v.append(rows<dim>(state.v));
+        }
+        py::dict d;
+        d["x"] = x;
+        d["v"] = v;
+        return d;
+    }
+    py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const override {
+        const std::size_t states = adjoint.tape().size();
+        if (states == 0) throw py::value_error("backward: run forward() first");
+        std::vector<std::vector<Vec<dim>>> xs(states), vs(states);
+        auto read = [&](const py::object& obj, const std::string& name, std::vector<std::vector<Vec<dim>>>& out) {
+            if (obj.is_none()) return;
+            const py::dict d = py::cast<py::dict>(obj);
+            for (const auto& [key, value] : d) {
+                const long k = py::cast<long>(key);
+                if (k < 0 || k >= static_cast<long>(states))
+                    throw py::value_error(name + "[" + std::to_string(k) + "]: the rollout kept states 0.." +
+                                          std::to_string(states - 1) + " (the start and each step's end)");
+                out[static_cast<std::size_t>(k)] =
+                    to_points<dim>(value, name + "[" + std::to_string(k) + "]", static_cast<py::ssize_t>(nodes()));
+            }
+        };
+        read(dL_dx, "dL_dx", xs);
+        read(dL_dv, "dL_dv", vs);
+        FemRolloutGradient<dim> g;
+        {
+            py::gil_scoped_release release;
+            g = adjoint.backward(xs, vs);
+        }
+        py::dict d;
+        d["x0"] = rows<dim>(g.x);
+        d["v0"] = rows<dim>(g.v);
+        d["youngs_modulus"] = g.youngs_modulus;
+        return d;
+    }
+};
+
+}  // namespace
+
+void define_adjoint(py::module_& m) {
+    py::class_<Rollout>(m, "FemRollout", R"doc(A rollout of an implicit FEM scene of elastic bodies and its adjoint.
+
+FemRollout(scene, newton_tolerance=1e-10): scene as a path, a dict or a Scene with meshes of one
+elastic material (no plasticity, no kinematic nodes, frictionless contact: ValueError naming the
+field otherwise). Steps are backward Euler on the elastic energy (the `lagged` integrator) with the
+scene's IPC contact, each solved to newton_tolerance (m/s), which sets how exact the gradient is.
+
+forward(steps, dt, x0=None, v0=None) runs the rollout from the scene's start (or x0, v0: (nodes,
+dim) arrays) and returns {"x": [...], "v": [...]}: every kept state (the start, then each step's
+end), (nodes, dim) arrays. backward(dL_dx, dL_dv) takes dicts {state index: (nodes, dim) array} of
+the loss's gradient with respect to those states and returns {"x0", "v0": (nodes, dim) arrays,
+"youngs_modulus": float}: dL/dx0, dL/dv0 and dL/dE, by the adjoint of every step (docs/adjoint.md).)doc")
+        .def(py::init([](const py::object& scene, double newton_tolerance) -> std::unique_ptr<Rollout> {
+                 Scene s = scene_of(scene);
+                 if (!s.has_meshes() || s.has_particles())
+                     throw py::value_error(s.file + ": FemRollout takes a scene of meshes only");
+                 if (!(newton_tolerance > 0.0)) throw py::value_error("newton_tolerance: expected a positive number");
+                 ImplicitOptions options;
+                 options.newton_tolerance = newton_tolerance;
+                 options.max_newton_iterations = 1000;
+                 try {
+                     if (s.dim == 2) return std::make_unique<RolloutOf<2>>(std::move(s), options);
+                     return std::make_unique<RolloutOf<3>>(std::move(s), options);
+                 } catch (const std::invalid_argument& e) {
+                     throw py::value_error(std::string(e.what()));
+                 }
+             }),
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10)
+        .def_property_readonly("nodes", &Rollout::nodes)
+        .def_property_readonly("youngs_modulus", &Rollout::youngs_modulus, "The material's E, Pa.")
+        .def("start", &Rollout::start, "The scene's start: {\"x\", \"v\"}, (nodes, dim) arrays.")
+        .def("forward", &Rollout::forward, py::arg("steps"), py::arg("dt"), py::arg("x0") = py::none(),
+             py::arg("v0") = py::none())
+        .def("backward", &Rollout::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
+}
+
+}  // namespace pnet::bindings

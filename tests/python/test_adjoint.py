@@ -1,0 +1,124 @@
+"""Gradients of simulated outcomes from Python (docs/adjoint.md): plasticitynet_sim.FemRollout against
+central differences of the whole rollout, the torch function plasticitynet.adjoint.fem_positions, a tiny
+identification of Young's modulus, and bad requests refused naming what is wrong."""
+
+from __future__ import annotations
+
+import copy
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "python"))
+
+pns = pytest.importorskip("plasticitynet_sim")
+from plasticitynet import adjoint  # noqa: E402
+
+STEPS, DT = 15, 2e-3
+
+
+def box_scene(E: float = 1e5, speed: float = 0.5) -> dict:
+    """A 6 x 3 cm elastic box 2 mm above the ground, falling at `speed` m/s: it meets the ground's
+    barrier within STEPS steps."""
+    return {
+        "name": "box", "dim": 2, "domain": {"min": [0, -0.01], "max": [0.2, 0.2]},
+        "gravity": [0, -9.8], "frame_dt": 0.01, "frames": 3,
+        "integrator": {"name": "lagged", "dt": DT},
+        "meshes": [{"shape": "box", "min": [0.07, 0.002], "max": [0.13, 0.032], "element_size": 0.015,
+                    "velocity": [0, -speed],
+                    "material": {"name": "rubber", "density": 1000,
+                                 "elasticity": {"model": "neo_hookean_metal", "E": E, "nu": 0.3},
+                                 "plasticity": {"model": "none"}}}],
+        "ground": {"height": 0}, "contact": {"friction": 0},
+    }
+
+
+def test_rollout_gradient_matches_central_differences():
+    rollout = pns.FemRollout(box_scene())
+    out = rollout.forward(STEPS, DT)
+    assert len(out["x"]) == STEPS + 1 and out["x"][0].shape == (rollout.nodes, 2)
+    assert min(float(x[:, 1].min()) for x in out["x"]) < 1e-3, "the box never came within dhat of the ground"
+    rng = np.random.default_rng(3)
+    a, b = rng.uniform(-1, 1, (rollout.nodes, 2)), rng.uniform(-1, 1, (rollout.nodes, 2))
+    g = rollout.backward({STEPS: a, STEPS // 2: b})
+
+    def loss(E=1e5, v0=None):
+        x = pns.FemRollout(box_scene(E)).forward(STEPS, DT, v0=v0)["x"]
+        return float((x[STEPS] * a).sum() + (x[STEPS // 2] * b).sum())
+
+    h = 1e-4 * 1e5
+    fd = (loss(1e5 + h) - loss(1e5 - h)) / (2 * h)
+    assert g["youngs_modulus"] == pytest.approx(fd, rel=1e-4)
+    d = rng.uniform(-1, 1, (rollout.nodes, 2))
+    v0 = rollout.start()["v"]
+    fd = (loss(v0=v0 + 1e-4 * d) - loss(v0=v0 - 1e-4 * d)) / 2e-4
+    assert float((g["v0"] * d).sum()) == pytest.approx(fd, rel=1e-4)
+
+
+def test_torch_function_gives_the_adjoints_gradients():
+    E = torch.tensor(1e5, dtype=torch.float64, requires_grad=True)
+    v0 = torch.from_numpy(pns.FemRollout(box_scene()).start()["v"]).requires_grad_(True)
+    x = adjoint.fem_positions(box_scene(), E, v0, STEPS, DT, [STEPS // 2, STEPS])
+    assert x.shape == (2, v0.shape[0], 2)
+    weights = torch.linspace(-1.0, 1.0, x.numel(), dtype=torch.float64).reshape(x.shape)
+    (x * weights).sum().backward()
+    rollout = pns.FemRollout(box_scene())
+    rollout.forward(STEPS, DT)
+    g = rollout.backward({STEPS // 2: weights[0].numpy(), STEPS: weights[1].numpy()})
+    assert float(E.grad) == pytest.approx(g["youngs_modulus"], rel=1e-12)
+    assert np.allclose(v0.grad.numpy(), g["v0"], rtol=1e-12, atol=0)
+
+
+def test_a_tiny_identification_recovers_youngs_modulus():
+    """The observed run at 1.6e5 Pa; L-BFGS on log E from 1e5 Pa."""
+    states = [5, 10, 15]
+    with torch.no_grad():
+        observed = adjoint.fem_positions(box_scene(1.6e5), torch.tensor(1.6e5, dtype=torch.float64), None,
+                                         STEPS, DT, states)
+    log_E = torch.tensor(np.log(1e5), dtype=torch.float64, requires_grad=True)
+    optimizer = torch.optim.LBFGS([log_E], max_iter=20, max_eval=20, tolerance_grad=1e-14, tolerance_change=1e-14,
+                                  line_search_fn="strong_wolfe")
+    evaluations = []
+
+    def closure():
+        optimizer.zero_grad()
+        x = adjoint.fem_positions(box_scene(), torch.exp(log_E), None, STEPS, DT, states)
+        loss = 1e6 * ((x - observed) ** 2).sum(dim=-1).mean()  # mm^2
+        loss.backward()
+        evaluations.append(float(loss))
+        return loss
+
+    optimizer.step(closure)
+    assert len(evaluations) <= 20
+    assert float(torch.exp(log_E)) == pytest.approx(1.6e5, rel=0.01)
+
+
+def test_bad_requests_are_refused_naming_what():
+    with pytest.raises(ValueError, match="states: 16"):
+        adjoint.fem_positions(box_scene(), torch.tensor(1e5, dtype=torch.float64), None, STEPS, DT, [16])
+    rollout = pns.FemRollout(box_scene())
+    with pytest.raises(ValueError, match="forward"):
+        rollout.backward({0: np.zeros((rollout.nodes, 2))})
+    rollout.forward(3, DT)
+    with pytest.raises(ValueError, match=r"dL_dx\[7\]: the rollout kept states 0..3"):
+        rollout.backward({7: np.zeros((rollout.nodes, 2))})
+    with pytest.raises(ValueError, match=r"dL_dx\[3\]: expected a float64 array of shape"):
+        rollout.backward({3: np.zeros((rollout.nodes + 1, 2))})
+    plastic = box_scene()
+    plastic["meshes"][0]["material"] = "metal"
+    with pytest.raises(ValueError, match="plasticity"):
+        pns.FemRollout(plastic)
+    frictional = box_scene()
+    frictional["contact"]["friction"] = 0.3
+    with pytest.raises(ValueError, match="contact.friction"):
+        pns.FemRollout(frictional)
+    preset = copy.deepcopy(box_scene())
+    preset["meshes"][0]["material"] = "metal"
+    with pytest.raises(ValueError, match=r"meshes\[0\].material"):
+        adjoint.with_youngs_modulus(preset, 2e5)
+    with pytest.raises(ValueError, match="meshes only"):
+        pns.FemRollout(str(ROOT / "scenes" / "tiny" / "sand_column_2d.json"))
