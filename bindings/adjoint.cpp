@@ -23,10 +23,12 @@ std::vector<Vec<dim>> to_points(const py::handle& obj, const std::string& name, 
 struct Rollout {
     virtual ~Rollout() = default;
     virtual py::dict start() const = 0;
-    virtual py::dict forward(int steps, double dt, const py::object& x0, const py::object& v0) = 0;
+    virtual py::dict forward(int steps, double dt, const py::object& x0, const py::object& v0, int checkpoint_every,
+                             const py::object& states) = 0;
     virtual py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const = 0;
     virtual double youngs_modulus() const = 0;
     virtual int nodes() const = 0;
+    virtual std::size_t peak_states() const = 0;
 };
 
 template <int dim>
@@ -50,6 +52,7 @@ struct RolloutOf final : Rollout {
                 initial.v[i] = scene.meshes[k].velocity.template head<dim>();
     }
     int nodes() const override { return static_cast<int>(fem.system.mesh.nodes()); }
+    std::size_t peak_states() const override { return adjoint.peak_states(); }
     double youngs_modulus() const override { return fem.system.materials[0].description().elastic.E; }
     py::dict start() const override {
         py::dict d;
@@ -57,20 +60,39 @@ struct RolloutOf final : Rollout {
         d["v"] = rows<dim>(initial.v);
         return d;
     }
-    py::dict forward(int steps, double dt, const py::object& x0, const py::object& v0) override {
+    py::dict forward(int steps, double dt, const py::object& x0, const py::object& v0, int checkpoint_every,
+                     const py::object& states) override {
+        if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
+        if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
+        std::vector<char> wanted(static_cast<std::size_t>(steps) + 1, states.is_none());
+        if (!states.is_none())
+            for (const py::handle k : states) {
+                const long state = py::cast<long>(k);
+                if (state < 0 || state > steps)
+                    throw py::value_error("states: " + std::to_string(state) + " is not a state of a " +
+                                          std::to_string(steps) + "-step rollout (0.." + std::to_string(steps) + ")");
+                wanted[static_cast<std::size_t>(state)] = 1;
+            }
         FemState<dim> s = initial;
         if (!x0.is_none()) s.x = to_points<dim>(x0, "x0", nodes());
         if (!v0.is_none()) s.v = to_points<dim>(v0, "v0", nodes());
         const std::string inside = contact->first_intersection(s.x);
         if (!inside.empty()) throw py::value_error("x0: the start intersects: " + inside);
+        std::vector<int> index;
+        std::vector<std::vector<Vec<dim>>> xs, vs;
         {
             py::gil_scoped_release release;
-            adjoint.forward(s, dt, steps);
+            adjoint.forward(s, dt, steps, checkpoint_every, [&](int k, const FemState<dim>& state) {
+                if (!wanted[static_cast<std::size_t>(k)]) return;
+                index.push_back(k);
+                xs.push_back(state.x);
+                vs.push_back(state.v);
+            });
         }
-        py::list x, v;
-        for (const FemState<dim>& state : adjoint.tape()) {
-            x.append(rows<dim>(state.x));
-            v.append(rows<dim>(state.v));
+        py::dict x, v;
+        for (std::size_t j = 0; j < index.size(); ++j) {
+            x[py::int_(index[j])] = rows<dim>(xs[j]);
+            v[py::int_(index[j])] = rows<dim>(vs[j]);
         }
         py::dict d;
         d["x"] = x;
@@ -78,8 +100,8 @@ struct RolloutOf final : Rollout {
         return d;
     }
     py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const override {
-        const std::size_t states = adjoint.tape().size();
-        if (states == 0) throw py::value_error("backward: run forward() first");
+        if (adjoint.steps() < 0) throw py::value_error("backward: run forward() first");
+        const std::size_t states = static_cast<std::size_t>(adjoint.steps()) + 1;
         std::vector<std::vector<Vec<dim>>> xs(states), vs(states);
         auto read = [&](const py::object& obj, const std::string& name, std::vector<std::vector<Vec<dim>>>& out) {
             if (obj.is_none()) return;
@@ -118,11 +140,14 @@ elastic material (no plasticity, no kinematic nodes, frictionless contact: Value
 field otherwise). Steps are backward Euler on the elastic energy (the `lagged` integrator) with the
 scene's IPC contact, each solved to newton_tolerance (m/s), which sets how exact the gradient is.
 
-forward(steps, dt, x0=None, v0=None) runs the rollout from the scene's start (or x0, v0: (nodes,
-dim) arrays) and returns {"x": [...], "v": [...]}: every kept state (the start, then each step's
-end), (nodes, dim) arrays. backward(dL_dx, dL_dv) takes dicts {state index: (nodes, dim) array} of
-the loss's gradient with respect to those states and returns {"x0", "v0": (nodes, dim) arrays,
-"youngs_modulus": float}: dL/dx0, dL/dv0 and dL/dE, by the adjoint of every step (docs/adjoint.md).)doc")
+forward(steps, dt, x0=None, v0=None, checkpoint_every=0, states=None) runs the rollout from the
+scene's start (or x0, v0: (nodes, dim) arrays) and returns {"x": {k: array}, "v": {k: array}}, the
+states k asked for (None: all; 0 is the start, k the end of step k), (nodes, dim) arrays. It keeps a
+checkpoint every checkpoint_every steps (0: about sqrt(steps); 1: every state). backward(dL_dx,
+dL_dv) takes dicts {state: (nodes, dim) array} of the loss's gradient with respect to those states
+and returns {"x0", "v0": (nodes, dim) arrays, "youngs_modulus": float}: dL/dx0, dL/dv0 and dL/dE, by
+the adjoint of every step, recomputing the steps between checkpoints (docs/adjoint.md). peak_states:
+the most states held at once by the last forward and backward.)doc")
         .def(py::init([](const py::object& scene, double newton_tolerance) -> std::unique_ptr<Rollout> {
                  Scene s = scene_of(scene);
                  if (!s.has_meshes() || s.has_particles())
@@ -143,7 +168,8 @@ the loss's gradient with respect to those states and returns {"x0", "v0": (nodes
         .def_property_readonly("youngs_modulus", &Rollout::youngs_modulus, "The material's E, Pa.")
         .def("start", &Rollout::start, "The scene's start: {\"x\", \"v\"}, (nodes, dim) arrays.")
         .def("forward", &Rollout::forward, py::arg("steps"), py::arg("dt"), py::arg("x0") = py::none(),
-             py::arg("v0") = py::none())
+             py::arg("v0") = py::none(), py::arg("checkpoint_every") = 0, py::arg("states") = py::none())
+        .def_property_readonly("peak_states", &Rollout::peak_states)
         .def("backward", &Rollout::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
 }
 

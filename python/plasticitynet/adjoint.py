@@ -43,7 +43,7 @@ class _FemPositions(torch.autograd.Function):
     def forward(ctx, youngs_modulus, v0, scene, steps, dt, states, newton_tolerance):
         rollout = _sim().FemRollout(with_youngs_modulus(scene, float(youngs_modulus)), newton_tolerance)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
-        x = rollout.forward(int(steps), float(dt), v0=v)["x"]
+        x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
         ctx.rollout, ctx.states, ctx.has_v0 = rollout, list(states), v0 is not None
         return torch.from_numpy(np.stack([x[k] for k in states]))
 

@@ -1,5 +1,7 @@
 #include "pnet/fem/fem_adjoint.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -28,27 +30,51 @@ FemAdjoint<dim>::FemAdjoint(const FemSystem<dim>& system, const ContactPotential
 }
 
 template <int dim>
-FemState<dim> FemAdjoint<dim>::forward(const FemState<dim>& start, double dt, int steps) {
-    if (!(dt > 0.0) || steps < 0) throw std::invalid_argument("FemAdjoint::forward: dt > 0 and steps >= 0 are needed");
+FemState<dim> FemAdjoint<dim>::forward(const FemState<dim>& start, double dt, int steps, int checkpoint_every,
+                                       const std::function<void(int, const FemState<dim>&)>& observe) {
+    if (!(dt > 0.0) || steps < 0 || checkpoint_every < 0)
+        throw std::invalid_argument("FemAdjoint::forward: dt > 0, steps >= 0 and checkpoint_every >= 0 are needed");
+    const int every =
+        checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
     FemImplicitIntegrator<dim> integrator(system_, FemMethod::Lagged, options_,
                                           std::make_unique<ElasticParticleEnergy<dim>>(system_.materials), contact_);
     dt_ = dt;
-    tape_.assign(1, start);
-    tape_.back().x_previous.clear();  // backward Euler: no history
-    tape_.back().v_previous.clear();
-    FemState<dim> state = tape_.back();
-    for (int n = 0; n < steps; ++n) {
+    steps_ = steps;
+    checkpoints_.clear();
+    FemState<dim> state = start;
+    state.x_previous.clear();  // backward Euler: no history
+    state.v_previous.clear();
+    for (int n = 0;; ++n) {
+        if (n % every == 0 || n == steps) checkpoints_[n] = state;
+        if (observe) observe(n, state);
+        if (n == steps) break;
         integrator.step(state, dt, n);
-        tape_.push_back(state);
     }
+    peak_states_ = checkpoints_.size();
     return state;
+}
+
+template <int dim>
+std::vector<FemState<dim>> FemAdjoint<dim>::segment(int first, int last) const {
+    if (last - first == 1) return {checkpoints_.at(first), checkpoints_.at(last)};  // both kept
+    // A fresh integrator: a step depends on its start state only (the contact's broad phase gives the
+    // same bits whatever its cache, contact.hpp), so the recomputed states are the forward pass's.
+    FemImplicitIntegrator<dim> integrator(system_, FemMethod::Lagged, options_,
+                                          std::make_unique<ElasticParticleEnergy<dim>>(system_.materials), contact_);
+    std::vector<FemState<dim>> states{checkpoints_.at(first)};
+    for (int n = first; n < last; ++n) {
+        FemState<dim> next = states.back();
+        integrator.step(next, dt_, n);
+        states.push_back(std::move(next));
+    }
+    return states;
 }
 
 template <int dim>
 FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<Vec<dim>>& dL_dx,
                                                   const std::vector<Vec<dim>>& dL_dv) const {
-    if (tape_.empty()) throw std::logic_error("FemAdjoint::backward: forward() first");
-    std::vector<std::vector<Vec<dim>>> xs(tape_.size()), vs(tape_.size());
+    if (steps_ < 0) throw std::logic_error("FemAdjoint::backward: forward() first");
+    std::vector<std::vector<Vec<dim>>> xs(steps_ + 1), vs(steps_ + 1);
     xs.back() = dL_dx;
     vs.back() = dL_dv;
     if (dL_dx.empty() || dL_dv.empty())
@@ -61,11 +87,12 @@ template <int dim>
 FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<Vec<dim>>>& dL_dx,
                                                   const std::vector<std::vector<Vec<dim>>>& dL_dv) const {
     const std::size_t nodes = system_.mesh.nodes();
-    if (tape_.empty()) throw std::logic_error("FemAdjoint::backward: forward() first");
-    if (dL_dx.size() != tape_.size() || dL_dv.size() != tape_.size())
-        throw std::invalid_argument("FemAdjoint::backward: one dL/dx and one dL/dv per kept state (" +
-                                    std::to_string(tape_.size()) + ", the start and every step's end)");
-    for (std::size_t k = 0; k < tape_.size(); ++k)
+    if (steps_ < 0) throw std::logic_error("FemAdjoint::backward: forward() first");
+    const std::size_t states = static_cast<std::size_t>(steps_) + 1;
+    if (dL_dx.size() != states || dL_dv.size() != states)
+        throw std::invalid_argument("FemAdjoint::backward: one dL/dx and one dL/dv per state (" +
+                                    std::to_string(states) + ", the start and every step's end)");
+    for (std::size_t k = 0; k < states; ++k)
         if ((!dL_dx[k].empty() && dL_dx[k].size() != nodes) || (!dL_dv[k].empty() && dL_dv[k].size() != nodes))
             throw std::invalid_argument("FemAdjoint::backward: state " + std::to_string(k) +
                                         ": dL/dx and dL/dv need one entry per node (" + std::to_string(nodes) +
@@ -80,7 +107,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
             if (!dL_dv[k].empty()) vb.template segment<dim>(dim * i) += dL_dv[k][i];
         }
     };
-    add_state(tape_.size() - 1);
+    add_state(states - 1);
     const double E = system_.materials[0].description().elastic.E;
     ElasticParticleEnergy<dim> energy(system_.materials);
     FemPotential<dim> potential(system_.mesh, system_.rest, energy);  // the step's R and H
@@ -90,33 +117,40 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     FemRolloutGradient<dim> out;
     Eigen::SimplicialLDLT<SparseMatrix> ldlt;
     VecX v(n), v_star(n), gradient(n);
-    for (std::size_t k = tape_.size() - 1; k-- > 0;) {
-        const FemState<dim>& start = tape_[k];
-        for (std::size_t i = 0; i < nodes; ++i) {
-            v.template segment<dim>(dim * i) = tape_[k + 1].v[i];
-            v_star.template segment<dim>(dim * i) = start.v[i] + dt_ * system_.gravity;
+    // Segment by segment between checkpoints, the last first; each recomputed from its checkpoint.
+    std::vector<int> marks;
+    for (const auto& [step, state] : checkpoints_) marks.push_back(step);
+    for (std::size_t j = marks.size() - 1; j-- > 0;) {
+        const std::vector<FemState<dim>> kept = segment(marks[j], marks[j + 1]);
+        peak_states_ = std::max(peak_states_, checkpoints_.size() + kept.size());
+        for (int k = marks[j + 1] - 1; k >= marks[j]; --k) {
+            const FemState<dim>& start = kept[k - marks[j]];
+            for (std::size_t i = 0; i < nodes; ++i) {
+                v.template segment<dim>(dim * i) = kept[k - marks[j] + 1].v[i];
+                v_star.template segment<dim>(dim * i) = start.v[i] + dt_ * system_.gravity;
+            }
+            for (FemPotential<dim>* p : {&potential, &elastic}) {
+                p->begin_step(start.x, v_star, dt_, start.plastic_inverse, {});
+                p->set_material_state(system_.element_object, start.hardening);
+                p->set_reference({});
+            }
+            potential.prepare_hessian(v);
+            ldlt.compute(*potential.hessian_matrix());
+            if (ldlt.info() != Eigen::Success)
+                throw std::runtime_error("FemAdjoint::backward: step " + std::to_string(k) +
+                                         ": the step's Hessian could not be factorized");
+            const VecX rhs = vb + dt_ * xb;
+            const VecX lambda = ldlt.solve(rhs);
+            const VecX m_lambda = mass.cwiseProduct(lambda);
+            // dR/dE = g_el / E, g_el the elastic form's gradient in v: the elastic potential's gradient
+            // less its inertia M (v - v*).
+            elastic.value_gradient(v, gradient);
+            gradient -= mass.cwiseProduct(v - v_star);
+            out.youngs_modulus -= lambda.dot(gradient) / E;
+            xb -= (rhs - m_lambda) / dt_;
+            vb = m_lambda;
+            add_state(static_cast<std::size_t>(k));
         }
-        for (FemPotential<dim>* p : {&potential, &elastic}) {
-            p->begin_step(start.x, v_star, dt_, start.plastic_inverse, {});
-            p->set_material_state(system_.element_object, start.hardening);
-            p->set_reference({});
-        }
-        potential.prepare_hessian(v);
-        ldlt.compute(*potential.hessian_matrix());
-        if (ldlt.info() != Eigen::Success)
-            throw std::runtime_error("FemAdjoint::backward: step " + std::to_string(k) +
-                                     ": the step's Hessian could not be factorized");
-        const VecX rhs = vb + dt_ * xb;
-        const VecX lambda = ldlt.solve(rhs);
-        const VecX m_lambda = mass.cwiseProduct(lambda);
-        // dR/dE = g_el / E, g_el the elastic form's gradient in v: the elastic potential's gradient
-        // less its inertia M (v - v*).
-        elastic.value_gradient(v, gradient);
-        gradient -= mass.cwiseProduct(v - v_star);
-        out.youngs_modulus -= lambda.dot(gradient) / E;
-        xb -= (rhs - m_lambda) / dt_;
-        vb = m_lambda;
-        add_state(k);
     }
     out.x.resize(nodes);
     out.v.resize(nodes);

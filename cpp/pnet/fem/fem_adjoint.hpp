@@ -14,10 +14,15 @@
 //   Eb  -= lambda . dR/dE = lambda . g_el / E                           (Psi_el is linear in E at fixed nu:
 //                                                                        g_el = dt grad_x Psi_el, the element
 //                                                                        form's gradient in v).
-// Memory: every step's start is kept (a tape, steps + 1 states); the forward steps are the
-// integrator's own (FemImplicitIntegrator, `lagged`: backward Euler on the elastic energy), solved to
-// the options' tolerance, which the gradient's accuracy follows (state it with a result).
+// Memory: the forward pass keeps a checkpoint every C steps (C about sqrt(N): about 2 sqrt(N) states
+// with the segment the backward pass recomputes; C = 1 keeps every state); the backward pass
+// recomputes each segment from its checkpoint, the last first, and runs the adjoint through it. The
+// forward steps are the integrator's own (FemImplicitIntegrator, `lagged`: backward Euler on the
+// elastic energy), solved to the options' tolerance, which the gradient's accuracy follows (state it
+// with a result); a recomputed step is the same step to the last bit.
 // Refused, naming what: plastic materials, kinematic nodes, BDF2, friction, more than one material.
+#include <functional>
+#include <map>
 #include <memory>
 #include <vector>
 
@@ -40,25 +45,38 @@ public:
     /// (the Newton tolerance sets how exact the gradient is).
     FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact, const ImplicitOptions& options);
 
-    /// Runs `steps` backward Euler steps of dt from `start`, keeping every step's start; returns the last state.
-    FemState<dim> forward(const FemState<dim>& start, double dt, int steps);
+    /// Runs `steps` backward Euler steps of dt from `start`, keeping a checkpoint every
+    /// `checkpoint_every` steps (0: ceil(sqrt(steps)); 1: every state) and the last state, and calling
+    /// observe(k, state) at each state k = 0..steps (where a loss reads them); returns the last state.
+    FemState<dim> forward(const FemState<dim>& start, double dt, int steps, int checkpoint_every = 0,
+                          const std::function<void(int, const FemState<dim>&)>& observe = {});
 
     /// The gradient of L through the last forward() run, given dL/dx^N and dL/dv^N per node.
+    /// Recomputes the steps between checkpoints (at most checkpoint_every states held at once).
     FemRolloutGradient<dim> backward(const std::vector<Vec<dim>>& dL_dx, const std::vector<Vec<dim>>& dL_dv) const;
     /// The same for a loss of several states: dL_dx[k], dL_dv[k] of the state after step k (k = 0: the
     /// start; steps + 1 entries, each empty for none or one entry per node).
     FemRolloutGradient<dim> backward(const std::vector<std::vector<Vec<dim>>>& dL_dx,
                                      const std::vector<std::vector<Vec<dim>>>& dL_dv) const;
 
-    /// The states kept by forward() (steps + 1).
-    const std::vector<FemState<dim>>& tape() const { return tape_; }
+    /// The states forward() kept, by step index (the checkpoints and the last).
+    const std::map<int, FemState<dim>>& checkpoints() const { return checkpoints_; }
+    int steps() const { return steps_; }
+    /// The most states held at once by the last forward() and backward(): the checkpoints and a
+    /// recomputed segment.
+    std::size_t peak_states() const { return peak_states_; }
 
 private:
+    /// The states of steps first..last (recomputed from the checkpoint at `first`).
+    std::vector<FemState<dim>> segment(int first, int last) const;
+
     const FemSystem<dim>& system_;
     const ContactPotential<dim>* contact_;
     ImplicitOptions options_;
-    std::vector<FemState<dim>> tape_;
+    std::map<int, FemState<dim>> checkpoints_;
+    int steps_ = -1;
     double dt_ = 0.0;
+    mutable std::size_t peak_states_ = 0;
 };
 
 }  // namespace pnet

@@ -52,15 +52,21 @@ struct Rollout {
         for (Vec<dim>& v : s.v) v = -kSpeed * Vec<dim>::Unit(1);
         return s;
     }
+    /// Every state of kSteps steps from s (0: s), checkpoints every `every` steps (0: sqrt).
+    std::vector<FemState<dim>> run(const FemState<dim>& s, int every = 0, int steps = kSteps) {
+        std::vector<FemState<dim>> states;
+        adjoint.forward(s, kDt, steps, every, [&](int, const FemState<dim>& state) { states.push_back(state); });
+        return states;
+    }
 };
 
 /// L = a . x^N + b . v^N + c . x^(N/2): the last state's positions and velocities and a middle state's
 /// positions.
 template <int dim>
-double loss(const FemAdjoint<dim>& rollout, const std::vector<Vec<dim>>& a, const std::vector<Vec<dim>>& b,
+double loss(const std::vector<FemState<dim>>& states, const std::vector<Vec<dim>>& a, const std::vector<Vec<dim>>& b,
             const std::vector<Vec<dim>>& c) {
-    const FemState<dim>& last = rollout.tape().back();
-    const FemState<dim>& middle = rollout.tape()[rollout.tape().size() / 2];
+    const FemState<dim>& last = states.back();
+    const FemState<dim>& middle = states[states.size() / 2];
     double L = 0.0;
     for (std::size_t i = 0; i < a.size(); ++i) L += a[i].dot(last.x[i]) + b[i].dot(last.v[i]) + c[i].dot(middle.x[i]);
     return L;
@@ -78,11 +84,11 @@ void check_rollout_gradient() {
         c[i] = rng.template uniform_vec<dim>(-1.0, 1.0);
     }
     const FemState<dim> start = r.start();
-    r.adjoint.forward(start, r.kDt, r.kSteps);
+    const std::vector<FemState<dim>> states_run = r.run(start);
     double min_distance = 1e9;
-    for (const FemState<dim>& s : r.adjoint.tape()) min_distance = std::min(min_distance, r.contact.min_distance(s.x));
+    for (const FemState<dim>& s : states_run) min_distance = std::min(min_distance, r.contact.min_distance(s.x));
     ASSERT_LT(min_distance, 1e-3) << "the box never came within dhat of the ground";
-    const std::size_t states = r.adjoint.tape().size();
+    const std::size_t states = states_run.size();
     std::vector<std::vector<Vec<dim>>> dL_dx(states), dL_dv(states);
     dL_dx.back() = a;
     dL_dv.back() = b;
@@ -91,8 +97,7 @@ void check_rollout_gradient() {
 
     auto run = [&](double E, const FemState<dim>& s) {
         Rollout<dim> q(E);
-        q.adjoint.forward(s, q.kDt, q.kSteps);
-        return loss<dim>(q.adjoint, a, b, c);
+        return loss<dim>(q.run(s), a, b, c);
     };
     // Young's modulus.
     const double hE = 1e-4 * r.E;
@@ -128,6 +133,33 @@ TEST(FemAdjoint2d, RolloutGradientMatchesFiniteDifferencesThroughAContact) {
 }
 TEST(FemAdjoint3d, RolloutGradientMatchesFiniteDifferencesThroughAContact) {
     check_rollout_gradient<3>();
+}
+
+// Checkpoints every ~sqrt(N) steps and the segments recomputed give the gradient of the stored tape
+// to the last bit (a recomputed step is the same step), holding about 2 sqrt(N) states: 1000 steps.
+TEST(FemAdjoint2d, CheckpointedAndStoredTapeGradientsAreIdentical) {
+    Rollout<2> r(1e5);
+    const int steps = 1000;
+    const FemState<2> start = r.start();
+    std::vector<Vec<2>> a(r.system.mesh.nodes(), Vec<2>(0.3, -0.7));
+    std::vector<FemRolloutGradient<2>> g;
+    std::vector<std::size_t> peak;
+    for (const int every : {1, 0, 7}) {
+        r.adjoint.forward(start, 1e-4, steps, every);
+        g.push_back(r.adjoint.backward(a, a));
+        peak.push_back(r.adjoint.peak_states());
+    }
+    EXPECT_EQ(peak[0], static_cast<std::size_t>(steps + 1 + 2));  // every state, and a step's two
+    EXPECT_LE(peak[1], static_cast<std::size_t>(2 * std::sqrt(steps) + 3)) << "sqrt checkpoints";
+    for (std::size_t k = 1; k < g.size(); ++k) {
+        EXPECT_EQ(g[k].youngs_modulus, g[0].youngs_modulus);
+        for (std::size_t i = 0; i < a.size(); ++i) {
+            EXPECT_EQ(g[k].x[i], g[0].x[i]) << "node " << i;
+            EXPECT_EQ(g[k].v[i], g[0].v[i]) << "node " << i;
+        }
+    }
+    std::printf("1000 steps: %zu / %zu / %zu states held (every state / sqrt checkpoints / every 7)\n", peak[0],
+                peak[1], peak[2]);
 }
 
 TEST(FemAdjoint, RefusesWhatItDoesNotDifferentiate) {
