@@ -1,0 +1,33 @@
+#pragma once
+// The derivatives of a step's state update by the return mapping, for the adjoint of an elastoplastic
+// step (docs/adjoint.md): with F_trial = U diag(Sigma) V^T, the return-mapped elastic deformation
+// F^E = U diag(Z(Sigma, h)) V^T and the new hardening h' = h'(Sigma, h), their derivatives with respect
+// to F_trial and h. F^E is an isotropic matrix function of F_trial, so its derivative in the (U, V)
+// frame is that of its singular values on the diagonal and, for each pair i < j, the 2 x 2 block
+// [[a, b], [b, a]] on the (ij, ji) entries with a = (D + E) / 2, b = (D - E) / 2,
+// D = (Z_i - Z_j) / (Sigma_i - Sigma_j), E = (Z_i + Z_j) / (Sigma_i + Sigma_j) (isotropic_dPdF's
+// structure), D formed so that it is exact for equal singular values.
+//
+// Written for the materials whose return mapping has a closed form: elastic ones (F^E = F_trial) and
+// von Mises with StVK-Hencky (eq. 22: log Z = m 1 + h n with m the mean log strain and n the unit
+// deviatoric direction, h' = h + xi (L - h), L = |dev log Sigma|, where L > h). At the yield onset
+// (L = h) the derivative is one-sided, the elastic branch's, the branch the mapping takes there.
+// Others (Drucker-Prager, Cam-Clay, von Mises with another elasticity) throw std::invalid_argument.
+#include "pnet/material/material.hpp"
+
+namespace pnet {
+
+template <int dim>
+struct ReturnMapDerivative {
+    Tensor4<dim> dFE_dF = Tensor4<dim>::Identity();  // d vec(F^E) / d vec(F_trial), row-major vec
+    Mat<dim> dFE_dh = Mat<dim>::Zero();              // d F^E / d h
+    Mat<dim> dh_dF = Mat<dim>::Zero();               // d h' / d F_trial
+    double dh_dh = 1.0;                              // d h' / d h
+    bool yielded = false;                            // the plastic branch
+};
+
+/// The derivatives at F_trial = svd (the clamped polar SVD the step's return mapping used) and h.
+template <int dim>
+ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h);
+
+}  // namespace pnet

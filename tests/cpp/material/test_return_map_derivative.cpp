@@ -1,0 +1,84 @@
+// The derivatives of the return mapping's state update (material/return_map_derivative.hpp; the
+// adjoint of an elastoplastic step, docs/adjoint.md) against central differences of
+// Material::project: F^E and h' with respect to F_trial and h, elastic and yielding, in 2D and 3D, with
+// two equal singular values (3D), one-sided at the yield onset; refused for the materials not written.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "pnet/material/return_map_derivative.hpp"
+#include "support/random.hpp"
+
+namespace pnet {
+namespace {
+
+/// A random rotation (Cayley transform of a random skew matrix).
+template <int dim>
+Mat<dim> rotation(test::Random& rng) {
+    Mat<dim> K = Mat<dim>::Zero();
+    for (int i = 0; i < dim; ++i)
+        for (int j = i + 1; j < dim; ++j) K(i, j) = -(K(j, i) = rng.uniform(-1.0, 1.0));
+    return (Mat<dim>::Identity() - K).inverse() * (Mat<dim>::Identity() + K);
+}
+
+/// Checks return_map_derivative at F = R1 diag(stretch) R2 and h against central differences.
+template <int dim>
+void check(const Material<dim>& material, const Vec<dim>& stretch, double h, bool yielded, test::Random& rng) {
+    const Mat<dim> F = rotation<dim>(rng) * stretch.asDiagonal() * rotation<dim>(rng);
+    const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, clamped_svd<dim>(F), h);
+    EXPECT_EQ(d.yielded, yielded) << "stretch " << stretch.transpose() << ", h " << h;
+    const double step = 1e-6;
+    double worst = 0.0, scale = d.dFE_dF.cwiseAbs().maxCoeff();
+    for (int k = 0; k < dim * dim; ++k) {
+        Mat<dim> dF = Mat<dim>::Zero();
+        dF(k / dim, k % dim) = step;
+        const auto plus = material.project(F + dF, h), minus = material.project(F - dF, h);
+        const Eigen::Matrix<double, dim * dim, 1> fd =
+            flatten<dim>(Mat<dim>((plus.F_elastic - minus.F_elastic) / (2 * step)));
+        worst = std::max(worst, (d.dFE_dF.col(k) - fd).cwiseAbs().maxCoeff());
+        EXPECT_NEAR(d.dh_dF(k / dim, k % dim), (plus.hardening - minus.hardening) / (2 * step), 1e-7)
+            << "dh'/dF entry " << k;
+    }
+    EXPECT_LT(worst, 1e-7 * scale) << "dF^E/dF, stretch " << stretch.transpose();
+    const auto plus = material.project(F, h + step), minus = material.project(F, h - step);
+    EXPECT_LT((d.dFE_dh - (plus.F_elastic - minus.F_elastic) / (2 * step)).cwiseAbs().maxCoeff(), 1e-7);
+    EXPECT_NEAR(d.dh_dh, (plus.hardening - minus.hardening) / (2 * step), 1e-7);
+}
+
+TEST(ReturnMapDerivative, VonMisesMatchesCentralDifferencesElasticAndYielding) {
+    test::Random rng(11);
+    const Material<2> metal2(material_preset("metal"));
+    const Material<3> metal3(material_preset("metal"));
+    for (int trial = 0; trial < 5; ++trial) {
+        const Vec<2> s2(rng.uniform(0.9, 1.1), rng.uniform(0.9, 1.1));
+        const double L2 = std::abs(std::log(s2[0]) - std::log(s2[1])) / std::sqrt(2.0);
+        check<2>(metal2, s2, 0.5 * L2, true, rng);
+        check<2>(metal2, s2, 2.0 * L2, false, rng);
+        const Vec<3> s3(rng.uniform(0.9, 1.1), rng.uniform(0.9, 1.1), rng.uniform(0.9, 1.1));
+        const Vec<3> e3 = s3.array().log().matrix();
+        const double L3 = (e3 - e3.mean() * Vec<3>::Ones()).norm();
+        check<3>(metal3, s3, 0.5 * L3, true, rng);
+        check<3>(metal3, s3, 2.0 * L3, false, rng);
+    }
+    // Two equal singular values (the pair's quotient at its limit), yielding.
+    const Vec<3> equal(1.05, 1.05, 0.92);
+    const Vec<3> e = equal.array().log().matrix();
+    check<3>(metal3, equal, 0.3 * (e - e.mean() * Vec<3>::Ones()).norm(), true, rng);
+}
+
+TEST(ReturnMapDerivative, IsOneSidedAtTheYieldOnsetAndRefusesWhatIsNotWritten) {
+    // At L = h the mapping takes the elastic branch, and so does its derivative; just past it, the
+    // plastic one.
+    const Material<2> metal(material_preset("metal"));
+    const Vec<2> s(1.04, 0.98);
+    const double L = std::abs(std::log(s[0]) - std::log(s[1])) / std::sqrt(2.0);
+    const PolarSVD<2> svd = clamped_svd<2>(Mat<2>(s.asDiagonal()));
+    EXPECT_FALSE(return_map_derivative<2>(metal, svd, L).yielded);
+    EXPECT_EQ(return_map_derivative<2>(metal, svd, L).dFE_dF, Tensor4<2>::Identity());
+    EXPECT_TRUE(return_map_derivative<2>(metal, svd, L * (1.0 - 1e-9)).yielded);
+    EXPECT_THROW(return_map_derivative<2>(Material<2>(material_preset("sand")), svd, 0.0), std::invalid_argument);
+    EXPECT_THROW(return_map_derivative<2>(Material<2>(material_preset("metal_nh")), svd, 0.1), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace pnet
