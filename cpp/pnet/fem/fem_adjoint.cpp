@@ -8,6 +8,7 @@
 #include <Eigen/SparseCholesky>
 
 #include "pnet/energy/particle_energy.hpp"
+#include "pnet/material/return_map_derivative.hpp"
 
 namespace pnet {
 
@@ -18,10 +19,13 @@ FemAdjoint<dim>::FemAdjoint(const FemSystem<dim>& system, const ContactPotential
     if (system.materials.size() != 1)
         throw std::invalid_argument("FemAdjoint: materials: the adjoint takes one material (the scene has " +
                                     std::to_string(system.materials.size()) + ")");
-    if (system.materials[0].description().plasticity != PlasticityModel::None)
+    const MaterialDescription& m = system.materials[0].description();
+    if (m.plasticity != PlasticityModel::None &&
+        !(m.plasticity == PlasticityModel::VonMises && m.elasticity == ElasticityModel::StvkHencky))
         throw std::invalid_argument(
-            "FemAdjoint: materials[0].plasticity: the adjoint is of elastic bodies (its "
-            "return mapping's derivatives are not written yet)");
+            "FemAdjoint: materials[0].plasticity: the adjoint is of elastic bodies and of "
+            "von Mises with StVK-Hencky (the other return mappings' derivatives are not "
+            "written yet)");
     for (char fixed : system.fixed_node)
         if (fixed) throw std::invalid_argument("FemAdjoint: fixed_node: kinematic nodes are not supported");
     if (options.time_integrator != "backward_euler")
@@ -115,6 +119,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     potential.set_contact(contact_);
     potential.set_project_psd(false);
     FemRolloutGradient<dim> out;
+    const Material<dim>& material = system_.materials[0];
+    const bool plastic = material.description().plasticity != PlasticityModel::None;
+    const std::size_t elements = system_.mesh.elements.size();
+    std::vector<Mat<dim>> pb(elements, Mat<dim>::Zero());  // dL/d(F^P)^-1 of the state being reached back to
+    std::vector<double> hb(elements, 0.0);                 // dL/dh likewise
     Eigen::SimplicialLDLT<SparseMatrix> ldlt;
     VecX v(n), v_star(n), gradient(n);
     // Segment by segment between checkpoints, the last first; each recomputed from its checkpoint.
@@ -125,6 +134,27 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
         peak_states_ = std::max(peak_states_, checkpoints_.size() + kept.size());
         for (int k = marks[j + 1] - 1; k >= marks[j]; --k) {
             const FemState<dim>& start = kept[k - marks[j]];
+            const FemState<dim>& next = kept[k - marks[j] + 1];
+            if (plastic) {
+                // The return mapping after the solve: (F^P)^-1' = F^-1 F^E(F (F^P)^-1, h), h' = h'(...), with
+                // F = F(x^{n+1}): back into x^{n+1} (xb), (F^P)^-1 and h of the step's start.
+                for (std::size_t e = 0; e < elements; ++e) {
+                    const Mat<dim> F = deformation_gradient(system_.mesh, system_.rest, next.x, e);
+                    const Mat<dim>& Pn = start.plastic_inverse[e];
+                    const ReturnMapDerivative<dim> d =
+                        return_map_derivative<dim>(material, clamped_svd<dim>(Mat<dim>(F * Pn)), start.hardening[e]);
+                    const Mat<dim> F_inv_T = F.inverse().transpose();
+                    const Mat<dim> FE_bar = F_inv_T * pb[e];
+                    Mat<dim> F_bar = -F_inv_T * pb[e] * next.plastic_inverse[e].transpose();
+                    const Mat<dim> Ft_bar =
+                        unflatten<dim>(d.dFE_dF.transpose() * flatten<dim>(FE_bar)) + hb[e] * d.dh_dF;
+                    hb[e] = d.dFE_dh.cwiseProduct(FE_bar).sum() + d.dh_dh * hb[e];
+                    F_bar += Ft_bar * Pn.transpose();
+                    pb[e] = F.transpose() * Ft_bar;
+                    for (int a = 0; a <= dim; ++a)
+                        xb.template segment<dim>(dim * system_.mesh.elements[e][a]) += F_bar * system_.rest.grad[e][a];
+                }
+            }
             for (std::size_t i = 0; i < nodes; ++i) {
                 v.template segment<dim>(dim * i) = kept[k - marks[j] + 1].v[i];
                 v_star.template segment<dim>(dim * i) = start.v[i] + dt_ * system_.gravity;
@@ -147,11 +177,31 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
             elastic.value_gradient(v, gradient);
             gradient -= mass.cwiseProduct(v - v_star);
             out.youngs_modulus -= lambda.dot(gradient) / E;
+            if (plastic) {
+                // The residual's dependence on the start's (F^P)^-1: -lambda . dR/d(F^P)^-1 with
+                // lambda . g_el = dt V P(F (F^P)^-1) : (G (F^P)^-1), G = sum_a lambda_a g_a^T.
+                for (std::size_t e = 0; e < elements; ++e) {
+                    const Mat<dim> F = deformation_gradient(system_.mesh, system_.rest, next.x, e);
+                    const Mat<dim>& Pn = start.plastic_inverse[e];
+                    Mat<dim> G = Mat<dim>::Zero();
+                    for (int a = 0; a <= dim; ++a)
+                        G += lambda.template segment<dim>(dim * system_.mesh.elements[e][a]) *
+                             system_.rest.grad[e][a].transpose();
+                    const Mat<dim> A = F * Pn;
+                    const PolarSVD<dim> svd = clamped_svd<dim>(A);
+                    const Elasticity<dim>& elasticity = material.elasticity();
+                    const Mat<dim> P = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
+                    const Mat<dim> CGP = unflatten<dim>(elasticity.dPdF(svd, false) * flatten<dim>(Mat<dim>(G * Pn)));
+                    pb[e] -= (dt_ * system_.rest.volume[e]) * (F.transpose() * CGP + G.transpose() * P);
+                }
+            }
             xb -= (rhs - m_lambda) / dt_;
             vb = m_lambda;
             add_state(static_cast<std::size_t>(k));
         }
     }
+    out.hardening = hb;
+    out.plastic_inverse = pb;
     out.x.resize(nodes);
     out.v.resize(nodes);
     for (std::size_t i = 0; i < nodes; ++i) {

@@ -20,7 +20,13 @@
 // forward steps are the integrator's own (FemImplicitIntegrator, `lagged`: backward Euler on the
 // elastic energy), solved to the options' tolerance, which the gradient's accuracy follows (state it
 // with a result); a recomputed step is the same step to the last bit.
-// Refused, naming what: plastic materials, kinematic nodes, BDF2, friction, more than one material.
+// Plasticity (von Mises with StVK-Hencky, the `lagged` step: the elastic energy about the step's
+// (F^P)^-1, then the return mapping): each element's (F^P)^-1 and h are state too. The return
+// mapping's update (F^P)^-1' = F^-1 F^E(F (F^P)^-1, h), h' = h'(...) is differentiated through
+// material/return_map_derivative.hpp (one-sided, elastic, at the yield onset), and the step's
+// residual through its dependence on (F^P)^-1: d(lambda . g_el)/d(F^P)^-1 = dt V [F^T (C : (G (F^P)^-1))
+// + G^T P], G = sum_a lambda_a g_a^T, C = dP/dF^E.
+// Refused, naming what: other plasticity, kinematic nodes, BDF2, friction, more than one material.
 #include <functional>
 #include <map>
 #include <memory>
@@ -33,8 +39,10 @@ namespace pnet {
 /// dL/d(start state) and dL/dE of a rollout.
 template <int dim>
 struct FemRolloutGradient {
-    std::vector<Vec<dim>> x, v;   // per node: dL/dx^0 (1/m), dL/dv^0 (s/m) times L's unit
-    double youngs_modulus = 0.0;  // dL/dE (1/Pa times L's unit)
+    std::vector<Vec<dim>> x, v;             // per node: dL/dx^0 (1/m), dL/dv^0 (s/m) times L's unit
+    double youngs_modulus = 0.0;            // dL/dE (1/Pa times L's unit)
+    std::vector<double> hardening;          // per element: dL/dh^0 (von Mises: h = tau_Y / (2 mu))
+    std::vector<Mat<dim>> plastic_inverse;  // per element: dL/d(F^P)^-1 at the start
 };
 
 template <int dim>
