@@ -126,6 +126,11 @@ struct RolloutOf final : Rollout {
         d["x0"] = rows<dim>(g.x);
         d["v0"] = rows<dim>(g.v);
         d["youngs_modulus"] = g.youngs_modulus;
+        py::array_t<double> h(static_cast<py::ssize_t>(g.hardening.size()));
+        double total = 0.0;
+        for (std::size_t e = 0; e < g.hardening.size(); ++e) total += h.mutable_data()[e] = g.hardening[e];
+        d["hardening"] = h;
+        d["initial_hardening"] = total;
         return d;
     }
 };
@@ -136,17 +141,20 @@ void define_adjoint(py::module_& m) {
     py::class_<Rollout>(m, "FemRollout", R"doc(A rollout of an implicit FEM scene of elastic bodies and its adjoint.
 
 FemRollout(scene, newton_tolerance=1e-10): scene as a path, a dict or a Scene with meshes of one
-elastic material (no plasticity, no kinematic nodes, frictionless contact: ValueError naming the
-field otherwise). Steps are backward Euler on the elastic energy (the `lagged` integrator) with the
-scene's IPC contact, each solved to newton_tolerance (m/s), which sets how exact the gradient is.
+material, elastic or von Mises with StVK-Hencky (the metal preset), no kinematic nodes, frictionless
+contact (ValueError naming the field otherwise). Steps are the `lagged` integrator's (backward Euler
+on the elastic energy, then the return mapping) with the scene's IPC contact, each solved to
+newton_tolerance (m/s), which sets how exact the gradient is.
 
 forward(steps, dt, x0=None, v0=None, checkpoint_every=0, states=None) runs the rollout from the
 scene's start (or x0, v0: (nodes, dim) arrays) and returns {"x": {k: array}, "v": {k: array}}, the
 states k asked for (None: all; 0 is the start, k the end of step k), (nodes, dim) arrays. It keeps a
 checkpoint every checkpoint_every steps (0: about sqrt(steps); 1: every state). backward(dL_dx,
 dL_dv) takes dicts {state: (nodes, dim) array} of the loss's gradient with respect to those states
-and returns {"x0", "v0": (nodes, dim) arrays, "youngs_modulus": float}: dL/dx0, dL/dv0 and dL/dE, by
-the adjoint of every step, recomputing the steps between checkpoints (docs/adjoint.md). peak_states:
+and returns {"x0", "v0": (nodes, dim) arrays, "youngs_modulus": float, "hardening": (elements,)
+array, "initial_hardening": float}: dL/dx0, dL/dv0, dL/dE, dL/dh0 per element and summed (the
+material's initial_hardening: von Mises' yield stress tau_Y = 2 mu h), by the adjoint of every step,
+recomputing the steps between checkpoints (docs/adjoint.md). peak_states:
 the most states held at once by the last forward and backward.)doc")
         .def(py::init([](const py::object& scene, double newton_tolerance) -> std::unique_ptr<Rollout> {
                  Scene s = scene_of(scene);

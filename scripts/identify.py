@@ -2,6 +2,7 @@
 """Identify a material parameter from an observed run, by the adjoint of the implicit step (docs/adjoint.md).
 
     scripts/identify.py youngs_modulus [--true-E 2e5] [--start-E 1e5] [--out out/identify]
+    scripts/identify.py yield_stress [--true-h0 0.004] [--start-h0 0.006] [--out out/identify]
 
 youngs_modulus: an elastic box (FEM, neo-Hookean, bouncing_box() below) dropped onto the ground
 bounces. The observed run is `pnet simulate` of that scene at --true-E with the implicit integrator
@@ -13,8 +14,12 @@ moves log E by L-BFGS on the mean squared distance of the nodes to the observed 
 each evaluation a forward and a backward pass (plasticitynet.adjoint). Prints the optimizer's path and
 the result beside the true value, and plots the loss along the path (out/identify/youngs_modulus.png).
 
-The other identifications issue 57 asks for (a sand column's friction angle, a metal's yield stress)
-need the adjoint of the MPM step and of the return mapping, which are not written yet.
+yield_stress: a metal block (von Mises with StVK-Hencky: the metal preset's E 1e7 Pa, nu 0.3, hardening
+coefficient 0.1) hits the ground at 4 m/s and flattens plastically. The observed run is `pnet simulate`
+at the initial hardening --true-h0 (tau_Y = 2 mu h0), the fit moves log h0 from --start-h0 the same way.
+
+A sand column's friction angle (issue 57's first identification) needs the adjoint of the MPM step,
+which is not written yet.
 """
 from __future__ import annotations
 
@@ -57,12 +62,30 @@ def bouncing_box(E: float) -> dict:
     }
 
 
-def observed_frames(E: float, out: Path) -> np.ndarray:
+def metal_block(h0: float) -> dict:
+    """A 6 x 3 cm metal block (the metal preset's elasticity and hardening, initial hardening h0) 2 mm
+    above the ground, falling at 4 m/s; 20 ms in frames of 2 ms."""
+    return {
+        "name": "metal_block_2d",
+        "description": "scripts/identify.py: a metal block flattening on the ground, for identifying its yield stress.",
+        "dim": 2, "domain": {"min": [0, -0.01], "max": [0.2, 0.2]},
+        "gravity": [0, -9.8], "frame_dt": 0.002, "frames": FRAMES,
+        "integrator": {"name": "lagged", "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
+        "meshes": [{"shape": "box", "min": [0.07, 0.002], "max": [0.13, 0.032], "element_size": 0.01,
+                    "velocity": [0, -4.0],
+                    "material": {"name": "metal", "density": 7800, "initial_hardening": h0,
+                                 "elasticity": {"model": "stvk_hencky", "E": 1e7, "nu": 0.3},
+                                 "plasticity": {"model": "von_mises", "hardening_coefficient": 0.1}}}],
+        "ground": {"height": 0}, "contact": {"friction": 0},
+    }
+
+
+def observed_frames(scene_dict: dict, out: Path, name: str) -> np.ndarray:
     """The observed run's node positions at frames 1..FRAMES, (FRAMES, nodes, 2)."""
     out.mkdir(parents=True, exist_ok=True)
-    scene = out / "observed_scene.json"
-    scene.write_text(json.dumps(bouncing_box(E), indent=1))
-    run = out / "observed"
+    scene = out / f"{name}_observed_scene.json"
+    scene.write_text(json.dumps(scene_dict, indent=1))
+    run = out / f"{name}_observed"
     cmd = launch.simulate_command(launch.default_pnet(), scene, run, threads=2, overwrite=run.exists())
     done = launch.run(cmd, echo=True)
     if done.status != 0:
@@ -70,61 +93,94 @@ def observed_frames(E: float, out: Path) -> np.ndarray:
     return np.stack([frames.read_mesh_ply(run / f"frame_{k:05d}.ply").position for k in range(1, FRAMES + 1)])
 
 
-def identify_youngs_modulus(true_E: float, start_E: float, out: Path, max_evaluations: int) -> int:
-    observed = torch.from_numpy(observed_frames(true_E, out))
-    scene = bouncing_box(start_E)  # the fit's scene: E is what it moves
-    steps_per_frame = round(FRAME_DT / DT)
+def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_value: float, start_value: float,
+        positions, out: Path, max_evaluations: int) -> int:
+    """L-BFGS on log p of the mean squared nodal distance to the observed frames; positions(scene, p, states)
+    is the differentiable rollout."""
+    observed = torch.from_numpy(observed_frames(scene, out, name))
+    steps_per_frame = round(frame_dt / DT)
     states = [k * steps_per_frame for k in range(1, FRAMES + 1)]
-    log_E = torch.tensor(math.log(start_E), dtype=torch.float64, requires_grad=True)
-    optimizer = torch.optim.LBFGS([log_E], lr=1.0, max_iter=max_evaluations, max_eval=max_evaluations,
-                                  tolerance_grad=1e-12, tolerance_change=1e-12, line_search_fn="strong_wolfe")
+    log_p = torch.tensor(math.log(start_value), dtype=torch.float64, requires_grad=True)
+    optimizer = torch.optim.LBFGS([log_p], lr=1.0, max_iter=max_evaluations, max_eval=max_evaluations,
+                                  tolerance_grad=1e-14, tolerance_change=1e-14, line_search_fn="strong_wolfe")
     path = []
 
     def closure():
         optimizer.zero_grad()
         start = time.perf_counter()
-        x = adjoint.fem_positions(scene, torch.exp(log_E), None, FRAMES * steps_per_frame, DT, states)
-        loss = ((x - observed) ** 2).sum(dim=-1).mean()
+        x = positions(torch.exp(log_p), FRAMES * steps_per_frame, states)
+        loss = 1e6 * ((x - observed) ** 2).sum(dim=-1).mean()  # mm^2
         loss.backward()
-        path.append((float(torch.exp(log_E)), float(loss), float(log_E.grad), time.perf_counter() - start))
-        E, L, g, seconds = path[-1]
-        print(f"evaluation {len(path):2d}: E {E:.6g} Pa, loss {L:.6g} m^2, dL/dlogE {g:.4g} ({seconds:.2f} s)",
-              flush=True)
+        path.append((float(torch.exp(log_p)), float(loss), float(log_p.grad), time.perf_counter() - start))
+        p, L, g, seconds = path[-1]
+        print(f"evaluation {len(path):2d}: {symbol} {p:.6g} {unit}, loss {L:.6g} mm^2, dL/dlog{symbol} {g:.4g} "
+              f"({seconds:.2f} s)", flush=True)
         return loss
 
     optimizer.step(closure)
-    best = min(path, key=lambda p: p[1])
-    error = abs(best[0] - true_E) / true_E
-    print(f"identified E = {best[0]:.6g} Pa against the true {true_E:.6g} Pa ({100 * error:.3g}%), "
+    best = min(path, key=lambda q: q[1])
+    error = abs(best[0] - true_value) / true_value
+    print(f"identified {symbol} = {best[0]:.6g} {unit} against the true {true_value:.6g} {unit} ({100 * error:.3g}%), "
           f"{len(path)} evaluations (a forward and a backward pass each)")
-    (out / "youngs_modulus.json").write_text(json.dumps(
-        {"true_E": true_E, "start_E": start_E, "identified_E": best[0], "relative_error": error,
-         "path": [{"E": E, "loss": L, "dloss_dlogE": g, "seconds": s} for E, L, g, s in path]}, indent=1))
+    (out / f"{name}.json").write_text(json.dumps(
+        {"parameter": symbol, "true": true_value, "start": start_value, "identified": best[0], "relative_error": error,
+         "path": [{"value": p, "loss_mm2": L, "dloss_dlog": g, "seconds": s} for p, L, g, s in path]}, indent=1))
     try:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
         fig, ax = plt.subplots(figsize=(5, 3.2))
-        ax.semilogy([p[1] for p in path], "o-")
+        ax.semilogy([q[1] for q in path], "o-")
         ax.set_xlabel("evaluation (forward + backward)")
-        ax.set_ylabel("loss (m$^2$)")
-        ax.set_title(f"E: {start_E:.3g} -> {best[0]:.4g} Pa (true {true_E:.3g})")
+        ax.set_ylabel("loss (mm$^2$)")
+        ax.set_title(f"{symbol}: {start_value:.3g} -> {best[0]:.4g} {unit} (true {true_value:.3g})")
         fig.tight_layout()
-        fig.savefig(out / "youngs_modulus.png", dpi=120)
-        print(f"wrote {out / 'youngs_modulus.json'} and {out / 'youngs_modulus.png'}")
+        fig.savefig(out / f"{name}.png", dpi=120)
+        print(f"wrote {out / (name + '.json')} and {out / (name + '.png')}")
     except ImportError:
-        print(f"wrote {out / 'youngs_modulus.json'} (no matplotlib: no plot)")
+        print(f"wrote {out / (name + '.json')} (no matplotlib: no plot)")
     return 0
+
+
+def identify_youngs_modulus(true_E: float, start_E: float, out: Path, max_evaluations: int) -> int:
+    scene = bouncing_box(start_E)  # the fit's scene: E is what it moves
+
+    def positions(E, steps, states):
+        return adjoint.fem_positions(scene, E, None, steps, DT, states)
+
+    return fit("youngs_modulus", "E", "Pa", bouncing_box(true_E), FRAME_DT, true_E, start_E, positions, out,
+               max_evaluations)
+
+
+def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int) -> int:
+    scene = metal_block(start_h0)
+    mu = 1e7 / (2 * 1.3)
+    print(f"yield stress tau_Y = 2 mu h0 with mu = {mu:.6g} Pa: the true {2 * mu * true_h0:.6g} Pa")
+
+    def positions(h0, steps, states):
+        return adjoint.fem_positions(scene, torch.tensor(1e7, dtype=torch.float64), None, steps, DT, states,
+                                     initial_hardening=h0)
+
+    status = fit("yield_stress", "h0", "", metal_block(true_h0), 0.002, true_h0, start_h0, positions, out,
+                 max_evaluations)
+    found = json.loads((out / "yield_stress.json").read_text())["identified"]
+    print(f"tau_Y = {2 * mu * found:.6g} Pa against the true {2 * mu * true_h0:.6g} Pa")
+    return status
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("case", choices=["youngs_modulus"])
+    parser.add_argument("case", choices=["youngs_modulus", "yield_stress"])
     parser.add_argument("--true-E", type=float, default=2e5, help="the observed run's E, Pa (the fit never sees it)")
     parser.add_argument("--start-E", type=float, default=1e5, help="the fit's first E, Pa")
+    parser.add_argument("--true-h0", type=float, default=0.004,
+                        help="the observed run's initial hardening h0 = tau_Y / (2 mu) (the fit never sees it)")
+    parser.add_argument("--start-h0", type=float, default=0.006, help="the fit's first h0")
     parser.add_argument("--max-evaluations", type=int, default=20)
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "identify")
     args = parser.parse_args()
+    if args.case == "yield_stress":
+        return identify_yield_stress(args.true_h0, args.start_h0, args.out, args.max_evaluations)
     return identify_youngs_modulus(args.true_E, args.start_E, args.out, args.max_evaluations)
 
 

@@ -1,9 +1,10 @@
 """Gradients of simulated outcomes for torch (docs/adjoint.md).
 
 `fem_positions(scene, youngs_modulus, v0, steps, dt, states)` runs an implicit FEM rollout of elastic
-bodies (plasticitynet_sim.FemRollout: backward Euler, IPC contact without friction) and returns the
-nodes' positions at the chosen states as a tensor that torch can differentiate with respect to Young's
-modulus and the start's velocities: its backward pass is the rollout's adjoint, not a tape of torch
+or von Mises bodies (plasticitynet_sim.FemRollout: backward Euler, the return mapping after each
+step, IPC contact without friction) and returns the nodes' positions at the chosen states as a tensor
+that torch can differentiate with respect to Young's modulus, the start's velocities and the initial
+hardening (the yield stress): its backward pass is the rollout's adjoint, not a tape of torch
 operations, so a torch optimizer can fit E or v0 to observed frames.
 
     E = torch.tensor(1e5, dtype=torch.float64, requires_grad=True)
@@ -25,26 +26,30 @@ def _sim():
     return plasticitynet_sim
 
 
-def with_youngs_modulus(scene: dict, youngs_modulus: float) -> dict:
-    """A copy of a scene dict whose meshes' material has Young's modulus E (Pa). The material must be
-    written out in the scene (a dict with an "elasticity" block), not a preset's name."""
+def with_youngs_modulus(scene: dict, youngs_modulus: float, initial_hardening: float | None = None) -> dict:
+    """A copy of a scene dict whose meshes' material has Young's modulus E (Pa) and, when given, the
+    initial hardening h0 (von Mises: tau_Y = 2 mu h0). The material must be written out in the scene (a
+    dict with an "elasticity" block), not a preset's name."""
     out = copy.deepcopy(scene)
     for k, mesh in enumerate(out.get("meshes", [])):
         material = mesh.get("material")
         if not isinstance(material, dict) or "elasticity" not in material:
             raise ValueError(f"meshes[{k}].material: write the material out (a dict with an \"elasticity\" block) "
-                             "to set its Young's modulus")
+                             "to set its parameters")
         material["elasticity"]["E"] = float(youngs_modulus)
+        if initial_hardening is not None:
+            material["initial_hardening"] = float(initial_hardening)
     return out
 
 
 class _FemPositions(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, youngs_modulus, v0, scene, steps, dt, states, newton_tolerance):
-        rollout = _sim().FemRollout(with_youngs_modulus(scene, float(youngs_modulus)), newton_tolerance)
+    def forward(ctx, youngs_modulus, v0, initial_hardening, scene, steps, dt, states, newton_tolerance):
+        h0 = None if initial_hardening is None else float(initial_hardening)
+        rollout = _sim().FemRollout(with_youngs_modulus(scene, float(youngs_modulus), h0), newton_tolerance)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
-        ctx.rollout, ctx.states, ctx.has_v0 = rollout, list(states), v0 is not None
+        ctx.rollout, ctx.states, ctx.has_v0, ctx.has_h0 = rollout, list(states), v0 is not None, h0 is not None
         return torch.from_numpy(np.stack([x[k] for k in states]))
 
     @staticmethod
@@ -56,15 +61,19 @@ class _FemPositions(torch.autograd.Function):
         out = ctx.rollout.backward(dL_dx)
         dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
         dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
-        return dE, dv0, None, None, None, None, None
+        dh0 = torch.tensor(out["initial_hardening"], dtype=torch.float64) if ctx.has_h0 else None
+        return dE, dv0, dh0, None, None, None, None, None
 
 
 def fem_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
-                  states: Sequence[int], newton_tolerance: float = 1e-10) -> torch.Tensor:
+                  states: Sequence[int], newton_tolerance: float = 1e-10,
+                  initial_hardening: torch.Tensor | None = None) -> torch.Tensor:
     """The nodes' positions (len(states), nodes, dim) at the kept states `states` (0: the start; k: after
     step k) of `steps` steps of dt from the scene's start (v0: the start's velocities instead of the
-    scene's), differentiable in youngs_modulus (a 0-d tensor, Pa) and v0."""
+    scene's), differentiable in youngs_modulus (a 0-d tensor, Pa), v0 and, for von Mises metal,
+    initial_hardening (a 0-d tensor: h0 = tau_Y / (2 mu) of every element at the start)."""
     for k in states:
         if not 0 <= int(k) <= steps:
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
-    return _FemPositions.apply(youngs_modulus, v0, scene, steps, dt, [int(k) for k in states], newton_tolerance)
+    return _FemPositions.apply(youngs_modulus, v0, initial_hardening, scene, steps, dt, [int(k) for k in states],
+                               newton_tolerance)

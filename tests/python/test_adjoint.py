@@ -73,6 +73,37 @@ def test_torch_function_gives_the_adjoints_gradients():
     assert np.allclose(v0.grad.numpy(), g["v0"], rtol=1e-12, atol=0)
 
 
+def metal_scene(h0: float = 0.005) -> dict:
+    """A metal block (von Mises, StVK-Hencky) hitting the ground at 4 m/s: it yields."""
+    scene = box_scene(speed=4.0)
+    scene["integrator"]["dt"] = 1e-3
+    scene["meshes"][0]["material"] = {"name": "metal", "density": 7800, "initial_hardening": h0,
+                                      "elasticity": {"model": "stvk_hencky", "E": 1e7, "nu": 0.3},
+                                      "plasticity": {"model": "von_mises", "hardening_coefficient": 0.1}}
+    return scene
+
+
+def test_the_yield_stress_gradient_through_plastic_flow_matches_central_differences():
+    E = torch.tensor(1e7, dtype=torch.float64)
+    h0 = torch.tensor(0.005, dtype=torch.float64, requires_grad=True)
+    x = adjoint.fem_positions(metal_scene(), E, None, 12, 1e-3, [12], initial_hardening=h0)
+    weights = torch.linspace(-1.0, 1.0, x.numel(), dtype=torch.float64).reshape(x.shape)
+    (x * weights).sum().backward()
+    rollout = pns.FemRollout(metal_scene())
+    out = rollout.forward(12, 1e-3, states=[0, 12])
+    g = rollout.backward({12: weights[0].numpy()})
+    assert float(h0.grad) == pytest.approx(g["initial_hardening"], rel=1e-12)
+    assert g["hardening"].shape == (len(g["hardening"]),) and len(g["hardening"]) > 0
+
+    def loss(h):
+        x = pns.FemRollout(metal_scene(h)).forward(12, 1e-3, states=[12])["x"][12]
+        return float((x * weights[0].numpy()).sum())
+
+    fd = (loss(0.005 + 1e-6) - loss(0.005 - 1e-6)) / 2e-6
+    assert float(h0.grad) == pytest.approx(fd, rel=1e-4)
+    assert abs(fd) > 1e-3, "the rollout does not depend on the yield stress: nothing yielded"
+
+
 def test_a_tiny_identification_recovers_youngs_modulus():
     """The observed run at 1.6e5 Pa; L-BFGS on log E from 1e5 Pa."""
     states = [5, 10, 15]
@@ -109,7 +140,7 @@ def test_bad_requests_are_refused_naming_what():
     with pytest.raises(ValueError, match=r"dL_dx\[3\]: expected a float64 array of shape"):
         rollout.backward({3: np.zeros((rollout.nodes + 1, 2))})
     plastic = box_scene()
-    plastic["meshes"][0]["material"] = "metal"
+    plastic["meshes"][0]["material"] = "metal_nh"  # von Mises with neo-Hookean elasticity: not written
     with pytest.raises(ValueError, match="plasticity"):
         pns.FemRollout(plastic)
     frictional = box_scene()
