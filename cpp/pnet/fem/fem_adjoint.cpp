@@ -26,8 +26,10 @@ FemAdjoint<dim>::FemAdjoint(const FemSystem<dim>& system, const ContactPotential
             "FemAdjoint: materials[0].plasticity: the adjoint is of elastic bodies and of "
             "von Mises with StVK-Hencky (the other return mappings' derivatives are not "
             "written yet)");
-    for (char fixed : system.fixed_node)
-        if (fixed) throw std::invalid_argument("FemAdjoint: fixed_node: kinematic nodes are not supported");
+    for (std::size_t i = 0; i < system.fixed_node.size(); ++i)
+        if (system.fixed_node[i] && !system.prescribed_velocity[i].isZero())
+            throw std::invalid_argument("FemAdjoint: fixed_node " + std::to_string(i) +
+                                        ": moving kinematic nodes are not supported (clamps, at rest, are)");
     if (options.time_integrator != "backward_euler")
         throw std::invalid_argument("FemAdjoint: time_integrator \"" + options.time_integrator +
                                     "\": the adjoint is of backward Euler");
@@ -124,6 +126,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     const std::size_t elements = system_.mesh.elements.size();
     std::vector<Mat<dim>> pb(elements, Mat<dim>::Zero());  // dL/d(F^P)^-1 of the state being reached back to
     std::vector<double> hb(elements, 0.0);                 // dL/dh likewise
+    // Clamps (fixed nodes at rest) are no unknowns: their v* is 0 and their lambda is 0 (the masked
+    // Hessian keeps only their mass, so the free nodes' lambda does not see them).
+    std::vector<char> fixed_components(dim * nodes, 0);
+    for (std::size_t i = 0; i < system_.fixed_node.size(); ++i)
+        for (int a = 0; a < dim; ++a) fixed_components[dim * i + a] = system_.fixed_node[i];
     Eigen::SimplicialLDLT<SparseMatrix> ldlt;
     VecX v(n), v_star(n), gradient(n);
     // Segment by segment between checkpoints, the last first; each recomputed from its checkpoint.
@@ -157,10 +164,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
             }
             for (std::size_t i = 0; i < nodes; ++i) {
                 v.template segment<dim>(dim * i) = kept[k - marks[j] + 1].v[i];
-                v_star.template segment<dim>(dim * i) = start.v[i] + dt_ * system_.gravity;
+                v_star.template segment<dim>(dim * i) =
+                    fixed_components[dim * i] ? Vec<dim>::Zero() : Vec<dim>(start.v[i] + dt_ * system_.gravity);
             }
             for (FemPotential<dim>* p : {&potential, &elastic}) {
-                p->begin_step(start.x, v_star, dt_, start.plastic_inverse, {});
+                p->begin_step(start.x, v_star, dt_, start.plastic_inverse, fixed_components);
                 p->set_material_state(system_.element_object, start.hardening);
                 p->set_reference({});
             }
@@ -170,7 +178,9 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                 throw std::runtime_error("FemAdjoint::backward: step " + std::to_string(k) +
                                          ": the step's Hessian could not be factorized");
             const VecX rhs = vb + dt_ * xb;
-            const VecX lambda = ldlt.solve(rhs);
+            VecX lambda = ldlt.solve(rhs);
+            for (Eigen::Index c = 0; c < n; ++c)
+                if (fixed_components[c]) lambda[c] = 0.0;
             const VecX m_lambda = mass.cwiseProduct(lambda);
             // dR/dE = g_el / E, g_el the elastic form's gradient in v: the elastic potential's gradient
             // less its inertia M (v - v*).
@@ -197,6 +207,9 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
             }
             xb -= (rhs - m_lambda) / dt_;
             vb = m_lambda;
+            // A clamp's velocity is prescribed (0), whatever the start's: nothing flows back through it.
+            for (std::size_t i = 0; i < system_.fixed_node.size(); ++i)
+                if (system_.fixed_node[i]) vb.template segment<dim>(dim * i).setZero();
             add_state(static_cast<std::size_t>(k));
         }
     }
@@ -205,8 +218,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     out.x.resize(nodes);
     out.v.resize(nodes);
     for (std::size_t i = 0; i < nodes; ++i) {
-        out.x[i] = xb.template segment<dim>(dim * i);
-        out.v[i] = vb.template segment<dim>(dim * i);
+        // A clamp's start position: its pull on the free nodes is not in the masked Hessian, so its
+        // gradient is not computed (0).
+        const bool clamp = i < system_.fixed_node.size() && system_.fixed_node[i];
+        out.x[i] = clamp ? Vec<dim>::Zero() : Vec<dim>(xb.template segment<dim>(dim * i));
+        out.v[i] = clamp ? Vec<dim>::Zero() : Vec<dim>(vb.template segment<dim>(dim * i));
     }
     return out;
 }

@@ -26,7 +26,8 @@
 // material/return_map_derivative.hpp (one-sided, elastic, at the yield onset), and the step's
 // residual through its dependence on (F^P)^-1: d(lambda . g_el)/d(F^P)^-1 = dt V [F^T (C : (G (F^P)^-1))
 // + G^T P], G = sum_a lambda_a g_a^T, C = dP/dF^E.
-// Refused, naming what: other plasticity, kinematic nodes, BDF2, friction, more than one material.
+// Clamps (fixed nodes at rest) are allowed: no unknowns, nothing flows back through their velocity.
+// Refused, naming what: other plasticity, moving kinematic nodes, BDF2, friction, more than one material.
 #include <functional>
 #include <map>
 #include <memory>
@@ -48,8 +49,8 @@ struct FemRolloutGradient {
 template <int dim>
 class FemAdjoint {
 public:
-    /// system: elastic, one material, no kinematic nodes (std::invalid_argument naming the field
-    /// otherwise); contact may be null (no friction is applied); options: the forward steps' solver
+    /// system: one material, elastic or von Mises with StVK-Hencky, no moving kinematic nodes
+    /// (std::invalid_argument naming the field otherwise); contact may be null (no friction is applied); options: the forward steps' solver
     /// (the Newton tolerance sets how exact the gradient is).
     FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact, const ImplicitOptions& options);
 
