@@ -1,8 +1,8 @@
 #pragma once
 // The adjoint of an implicit FEM rollout (issue 57's first part; docs/adjoint.md): the gradient of a
 // loss L of the rollout's states (the last one's, or any step's) with respect to the start's positions and velocities
-// and to the Young's modulus of the material, for elastic bodies under backward Euler with IPC contact (the ground,
-// between bodies), without friction.
+// and to the Young's modulus of the material (and, for von Mises metal, each element's initial hardening: the yield
+// stress), for bodies under backward Euler with IPC contact (the ground, between bodies), without friction.
 //
 // A converged step solves R(v; x^n, v^n, E) = M (v - v^n - dt g) + dt grad Psi(x^n + dt v) = 0 (Psi the
 // elastic energy and the barrier), and x^{n+1} = x^n + dt v^{n+1}. Its Jacobian in v is the Hessian
@@ -50,8 +50,8 @@ template <int dim>
 class FemAdjoint {
 public:
     /// system: one material, elastic or von Mises with StVK-Hencky, no moving kinematic nodes
-    /// (std::invalid_argument naming the field otherwise); contact may be null (no friction is applied); options: the forward steps' solver
-    /// (the Newton tolerance sets how exact the gradient is).
+    /// (std::invalid_argument naming the field otherwise); contact may be null (no friction is applied); options: the
+    /// forward steps' solver (the Newton tolerance sets how exact the gradient is).
     FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact, const ImplicitOptions& options);
 
     /// Runs `steps` backward Euler steps of dt from `start`, keeping a checkpoint every
