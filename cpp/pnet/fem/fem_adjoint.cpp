@@ -8,14 +8,19 @@
 #include <Eigen/SparseCholesky>
 
 #include "pnet/energy/particle_energy.hpp"
+#include "pnet/energy/return_mapping_energy.hpp"
 #include "pnet/material/return_map_derivative.hpp"
 
 namespace pnet {
 
 template <int dim>
 FemAdjoint<dim>::FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact,
-                            const ImplicitOptions& options)
-    : system_(system), contact_(contact), options_(options) {
+                            const ImplicitOptions& options, FemMethod method)
+    : system_(system), contact_(contact), options_(options), method_(method) {
+    if (method != FemMethod::Lagged && method != FemMethod::ReturnMap)
+        throw std::invalid_argument(std::string("FemAdjoint: integrator \"") + integrator_info(method).name +
+                                    "\": the adjoint is of lagged and return_map (plasticitynet converges to "
+                                    "return_map's step: differentiate that)");
     if (system.materials.size() != 1)
         throw std::invalid_argument("FemAdjoint: materials: the adjoint takes one material (the scene has " +
                                     std::to_string(system.materials.size()) + ")");
@@ -36,14 +41,20 @@ FemAdjoint<dim>::FemAdjoint(const FemSystem<dim>& system, const ContactPotential
 }
 
 template <int dim>
+std::unique_ptr<ParticleEnergy<dim>> FemAdjoint<dim>::make_energy() const {
+    if (method_ == FemMethod::ReturnMap)
+        return std::make_unique<ReturnMappingEnergy<dim>>(system_.materials, options_.tangent_damping);
+    return std::make_unique<ElasticParticleEnergy<dim>>(system_.materials);
+}
+
+template <int dim>
 FemState<dim> FemAdjoint<dim>::forward(const FemState<dim>& start, double dt, int steps, int checkpoint_every,
                                        const std::function<void(int, const FemState<dim>&)>& observe) {
     if (!(dt > 0.0) || steps < 0 || checkpoint_every < 0)
         throw std::invalid_argument("FemAdjoint::forward: dt > 0, steps >= 0 and checkpoint_every >= 0 are needed");
     const int every =
         checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
-    FemImplicitIntegrator<dim> integrator(system_, FemMethod::Lagged, options_,
-                                          std::make_unique<ElasticParticleEnergy<dim>>(system_.materials), contact_);
+    FemImplicitIntegrator<dim> integrator(system_, method_, options_, make_energy(), contact_);
     dt_ = dt;
     steps_ = steps;
     checkpoints_.clear();
@@ -65,8 +76,7 @@ std::vector<FemState<dim>> FemAdjoint<dim>::segment(int first, int last) const {
     if (last - first == 1) return {checkpoints_.at(first), checkpoints_.at(last)};  // both kept
     // A fresh integrator: a step depends on its start state only (the contact's broad phase gives the
     // same bits whatever its cache, contact.hpp), so the recomputed states are the forward pass's.
-    FemImplicitIntegrator<dim> integrator(system_, FemMethod::Lagged, options_,
-                                          std::make_unique<ElasticParticleEnergy<dim>>(system_.materials), contact_);
+    FemImplicitIntegrator<dim> integrator(system_, method_, options_, make_energy(), contact_);
     std::vector<FemState<dim>> states{checkpoints_.at(first)};
     for (int n = first; n < last; ++n) {
         FemState<dim> next = states.back();
@@ -115,9 +125,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     };
     add_state(states - 1);
     const double E = system_.materials[0].description().elastic.E;
-    ElasticParticleEnergy<dim> energy(system_.materials);
-    FemPotential<dim> potential(system_.mesh, system_.rest, energy);  // the step's R and H
-    FemPotential<dim> elastic(system_.mesh, system_.rest, energy);    // its elastic part alone (dR/dE)
+    const std::unique_ptr<ParticleEnergy<dim>> energy = make_energy();
+    FemPotential<dim> potential(system_.mesh, system_.rest, *energy);  // the step's R and H
+    FemPotential<dim> elastic(system_.mesh, system_.rest, *energy);    // its material part alone (dR/dE)
+    const bool return_mapped = method_ == FemMethod::ReturnMap;
+    std::vector<Mat<dim>> FE;
     potential.set_contact(contact_);
     potential.set_project_psd(false);
     FemRolloutGradient<dim> out;
@@ -172,6 +184,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                 p->set_material_state(system_.element_object, start.hardening);
                 p->set_reference({});
             }
+            if (return_mapped) {  // the return-mapped stress is evaluated at its reference: the iterate
+                potential.deformation(v, FE);
+                potential.set_reference(FE);
+                elastic.set_reference(FE);
+            }
             potential.prepare_hessian(v);
             ldlt.compute(*potential.hessian_matrix());
             if (ldlt.info() != Eigen::Success)
@@ -197,12 +214,24 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                     for (int a = 0; a <= dim; ++a)
                         G += lambda.template segment<dim>(dim * system_.mesh.elements[e][a]) *
                              system_.rest.grad[e][a].transpose();
-                    const Mat<dim> A = F * Pn;
+                    const Mat<dim> A = F * Pn, GP = G * Pn;
                     const PolarSVD<dim> svd = clamped_svd<dim>(A);
-                    const Elasticity<dim>& elasticity = material.elasticity();
-                    const Mat<dim> P = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
-                    const Mat<dim> CGP = unflatten<dim>(elasticity.dPdF(svd, false) * flatten<dim>(Mat<dim>(G * Pn)));
-                    pb[e] -= (dt_ * system_.rest.volume[e]) * (F.transpose() * CGP + G.transpose() * P);
+                    const double scale = dt_ * system_.rest.volume[e];
+                    if (return_mapped) {
+                        // Ptilde(A, h) and its consistent tangent T = dPtilde/dA (not symmetric in general: T^T).
+                        const Mat<dim> P = material.elastoplastic_stress(svd, start.hardening[e]);
+                        const Tensor4<dim> T = material.elastoplastic_tangent(svd, start.hardening[e], false, true);
+                        const Mat<dim> TGP = unflatten<dim>(T.transpose() * flatten<dim>(GP));
+                        pb[e] -= scale * (F.transpose() * TGP + G.transpose() * P);
+                        const ReturnMapDerivative<dim> d =
+                            return_map_derivative<dim>(material, svd, start.hardening[e]);
+                        hb[e] -= scale * d.dP_dh.cwiseProduct(GP).sum();
+                    } else {
+                        const Elasticity<dim>& elasticity = material.elasticity();
+                        const Mat<dim> P = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
+                        const Mat<dim> CGP = unflatten<dim>(elasticity.dPdF(svd, false) * flatten<dim>(GP));
+                        pb[e] -= scale * (F.transpose() * CGP + G.transpose() * P);
+                    }
                 }
             }
             xb -= (rhs - m_lambda) / dt_;

@@ -20,8 +20,11 @@
 // forward steps are the integrator's own (FemImplicitIntegrator, `lagged`: backward Euler on the
 // elastic energy), solved to the options' tolerance, which the gradient's accuracy follows (state it
 // with a result); a recomputed step is the same step to the last bit.
-// Plasticity (von Mises with StVK-Hencky, the `lagged` step: the elastic energy about the step's
-// (F^P)^-1, then the return mapping): each element's (F^P)^-1 and h are state too. The return
+// Plasticity (von Mises with StVK-Hencky): each element's (F^P)^-1 and h are state too. The `lagged`
+// step solves the elastic energy about the step's (F^P)^-1, then return-maps; the `return_map` step
+// (the classical integrator; the learned one converges to the same step) has the return-mapped stress
+// Ptilde(F (F^P)^-1, h) in its residual, its Jacobian the consistent tangent T, so that its residual's
+// (F^P)^-1 term has T^T and Ptilde for C and P, and its h term is -dt V (dPtilde/dh) : (G (F^P)^-1). The return
 // mapping's update (F^P)^-1' = F^-1 F^E(F (F^P)^-1, h), h' = h'(...) is differentiated through
 // material/return_map_derivative.hpp (one-sided, elastic, at the yield onset), and the step's
 // residual through its dependence on (F^P)^-1: d(lambda . g_el)/d(F^P)^-1 = dt V [F^T (C : (G (F^P)^-1))
@@ -52,7 +55,11 @@ public:
     /// system: one material, elastic or von Mises with StVK-Hencky, no moving kinematic nodes
     /// (std::invalid_argument naming the field otherwise); contact may be null (no friction is applied); options: the
     /// forward steps' solver (the Newton tolerance sets how exact the gradient is).
-    FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact, const ImplicitOptions& options);
+    /// method: Lagged (the elastic energy about (F^P)^-1, then the return mapping) or ReturnMap (the
+    /// return-mapped stress within the solve, the classical integrator; the learned one converges to the
+    /// same step).
+    FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact, const ImplicitOptions& options,
+               FemMethod method = FemMethod::Lagged);
 
     /// Runs `steps` backward Euler steps of dt from `start`, keeping a checkpoint every
     /// `checkpoint_every` steps (0: ceil(sqrt(steps)); 1: every state) and the last state, and calling
@@ -79,9 +86,13 @@ private:
     /// The states of steps first..last (recomputed from the checkpoint at `first`).
     std::vector<FemState<dim>> segment(int first, int last) const;
 
+    /// The element energy of the method's step.
+    std::unique_ptr<ParticleEnergy<dim>> make_energy() const;
+
     const FemSystem<dim>& system_;
     const ContactPotential<dim>* contact_;
     ImplicitOptions options_;
+    FemMethod method_;
     std::map<int, FemState<dim>> checkpoints_;
     int steps_ = -1;
     double dt_ = 0.0;

@@ -63,6 +63,8 @@ ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, co
     out.dFE_dh = svd.compose(Z.cwiseProduct(n));
     out.dh_dF = svd.compose(Vec<dim>(xi * n.cwiseQuotient(S)));
     out.dh_dh = 1.0 - xi;
+    // Ptilde = U diag(tau(Z) / Sigma) V^T: d tau / dh = (d tau / d eps)(Z) n.
+    out.dP_dh = svd.compose(Vec<dim>((material.elasticity().dtau_deps(Z) * n).cwiseQuotient(S)));
     return out;
 }
 

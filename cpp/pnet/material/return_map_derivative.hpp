@@ -23,6 +23,7 @@ struct ReturnMapDerivative {
     Mat<dim> dFE_dh = Mat<dim>::Zero();              // d F^E / d h
     Mat<dim> dh_dF = Mat<dim>::Zero();               // d h' / d F_trial
     double dh_dh = 1.0;                              // d h' / d h
+    Mat<dim> dP_dh = Mat<dim>::Zero();               // d Ptilde / d h: the return-mapped stress's
     bool yielded = false;                            // the plastic branch
 };
 

@@ -43,6 +43,11 @@ void check(const Material<dim>& material, const Vec<dim>& stretch, double h, boo
     const auto plus = material.project(F, h + step), minus = material.project(F, h - step);
     EXPECT_LT((d.dFE_dh - (plus.F_elastic - minus.F_elastic) / (2 * step)).cwiseAbs().maxCoeff(), 1e-7);
     EXPECT_NEAR(d.dh_dh, (plus.hardening - minus.hardening) / (2 * step), 1e-7);
+    const PolarSVD<dim> svd = clamped_svd<dim>(F);
+    const Mat<dim> fd_P =
+        (material.elastoplastic_stress(svd, h + step) - material.elastoplastic_stress(svd, h - step)) / (2 * step);
+    EXPECT_LT((d.dP_dh - fd_P).cwiseAbs().maxCoeff(), 1e-6 * std::max(1.0, fd_P.cwiseAbs().maxCoeff()))
+        << "dPtilde/dh";
 }
 
 TEST(ReturnMapDerivative, VonMisesMatchesCentralDifferencesElasticAndYielding) {
