@@ -39,11 +39,11 @@ struct RolloutOf final : Rollout {
     FemAdjoint<dim> adjoint;
     FemState<dim> initial;
 
-    RolloutOf(Scene s, const ImplicitOptions& options)
+    RolloutOf(Scene s, const ImplicitOptions& options, Method method)
         : scene(std::move(s)),
           fem(make_fem_system<dim>(scene)),
           contact(make_fem_contact<dim>(scene, fem)),
-          adjoint(fem.system, contact.get(), options),
+          adjoint(fem.system, contact.get(), options, method),
           initial(FemState<dim>::at_rest(fem.system)) {
         if (scene.contact.friction > 0.0)
             throw py::value_error(scene.file + ": contact.friction: the adjoint is of frictionless contact (0)");
@@ -140,11 +140,12 @@ struct RolloutOf final : Rollout {
 void define_adjoint(py::module_& m) {
     py::class_<Rollout>(m, "FemRollout", R"doc(A rollout of an implicit FEM scene of elastic bodies and its adjoint.
 
-FemRollout(scene, newton_tolerance=1e-10): scene as a path, a dict or a Scene with meshes of one
-material, elastic or von Mises with StVK-Hencky (the metal preset), no kinematic nodes, frictionless
-contact (ValueError naming the field otherwise). Steps are the `lagged` integrator's (backward Euler
-on the elastic energy, then the return mapping) with the scene's IPC contact, each solved to
-newton_tolerance (m/s), which sets how exact the gradient is.
+FemRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
+meshes of one material, elastic or von Mises with StVK-Hencky (the metal preset), no moving kinematic
+nodes, frictionless contact (ValueError naming the field otherwise). Steps are the integrator's:
+"lagged" (backward Euler on the elastic energy, then the return mapping) or "return_map" (the
+return-mapped stress within the solve; plasticitynet converges to the same step), with the scene's IPC
+contact, each solved to newton_tolerance (m/s), which sets how exact the gradient is.
 
 forward(steps, dt, x0=None, v0=None, checkpoint_every=0, states=None) runs the rollout from the
 scene's start (or x0, v0: (nodes, dim) arrays) and returns {"x": {k: array}, "v": {k: array}}, the
@@ -156,7 +157,8 @@ array, "initial_hardening": float}: dL/dx0, dL/dv0, dL/dE, dL/dh0 per element an
 material's initial_hardening: von Mises' yield stress tau_Y = 2 mu h), by the adjoint of every step,
 recomputing the steps between checkpoints (docs/adjoint.md). peak_states:
 the most states held at once by the last forward and backward.)doc")
-        .def(py::init([](const py::object& scene, double newton_tolerance) -> std::unique_ptr<Rollout> {
+        .def(py::init([](const py::object& scene, double newton_tolerance,
+                         const std::string& integrator) -> std::unique_ptr<Rollout> {
                  Scene s = scene_of(scene);
                  if (!s.has_meshes() || s.has_particles())
                      throw py::value_error(s.file + ": FemRollout takes a scene of meshes only");
@@ -165,13 +167,14 @@ the most states held at once by the last forward and backward.)doc")
                  options.newton_tolerance = newton_tolerance;
                  options.max_newton_iterations = 1000;
                  try {
-                     if (s.dim == 2) return std::make_unique<RolloutOf<2>>(std::move(s), options);
-                     return std::make_unique<RolloutOf<3>>(std::move(s), options);
+                     const Method method = parse_integrator(integrator, "integrator");
+                     if (s.dim == 2) return std::make_unique<RolloutOf<2>>(std::move(s), options, method);
+                     return std::make_unique<RolloutOf<3>>(std::move(s), options, method);
                  } catch (const std::invalid_argument& e) {
                      throw py::value_error(std::string(e.what()));
                  }
              }),
-             py::arg("scene"), py::arg("newton_tolerance") = 1e-10)
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged")
         .def_property_readonly("nodes", &Rollout::nodes)
         .def_property_readonly("youngs_modulus", &Rollout::youngs_modulus, "The material's E, Pa.")
         .def("start", &Rollout::start, "The scene's start: {\"x\", \"v\"}, (nodes, dim) arrays.")

@@ -44,9 +44,10 @@ def with_youngs_modulus(scene: dict, youngs_modulus: float, initial_hardening: f
 
 class _FemPositions(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, youngs_modulus, v0, initial_hardening, scene, steps, dt, states, newton_tolerance):
+    def forward(ctx, youngs_modulus, v0, initial_hardening, scene, steps, dt, states, newton_tolerance, integrator):
         h0 = None if initial_hardening is None else float(initial_hardening)
-        rollout = _sim().FemRollout(with_youngs_modulus(scene, float(youngs_modulus), h0), newton_tolerance)
+        rollout = _sim().FemRollout(with_youngs_modulus(scene, float(youngs_modulus), h0), newton_tolerance,
+                                    integrator)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
         ctx.rollout, ctx.states, ctx.has_v0, ctx.has_h0 = rollout, list(states), v0 is not None, h0 is not None
@@ -62,18 +63,19 @@ class _FemPositions(torch.autograd.Function):
         dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
         dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
         dh0 = torch.tensor(out["initial_hardening"], dtype=torch.float64) if ctx.has_h0 else None
-        return dE, dv0, dh0, None, None, None, None, None
+        return dE, dv0, dh0, None, None, None, None, None, None
 
 
 def fem_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
                   states: Sequence[int], newton_tolerance: float = 1e-10,
-                  initial_hardening: torch.Tensor | None = None) -> torch.Tensor:
+                  initial_hardening: torch.Tensor | None = None, integrator: str = "lagged") -> torch.Tensor:
     """The nodes' positions (len(states), nodes, dim) at the kept states `states` (0: the start; k: after
     step k) of `steps` steps of dt from the scene's start (v0: the start's velocities instead of the
     scene's), differentiable in youngs_modulus (a 0-d tensor, Pa), v0 and, for von Mises metal,
-    initial_hardening (a 0-d tensor: h0 = tau_Y / (2 mu) of every element at the start)."""
+    initial_hardening (a 0-d tensor: h0 = tau_Y / (2 mu) of every element at the start). integrator: the
+    steps' integrator, "lagged" or "return_map" (FemRollout)."""
     for k in states:
         if not 0 <= int(k) <= steps:
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
     return _FemPositions.apply(youngs_modulus, v0, initial_hardening, scene, steps, dt, [int(k) for k in states],
-                               newton_tolerance)
+                               newton_tolerance, integrator)

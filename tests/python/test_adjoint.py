@@ -83,20 +83,21 @@ def metal_scene(h0: float = 0.005) -> dict:
     return scene
 
 
-def test_the_yield_stress_gradient_through_plastic_flow_matches_central_differences():
+@pytest.mark.parametrize("integrator", ["lagged", "return_map"])
+def test_the_yield_stress_gradient_through_plastic_flow_matches_central_differences(integrator):
     E = torch.tensor(1e7, dtype=torch.float64)
     h0 = torch.tensor(0.005, dtype=torch.float64, requires_grad=True)
-    x = adjoint.fem_positions(metal_scene(), E, None, 12, 1e-3, [12], initial_hardening=h0)
+    x = adjoint.fem_positions(metal_scene(), E, None, 12, 1e-3, [12], initial_hardening=h0, integrator=integrator)
     weights = torch.linspace(-1.0, 1.0, x.numel(), dtype=torch.float64).reshape(x.shape)
     (x * weights).sum().backward()
-    rollout = pns.FemRollout(metal_scene())
-    out = rollout.forward(12, 1e-3, states=[0, 12])
+    rollout = pns.FemRollout(metal_scene(), integrator=integrator)
+    rollout.forward(12, 1e-3, states=[0, 12])
     g = rollout.backward({12: weights[0].numpy()})
     assert float(h0.grad) == pytest.approx(g["initial_hardening"], rel=1e-12)
     assert g["hardening"].shape == (len(g["hardening"]),) and len(g["hardening"]) > 0
 
     def loss(h):
-        x = pns.FemRollout(metal_scene(h)).forward(12, 1e-3, states=[12])["x"][12]
+        x = pns.FemRollout(metal_scene(h), integrator=integrator).forward(12, 1e-3, states=[12])["x"][12]
         return float((x * weights[0].numpy()).sum())
 
     fd = (loss(0.005 + 1e-6) - loss(0.005 - 1e-6)) / 2e-6
@@ -143,6 +144,8 @@ def test_bad_requests_are_refused_naming_what():
     plastic["meshes"][0]["material"] = "metal_nh"  # von Mises with neo-Hookean elasticity: not written
     with pytest.raises(ValueError, match="plasticity"):
         pns.FemRollout(plastic)
+    with pytest.raises(ValueError, match="return_map"):
+        pns.FemRollout(box_scene(), integrator="plasticitynet")
     frictional = box_scene()
     frictional["contact"]["friction"] = 0.3
     with pytest.raises(ValueError, match="contact.friction"):
