@@ -45,8 +45,7 @@ struct RolloutOf final : Rollout {
           contact(make_fem_contact<dim>(scene, fem)),
           adjoint(fem.system, contact.get(), options, method),
           initial(FemState<dim>::at_rest(fem.system)) {
-        if (scene.contact.friction > 0.0)
-            throw py::value_error(scene.file + ": contact.friction: the adjoint is of frictionless contact (0)");
+        if (scene.contact.friction > 0.0) adjoint.set_friction(scene.contact.friction, scene.contact.friction_eps_v);
         for (std::size_t k = 0; k < scene.meshes.size(); ++k)
             for (int i = fem.first_node[k]; i < fem.first_node[k + 1]; ++i)
                 initial.v[i] = scene.meshes[k].velocity.template head<dim>();
@@ -142,7 +141,8 @@ void define_adjoint(py::module_& m) {
 
 FemRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
 meshes of one material, elastic or von Mises with StVK-Hencky (the metal preset), no moving kinematic
-nodes, frictionless contact (ValueError naming the field otherwise). Steps are the integrator's:
+nodes (ValueError naming the field otherwise); the scene's friction is lagged and held at its lagged
+values in the gradient (docs/adjoint.md). Steps are the integrator's:
 "lagged" (backward Euler on the elastic energy, then the return mapping) or "return_map" (the
 return-mapped stress within the solve; plasticitynet converges to the same step), with the scene's IPC
 contact, each solved to newton_tolerance (m/s), which sets how exact the gradient is.

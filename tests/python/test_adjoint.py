@@ -146,10 +146,11 @@ def test_bad_requests_are_refused_naming_what():
         pns.FemRollout(plastic)
     with pytest.raises(ValueError, match="return_map"):
         pns.FemRollout(box_scene(), integrator="plasticitynet")
-    frictional = box_scene()
-    frictional["contact"]["friction"] = 0.3
-    with pytest.raises(ValueError, match="contact.friction"):
-        pns.FemRollout(frictional)
+    kinematic = box_scene()
+    kinematic["meshes"].append({"shape": "box", "min": [0.0, 0.1], "max": [0.05, 0.11], "element_size": 0.01,
+                                "kinematic": True, "velocity": [0, -0.1]})
+    with pytest.raises(ValueError, match="materials: the adjoint takes one material"):
+        pns.FemRollout(kinematic)
     preset = copy.deepcopy(box_scene())
     preset["meshes"][0]["material"] = "metal"
     with pytest.raises(ValueError, match=r"meshes\[0\].material"):

@@ -41,6 +41,26 @@ FemAdjoint<dim>::FemAdjoint(const FemSystem<dim>& system, const ContactPotential
 }
 
 template <int dim>
+void FemAdjoint<dim>::set_friction(double mu, double eps_v) {
+    if (!(mu >= 0.0) || !(eps_v > 0.0))
+        throw std::invalid_argument("FemAdjoint: contact.friction >= 0 and contact.friction_eps_v > 0 are needed");
+    if (!contact_ && mu > 0.0) throw std::invalid_argument("FemAdjoint: contact.friction without contact");
+    mu_ = mu;
+    eps_v_ = eps_v;
+}
+
+template <int dim>
+typename FemAdjoint<dim>::Stepper FemAdjoint<dim>::make_stepper() const {
+    Stepper s;
+    s.integrator = std::make_unique<FemImplicitIntegrator<dim>>(system_, method_, options_, make_energy(), contact_);
+    if (mu_ > 0.0) {
+        s.friction = std::make_unique<Friction<dim>>(mu_, eps_v_);
+        s.integrator->set_friction(s.friction.get(), contact_);
+    }
+    return s;
+}
+
+template <int dim>
 std::unique_ptr<ParticleEnergy<dim>> FemAdjoint<dim>::make_energy() const {
     if (method_ == FemMethod::ReturnMap)
         return std::make_unique<ReturnMappingEnergy<dim>>(system_.materials, options_.tangent_damping);
@@ -54,7 +74,7 @@ FemState<dim> FemAdjoint<dim>::forward(const FemState<dim>& start, double dt, in
         throw std::invalid_argument("FemAdjoint::forward: dt > 0, steps >= 0 and checkpoint_every >= 0 are needed");
     const int every =
         checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
-    FemImplicitIntegrator<dim> integrator(system_, method_, options_, make_energy(), contact_);
+    const Stepper stepper = make_stepper();
     dt_ = dt;
     steps_ = steps;
     checkpoints_.clear();
@@ -65,7 +85,7 @@ FemState<dim> FemAdjoint<dim>::forward(const FemState<dim>& start, double dt, in
         if (n % every == 0 || n == steps) checkpoints_[n] = state;
         if (observe) observe(n, state);
         if (n == steps) break;
-        integrator.step(state, dt, n);
+        stepper.integrator->step(state, dt, n);
     }
     peak_states_ = checkpoints_.size();
     return state;
@@ -76,11 +96,11 @@ std::vector<FemState<dim>> FemAdjoint<dim>::segment(int first, int last) const {
     if (last - first == 1) return {checkpoints_.at(first), checkpoints_.at(last)};  // both kept
     // A fresh integrator: a step depends on its start state only (the contact's broad phase gives the
     // same bits whatever its cache, contact.hpp), so the recomputed states are the forward pass's.
-    FemImplicitIntegrator<dim> integrator(system_, method_, options_, make_energy(), contact_);
+    const Stepper stepper = make_stepper();
     std::vector<FemState<dim>> states{checkpoints_.at(first)};
     for (int n = first; n < last; ++n) {
         FemState<dim> next = states.back();
-        integrator.step(next, dt_, n);
+        stepper.integrator->step(next, dt_, n);
         states.push_back(std::move(next));
     }
     return states;
@@ -132,6 +152,16 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     std::vector<Mat<dim>> FE;
     potential.set_contact(contact_);
     potential.set_project_psd(false);
+    // Lagged friction: its pairs lagged at each step's start, as the forward step's; held, so the x^n
+    // term of the adjoint takes the Hessian without it (frictionless).
+    Friction<dim> friction(std::max(mu_, 0.0), eps_v_);
+    FemPotential<dim> frictionless(system_.mesh, system_.rest, *energy);
+    const bool frictional = mu_ > 0.0;
+    if (frictional) {
+        potential.set_friction(&friction);
+        frictionless.set_contact(contact_);
+        frictionless.set_project_psd(false);
+    }
     FemRolloutGradient<dim> out;
     const Material<dim>& material = system_.materials[0];
     const bool plastic = material.description().plasticity != PlasticityModel::None;
@@ -179,7 +209,8 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                 v_star.template segment<dim>(dim * i) =
                     fixed_components[dim * i] ? Vec<dim>::Zero() : Vec<dim>(start.v[i] + dt_ * system_.gravity);
             }
-            for (FemPotential<dim>* p : {&potential, &elastic}) {
+            if (frictional) friction.lag(*contact_, start.x);
+            for (FemPotential<dim>* p : {&potential, &elastic, &frictionless}) {
                 p->begin_step(start.x, v_star, dt_, start.plastic_inverse, fixed_components);
                 p->set_material_state(system_.element_object, start.hardening);
                 p->set_reference({});
@@ -188,6 +219,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                 potential.deformation(v, FE);
                 potential.set_reference(FE);
                 elastic.set_reference(FE);
+                frictionless.set_reference(FE);
             }
             potential.prepare_hessian(v);
             ldlt.compute(*potential.hessian_matrix());
@@ -234,7 +266,12 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                     }
                 }
             }
-            xb -= (rhs - m_lambda) / dt_;
+            if (frictional) {  // (H_nf - M) lambda / dt: the friction's lagged pairs are held
+                frictionless.prepare_hessian(v);
+                xb -= (*frictionless.hessian_matrix() * lambda - m_lambda) / dt_;
+            } else {
+                xb -= (rhs - m_lambda) / dt_;  // H lambda = rhs
+            }
             vb = m_lambda;
             // A clamp's velocity is prescribed (0), whatever the start's: nothing flows back through it.
             for (std::size_t i = 0; i < system_.fixed_node.size(); ++i)

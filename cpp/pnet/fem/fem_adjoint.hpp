@@ -30,7 +30,9 @@
 // residual through its dependence on (F^P)^-1: d(lambda . g_el)/d(F^P)^-1 = dt V [F^T (C : (G (F^P)^-1))
 // + G^T P], G = sum_a lambda_a g_a^T, C = dP/dF^E.
 // Clamps (fixed nodes at rest) are allowed: no unknowns, nothing flows back through their velocity.
-// Refused, naming what: other plasticity, moving kinematic nodes, BDF2, friction, more than one material.
+// Friction (set_friction) is lagged: its pairs are held at their values of each step's start, so the
+// x^n term of the step's adjoint uses the Hessian without friction, (H_nf - M) / dt.
+// Refused, naming what: other plasticity, moving kinematic nodes, BDF2, more than one material.
 #include <functional>
 #include <map>
 #include <memory>
@@ -61,6 +63,12 @@ public:
     FemAdjoint(const FemSystem<dim>& system, const ContactPotential<dim>* contact, const ImplicitOptions& options,
                FemMethod method = FemMethod::Lagged);
 
+    /// Lagged IPC friction on the contact's pairs (Coulomb coefficient mu > 0, smoothed below eps_v
+    /// m/s), as the scene's contact.friction: the adjoint holds each step's lagged pairs (their normal
+    /// forces, tangents and weights, taken at the step's start) fixed, so it is the gradient of the
+    /// rollout with those held (exact for one step's start velocities and E; docs/adjoint.md).
+    void set_friction(double mu, double eps_v);
+
     /// Runs `steps` backward Euler steps of dt from `start`, keeping a checkpoint every
     /// `checkpoint_every` steps (0: ceil(sqrt(steps)); 1: every state) and the last state, and calling
     /// observe(k, state) at each state k = 0..steps (where a loss reads them); returns the last state.
@@ -89,10 +97,18 @@ private:
     /// The element energy of the method's step.
     std::unique_ptr<ParticleEnergy<dim>> make_energy() const;
 
+    /// An integrator of the method, with its friction when set (the friction outlives it).
+    struct Stepper {
+        std::unique_ptr<Friction<dim>> friction;
+        std::unique_ptr<FemImplicitIntegrator<dim>> integrator;
+    };
+    Stepper make_stepper() const;
+
     const FemSystem<dim>& system_;
     const ContactPotential<dim>* contact_;
     ImplicitOptions options_;
     FemMethod method_;
+    double mu_ = 0.0, eps_v_ = 1e-4;
     std::map<int, FemState<dim>> checkpoints_;
     int steps_ = -1;
     double dt_ = 0.0;
