@@ -377,6 +377,36 @@ for title, folder, runs in SCENES:
 ]
 
 
+NOTEBOOKS["inverse_identification"] = [
+    new_markdown_cell("""# Identifying a material from an observed run (issue 57; docs/adjoint.md)
+
+Young's modulus of an elastic box bouncing on the ground, and the yield stress of a metal block
+flattening on it (FEM), each fitted to frames of an observed run by L-BFGS on the log of the parameter.
+Each evaluation is a forward rollout and its adjoint. Regenerate:
+`python3 scripts/identify.py youngs_modulus --out notebooks/results/identify` and
+`python3 scripts/identify.py yield_stress --out notebooks/results/identify` (the JSON and PNG files;
+the observed runs' folders are not kept)."""),
+    new_code_cell(PREAMBLE),
+    new_code_cell('''cases = {"youngs_modulus": ("E", "Pa"), "yield_stress": ("h0", "")}
+fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+rows = ["| case | true | start | identified | relative error | evaluations |", "|---|---|---|---|---|---|"]
+for name, (symbol, unit) in cases.items():
+    run = json.loads(require(RESULTS / "identify" / f"{name}.json").read_text())
+    path = run["path"]
+    axes[0].semilogy(range(1, len(path) + 1), [p["loss_mm2"] for p in path], "o-", label=name)
+    axes[1].plot(range(1, len(path) + 1), [p["value"] / run["true"] for p in path], "o-", label=name)
+    rows.append(f"| {name} | {run['true']:.6g} {unit} | {run['start']:.6g} {unit} | {run['identified']:.6g} {unit} "
+                f"| {run['relative_error']:.2g} | {len(path)} |")
+axes[0].set(title="loss along the optimizer's path", xlabel="evaluation (forward + backward)", ylabel="mm$^2$ (log)")
+axes[1].set(title="parameter / true value", xlabel="evaluation", ylabel="ratio")
+axes[1].axhline(1.0, color="k", lw=0.8)
+for ax in axes:
+    ax.legend()
+plt.show()
+display(Markdown("\\n".join(rows)))'''),
+]
+
+
 def build(execute: bool, names=()) -> None:
     unknown = set(names) - set(NOTEBOOKS)
     if unknown:

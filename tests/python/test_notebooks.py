@@ -16,7 +16,7 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 def test_every_notebook_is_listed():
     names = {p.stem for p in NOTEBOOKS}
     assert {"fig04_training_curves", "fig05_accuracy", "table1_timings", "fig11_energy_representations", "fig12_regularizer", "fig13_gallery_3d",
-            "fig14_16_elastic_regions", "fig06_10_scenes_2d"} <= names
+            "fig14_16_elastic_regions", "fig06_10_scenes_2d", "inverse_identification"} <= names
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
