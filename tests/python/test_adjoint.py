@@ -59,6 +59,23 @@ def test_rollout_gradient_matches_central_differences():
     assert float((g["v0"] * d).sum()) == pytest.approx(fd, rel=1e-4)
 
 
+def test_a_3d_rollout_gradient_matches_central_differences():
+    scene = box_scene()
+    scene.update(dim=3, domain={"min": [0, -0.01, 0], "max": [0.2, 0.2, 0.2]}, gravity=[0, -9.8, 0])
+    scene["meshes"][0].update(min=[0.07, 0.002, 0.07], max=[0.13, 0.032, 0.1], velocity=[0, -0.5, 0])
+    rollout = pns.FemRollout(scene)
+    out = rollout.forward(STEPS, DT, states=[STEPS])
+    a = np.random.default_rng(5).uniform(-1, 1, out["x"][STEPS].shape)
+    g = rollout.backward({STEPS: a})
+
+    def loss(E):
+        s = adjoint.with_youngs_modulus(scene, E)
+        return float((pns.FemRollout(s).forward(STEPS, DT, states=[STEPS])["x"][STEPS] * a).sum())
+
+    fd = (loss(1e5 * (1 + 1e-4)) - loss(1e5 * (1 - 1e-4))) / (2e-4 * 1e5)
+    assert g["youngs_modulus"] == pytest.approx(fd, rel=1e-4)
+
+
 def test_torch_function_gives_the_adjoints_gradients():
     E = torch.tensor(1e5, dtype=torch.float64, requires_grad=True)
     v0 = torch.from_numpy(pns.FemRollout(box_scene()).start()["v"]).requires_grad_(True)
