@@ -3,6 +3,7 @@
 
     scripts/identify.py youngs_modulus [--true-E 2e5] [--start-E 1e5] [--out out/identify]
     scripts/identify.py yield_stress [--true-h0 0.004] [--start-h0 0.006] [--out out/identify]
+    [--integrator lagged|return_map]: the steps of the observed run and of the fit (default lagged)
 
 youngs_modulus: an elastic box (FEM, neo-Hookean, bouncing_box() below) dropped onto the ground
 bounces. The observed run is `pnet simulate` of that scene at --true-E with the implicit integrator
@@ -45,6 +46,9 @@ from plasticitynet import adjoint, frames  # noqa: E402
 FRAME_DT, FRAMES, DT = 0.01, 10, 1e-3
 
 
+INTEGRATOR = "lagged"  # the steps of the observed run and of the fit (--integrator)
+
+
 def bouncing_box(E: float) -> dict:
     """A 6 x 3 cm elastic box (1000 kg/m^3, nu 0.3) 1 cm above the ground, falling at 1 m/s; 0.1 s."""
     return {
@@ -52,7 +56,7 @@ def bouncing_box(E: float) -> dict:
         "description": "scripts/identify.py: an elastic box bouncing on the ground, for identifying E.",
         "dim": 2, "domain": {"min": [0, -0.01], "max": [0.2, 0.2]},
         "gravity": [0, -9.8], "frame_dt": FRAME_DT, "frames": FRAMES,
-        "integrator": {"name": "lagged", "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
+        "integrator": {"name": INTEGRATOR, "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
         "meshes": [{"shape": "box", "min": [0.07, 0.01], "max": [0.13, 0.04], "element_size": 0.01,
                     "velocity": [0, -1.0],
                     "material": {"name": "rubber", "density": 1000,
@@ -70,7 +74,7 @@ def metal_block(h0: float) -> dict:
         "description": "scripts/identify.py: a metal block flattening on the ground, for identifying its yield stress.",
         "dim": 2, "domain": {"min": [0, -0.01], "max": [0.2, 0.2]},
         "gravity": [0, -9.8], "frame_dt": 0.002, "frames": FRAMES,
-        "integrator": {"name": "lagged", "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
+        "integrator": {"name": INTEGRATOR, "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
         "meshes": [{"shape": "box", "min": [0.07, 0.002], "max": [0.13, 0.032], "element_size": 0.01,
                     "velocity": [0, -4.0],
                     "material": {"name": "metal", "density": 7800, "initial_hardening": h0,
@@ -146,7 +150,7 @@ def identify_youngs_modulus(true_E: float, start_E: float, out: Path, max_evalua
     scene = bouncing_box(start_E)  # the fit's scene: E is what it moves
 
     def positions(E, steps, states):
-        return adjoint.fem_positions(scene, E, None, steps, DT, states)
+        return adjoint.fem_positions(scene, E, None, steps, DT, states, integrator=INTEGRATOR)
 
     return fit("youngs_modulus", "E", "Pa", bouncing_box(true_E), FRAME_DT, true_E, start_E, positions, out,
                max_evaluations)
@@ -159,7 +163,7 @@ def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evalua
 
     def positions(h0, steps, states):
         return adjoint.fem_positions(scene, torch.tensor(1e7, dtype=torch.float64), None, steps, DT, states,
-                                     initial_hardening=h0)
+                                     initial_hardening=h0, integrator=INTEGRATOR)
 
     status = fit("yield_stress", "h0", "", metal_block(true_h0), 0.002, true_h0, start_h0, positions, out,
                  max_evaluations)
@@ -177,8 +181,12 @@ def main() -> int:
                         help="the observed run's initial hardening h0 = tau_Y / (2 mu) (the fit never sees it)")
     parser.add_argument("--start-h0", type=float, default=0.006, help="the fit's first h0")
     parser.add_argument("--max-evaluations", type=int, default=20)
+    parser.add_argument("--integrator", choices=["lagged", "return_map"], default="lagged",
+                        help="the steps of the observed run and of the fit")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "identify")
     args = parser.parse_args()
+    global INTEGRATOR
+    INTEGRATOR = args.integrator
     if args.case == "yield_stress":
         return identify_yield_stress(args.true_h0, args.start_h0, args.out, args.max_evaluations)
     return identify_youngs_modulus(args.true_E, args.start_E, args.out, args.max_evaluations)
