@@ -139,7 +139,8 @@ struct RolloutOf final : Rollout {
 void define_adjoint(py::module_& m) {
     py::class_<Rollout>(m, "FemRollout", R"doc(A rollout of an implicit FEM scene of elastic bodies and its adjoint.
 
-FemRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
+FemRollout(scene, newton_tolerance=1e-10, integrator="lagged", time_integrator="backward_euler"; or
+"bdf2"): scene as a path, a dict or a Scene with
 meshes of one material, elastic or von Mises with StVK-Hencky (the metal preset), no moving kinematic
 nodes (ValueError naming the field otherwise); the scene's friction is lagged and held at its lagged
 values in the gradient (docs/adjoint.md). Steps are the integrator's:
@@ -157,8 +158,8 @@ array, "initial_hardening": float}: dL/dx0, dL/dv0, dL/dE, dL/dh0 per element an
 material's initial_hardening: von Mises' yield stress tau_Y = 2 mu h), by the adjoint of every step,
 recomputing the steps between checkpoints (docs/adjoint.md). peak_states:
 the most states held at once by the last forward and backward.)doc")
-        .def(py::init([](const py::object& scene, double newton_tolerance,
-                         const std::string& integrator) -> std::unique_ptr<Rollout> {
+        .def(py::init([](const py::object& scene, double newton_tolerance, const std::string& integrator,
+                         const std::string& time_integrator) -> std::unique_ptr<Rollout> {
                  Scene s = scene_of(scene);
                  if (!s.has_meshes() || s.has_particles())
                      throw py::value_error(s.file + ": FemRollout takes a scene of meshes only");
@@ -166,6 +167,10 @@ the most states held at once by the last forward and backward.)doc")
                  ImplicitOptions options;
                  options.newton_tolerance = newton_tolerance;
                  options.max_newton_iterations = 1000;
+                 if (time_integrator != "backward_euler" && time_integrator != "bdf2")
+                     throw py::value_error("time_integrator: \"" + time_integrator +
+                                           "\" (expected backward_euler or bdf2)");
+                 options.time_integrator = time_integrator;
                  try {
                      const Method method = parse_integrator(integrator, "integrator");
                      if (s.dim == 2) return std::make_unique<RolloutOf<2>>(std::move(s), options, method);
@@ -174,7 +179,8 @@ the most states held at once by the last forward and backward.)doc")
                      throw py::value_error(std::string(e.what()));
                  }
              }),
-             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged")
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged",
+             py::arg("time_integrator") = "backward_euler")
         .def_property_readonly("nodes", &Rollout::nodes)
         .def_property_readonly("youngs_modulus", &Rollout::youngs_modulus, "The material's E, Pa.")
         .def("start", &Rollout::start, "The scene's start: {\"x\", \"v\"}, (nodes, dim) arrays.")

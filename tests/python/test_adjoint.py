@@ -76,6 +76,20 @@ def test_a_3d_rollout_gradient_matches_central_differences():
     assert g["youngs_modulus"] == pytest.approx(fd, rel=1e-4)
 
 
+def test_a_bdf2_rollout_gradient_matches_central_differences():
+    rollout = pns.FemRollout(box_scene(), time_integrator="bdf2")
+    out = rollout.forward(STEPS, DT, states=[STEPS])
+    a = np.random.default_rng(6).uniform(-1, 1, out["x"][STEPS].shape)
+    g = rollout.backward({STEPS: a})
+
+    def loss(E):
+        r = pns.FemRollout(adjoint.with_youngs_modulus(box_scene(), E), time_integrator="bdf2")
+        return float((r.forward(STEPS, DT, states=[STEPS])["x"][STEPS] * a).sum())
+
+    fd = (loss(1e5 * (1 + 1e-4)) - loss(1e5 * (1 - 1e-4))) / (2e-4 * 1e5)
+    assert g["youngs_modulus"] == pytest.approx(fd, rel=1e-4)
+
+
 def test_torch_function_gives_the_adjoints_gradients():
     E = torch.tensor(1e5, dtype=torch.float64, requires_grad=True)
     v0 = torch.from_numpy(pns.FemRollout(box_scene()).start()["v"]).requires_grad_(True)
@@ -163,6 +177,8 @@ def test_bad_requests_are_refused_naming_what():
         pns.FemRollout(plastic)
     with pytest.raises(ValueError, match="return_map"):
         pns.FemRollout(box_scene(), integrator="plasticitynet")
+    with pytest.raises(ValueError, match="time_integrator"):
+        pns.FemRollout(box_scene(), time_integrator="rk4")
     kinematic = box_scene()
     kinematic["meshes"].append({"shape": "box", "min": [0.0, 0.1], "max": [0.05, 0.11], "element_size": 0.01,
                                 "kinematic": True, "velocity": [0, -0.1]})

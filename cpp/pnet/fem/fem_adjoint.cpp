@@ -10,6 +10,7 @@
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/energy/return_mapping_energy.hpp"
 #include "pnet/material/return_map_derivative.hpp"
+#include "pnet/solver/bdf2.hpp"
 
 namespace pnet {
 
@@ -35,9 +36,6 @@ FemAdjoint<dim>::FemAdjoint(const FemSystem<dim>& system, const ContactPotential
         if (system.fixed_node[i] && !system.prescribed_velocity[i].isZero())
             throw std::invalid_argument("FemAdjoint: fixed_node " + std::to_string(i) +
                                         ": moving kinematic nodes are not supported (clamps, at rest, are)");
-    if (options.time_integrator != "backward_euler")
-        throw std::invalid_argument("FemAdjoint: time_integrator \"" + options.time_integrator +
-                                    "\": the adjoint is of backward Euler");
 }
 
 template <int dim>
@@ -174,6 +172,8 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     for (std::size_t i = 0; i < system_.fixed_node.size(); ++i)
         for (int a = 0; a < dim; ++a) fixed_components[dim * i + a] = system_.fixed_node[i];
     Eigen::SimplicialLDLT<SparseMatrix> ldlt;
+    std::vector<Vec<dim>> x_hat(nodes);
+    VecX xpb = VecX::Zero(n), vpb = VecX::Zero(n);  // the cotangents of a state's history (x^{n-1}, v^{n-1})
     VecX v(n), v_star(n), gradient(n);
     // Segment by segment between checkpoints, the last first; each recomputed from its checkpoint.
     std::vector<int> marks;
@@ -204,14 +204,23 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                         xb.template segment<dim>(dim * system_.mesh.elements[e][a]) += F_bar * system_.rest.grad[e][a];
                 }
             }
+            // BDF2 (once the state has history): the potential about x^ = c x^n - p x^{n-1} with the step
+            // h = beta dt (fem_integrator.hpp); backward Euler: c = 1, p = 0, h = dt.
+            const bool bdf2 = options_.time_integrator == "bdf2" && start.x_previous.size() == nodes;
+            const Bdf2Weights w = bdf2 ? bdf2_weights(start.dt_previous > 0.0 ? dt_ / start.dt_previous : 1.0)
+                                       : Bdf2Weights{1.0, 0.0, 1.0};
+            const double h = w.beta * dt_;
             for (std::size_t i = 0; i < nodes; ++i) {
                 v.template segment<dim>(dim * i) = kept[k - marks[j] + 1].v[i];
+                x_hat[i] = bdf2 ? Vec<dim>(w.current * start.x[i] - w.previous * start.x_previous[i]) : start.x[i];
+                const Vec<dim> v_hat =
+                    bdf2 ? Vec<dim>(w.current * start.v[i] - w.previous * start.v_previous[i]) : start.v[i];
                 v_star.template segment<dim>(dim * i) =
-                    fixed_components[dim * i] ? Vec<dim>::Zero() : Vec<dim>(start.v[i] + dt_ * system_.gravity);
+                    fixed_components[dim * i] ? Vec<dim>::Zero() : Vec<dim>(v_hat + h * system_.gravity);
             }
             if (frictional) friction.lag(*contact_, start.x);
             for (FemPotential<dim>* p : {&potential, &elastic, &frictionless}) {
-                p->begin_step(start.x, v_star, dt_, start.plastic_inverse, fixed_components);
+                p->begin_step(x_hat, v_star, h, start.plastic_inverse, fixed_components);
                 p->set_material_state(system_.element_object, start.hardening);
                 p->set_reference({});
             }
@@ -226,7 +235,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
             if (ldlt.info() != Eigen::Success)
                 throw std::runtime_error("FemAdjoint::backward: step " + std::to_string(k) +
                                          ": the step's Hessian could not be factorized");
-            const VecX rhs = vb + dt_ * xb;
+            const VecX rhs = vb + h * xb;
             VecX lambda = ldlt.solve(rhs);
             for (Eigen::Index c = 0; c < n; ++c)
                 if (fixed_components[c]) lambda[c] = 0.0;
@@ -248,7 +257,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                              system_.rest.grad[e][a].transpose();
                     const Mat<dim> A = F * Pn, GP = G * Pn;
                     const PolarSVD<dim> svd = clamped_svd<dim>(A);
-                    const double scale = dt_ * system_.rest.volume[e];
+                    const double scale = h * system_.rest.volume[e];
                     if (return_mapped) {
                         // Ptilde(A, h) and its consistent tangent T = dPtilde/dA (not symmetric in general: T^T).
                         const Mat<dim> P = material.elastoplastic_stress(svd, start.hardening[e]);
@@ -266,16 +275,27 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                     }
                 }
             }
-            if (frictional) {  // (H_nf - M) lambda / dt: the friction's lagged pairs are held
+            // x^'s cotangent: xb - (H_nf - M) lambda / h (the friction's lagged pairs held; H_nf = H
+            // without friction, and H lambda = rhs); v^'s: M lambda. Then x^n and v^n take c times them
+            // and what flows back through the next state's history (x_prev = x^n, v_prev = v^n); the
+            // history of this state, -p times them.
+            VecX x_hat_bar = xb;
+            if (frictional) {
                 frictionless.prepare_hessian(v);
-                xb -= (*frictionless.hessian_matrix() * lambda - m_lambda) / dt_;
+                x_hat_bar -= (*frictionless.hessian_matrix() * lambda - m_lambda) / h;
             } else {
-                xb -= (rhs - m_lambda) / dt_;  // H lambda = rhs
+                x_hat_bar -= (rhs - m_lambda) / h;
             }
-            vb = m_lambda;
+            xb = w.current * x_hat_bar + xpb;
+            vb = w.current * m_lambda + vpb;
+            xpb = -w.previous * x_hat_bar;
+            vpb = -w.previous * m_lambda;
             // A clamp's velocity is prescribed (0), whatever the start's: nothing flows back through it.
             for (std::size_t i = 0; i < system_.fixed_node.size(); ++i)
-                if (system_.fixed_node[i]) vb.template segment<dim>(dim * i).setZero();
+                if (system_.fixed_node[i]) {
+                    vb.template segment<dim>(dim * i).setZero();
+                    vpb.template segment<dim>(dim * i).setZero();
+                }
             add_state(static_cast<std::size_t>(k));
         }
     }

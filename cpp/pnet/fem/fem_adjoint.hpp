@@ -2,7 +2,7 @@
 // The adjoint of an implicit FEM rollout (issue 57's first part; docs/adjoint.md): the gradient of a
 // loss L of the rollout's states (the last one's, or any step's) with respect to the start's positions and velocities
 // and to the Young's modulus of the material (and, for von Mises metal, each element's initial hardening: the yield
-// stress), for bodies under backward Euler with IPC contact (the ground, between bodies), without friction.
+// stress), for bodies under backward Euler or BDF2 with IPC contact (the ground, between bodies) and lagged friction.
 //
 // A converged step solves R(v; x^n, v^n, E) = M (v - v^n - dt g) + dt grad Psi(x^n + dt v) = 0 (Psi the
 // elastic energy and the barrier), and x^{n+1} = x^n + dt v^{n+1}. Its Jacobian in v is the Hessian
@@ -32,7 +32,10 @@
 // Clamps (fixed nodes at rest) are allowed: no unknowns, nothing flows back through their velocity.
 // Friction (set_friction) is lagged: its pairs are held at their values of each step's start, so the
 // x^n term of the step's adjoint uses the Hessian without friction, (H_nf - M) / dt.
-// Refused, naming what: other plasticity, moving kinematic nodes, BDF2, more than one material.
+// BDF2 (options.time_integrator): the step is the same potential about x^ = c x^n - p x^{n-1} with h = beta dt
+// (solver/bdf2.hpp), so the step's cotangents of x^ and v^ go to x^n, v^n (times c) and to the state's
+// history x^{n-1}, v^{n-1} (times -p); the first step, without history, is backward Euler.
+// Refused, naming what: other plasticity, moving kinematic nodes, more than one material.
 #include <functional>
 #include <map>
 #include <memory>
@@ -69,7 +72,7 @@ public:
     /// rollout with those held (exact for one step's start velocities and E; docs/adjoint.md).
     void set_friction(double mu, double eps_v);
 
-    /// Runs `steps` backward Euler steps of dt from `start`, keeping a checkpoint every
+    /// Runs `steps` steps of dt (backward Euler or BDF2, as the options say) from `start`, keeping a checkpoint every
     /// `checkpoint_every` steps (0: ceil(sqrt(steps)); 1: every state) and the last state, and calling
     /// observe(k, state) at each state k = 0..steps (where a loss reads them); returns the last state.
     FemState<dim> forward(const FemState<dim>& start, double dt, int steps, int checkpoint_every = 0,
