@@ -46,17 +46,14 @@ from plasticitynet import adjoint, frames  # noqa: E402
 FRAME_DT, FRAMES, DT = 0.01, 10, 1e-3
 
 
-INTEGRATOR = "lagged"  # the steps of the observed run and of the fit (--integrator)
-
-
-def bouncing_box(E: float) -> dict:
+def bouncing_box(E: float, integrator: str = "lagged") -> dict:
     """A 6 x 3 cm elastic box (1000 kg/m^3, nu 0.3) 1 cm above the ground, falling at 1 m/s; 0.1 s."""
     return {
         "name": "bouncing_box_2d",
         "description": "scripts/identify.py: an elastic box bouncing on the ground, for identifying E.",
         "dim": 2, "domain": {"min": [0, -0.01], "max": [0.2, 0.2]},
         "gravity": [0, -9.8], "frame_dt": FRAME_DT, "frames": FRAMES,
-        "integrator": {"name": INTEGRATOR, "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
+        "integrator": {"name": integrator, "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
         "meshes": [{"shape": "box", "min": [0.07, 0.01], "max": [0.13, 0.04], "element_size": 0.01,
                     "velocity": [0, -1.0],
                     "material": {"name": "rubber", "density": 1000,
@@ -66,7 +63,7 @@ def bouncing_box(E: float) -> dict:
     }
 
 
-def metal_block(h0: float) -> dict:
+def metal_block(h0: float, integrator: str = "lagged") -> dict:
     """A 6 x 3 cm metal block (the metal preset's elasticity and hardening, initial hardening h0) 2 mm
     above the ground, falling at 4 m/s; 20 ms in frames of 2 ms."""
     return {
@@ -74,7 +71,7 @@ def metal_block(h0: float) -> dict:
         "description": "scripts/identify.py: a metal block flattening on the ground, for identifying its yield stress.",
         "dim": 2, "domain": {"min": [0, -0.01], "max": [0.2, 0.2]},
         "gravity": [0, -9.8], "frame_dt": 0.002, "frames": FRAMES,
-        "integrator": {"name": INTEGRATOR, "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
+        "integrator": {"name": integrator, "dt": DT, "newton_tolerance": 1e-10, "max_newton_iterations": 1000},
         "meshes": [{"shape": "box", "min": [0.07, 0.002], "max": [0.13, 0.032], "element_size": 0.01,
                     "velocity": [0, -4.0],
                     "material": {"name": "metal", "density": 7800, "initial_hardening": h0,
@@ -146,26 +143,26 @@ def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_va
     return 0
 
 
-def identify_youngs_modulus(true_E: float, start_E: float, out: Path, max_evaluations: int) -> int:
-    scene = bouncing_box(start_E)  # the fit's scene: E is what it moves
+def identify_youngs_modulus(true_E: float, start_E: float, out: Path, max_evaluations: int, integrator: str) -> int:
+    scene = bouncing_box(start_E, integrator)  # the fit's scene: E is what it moves
 
     def positions(E, steps, states):
-        return adjoint.fem_positions(scene, E, None, steps, DT, states, integrator=INTEGRATOR)
+        return adjoint.fem_positions(scene, E, None, steps, DT, states, integrator=integrator)
 
-    return fit("youngs_modulus", "E", "Pa", bouncing_box(true_E), FRAME_DT, true_E, start_E, positions, out,
+    return fit("youngs_modulus", "E", "Pa", bouncing_box(true_E, integrator), FRAME_DT, true_E, start_E, positions, out,
                max_evaluations)
 
 
-def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int) -> int:
-    scene = metal_block(start_h0)
+def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int, integrator: str) -> int:
+    scene = metal_block(start_h0, integrator)
     mu = 1e7 / (2 * 1.3)
     print(f"yield stress tau_Y = 2 mu h0 with mu = {mu:.6g} Pa: the true {2 * mu * true_h0:.6g} Pa")
 
     def positions(h0, steps, states):
         return adjoint.fem_positions(scene, torch.tensor(1e7, dtype=torch.float64), None, steps, DT, states,
-                                     initial_hardening=h0, integrator=INTEGRATOR)
+                                     initial_hardening=h0, integrator=integrator)
 
-    status = fit("yield_stress", "h0", "", metal_block(true_h0), 0.002, true_h0, start_h0, positions, out,
+    status = fit("yield_stress", "h0", "", metal_block(true_h0, integrator), 0.002, true_h0, start_h0, positions, out,
                  max_evaluations)
     found = json.loads((out / "yield_stress.json").read_text())["identified"]
     print(f"tau_Y = {2 * mu * found:.6g} Pa against the true {2 * mu * true_h0:.6g} Pa")
@@ -185,11 +182,9 @@ def main() -> int:
                         help="the steps of the observed run and of the fit")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "identify")
     args = parser.parse_args()
-    global INTEGRATOR
-    INTEGRATOR = args.integrator
     if args.case == "yield_stress":
-        return identify_yield_stress(args.true_h0, args.start_h0, args.out, args.max_evaluations)
-    return identify_youngs_modulus(args.true_E, args.start_E, args.out, args.max_evaluations)
+        return identify_yield_stress(args.true_h0, args.start_h0, args.out, args.max_evaluations, args.integrator)
+    return identify_youngs_modulus(args.true_E, args.start_E, args.out, args.max_evaluations, args.integrator)
 
 
 if __name__ == "__main__":

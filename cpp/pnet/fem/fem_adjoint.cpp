@@ -144,18 +144,20 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     add_state(states - 1);
     const double E = system_.materials[0].description().elastic.E;
     const std::unique_ptr<ParticleEnergy<dim>> energy = make_energy();
-    FemPotential<dim> potential(system_.mesh, system_.rest, *energy);  // the step's R and H
-    FemPotential<dim> elastic(system_.mesh, system_.rest, *energy);    // its material part alone (dR/dE)
+    FemPotential<dim> potential(system_.mesh, system_.rest, *energy);      // the step's R and H
+    FemPotential<dim> material_only(system_.mesh, system_.rest, *energy);  // without contact (dR/dE)
     const bool return_mapped = method_ == FemMethod::ReturnMap;
     std::vector<Mat<dim>> FE;
     potential.set_contact(contact_);
     potential.set_project_psd(false);
     // Lagged friction: its pairs lagged at each step's start, as the forward step's; held, so the x^n
     // term of the adjoint takes the Hessian without it (frictionless).
-    Friction<dim> friction(std::max(mu_, 0.0), eps_v_);
+    Friction<dim> friction(mu_, eps_v_);
     FemPotential<dim> frictionless(system_.mesh, system_.rest, *energy);
     const bool frictional = mu_ > 0.0;
+    std::vector<FemPotential<dim>*> potentials{&potential, &material_only};
     if (frictional) {
+        potentials.push_back(&frictionless);
         potential.set_friction(&friction);
         frictionless.set_contact(contact_);
         frictionless.set_project_psd(false);
@@ -166,6 +168,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     const std::size_t elements = system_.mesh.elements.size();
     std::vector<Mat<dim>> pb(elements, Mat<dim>::Zero());  // dL/d(F^P)^-1 of the state being reached back to
     std::vector<double> hb(elements, 0.0);                 // dL/dh likewise
+    // Per element, at the step's end: F = F(x^{n+1}), the SVD of F (F^P)^-1 and the return mapping's
+    // derivatives there (the state update and the residual's terms both need them).
+    std::vector<Mat<dim>> F_end(plastic ? elements : 0);
+    std::vector<PolarSVD<dim>> svd_end(F_end.size());
+    std::vector<ReturnMapDerivative<dim>> d_end(F_end.size());
     // Clamps (fixed nodes at rest) are no unknowns: their v* is 0 and their lambda is 0 (the masked
     // Hessian keeps only their mass, so the free nodes' lambda does not see them).
     std::vector<char> fixed_components(dim * nodes, 0);
@@ -188,10 +195,11 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                 // The return mapping after the solve: (F^P)^-1' = F^-1 F^E(F (F^P)^-1, h), h' = h'(...), with
                 // F = F(x^{n+1}): back into x^{n+1} (xb), (F^P)^-1 and h of the step's start.
                 for (std::size_t e = 0; e < elements; ++e) {
-                    const Mat<dim> F = deformation_gradient(system_.mesh, system_.rest, next.x, e);
+                    const Mat<dim>& F = F_end[e] = deformation_gradient(system_.mesh, system_.rest, next.x, e);
                     const Mat<dim>& Pn = start.plastic_inverse[e];
-                    const ReturnMapDerivative<dim> d =
-                        return_map_derivative<dim>(material, clamped_svd<dim>(Mat<dim>(F * Pn)), start.hardening[e]);
+                    svd_end[e] = clamped_svd<dim>(Mat<dim>(F * Pn));
+                    const ReturnMapDerivative<dim>& d = d_end[e] =
+                        return_map_derivative<dim>(material, svd_end[e], start.hardening[e]);
                     const Mat<dim> F_inv_T = F.inverse().transpose();
                     const Mat<dim> FE_bar = F_inv_T * pb[e];
                     Mat<dim> F_bar = -F_inv_T * pb[e] * next.plastic_inverse[e].transpose();
@@ -211,7 +219,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                                        : Bdf2Weights{1.0, 0.0, 1.0};
             const double h = w.beta * dt_;
             for (std::size_t i = 0; i < nodes; ++i) {
-                v.template segment<dim>(dim * i) = kept[k - marks[j] + 1].v[i];
+                v.template segment<dim>(dim * i) = next.v[i];
                 x_hat[i] = bdf2 ? Vec<dim>(w.current * start.x[i] - w.previous * start.x_previous[i]) : start.x[i];
                 const Vec<dim> v_hat =
                     bdf2 ? Vec<dim>(w.current * start.v[i] - w.previous * start.v_previous[i]) : start.v[i];
@@ -219,16 +227,14 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                     fixed_components[dim * i] ? Vec<dim>::Zero() : Vec<dim>(v_hat + h * system_.gravity);
             }
             if (frictional) friction.lag(*contact_, start.x);
-            for (FemPotential<dim>* p : {&potential, &elastic, &frictionless}) {
+            for (FemPotential<dim>* p : potentials) {
                 p->begin_step(x_hat, v_star, h, start.plastic_inverse, fixed_components);
                 p->set_material_state(system_.element_object, start.hardening);
                 p->set_reference({});
             }
             if (return_mapped) {  // the return-mapped stress is evaluated at its reference: the iterate
                 potential.deformation(v, FE);
-                potential.set_reference(FE);
-                elastic.set_reference(FE);
-                frictionless.set_reference(FE);
+                for (FemPotential<dim>* p : potentials) p->set_reference(FE);
             }
             potential.prepare_hessian(v);
             ldlt.compute(*potential.hessian_matrix());
@@ -242,21 +248,21 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
             const VecX m_lambda = mass.cwiseProduct(lambda);
             // dR/dE = g_el / E, g_el the elastic form's gradient in v: the elastic potential's gradient
             // less its inertia M (v - v*).
-            elastic.value_gradient(v, gradient);
+            material_only.value_gradient(v, gradient);
             gradient -= mass.cwiseProduct(v - v_star);
             out.youngs_modulus -= lambda.dot(gradient) / E;
             if (plastic) {
                 // The residual's dependence on the start's (F^P)^-1: -lambda . dR/d(F^P)^-1 with
                 // lambda . g_el = dt V P(F (F^P)^-1) : (G (F^P)^-1), G = sum_a lambda_a g_a^T.
                 for (std::size_t e = 0; e < elements; ++e) {
-                    const Mat<dim> F = deformation_gradient(system_.mesh, system_.rest, next.x, e);
+                    const Mat<dim>& F = F_end[e];
                     const Mat<dim>& Pn = start.plastic_inverse[e];
+                    const PolarSVD<dim>& svd = svd_end[e];
                     Mat<dim> G = Mat<dim>::Zero();
                     for (int a = 0; a <= dim; ++a)
                         G += lambda.template segment<dim>(dim * system_.mesh.elements[e][a]) *
                              system_.rest.grad[e][a].transpose();
-                    const Mat<dim> A = F * Pn, GP = G * Pn;
-                    const PolarSVD<dim> svd = clamped_svd<dim>(A);
+                    const Mat<dim> GP = G * Pn;
                     const double scale = h * system_.rest.volume[e];
                     if (return_mapped) {
                         // Ptilde(A, h) and its consistent tangent T = dPtilde/dA (not symmetric in general: T^T).
@@ -264,9 +270,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                         const Tensor4<dim> T = material.elastoplastic_tangent(svd, start.hardening[e], false, true);
                         const Mat<dim> TGP = unflatten<dim>(T.transpose() * flatten<dim>(GP));
                         pb[e] -= scale * (F.transpose() * TGP + G.transpose() * P);
-                        const ReturnMapDerivative<dim> d =
-                            return_map_derivative<dim>(material, svd, start.hardening[e]);
-                        hb[e] -= scale * d.dP_dh.cwiseProduct(GP).sum();
+                        hb[e] -= scale * d_end[e].dP_dh.cwiseProduct(GP).sum();
                     } else {
                         const Elasticity<dim>& elasticity = material.elasticity();
                         const Mat<dim> P = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));

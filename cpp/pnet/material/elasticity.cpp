@@ -210,7 +210,12 @@ Tensor4<dim> isotropic_dPdF(const PolarSVD<dim>& svd, const Vec<dim>& t, const M
             A(ji, ij) = b;
         }
     }
-    // Back to F space: column (i*d+j) of W is vec(u_i v_j^T).
+    return to_f_space<dim>(svd, A);
+}
+
+template <int dim>
+Tensor4<dim> to_f_space(const PolarSVD<dim>& svd, const Tensor4<dim>& A) {
+    // Column (i*d+j) of W is vec(u_i v_j^T).
     Tensor4<dim> W;
     for (int i = 0; i < dim; ++i)
         for (int j = 0; j < dim; ++j)
@@ -254,6 +259,8 @@ template class Elasticity<2>;
 template class Elasticity<3>;
 template Tensor4<2> isotropic_dPdF<2>(const PolarSVD<2>&, const Vec<2>&, const Mat<2>&,
                                       const std::function<double(int, int)>&, bool);
+template Tensor4<2> to_f_space<2>(const PolarSVD<2>&, const Tensor4<2>&);
+template Tensor4<3> to_f_space<3>(const PolarSVD<3>&, const Tensor4<3>&);
 template Tensor4<3> isotropic_dPdF<3>(const PolarSVD<3>&, const Vec<3>&, const Mat<3>&,
                                       const std::function<double(int, int)>&, bool);
 template Vec<2> clamp_singular_values<2>(const Vec<2>&);

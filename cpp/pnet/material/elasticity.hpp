@@ -86,6 +86,11 @@ template <int dim>
 Tensor4<dim> isotropic_dPdF(const PolarSVD<dim>& svd, const Vec<dim>& tau, const Mat<dim>& dtau_deps,
                             const std::function<double(int, int)>& tau_quotient, bool project_psd);
 
+/// A derivative given in the (U, V) frame of svd (entry (i d + j, k d + l): d(U^T dP V)_ij / d(U^T dF V)_kl)
+/// in the row-major vec(F) basis: W A W^T, column i d + j of W being vec(u_i v_j^T).
+template <int dim>
+Tensor4<dim> to_f_space(const PolarSVD<dim>& svd, const Tensor4<dim>& A);
+
 /// (log a - log b) / (a - b), exact as a -> b (1 / a there).
 double log_difference_quotient(double a, double b);
 

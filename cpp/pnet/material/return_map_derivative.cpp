@@ -54,11 +54,7 @@ ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, co
             A(ij, ij) = A(ji, ji) = 0.5 * (D + E);
             A(ij, ji) = A(ji, ij) = 0.5 * (D - E);
         }
-    Tensor4<dim> W;
-    for (int i = 0; i < dim; ++i)
-        for (int j = 0; j < dim; ++j)
-            W.col(i * dim + j) = flatten<dim>(Mat<dim>(svd.U.col(i) * svd.V.col(j).transpose()));
-    out.dFE_dF = W * A * W.transpose();
+    out.dFE_dF = to_f_space<dim>(svd, A);
     // d log Z / dh = n; h' = h + xi (L - h): dh'/d eps = xi n, dh'/dh = 1 - xi.
     out.dFE_dh = svd.compose(Z.cwiseProduct(n));
     out.dh_dF = svd.compose(Vec<dim>(xi * n.cwiseQuotient(S)));

@@ -102,8 +102,9 @@ StepRecord CoupledSimulation<dim>::step() {
     StepRecord s =
         implicit_ ? implicit_->step(particles_, state_, dt, steps_) : explicit_->step(particles_, state_, dt, steps_);
     s.advection_capped = limit && limited < dt_;
-    s.contact_pairs = coupling_->active_pairs(contact_positions());
-    s.min_distance = coupling_->min_distance(contact_positions());
+    const std::vector<Vec<dim>>& x = contact_positions();
+    s.contact_pairs = coupling_->active_pairs(x);
+    s.min_distance = coupling_->min_distance(x);
     count_step(dt);
     return s;
 }
@@ -209,10 +210,11 @@ void CoupledSimulation<dim>::write_frame(const FrameFiles& files) const {
 
 template <int dim>
 nlohmann::json CoupledSimulation<dim>::contact_state() const {
+    const std::vector<Vec<dim>>& x = contact_positions();
     return {{"dhat", coupling_->dhat()},
             {"kappa", coupling_->kappa()},
-            {"min_distance", coupling_->min_distance(contact_positions())},
-            {"active_pairs", coupling_->active_pairs(contact_positions())},
+            {"min_distance", coupling_->min_distance(x)},
+            {"active_pairs", coupling_->active_pairs(x)},
             {"penetrations", penetrations()}};
 }
 
