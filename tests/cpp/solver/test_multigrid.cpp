@@ -1,7 +1,7 @@
-// The grid multigrid preconditioner (solver/multigrid.hpp) on a constructed MPM-like problem: an
-// N x N grid's nodes, particles (2 x 2 per cell) whose quadratic B-spline stencils couple them
-// through an isotropic linear elasticity, the lumped mass on the diagonal, the floor layer's normal
-// components held fixed. CG's iterations stay bounded as the grid is refined and as the stiffness
+// The grid multigrid preconditioner (solver/multigrid.hpp) on a constructed MPM-like problem
+// (solver/grid_model_problem.hpp): an N x N grid's nodes, particles (2 x 2 per cell) whose quadratic
+// B-spline stencils couple them through an isotropic linear elasticity, the lumped mass on the
+// diagonal, the floor layer's normal components held fixed. CG's iterations stay bounded as the grid is refined and as the stiffness
 // grows 100x (32^2 to 128^2 cells; 256^2 measured the same: 40 and 41 iterations, Jacobi 1059 and
 // 1797), the preconditioned solution is the unpreconditioned one, and the result does not
 // depend on the thread count.
@@ -15,90 +15,13 @@
 #include <cstdio>
 #include <vector>
 
+#include "pnet/solver/grid_model_problem.hpp"
 #include "pnet/solver/multigrid.hpp"
 #include "pnet/solver/pcg.hpp"
 #include "support/random.hpp"
 
 namespace pnet {
 namespace {
-
-/// A = M + dt^2 K on the nodes of an N x N grid (node (i, j) is unknowns 2 (i + (N + 1) j) + a; only
-/// the nodes some particle reaches are unknowns), with the components of the floor layer (j <= 3)
-/// along y fixed: their rows and columns hold the mass alone.
-struct GridProblem {
-    int dim = 2;
-    std::vector<int> coordinates;
-    VecX free;
-    SparseMatrix A;
-
-    GridProblem(int cells, double youngs, double dt = 1e-3, double nu = 0.3, bool floor = true, double rho = 1000.0) {
-        const double dx = 1.0 / cells;
-        const double mu = youngs / (2 * (1 + nu)), lambda = youngs * nu / ((1 + nu) * (1 - 2 * nu));
-        const int n1 = cells + 1;
-        std::vector<int> dof(static_cast<std::size_t>(n1 * n1), -1);
-        struct Particle {
-            std::array<int, 9> node;
-            std::array<double, 9> w;
-            std::array<Eigen::Vector2d, 9> grad;
-        };
-        std::vector<Particle> particles;
-        for (int cj = 2; cj < cells - 2; ++cj)
-            for (int ci = 2; ci < cells - 2; ++ci)
-                for (int q = 0; q < 4; ++q) {
-                    const double x[2] = {ci + 0.25 + 0.5 * (q % 2), cj + 0.25 + 0.5 * (q / 2)};  // in cells
-                    int base[2];
-                    double w[2][3], dw[2][3];
-                    for (int a = 0; a < 2; ++a) {
-                        base[a] = static_cast<int>(std::floor(x[a] - 0.5));
-                        const double f = x[a] - base[a];
-                        w[a][0] = 0.5 * (1.5 - f) * (1.5 - f);
-                        w[a][1] = 0.75 - (f - 1) * (f - 1);
-                        w[a][2] = 0.5 * (f - 0.5) * (f - 0.5);
-                        dw[a][0] = (f - 1.5) / dx;
-                        dw[a][1] = -2 * (f - 1) / dx;
-                        dw[a][2] = (f - 0.5) / dx;
-                    }
-                    Particle p;
-                    for (int s = 0; s < 9; ++s) {
-                        const int si = s % 3, sj = s / 3;
-                        const int node = (base[0] + si) + n1 * (base[1] + sj);
-                        if (dof[node] < 0) {
-                            dof[node] = static_cast<int>(coordinates.size() / 2);
-                            coordinates.push_back(base[0] + si);
-                            coordinates.push_back(base[1] + sj);
-                        }
-                        p.node[s] = dof[node];
-                        p.w[s] = w[0][si] * w[1][sj];
-                        p.grad[s] = Eigen::Vector2d(dw[0][si] * w[1][sj], w[0][si] * dw[1][sj]);
-                    }
-                    particles.push_back(p);
-                }
-        const Eigen::Index n = static_cast<Eigen::Index>(coordinates.size());
-        free = VecX::Ones(n);
-        for (Eigen::Index k = 0; k < n / 2; ++k)
-            if (floor && coordinates[2 * k + 1] <= 3) free[2 * k + 1] = 0.0;
-        const double mp = rho * dx * dx / 4, volume = dx * dx / 4;
-        VecX mass = VecX::Zero(n);
-        std::vector<Eigen::Triplet<double>> t;
-        for (const Particle& p : particles)
-            for (int s = 0; s < 9; ++s) {
-                mass[2 * p.node[s]] += p.w[s] * mp;
-                mass[2 * p.node[s] + 1] += p.w[s] * mp;
-                for (int r = 0; r < 9; ++r)
-                    for (int a = 0; a < 2; ++a)
-                        for (int b = 0; b < 2; ++b) {
-                            const Eigen::Index row = 2 * p.node[s] + a, col = 2 * p.node[r] + b;
-                            if (free[row] == 0.0 || free[col] == 0.0) continue;
-                            const double k = mu * p.grad[s].dot(p.grad[r]) * (a == b) +
-                                             mu * p.grad[s][b] * p.grad[r][a] + lambda * p.grad[s][a] * p.grad[r][b];
-                            t.emplace_back(row, col, dt * dt * volume * k);
-                        }
-            }
-        for (Eigen::Index i = 0; i < n; ++i) t.emplace_back(i, i, mass[i]);
-        A.resize(n, n);
-        A.setFromTriplets(t.begin(), t.end());
-    }
-};
 
 /// A matrix as an Objective whose preconditioner is the multigrid.
 class MatrixObjective : public Objective {
@@ -123,7 +46,7 @@ struct Solve {
     VecX multigrid_solution, jacobi_solution;
 };
 
-Solve solve_both(const GridProblem& problem, double tolerance) {
+Solve solve_both(const GridModelProblem& problem, double tolerance) {
     GridMultigrid multigrid;
     multigrid.set_grid(problem.dim, problem.coordinates, problem.free);
     multigrid.set_operator(problem.A);
@@ -153,7 +76,7 @@ TEST(GridMultigrid, IterationsBoundedAsTheGridIsRefinedAndTheStiffnessGrows) {
     for (const double youngs : {1e8, 1e10}) {
         int jacobi_coarse = 0;
         for (const int cells : {32, 64, 128}) {
-            const GridProblem problem(cells, youngs);
+            const GridModelProblem problem(cells, youngs);
             const Solve s = solve_both(problem, 1e-8);
             std::printf("E %.0e, %d^2 cells: %ld unknowns, %d levels, CG iterations multigrid %d, Jacobi %d\n",
                         youngs, cells, static_cast<long>(problem.A.rows()), s.levels, s.multigrid_iterations,
@@ -173,7 +96,7 @@ TEST(GridMultigrid, IterationsBoundedAsTheGridIsRefinedAndTheStiffnessGrows) {
 }
 
 TEST(GridMultigrid, GivesTheUnpreconditionedSolution) {
-    const GridProblem problem(48, 1e6);
+    const GridModelProblem problem(48, 1e6);
     const Solve s = solve_both(problem, 1e-11);
     const double scale = s.jacobi_solution.norm();
     EXPECT_LT((s.multigrid_solution - s.jacobi_solution).norm(), 1e-8 * scale);
@@ -188,7 +111,7 @@ TEST(GridMultigrid, GivesTheUnpreconditionedSolution) {
 TEST(GridMultigrid, IsASymmetricPositiveDefiniteOperator) {
     // CG needs M^-1 symmetric positive definite: forward sweeps before the coarse correction and
     // backward sweeps after it make the V-cycle symmetric.
-    const GridProblem problem(24, 1e6);
+    const GridModelProblem problem(24, 1e6);
     GridMultigrid multigrid;
     multigrid.set_grid(2, problem.coordinates, problem.free);
     multigrid.set_operator(problem.A);
@@ -211,7 +134,7 @@ TEST(GridMultigrid, IsASymmetricPositiveDefiniteOperator) {
 // (before: a V-cycle with x . M^-1 x = -4e16). (The stiff sand column's "coarsest operator is not
 // positive definite" at frame 4-5 was another matter: BuildsOnAnOperatorWhoseRowsSpanManyScales.)
 TEST(GridMultigrid, BuildsOnASingularPositiveSemiDefiniteOperator) {
-    const GridProblem problem(24, 1e6, 1e-3, 0.3, false, 0.0);
+    const GridModelProblem problem(24, 1e6, 1e-3, 0.3, false, 0.0);
     GridMultigrid multigrid;
     multigrid.set_grid(2, problem.coordinates, problem.free);
     ASSERT_NO_THROW(multigrid.set_operator(problem.A));
@@ -230,7 +153,7 @@ TEST(GridMultigrid, BuildsOnASingularPositiveSemiDefiniteOperator) {
 // column at dx stopped at frame 4 with "the coarsest operator is not positive definite": its pivots
 // ran from 3e-13 to 33, judged against the largest), and the preconditioned solve converges.
 TEST(GridMultigrid, BuildsOnAnOperatorWhoseRowsSpanManyScales) {
-    GridProblem problem(32, 1e6);
+    GridModelProblem problem(32, 1e6);
     VecX scale = VecX::Ones(problem.A.rows());
     for (Eigen::Index i = 0; i < scale.size(); ++i)
         if (problem.coordinates[2 * (i / 2)] < 16) scale[i] = 1e-7;
@@ -245,7 +168,7 @@ TEST(GridMultigrid, BuildsOnAnOperatorWhoseRowsSpanManyScales) {
 }
 
 TEST(GridMultigrid, OneAndTwoThreadsGiveTheSameResult) {
-    const GridProblem problem(128, 1e6);
+    const GridModelProblem problem(128, 1e6);
     GridMultigrid multigrid;
     multigrid.set_grid(2, problem.coordinates, problem.free);
     multigrid.set_operator(problem.A);
