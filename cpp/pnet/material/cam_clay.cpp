@@ -133,6 +133,26 @@ ReturnResult<dim> CamClay<dim>::project(const Vec<dim>& Sigma, double a) const {
     return {Z, a + std::log(J / J_x), ReturnBranch::Ellipse};
 }
 
+template <int dim>
+Vec<dim> CamClay<dim>::project_tau(const Vec<dim>& Sigma, double p_0) const {
+    if (params_.variant != CamClayVariant::Exact)
+        throw std::logic_error("CamClay::project_tau: only the exact variant keeps J");
+    const double beta = params_.beta;
+    const double J = Sigma.prod();
+    const double p = -0.5 * K_ * (J * J - 1.0);
+    const Vec<dim> ones = Vec<dim>::Ones();
+    // The branches and their tests as in project().
+    if (p > p_0) return -p_0 * ones;              // J_new^2 - 1 = -2 p0 / K
+    if (p < -beta * p_0) return beta * p_0 * ones;  // J_new^2 - 1 = 2 beta p0 / K
+    const Vec<dim> b = Sigma.cwiseProduct(Sigma);
+    const double J_iso = dim == 2 ? 1.0 / J : std::pow(J, -2.0 / dim);
+    const Vec<dim> s = mu_ * J_iso * (b - b.sum() / dim * ones);
+    const double q2_factor = 0.5 * (6.0 - dim) * (1.0 + 2.0 * beta);
+    const double pressure_term = M_ * M_ * (p + beta * p_0) * (p - p_0);
+    if (q2_factor * s.squaredNorm() + pressure_term <= 0.0) return s - p * ones;
+    return std::sqrt(-pressure_term / q2_factor) / s.norm() * s - p * ones;
+}
+
 template class CamClay<2>;
 template class CamClay<3>;
 

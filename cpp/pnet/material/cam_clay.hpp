@@ -40,6 +40,13 @@ public:
 
     /// Z(Sigma, a) and the CD-MPM hardening update a += log(J_trial / J_x).
     ReturnResult<dim> project(const Vec<dim>& Sigma, double a) const;
+    /// The return-mapped principal Kirchhoff stress tau(Z(Sigma)) of the exact variant, given
+    /// p0 = p0(a), without forming Z: the projection keeps J (hence tau's volumetric part -p) and
+    /// scales the deviatoric stress s onto the ellipse, so tau = s_new - p 1 there, s - p 1 inside, and
+    /// -p0 1 / beta p0 1 at the compression / tension tip. What the consistent tangent's stencil
+    /// evaluates 2d + 1 times per yielding point (Material::elastoplastic_tangent): no exp, log or
+    /// expm1. Throws std::logic_error for the paper's variant (it does not keep J).
+    Vec<dim> project_tau(const Vec<dim>& Sigma, double p0) const;
 
     /// y = (6-d)/2 (1 + 2 beta) ||s||^2 + M^2 (p + beta p0)(p - p0), Pa^2;
     /// the elastic region is y <= 0 with -beta p0 <= p <= p0.

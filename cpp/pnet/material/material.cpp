@@ -239,6 +239,22 @@ Mat<dim> Material<dim>::elastoplastic_stress(const PolarSVD<dim>& svd, double ha
 template <int dim>
 Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, double hardening, bool project_psd,
                                                   bool keep_skew) const {
+    if (const auto* cam_clay = std::get_if<CamClay<dim>>(&plasticity_)) {
+        // Inside the yield surface the return mapping is the identity, so the tangent is the elastic
+        // one in closed form (one-sided within the stencil's step of the surface, as the mapping's
+        // branch there): the stencil's 2d + 1 projections, each a few exp/log/pow and the snow
+        // elasticity's expm1, only where the point yields.
+        if (cam_clay->project(svd.Sigma, hardening).branch == ReturnBranch::Elastic)
+            return elasticity_.dPdF(svd, project_psd);
+        if (cam_clay->params().variant == CamClayVariant::Exact) {  // the stencil on tau directly
+            constexpr int k = kTangentStencil<dim>;
+            Vec<dim> Sigma[k], tau[k];
+            tangent_stencil<dim>(svd.Sigma, Sigma);
+            const double p0 = cam_clay->p0(hardening);
+            for (int j = 0; j < k; ++j) tau[j] = cam_clay->project_tau(Sigma[j], p0);
+            return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd, keep_skew);
+        }
+    }
     constexpr int k = kTangentStencil<dim>;
     Vec<dim> strain[k], tau[k];
     tangent_strain_stencil<dim>(svd.Sigma.array().log().matrix(), strain);

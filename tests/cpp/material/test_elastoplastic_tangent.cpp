@@ -144,6 +144,61 @@ TYPED_TEST(ElastoplasticTangentTest, MaterialTangentInStrainMatchesTheGenericOne
     }
 }
 
+// Cam-Clay's tangent inside the yield surface is the snow elasticity's, in closed form (not the
+// 2d + 1 projections of the stencil): exactly Elasticity::dPdF there, and the stencil's elsewhere.
+TYPED_TEST(ElastoplasticTangentTest, CamClayTangentInsideTheYieldSurfaceIsTheElasticOne) {
+    constexpr int dim = TypeParam::value;
+    const Material<dim> snow(material_preset("snow"));
+    const double h = snow.description().initial_hardening;
+    test::Random random(47);
+    int elastic = 0, plastic = 0;
+    for (int k = 0; k < 40; ++k) {
+        const Mat<dim> F = random.template deformation<dim>(k % 2 ? 0.002 : 0.05);
+        const PolarSVD<dim> svd = clamped_svd<dim>(F);
+        const bool inside = snow.return_map(svd.Sigma, h).branch == ReturnBranch::Elastic;
+        (inside ? elastic : plastic) += 1;
+        for (bool project : {false, true}) {
+            const Tensor4<dim> K = snow.elastoplastic_tangent(svd, h, project);
+            if (inside) {
+                EXPECT_EQ(K, snow.elasticity().dPdF(svd, project)) << "sample " << k;
+            } else {
+                EXPECT_LE((K - tangent_of<dim>(snow, F, h, project)).cwiseAbs().maxCoeff(),
+                          1e-6 * K.cwiseAbs().maxCoeff())
+                    << "sample " << k;
+            }
+        }
+    }
+    EXPECT_GE(elastic, 5);
+    EXPECT_GE(plastic, 5);
+}
+
+// CamClay::project_tau, the stencil's stress without Z: tau(Z(Sigma)) of the snow elasticity on every
+// branch (inside, the ellipse, both tips), and refused for the paper's variant.
+TYPED_TEST(ElastoplasticTangentTest, CamClayStressWithoutZIsTheStressOfZ) {
+    constexpr int dim = TypeParam::value;
+    const Material<dim> snow(material_preset("snow"));
+    const CamClay<dim> cam_clay(snow.description().cam_clay, snow.elasticity());
+    test::Random random(53);
+    std::map<ReturnBranch, int> branches;
+    for (int k = 0; k < 200; ++k) {
+        const Vec<dim> Sigma = clamped_svd<dim>(random.template deformation<dim>(k % 2 ? 0.01 : 0.2)).Sigma;
+        const double a = random.uniform(-0.2, 0.0);
+        const ReturnResult<dim> Z = cam_clay.project(Sigma, a);
+        branches[Z.branch] += 1;
+        const Vec<dim> expected = snow.elasticity().tau(Z.Sigma);
+        const Vec<dim> tau = cam_clay.project_tau(Sigma, cam_clay.p0(a));
+        EXPECT_LE((tau - expected).cwiseAbs().maxCoeff(), 1e-9 * std::max(1.0, expected.cwiseAbs().maxCoeff()))
+            << k << " (" << to_string(Z.branch) << ")";
+    }
+    for (const ReturnBranch b : {ReturnBranch::Elastic, ReturnBranch::Ellipse, ReturnBranch::CompressionTip,
+                                 ReturnBranch::TensionTip})
+        EXPECT_GE(branches[b], 3) << to_string(b);
+    CamClayParams paper = snow.description().cam_clay;
+    paper.variant = CamClayVariant::Paper;
+    EXPECT_THROW(CamClay<dim>(paper, snow.elasticity()).project_tau(Vec<dim>::Ones(), 1.0), std::logic_error);
+}
+
+
 TYPED_TEST(ElastoplasticTangentTest, StrainProjectionIsTheLogOfTheProjection) {
     constexpr int dim = TypeParam::value;
     test::Random random(41);
