@@ -84,8 +84,31 @@ double Elasticity<dim>::psi(const Vec<dim>& Sigma) const {
 
 template <int dim>
 Vec<dim> Elasticity<dim>::tau(const Vec<dim>& Sigma) const {
+    if constexpr (dim == 2) {
+        if (model_ == ElasticityModel::NeoHookeanSnow) {
+            // tau_of_strain's eq. 17 without log or expm1, as accurate near F = I: J^{-1} b_0 - 1 =
+            // (Sigma_0 - Sigma_1) / Sigma_1, and J - 1 = a + b + a b with a, b = Sigma - 1 (exact
+            // differences of nearby numbers).
+            const double a = Sigma[0] - 1.0, b = Sigma[1] - 1.0;
+            const double J_m1 = a + b + a * b;
+            const Vec<2> bbar_m1((Sigma[0] - Sigma[1]) / Sigma[1], (Sigma[1] - Sigma[0]) / Sigma[0]);
+            return mu_ * (bbar_m1 - 0.5 * bbar_m1.sum() * Vec<2>::Ones()) +
+                   0.5 * K_ * J_m1 * (J_m1 + 2.0) * Vec<2>::Ones();
+        }
+    }
     return tau_of_strain(Sigma.array().log().matrix());
 }
+
+namespace {
+
+/// J^{-2/d}.
+template <int dim>
+double isochoric_factor(double J) {
+    if constexpr (dim == 2) return 1.0 / J;
+    else return std::pow(J, -2.0 / dim);
+}
+
+}  // namespace
 
 template <int dim>
 Vec<dim> Elasticity<dim>::tau_of_strain(const Vec<dim>& eps) const {
@@ -112,7 +135,6 @@ Vec<dim> Elasticity<dim>::tau_of_strain(const Vec<dim>& eps) const {
 
 template <int dim>
 Mat<dim> Elasticity<dim>::dtau_deps(const Vec<dim>& Sigma) const {
-    const double log_J = Sigma.array().log().sum();
     const Mat<dim> ones = Mat<dim>::Ones();
     switch (model_) {
         case ElasticityModel::StvkHencky:
@@ -121,8 +143,9 @@ Mat<dim> Elasticity<dim>::dtau_deps(const Vec<dim>& Sigma) const {
             // d/d eps_j of mu J^{-2/d} (b_i - tr(b)/d) + K/2 (J^2 - 1), using
             // dJ/d eps_j = J and d b_i / d eps_j = 2 b_i delta_ij.
             const Vec<dim> b = Sigma.cwiseProduct(Sigma);
-            const double J2 = std::exp(2.0 * log_J);
-            const double iso = mu_ * std::exp(-2.0 / dim * log_J);
+            const double J = Sigma.prod();
+            const double J2 = J * J;
+            const double iso = mu_ * isochoric_factor<dim>(J);
             const Vec<dim> dev_b = b - b.sum() / dim * Vec<dim>::Ones();
             Mat<dim> H;
             for (int i = 0; i < dim; ++i)
@@ -145,7 +168,7 @@ double Elasticity<dim>::tau_difference_quotient(const Vec<dim>& Sigma, int i, in
         case ElasticityModel::StvkHencky:  // 2 mu (eps_i - eps_j) / (Sigma_i - Sigma_j)
             return 2.0 * mu_ * log_difference_quotient(Sigma[i], Sigma[j]);
         case ElasticityModel::NeoHookeanSnow:  // mu J^{-2/d} (b_i - b_j) / (Sigma_i - Sigma_j)
-            return mu_ * std::exp(-2.0 / dim * Sigma.array().log().sum()) * (Sigma[i] + Sigma[j]);
+            return mu_ * isochoric_factor<dim>(Sigma.prod()) * (Sigma[i] + Sigma[j]);
         case ElasticityModel::NeoHookeanMetal:  // mu (b_i - b_j) / (Sigma_i - Sigma_j)
             return mu_ * (Sigma[i] + Sigma[j]);
     }

@@ -115,6 +115,22 @@ TEST(Elasticity, RepeatedSingularValuesGiveFiniteExactTangent) {
     }
 }
 
+// The 2D snow elasticity's tau(Sigma) has its own form without log or expm1 (the Cam-Clay tangent's
+// elastic branch calls it per point): the same stress as eq. 17 through the Hencky strain, relative to
+// the stress itself down to strains of 1e-9, where a naive J^{-1} b - 1 loses half its digits.
+TEST(Elasticity, SnowStressFromSingularValuesIsTheStressFromTheStrain) {
+    const Elasticity<2> snow(ElasticityModel::NeoHookeanSnow, kParams);
+    test::Random rng(17);
+    for (double magnitude : {1e-9, 1e-6, 1e-3, 0.1, 0.5}) {
+        for (int k = 0; k < 20; ++k) {
+            const Vec<2> Sigma = clamped_svd<2>(rng.deformation<2>(magnitude)).Sigma;
+            const Vec<2> expected = snow.tau_of_strain(Sigma.array().log().matrix());
+            EXPECT_LE((snow.tau(Sigma) - expected).cwiseAbs().maxCoeff(), 1e-12 * expected.cwiseAbs().maxCoeff())
+                << "magnitude " << magnitude << " sample " << k;
+        }
+    }
+}
+
 TEST(Elasticity, InvertedFIsClampedNotNaN) {
     Mat<3> F = Mat<3>::Identity();
     F(2, 2) = -0.5;
