@@ -117,8 +117,37 @@ def test_resume_continues_bit_identically(tmp_path):
     assert strip(csv_rows(full / "stats.csv")) == strip(csv_rows(part / "stats.csv"))
 
 
+def cantilever(integrator: str) -> dict:
+    """A metal bar 10 x 1 cm clamped at its left end (the nodes at x = 0), sagging under gravity."""
+    return {
+        "dim": 2, "domain": {"min": [-0.01, -0.1], "max": [0.15, 0.1]}, "frame_dt": 0.01, "frames": 2,
+        "integrator": {"name": integrator, "dt": 2e-3 if integrator != "explicit" else 2e-5},
+        "meshes": [{"shape": "box", "min": [0.0, 0.05], "max": [0.1, 0.06], "element_size": 0.005,
+                    "material": {"name": "metal", "density": 7800, "initial_hardening": 0.005,
+                                 "elasticity": {"model": "stvk_hencky", "E": 1e7, "nu": 0.3},
+                                 "plasticity": {"model": "von_mises", "hardening_coefficient": 0.1}},
+                    "clamp": {"min": [-0.001, 0.04], "max": [1e-9, 0.07]}}],
+    }
+
+
+@pytest.mark.parametrize("integrator", ["return_map", "lagged", "explicit"])
+def test_a_clamp_holds_its_nodes_at_rest_and_the_bar_sags(tmp_path, integrator):
+    out = tmp_path / "run"
+    r = pnet("simulate", write(tmp_path, cantilever(integrator)), "--out", out)
+    assert r.returncode == 0, r.stderr
+    rest, last = (read_mesh_ply(out / f"frame_{f:05d}.ply").position for f in (0, 2))
+    root = rest[:, 0] <= 1e-9
+    assert 2 <= root.sum() < len(rest) // 4
+    assert np.array_equal(last[root], rest[root])  # held exactly
+    tip = rest[:, 0] >= 0.1 - 1e-9
+    sag = rest[tip, 1] - last[tip, 1]
+    assert (sag > 1e-3).all(), sag  # the free end falls (a free bar: 4.9 mm in 0.02 s)
+    beside = (rest[:, 0] > 1e-9) & (rest[:, 0] < 0.006)
+    assert (np.abs(last[beside] - rest[beside]).max(axis=1) > 0).all()  # the next column is not held
+
+
 @pytest.mark.parametrize("case", ["plate_through_frame", "no_material", "bad_element_size", "mesh_file_missing",
-                                  "garbage_mesh_file", "no_model"])
+                                  "garbage_mesh_file", "no_model", "clamp_holds_no_node"])
 def test_bad_fem_scenes_exit_2_naming_file_and_path(tmp_path, case):
     scene = tiny_scene("metal_frame_2d", "meshes")
     args = []
@@ -138,6 +167,10 @@ def test_bad_fem_scenes_exit_2_naming_file_and_path(tmp_path, case):
         (tmp_path / "junk.msh").write_text("$MeshFormat\nthis is not a mesh\n")
         scene["meshes"][0] = {"shape": "file", "file": "junk.msh", "material": "metal"}
         expected = "meshes[0].file: "
+    elif case == "clamp_holds_no_node":
+        scene["meshes"][0]["clamp"] = [{"min": [0.0, 0.0], "max": [1.0, 0.01]},
+                                       {"min": [0.0, 0.3], "max": [0.01, 0.4]}]
+        expected = "meshes[0].clamp[1]: no node of the mesh lies in the box"
     else:
         del scene["meshes"][0]["model"]
         args = ["--integrator", "plasticitynet"]

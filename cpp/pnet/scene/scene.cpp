@@ -233,7 +233,7 @@ SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, con
     const std::string shape =
         r.text(r.require(v, "shape", path, dim == 2 ? "box, frame, disk or file" : "box, frame, sphere or file"),
                shape_path);
-    std::vector<std::string> keys = {"shape", "material", "model", "velocity", "hardening", "kinematic"};
+    std::vector<std::string> keys = {"shape", "material", "model", "velocity", "hardening", "kinematic", "clamp"};
     if (shape == "box") {
         mesh.shape = SceneMesh::Shape::Box;
         keys.insert(keys.begin() + 1, {"min", "max", "element_size"});
@@ -301,6 +301,26 @@ SceneMesh read_mesh(const Reader& r, const json& v, const std::string& path, con
     if (const json* k = Reader::find(v, "kinematic")) {
         if (!k->is_boolean()) r.fail(join(path, "kinematic"), "expected true or false, got " + show(*k));
         mesh.kinematic = k->get<bool>();
+    }
+    if (const json* clamp = Reader::find(v, "clamp")) {
+        const std::string clamp_path = join(path, "clamp");
+        if (mesh.kinematic) r.fail(clamp_path, "a kinematic mesh moves as a whole; a clamp holds part of a deformable one");
+        const bool many = clamp->is_array();
+        if (many && clamp->empty()) r.fail(clamp_path, "expected a box {\"min\", \"max\"} or a non-empty array of them");
+        for (std::size_t b = 0; b < (many ? clamp->size() : 1); ++b) {
+            const json& box = many ? (*clamp)[b] : *clamp;
+            const std::string box_path = many ? index_path(clamp_path, b) : clamp_path;
+            r.require_object(box, box_path);
+            r.reject_unknown_keys(box, box_path, {"min", "max"}, " (a clamp is a box: min, max)");
+            SceneMesh::Box out{r.vector(r.require(box, "min", box_path, vec_expected), join(box_path, "min"), dim),
+                               r.vector(r.require(box, "max", box_path, vec_expected), join(box_path, "max"), dim)};
+            for (int a = 0; a < dim; ++a)
+                if (!(out.max[a] >= out.min[a]))
+                    r.fail(index_path(join(box_path, "max"), a), "must be at least min[" + std::to_string(a) +
+                                                                     "] = " + show(out.min[a]) + ", got " +
+                                                                     show(out.max[a]));
+            mesh.clamps.push_back(out);
+        }
     }
     if (mesh.kinematic) {
         for (const char* key : {"material", "model", "hardening"})
@@ -484,6 +504,9 @@ Scene scene_from_json(const json& j, const std::string& file, const std::string&
                 if (scene.meshes[k].kinematic)
                     r.fail(index_path("meshes", k) + ".kinematic",
                            "kinematic meshes are not supported beside particles (MPM-FEM coupling)");
+                else if (!scene.meshes[k].clamps.empty())
+                    r.fail(index_path("meshes", k) + ".clamp",
+                           "clamps are not supported beside particles (MPM-FEM coupling)");
         }
     }
     if (!scene.has_meshes()) {

@@ -49,7 +49,10 @@
 //       "model": "../models/metal_2d.pt",         // optional, as for objects
 //       "velocity": [0, 0],                       // m/s, optional
 //       "hardening": 0.05,                        // optional
-//       "kinematic": false                        // true: a rigid body moved at "velocity" (the plate)
+//       "kinematic": false,                       // true: a rigid body moved at "velocity" (the plate)
+//       "clamp": {"min": [0.1, 0], "max": [0.101, 0.05]}  // optional: the nodes in this box (or in any box
+//                                                 // of an array of them) are held at rest (a cantilever's
+//                                                 // root); FEM scenes only
 //     }],
 //     "ground": {"height": 0},                    // optional: the half-space y < height is solid
 //     "contact": {"dhat": 0.00025,                // m, optional, default 1e-3 x the meshes' bounding-box diagonal
@@ -124,6 +127,10 @@ struct SceneMesh {
     double element_size = 0.0;  // procedural shapes and surface files: target edge length, m (0: a .msh file)
     std::string file;           // File: a .msh, or (3D) a closed surface .obj/.stl/.ply, absolute and normalized
     bool kinematic = false;     // rigid, moved at `velocity` (no material)
+    struct Box {
+        Eigen::VectorXd min, max;
+    };
+    std::vector<Box> clamps;    // the nodes in any of these boxes (closed) are held at rest
     MaterialDescription material;  // unused when kinematic
     std::string model;             // energy model file, absolute; "" if none
     Eigen::VectorXd velocity;      // initial (kinematic: prescribed) velocity, m/s

@@ -90,6 +90,12 @@ json scene_to_json(const Scene& scene) {
             }
             if (mesh.element_size > 0.0) m["element_size"] = mesh.element_size;
             m["kinematic"] = mesh.kinematic;
+            if (!mesh.clamps.empty()) {
+                json clamps = json::array();
+                for (const SceneMesh::Box& box : mesh.clamps)
+                    clamps.push_back({{"min", vector_json(box.min)}, {"max", vector_json(box.max)}});
+                m["clamp"] = clamps;
+            }
             if (!mesh.kinematic) m["material"] = material_to_json(mesh.material);
             if (!mesh.model.empty()) m["model"] = mesh.model;
             m["velocity"] = vector_json(mesh.velocity);

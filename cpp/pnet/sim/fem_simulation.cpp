@@ -172,6 +172,21 @@ FemSceneSystem<dim> make_fem_system(const Scene& scene) {
         s.element_object.resize(s.mesh.elements.size(), static_cast<int>(k));
         s.fixed_node.resize(s.mesh.nodes(), m.kinematic ? 1 : 0);
         s.prescribed_velocity.resize(s.mesh.nodes(), m.kinematic ? to_vec<dim>(m.velocity) : Vec<dim>::Zero());
+        for (std::size_t b = 0; b < m.clamps.size(); ++b) {  // held at rest (prescribed velocity 0)
+            const Vec<dim> lo = to_vec<dim>(m.clamps[b].min), hi = to_vec<dim>(m.clamps[b].max);
+            int held = 0;
+            for (int i = out.first_node.back(); i < static_cast<int>(s.mesh.nodes()); ++i) {
+                const Vec<dim>& x = s.mesh.x[i];
+                if ((x.array() >= lo.array()).all() && (x.array() <= hi.array()).all()) {
+                    s.fixed_node[i] = 1;
+                    ++held;
+                }
+            }
+            if (held == 0)
+                throw SceneError(scene.file + ": " + m.json_path + ".clamp" +
+                                 (m.clamps.size() > 1 ? "[" + std::to_string(b) + "]" : std::string()) +
+                                 ": no node of the mesh lies in the box");
+        }
     }
     out.first_node.push_back(static_cast<int>(s.mesh.nodes()));
     out.first_element.push_back(static_cast<int>(s.mesh.elements.size()));

@@ -152,14 +152,17 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
         if (o.checkpoint_every > 0 && sim.frame() % o.checkpoint_every == 0) sim.save_checkpoint(checkpoint.string());
         const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         const double per_frame = elapsed / (sim.frame() - first);
-        if (implicit)
+        if (implicit) {
+            // The advection limit applies to particles (implicit MPM and coupling), not to meshes alone.
+            char capped[64] = "";
+            if (scene.has_particles())
+                std::snprintf(capped, sizeof capped, " (%ld cut by the advection limit)", f.advection_capped_steps);
             std::fprintf(stderr,
-                         "\rframe %d/%d  steps %ld (%ld cut by the advection limit)  Newton %.1f  CG %.0f per step  "
+                         "\rframe %d/%d  steps %ld%s  Newton %.1f  CG %.0f per step  "
                          "%.2f s/frame  ETA %.0f s   ",
-                         sim.frame(), frames, f.steps, f.advection_capped_steps,
-                         static_cast<double>(f.newton_iterations) / f.steps,
+                         sim.frame(), frames, f.steps, capped, static_cast<double>(f.newton_iterations) / f.steps,
                          static_cast<double>(f.cg_iterations) / f.steps, per_frame, per_frame * (frames - sim.frame()));
-        else
+        } else
             std::fprintf(stderr, "\rframe %d/%d  steps %ld  %.2f s/frame  ETA %.0f s   ", sim.frame(), frames, f.steps,
                          per_frame, per_frame * (frames - sim.frame()));
     }

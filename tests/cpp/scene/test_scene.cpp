@@ -675,6 +675,21 @@ const std::vector<MalformedCase> kMalformedCases = {
       "return_map or lagged"}},
     {"ParticlesAndKinematicMesh", 2, [](json& j) { j["meshes"] = example_fem()["meshes"]; },
      {"scenes/x.json: meshes[1].kinematic: kinematic meshes are not supported beside particles (MPM-FEM coupling)"}},
+    {"ClampOnAKinematicMesh", 2, [](json& j) { j = example_fem();
+                                               j["meshes"][1]["clamp"] = {{"min", {0.4, 0.18}}, {"max", {0.5, 0.2}}}; },
+     {"scenes/x.json: meshes[1].clamp: a kinematic mesh moves as a whole"}},
+    {"ClampInsideOut", 2, [](json& j) { j = example_fem();
+                                        j["meshes"][0]["clamp"] = {{"min", {0.4, 0.1}}, {"max", {0.5, 0.0}}}; },
+     {"scenes/x.json: meshes[0].clamp.max[1]: must be at least min[1] = 0.1, got 0"}},
+    {"ClampUnknownField", 2, [](json& j) { j = example_fem();
+                                           j["meshes"][0]["clamp"] = json::array({{{"min", {0, 0}}, {"max", {1, 0.01}}},
+                                                                                  {{"center", {0, 0}}}}); },
+     {"scenes/x.json: meshes[0].clamp[1].center: unknown field"}},
+    {"ClampEmptyArray", 2, [](json& j) { j = example_fem(); j["meshes"][0]["clamp"] = json::array(); },
+     {"scenes/x.json: meshes[0].clamp: expected a box"}},
+    {"ParticlesAndClampedMesh", 2, [](json& j) { j["meshes"] = {example_fem()["meshes"][0]};
+                                                 j["meshes"][0]["clamp"] = {{"min", {0.4, 0}}, {"max", {0.6, 0.01}}}; },
+     {"scenes/x.json: meshes[0].clamp: clamps are not supported beside particles (MPM-FEM coupling)"}},
     {"ParticleDhatAboveHalfACell", 2, [](json& j) { j["meshes"] = {example_fem()["meshes"][0]};
                                                     j["contact"] = {{"particle_dhat", 0.6 * j["dx"].get<double>()}}; },
      {"scenes/x.json: contact.particle_dhat: expected at most half the grid spacing"}},
