@@ -133,20 +133,44 @@ ReturnResult<dim> CamClay<dim>::project(const Vec<dim>& Sigma, double a) const {
     return {Z, a + std::log(J / J_x), ReturnBranch::Ellipse};
 }
 
+namespace {
+
+/// J - 1 = prod(1 + a_i) - 1 with a_i = Sigma_i - 1 (exact for Sigma_i near 1), expanded: as accurate near
+/// F = I as the stress through the Hencky strain (expm1), without its log and exp.
+template <int dim>
+double j_minus_one(const Vec<dim>& Sigma) {
+    const Vec<dim> a = Sigma.array() - 1.0;
+    if constexpr (dim == 2) return a[0] + a[1] + a[0] * a[1];
+    else return a[0] + a[1] + a[2] + a[0] * a[1] + a[0] * a[2] + a[1] * a[2] + a[0] * a[1] * a[2];
+}
+
+/// dev(b) with b = Sigma^2, from the differences b_i - b_j = (Sigma_i - Sigma_j)(Sigma_i + Sigma_j): accurate
+/// where the singular values are close.
+template <int dim>
+Vec<dim> deviatoric_b(const Vec<dim>& Sigma) {
+    Vec<dim> out = Vec<dim>::Zero();
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j)
+            if (j != i) out[i] += (Sigma[i] - Sigma[j]) * (Sigma[i] + Sigma[j]);
+    return out / dim;
+}
+
+}  // namespace
+
 template <int dim>
 Vec<dim> CamClay<dim>::project_tau(const Vec<dim>& Sigma, double p_0) const {
     if (params_.variant != CamClayVariant::Exact)
         throw std::logic_error("CamClay::project_tau: only the exact variant keeps J");
     const double beta = params_.beta;
-    const double J = Sigma.prod();
-    const double p = -0.5 * K_ * (J * J - 1.0);
+    const double J_m1 = j_minus_one<dim>(Sigma);
+    const double J = 1.0 + J_m1;
+    const double p = -0.5 * K_ * J_m1 * (J_m1 + 2.0);
     const Vec<dim> ones = Vec<dim>::Ones();
     // The branches and their tests as in project().
     if (p > p_0) return -p_0 * ones;              // J_new^2 - 1 = -2 p0 / K
     if (p < -beta * p_0) return beta * p_0 * ones;  // J_new^2 - 1 = 2 beta p0 / K
-    const Vec<dim> b = Sigma.cwiseProduct(Sigma);
     const double J_iso = dim == 2 ? 1.0 / J : std::pow(J, -2.0 / dim);
-    const Vec<dim> s = mu_ * J_iso * (b - b.sum() / dim * ones);
+    const Vec<dim> s = mu_ * J_iso * deviatoric_b<dim>(Sigma);
     const double q2_factor = 0.5 * (6.0 - dim) * (1.0 + 2.0 * beta);
     const double pressure_term = M_ * M_ * (p + beta * p_0) * (p - p_0);
     if (q2_factor * s.squaredNorm() + pressure_term <= 0.0) return s - p * ones;

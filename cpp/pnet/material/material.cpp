@@ -232,6 +232,10 @@ Mat<dim> Material<dim>::elastoplastic_stress(const Mat<dim>& F, double hardening
 
 template <int dim>
 Mat<dim> Material<dim>::elastoplastic_stress(const PolarSVD<dim>& svd, double hardening) const {
+    if (const auto* cam_clay = std::get_if<CamClay<dim>>(&plasticity_);
+        cam_clay && cam_clay->params().variant == CamClayVariant::Exact && std::isfinite(hardening))
+        // The return-mapped stress without Z, its log or the snow elasticity's expm1 (CamClay::project_tau).
+        return svd.compose(cam_clay->project_tau(svd.Sigma, cam_clay->p0(hardening)).cwiseQuotient(svd.Sigma));
     const ReturnResult<dim> Z = return_map(svd.Sigma, hardening);
     return svd.compose(elasticity_.tau_of_strain(Z.hencky_strain()).cwiseQuotient(svd.Sigma));
 }
