@@ -178,16 +178,23 @@ int main(int argc, char** argv) {
                 if (i + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
                 return argv[++i];
             };
-            if (arg == "--cells") cells_list = parse_list(value(), "--cells");
-            else if (arg == "--youngs") youngs_list = parse_list(value(), "--youngs");
-            else if (arg == "--threads") threads = std::stoi(value());
-            else if (arg == "--tol") tolerance = std::stod(value());
-            else if (arg == "--repeats") repeats = std::max(1, std::stoi(value()));
+            if (arg == "--cells")
+                cells_list = parse_list(value(), "--cells");
+            else if (arg == "--youngs")
+                youngs_list = parse_list(value(), "--youngs");
+            else if (arg == "--threads")
+                threads = std::stoi(value());
+            else if (arg == "--tol")
+                tolerance = std::stod(value());
+            else if (arg == "--repeats")
+                repeats = std::max(1, std::stoi(value()));
             else if (arg == "--help" || arg == "-h") {
-                std::printf("bench_preconditioners [--cells 64,128,256] [--youngs 3.5e5,3.5e7,1e10] [--threads T] "
-                            "[--tol 1e-4] [--repeats 3]\n");
+                std::printf(
+                    "bench_preconditioners [--cells 64,128,256] [--youngs 3.5e5,3.5e7,1e10] [--threads T] "
+                    "[--tol 1e-4] [--repeats 3]\n");
                 return 0;
-            } else throw std::invalid_argument("unknown argument '" + arg + "' (--help lists them)");
+            } else
+                throw std::invalid_argument("unknown argument '" + arg + "' (--help lists them)");
         }
     } catch (const std::exception& e) {
         std::fprintf(stderr, "bench_preconditioners: %s\n", e.what());
@@ -200,8 +207,9 @@ int main(int argc, char** argv) {
 #endif
     std::printf("PCG to a relative residual of %.0e, the best of %d repeats; %s\n\n", tolerance, repeats,
                 have_hypre ? "hypre BoomerAMG on one rank" : "built without hypre (no BoomerAMG rows)");
-    std::printf("| cells | E (Pa) | dt^2 E / (rho dx^2) | unknowns | preconditioner | threads | levels | setup ms | "
-                "PCG iterations | solve ms | setup + solve ms | vs Jacobi's solution |\n");
+    std::printf(
+        "| cells | E (Pa) | dt^2 E / (rho dx^2) | unknowns | preconditioner | threads | levels | setup ms | "
+        "PCG iterations | solve ms | setup + solve ms | vs Jacobi's solution |\n");
     std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (const double cells_value : cells_list) {
         const int cells = static_cast<int>(cells_value);
@@ -225,8 +233,7 @@ int main(int argc, char** argv) {
                     const MatrixObjective objective(problem.A, apply);
                     VecX x;
                     start = std::chrono::steady_clock::now();
-                    const PcgResult result =
-                        solve_pcg(objective, b, preconditioner(objective), x, tolerance, 100000);
+                    const PcgResult result = solve_pcg(objective, b, preconditioner(objective), x, tolerance, 100000);
                     row.solve = std::min(row.solve, seconds_since(start));
                     row.iterations = result.iterations;
                     row.converged = result.converged;
@@ -237,13 +244,15 @@ int main(int argc, char** argv) {
             };
             const auto jacobi = [&](const Objective&) { return Preconditioner::jacobi(problem.A.diagonal()); };
             const auto own = [&](const Objective& objective) { return Preconditioner::of(objective); };
-            measure("Jacobi", threads, [](Row&) { return std::function<void(const VecX&, VecX&)>(); }, jacobi);
+            measure(
+                "Jacobi", threads, [](Row&) { return std::function<void(const VecX&, VecX&)>(); }, jacobi);
             VecX blocks(problem.A.rows() * 2);  // the nodes' 2 x 2 diagonal blocks, row-major
             for (Eigen::Index k = 0; k < problem.A.rows() / 2; ++k)
                 for (int a = 0; a < 2; ++a)
                     for (int c = 0; c < 2; ++c) blocks[4 * k + 2 * a + c] = problem.A.coeff(2 * k + a, 2 * k + c);
-            measure("block Jacobi (2 x 2)", threads, [](Row&) { return std::function<void(const VecX&, VecX&)>(); },
-                    [&](const Objective&) { return Preconditioner::block_jacobi(blocks, 2); });
+            measure(
+                "block Jacobi (2 x 2)", threads, [](Row&) { return std::function<void(const VecX&, VecX&)>(); },
+                [&](const Objective&) { return Preconditioner::block_jacobi(blocks, 2); });
             for (const int t : {1, threads}) {
                 if (t == threads && threads == 1) break;
                 auto multigrid = std::make_shared<GridMultigrid>();
@@ -275,8 +284,8 @@ int main(int argc, char** argv) {
             }
 #endif
             for (const Row& row : rows)
-                std::printf("| %d | %.2g | %.3g | %ld | %s | %d | %s | %.2f | %d%s | %.2f | %.2f | %.1e |\n", cells, youngs,
-                            ratio, static_cast<long>(problem.A.rows()), row.name.c_str(), row.threads,
+                std::printf("| %d | %.2g | %.3g | %ld | %s | %d | %s | %.2f | %d%s | %.2f | %.2f | %.1e |\n", cells,
+                            youngs, ratio, static_cast<long>(problem.A.rows()), row.name.c_str(), row.threads,
                             row.levels ? std::to_string(row.levels).c_str() : "-", 1e3 * row.setup, row.iterations,
                             row.converged ? "" : " (not converged)", 1e3 * row.solve, 1e3 * (row.setup + row.solve),
                             row.difference);

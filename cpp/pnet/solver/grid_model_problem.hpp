@@ -26,7 +26,8 @@ struct GridModelProblem {
     VecX free;
     SparseMatrix A;
 
-    GridModelProblem(int cells, double youngs, double dt = 1e-3, double nu = 0.3, bool floor = true, double rho = 1000.0) {
+    GridModelProblem(int cells, double youngs, double dt = 1e-3, double nu = 0.3, bool floor = true,
+                     double rho = 1000.0) {
         const double dx = 1.0 / cells;
         const double mu = youngs / (2 * (1 + nu)), lambda = youngs * nu / ((1 + nu) * (1 - 2 * nu));
         const int n1 = cells + 1;
