@@ -86,6 +86,9 @@ public:
     const MpmOptions& mpm_options() const { return mpm_options_; }
     const Grid<dim>& grid() const { return grid_; }
     IncrementalPotential<dim>& potential() { return potential_; }
+    /// The last step's solution on the potential's unknowns, before the slip walls' projection (the
+    /// adjoint's linearization point: mpm_adjoint.hpp).
+    const VecX& solution() const { return v_; }
 
 private:
     const MpmSystem<dim>& system_;

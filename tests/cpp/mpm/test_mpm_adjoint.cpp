@@ -1,0 +1,143 @@
+// The adjoint of an implicit MPM rollout (mpm/mpm_adjoint.hpp) against central differences of the whole
+// rollout: an elastic disk dropped onto the slip floor (so that the walls' projection acts in the last
+// steps), a random linear loss of the last state's positions and velocities, its gradient with respect to
+// E and along random directions of the start's velocities, positions, APIC matrices and F. The forward
+// solves are tightened to 1e-11 m/s for the check.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+
+#include "pnet/mpm/mpm_adjoint.hpp"
+#include "pnet/scene/sampler.hpp"
+#include "pnet/scene/scene.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
+#include "support/random.hpp"
+
+namespace pnet {
+namespace {
+
+Scene disk_scene(double E, const char* plasticity = "none") {
+    return scene_from_json(nlohmann::json::parse(std::string(R"({
+        "dim": 2, "domain": {"min": [0, 0], "max": [1, 1]}, "dx": 0.03125, "gravity": [0, -9.8],
+        "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 0},
+        "integrator": {"name": "lagged", "dt": 2e-3},
+        "objects": [{"shape": "disk", "center": [0.5, 0.25], "radius": 0.1, "velocity": [0.3, -2],
+                     "material": {"name": "rubber", "density": 1000,
+                                  "elasticity": {"model": "stvk_hencky", "E": )") +
+                                                 std::to_string(E) + R"(, "nu": 0.3},
+                                  "plasticity": {"model": ")" +
+                                                 plasticity + R"("}}}]
+    })"),
+                           "<disk>", ".");
+}
+
+ImplicitOptions tight() {
+    ImplicitOptions o;
+    o.newton_tolerance = 1e-11;
+    o.newton_acceleration_tolerance = 0.0;
+    o.max_newton_iterations = 200;
+    o.cg_tolerance = 1e-6;
+    return o;
+}
+
+TEST(MpmAdjoint2d, ElasticRolloutGradientMatchesCentralDifferences) {
+    const double E = 1e5, dt = 2e-3;
+    const int steps = 20;
+    const Scene scene = disk_scene(E);
+    const MpmSystem<2> system = make_mpm_system<2>(scene);
+    const Particles<2> start = sample_particles<2>(scene);
+    const std::size_t n = start.size();
+    test::Random random(71);
+    std::vector<Vec<2>> a(n), b(n), dv(n), dx(n);
+    std::vector<Mat<2>> dC(n), dF(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        a[p] = random.uniform_vec<2>(-1.0, 1.0);
+        b[p] = random.uniform_vec<2>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
+        dx[p] = random.uniform_vec<2>(-1.0, 1.0) * system.dx;
+        for (int i = 0; i < 2; ++i)
+            for (int j = 0; j < 2; ++j) {
+                dC[p](i, j) = random.uniform(-10.0, 10.0);
+                dF[p](i, j) = random.uniform(-1.0, 1.0);
+            }
+    }
+    const MpmOptions mpm;
+    auto loss = [&](const MpmSystem<2>& s, const Particles<2>& from) {
+        MpmAdjoint<2> adjoint(s, tight(), mpm);
+        const Particles<2> last = adjoint.forward(from, dt, steps);
+        double L = 0.0;
+        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
+        return L;
+    };
+
+    MpmAdjoint<2> adjoint(system, tight(), mpm);
+    const Particles<2> last = adjoint.forward(start, dt, steps);
+    double lowest = 1.0;
+    for (const Vec<2>& x : last.x) lowest = std::min(lowest, x[1]);
+    ASSERT_LT(lowest, 3 * system.dx) << "the disk must reach the floor's wall nodes";
+    const MpmRolloutGradient<2> g = adjoint.backward(a, b);
+
+    auto along = [&](auto edit, double h) {
+        Particles<2> plus = start, minus = start;
+        edit(plus, h);
+        edit(minus, -h);
+        return (loss(system, plus) - loss(system, minus)) / (2.0 * h);
+    };
+    double g_v = 0.0, g_x = 0.0, g_C = 0.0, g_F = 0.0;
+    for (std::size_t p = 0; p < n; ++p) {
+        g_v += g.v[p].dot(dv[p]);
+        g_x += g.x[p].dot(dx[p]);
+        g_C += g.C[p].cwiseProduct(dC[p]).sum();
+        g_F += g.F[p].cwiseProduct(dF[p]).sum();
+    }
+    const double fd_v = along(
+        [&](Particles<2>& P, double h) {
+            for (std::size_t p = 0; p < n; ++p) P.v[p] += h * dv[p];
+        },
+        1e-4);
+    const double fd_x = along(
+        [&](Particles<2>& P, double h) {
+            for (std::size_t p = 0; p < n; ++p) P.x[p] += h * dx[p];
+        },
+        1e-4);
+    const double fd_C = along(
+        [&](Particles<2>& P, double h) {
+            for (std::size_t p = 0; p < n; ++p) P.C[p] += h * dC[p];
+        },
+        1e-4);
+    const double fd_F = along(
+        [&](Particles<2>& P, double h) {
+            for (std::size_t p = 0; p < n; ++p) P.F_elastic[p] += h * dF[p];
+        },
+        1e-6);
+    const double hE = 1e-4 * E;
+    const double fd_E =
+        (loss(make_mpm_system<2>(disk_scene(E + hE)), start) - loss(make_mpm_system<2>(disk_scene(E - hE)), start)) /
+        (2.0 * hE);
+    std::printf(
+        "MPM rollout, %zu particles, %d steps: dL/dv0 %.10g vs %.10g, dL/dx0 %.10g vs %.10g, dL/dC0 %.10g vs "
+        "%.10g, dL/dF0 %.10g vs %.10g, dL/dE %.10g vs %.10g\n",
+        n, steps, g_v, fd_v, g_x, fd_x, g_C, fd_C, g_F, fd_F, g.youngs_modulus, fd_E);
+    EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
+    EXPECT_NEAR(g_x, fd_x, 1e-4 * std::abs(fd_x));
+    EXPECT_NEAR(g_C, fd_C, 1e-4 * std::abs(fd_C));
+    EXPECT_NEAR(g_F, fd_F, 1e-4 * std::abs(fd_F));
+    EXPECT_NEAR(g.youngs_modulus, fd_E, 1e-4 * std::abs(fd_E));
+}
+
+TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
+    const Scene sand = disk_scene(1e5, "drucker_prager");
+    try {
+        MpmAdjoint<2>(make_mpm_system<2>(sand), tight(), MpmOptions{});
+        FAIL() << "expected std::invalid_argument";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("materials[0].plasticity 'drucker_prager'"), std::string::npos)
+            << e.what();
+    }
+    MpmSystem<2> aflip = make_mpm_system<2>(disk_scene(1e5));
+    aflip.flip_relaxation_time = 0.01;
+    EXPECT_THROW(MpmAdjoint<2>(aflip, tight(), MpmOptions{}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace pnet
