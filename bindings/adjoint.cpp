@@ -1,11 +1,14 @@
-// Gradients of simulated outcomes (issue 57; docs/adjoint.md): FemRollout, the adjoint of an implicit
-// FEM rollout of elastic bodies (cpp/pnet/fem/fem_adjoint.hpp) as numpy calls.
+// Gradients of simulated outcomes (issue 57; docs/adjoint.md): FemRollout and MpmRollout, the adjoints of
+// implicit FEM and MPM rollouts (cpp/pnet/fem/fem_adjoint.hpp, cpp/pnet/mpm/mpm_adjoint.hpp) as numpy calls.
 // plasticitynet.adjoint wraps it as a torch.autograd.Function.
 #include <memory>
 
 #include "common.hpp"
 #include "pnet/fem/fem_adjoint.hpp"
+#include "pnet/mpm/mpm_adjoint.hpp"
+#include "pnet/scene/sampler.hpp"
 #include "pnet/sim/fem_simulation.hpp"
+#include "pnet/sim/mpm_simulation.hpp"
 
 namespace pnet::bindings {
 
@@ -134,6 +137,112 @@ struct RolloutOf final : Rollout {
     }
 };
 
+template <int dim>
+py::array_t<double> matrices(const std::vector<Mat<dim>>& M) {
+    py::array_t<double> out({static_cast<py::ssize_t>(M.size()), static_cast<py::ssize_t>(dim),
+                             static_cast<py::ssize_t>(dim)});
+    double* o = out.mutable_data();
+    for (std::size_t p = 0; p < M.size(); ++p)
+        for (int i = 0; i < dim; ++i)
+            for (int j = 0; j < dim; ++j) o[(p * dim + i) * dim + j] = M[p](i, j);
+    return out;
+}
+
+struct MpmRolloutBase {
+    virtual ~MpmRolloutBase() = default;
+    virtual py::dict start() const = 0;
+    virtual py::dict forward(int steps, double dt, const py::object& v0, const py::object& states) = 0;
+    virtual py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const = 0;
+    virtual int particles() const = 0;
+};
+
+template <int dim>
+struct MpmRolloutOf final : MpmRolloutBase {
+    Scene scene;
+    MpmSystem<dim> system;
+    Particles<dim> initial;
+    MpmAdjoint<dim> adjoint;
+
+    MpmRolloutOf(Scene s, const ImplicitOptions& options)
+        : scene(std::move(s)),
+          system(make_mpm_system<dim>(scene)),
+          initial(sample_particles<dim>(scene)),
+          adjoint(system, options, MpmOptions{}) {}
+    int particles() const override { return static_cast<int>(initial.size()); }
+    py::dict start() const override {
+        py::dict d;
+        d["x"] = rows<dim>(initial.x);
+        d["v"] = rows<dim>(initial.v);
+        return d;
+    }
+    py::dict forward(int steps, double dt, const py::object& v0, const py::object& states) override {
+        if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
+        if (!(dt > 0.0)) throw py::value_error("dt: expected a positive number (s)");
+        std::vector<char> wanted(static_cast<std::size_t>(steps) + 1, states.is_none());
+        if (!states.is_none())
+            for (const py::handle k : states) {
+                const long state = py::cast<long>(k);
+                if (state < 0 || state > steps)
+                    throw py::value_error("states: " + std::to_string(state) + " is not a state of a " +
+                                          std::to_string(steps) + "-step rollout (0.." + std::to_string(steps) + ")");
+                wanted[static_cast<std::size_t>(state)] = 1;
+            }
+        Particles<dim> s = initial;
+        if (!v0.is_none()) s.v = to_points<dim>(v0, "v0", particles());
+        std::vector<int> index;
+        std::vector<std::vector<Vec<dim>>> xs, vs;
+        {
+            py::gil_scoped_release release;
+            adjoint.forward(s, dt, steps, [&](int k, const Particles<dim>& state) {
+                if (!wanted[static_cast<std::size_t>(k)]) return;
+                index.push_back(k);
+                xs.push_back(state.x);
+                vs.push_back(state.v);
+            });
+        }
+        py::dict x, v;
+        for (std::size_t j = 0; j < index.size(); ++j) {
+            x[py::int_(index[j])] = rows<dim>(xs[j]);
+            v[py::int_(index[j])] = rows<dim>(vs[j]);
+        }
+        py::dict d;
+        d["x"] = x;
+        d["v"] = v;
+        return d;
+    }
+    py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const override {
+        if (adjoint.steps() < 0) throw py::value_error("backward: run forward() first");
+        const std::size_t states = static_cast<std::size_t>(adjoint.steps()) + 1;
+        std::vector<std::vector<Vec<dim>>> xs(states), vs(states);
+        auto read = [&](const py::object& obj, const std::string& name, std::vector<std::vector<Vec<dim>>>& out) {
+            if (obj.is_none()) return;
+            const py::dict d = py::cast<py::dict>(obj);
+            for (const auto& [key, value] : d) {
+                const long k = py::cast<long>(key);
+                if (k < 0 || k >= static_cast<long>(states))
+                    throw py::value_error(name + "[" + std::to_string(k) + "]: the rollout kept states 0.." +
+                                          std::to_string(states - 1) + " (the start and each step's end)");
+                out[static_cast<std::size_t>(k)] =
+                    to_points<dim>(value, name + "[" + std::to_string(k) + "]", particles());
+            }
+        };
+        read(dL_dx, "dL_dx", xs);
+        read(dL_dv, "dL_dv", vs);
+        MpmRolloutGradient<dim> g;
+        {
+            py::gil_scoped_release release;
+            g = adjoint.backward(xs, vs);
+        }
+        py::dict d;
+        d["x0"] = rows<dim>(g.x);
+        d["v0"] = rows<dim>(g.v);
+        d["C0"] = matrices<dim>(g.C);
+        d["F0"] = matrices<dim>(g.F);
+        d["youngs_modulus"] = g.youngs_modulus;
+        return d;
+    }
+};
+
 }  // namespace
 
 void define_adjoint(py::module_& m) {
@@ -188,6 +297,44 @@ the most states held at once by the last forward and backward.)doc")
              py::arg("v0") = py::none(), py::arg("checkpoint_every") = 0, py::arg("states") = py::none())
         .def_property_readonly("peak_states", &Rollout::peak_states)
         .def("backward", &Rollout::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
+
+    py::class_<MpmRolloutBase>(m, "MpmRollout", R"doc(A rollout of an implicit MPM scene of elastic bodies and its adjoint.
+
+MpmRollout(scene, newton_tolerance=1e-10): scene as a path, a dict or a Scene with particle objects of
+elastic materials (no plasticity), APIC transfers (no transfer.flip_relaxation_time) and slip walls
+(no sticky or Coulomb floor); ValueError naming what otherwise. Steps are `lagged` backward Euler (for
+elastic materials every implicit MPM integrator's step) at a fixed dt (the advection limit is not
+applied), each solved to newton_tolerance (m/s), which sets how exact the gradient is.
+
+forward(steps, dt, v0=None, states=None) runs the rollout from the scene's particles (v0: their start
+velocities instead, a (particles, dim) array) and returns {"x": {k: array}, "v": {k: array}}, the
+states k asked for (None: all; 0 is the start, k the end of step k). Every step's start is kept (the
+tape). backward(dL_dx, dL_dv) takes dicts {state: (particles, dim) array} of the loss's gradient with
+respect to those states and returns {"x0", "v0": (particles, dim), "C0", "F0": (particles, dim, dim)
+arrays, "youngs_modulus": float}: dL/d of the start's positions, velocities, APIC matrices and F, and
+dL/dE (every material's E scaled together), by the adjoint of every step (docs/adjoint.md).)doc")
+        .def(py::init([](const py::object& scene, double newton_tolerance) -> std::unique_ptr<MpmRolloutBase> {
+                 Scene s = scene_of(scene);
+                 if (!s.has_particles() || s.has_meshes())
+                     throw py::value_error(s.file + ": MpmRollout takes a scene of particle objects only");
+                 if (!(newton_tolerance > 0.0)) throw py::value_error("newton_tolerance: expected a positive number");
+                 ImplicitOptions options;
+                 options.newton_tolerance = newton_tolerance;
+                 options.newton_acceleration_tolerance = 0.0;
+                 options.max_newton_iterations = 1000;
+                 try {
+                     if (s.dim == 2) return std::make_unique<MpmRolloutOf<2>>(std::move(s), options);
+                     return std::make_unique<MpmRolloutOf<3>>(std::move(s), options);
+                 } catch (const std::invalid_argument& e) {
+                     throw py::value_error(std::string(e.what()));
+                 }
+             }),
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10)
+        .def_property_readonly("particles", &MpmRolloutBase::particles)
+        .def("start", &MpmRolloutBase::start, "The scene's particles: {\"x\", \"v\"}, (particles, dim) arrays.")
+        .def("forward", &MpmRolloutBase::forward, py::arg("steps"), py::arg("dt"), py::arg("v0") = py::none(),
+             py::arg("states") = py::none())
+        .def("backward", &MpmRolloutBase::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
 }
 
 }  // namespace pnet::bindings

@@ -2,6 +2,7 @@
 """Identify a material parameter from an observed run, by the adjoint of the implicit step (docs/adjoint.md).
 
     scripts/identify.py youngs_modulus [--true-E 2e5] [--start-E 1e5] [--out out/identify]
+    scripts/identify.py ball_youngs_modulus [--true-E 1e5] [--start-E 5e4] [--observed explicit|implicit]
     scripts/identify.py yield_stress [--true-h0 0.004] [--start-h0 0.006] [--out out/identify]
         [--yield-scene cantilever|impact] [--observed explicit|implicit]
     [--integrator lagged|return_map]: the fit's steps (default lagged for E, return_map for the yield stress)
@@ -25,8 +26,14 @@ explicit FEM at 1e-5 s, the ground truth integrator, so that the fit's own step 
 bar that bends has no impact for backward Euler to damp); for the impact the fit's implicit step. The fit
 moves log h0 from --start-h0 the same way.
 
-A sand column's friction angle (issue 57's first identification) needs the adjoint of the MPM step,
-which is not written yet.
+ball_youngs_modulus: scenes/elastic_ball_2d.json, an elastic disk (MPM, StVK-Hencky) dropped at 2 m/s onto
+the slip floor, its first 0.2 s (the fall and the bounce). The observed run is explicit MPM at 1e-5 s at
+--true-E; the fit moves log E by L-BFGS on the mean squared distance of the particles at the 20 frames,
+each evaluation an implicit MPM rollout at --dt (2.5e-4 s) and its adjoint (plasticitynet.adjoint
+.mpm_positions). The implicit bounce's own damping is in the result (docs/adjoint.md).
+
+A sand column's friction angle (issue 57's first identification) needs the adjoint of the MPM step with
+the Drucker-Prager return mapping, AFLIP transfers and the Coulomb floor, which is not written yet.
 """
 from __future__ import annotations
 
@@ -50,6 +57,7 @@ import torch  # noqa: E402
 from plasticitynet import adjoint, frames  # noqa: E402
 
 FRAME_DT, FRAMES, DT = 0.01, 10, 1e-3
+BALL_FRAMES = 20
 
 
 def bouncing_box(E: float, integrator: str = "lagged", dt: float = DT) -> dict:
@@ -105,8 +113,20 @@ def cantilever(h0: float, integrator: str = "lagged", dt: float = DT) -> dict:
     }
 
 
+def elastic_ball(E: float, integrator: str = "lagged", dt: float = 2.5e-4) -> dict:
+    """scenes/elastic_ball_2d.json (an elastic disk, StVK-Hencky, dropped at 2 m/s onto the slip floor) at
+    Young's modulus E for its first BALL_FRAMES frames (the fall and the bounce), the implicit steps at dt
+    without the advection limit (the adjoint's steps are fixed)."""
+    scene = json.loads((ROOT / "scenes" / "elastic_ball_2d.json").read_text())
+    scene["objects"][0]["material"]["elasticity"]["E"] = E
+    scene["frames"] = BALL_FRAMES
+    scene["integrator"] = {"name": integrator, "dt": dt, "advection_cfl": 0, "newton_tolerance": 1e-10,
+                           "max_newton_iterations": 1000}
+    return scene
+
+
 def observed_frames(scene_dict: dict, out: Path, name: str) -> np.ndarray:
-    """The observed run's node positions at frames 1..FRAMES, (FRAMES, nodes, 2)."""
+    """The observed run's node (particle) positions at frames 1..frames, (frames, points, dim)."""
     out.mkdir(parents=True, exist_ok=True)
     scene = out / f"{name}_observed_scene.json"
     scene.write_text(json.dumps(scene_dict, indent=1))
@@ -115,11 +135,14 @@ def observed_frames(scene_dict: dict, out: Path, name: str) -> np.ndarray:
     done = launch.run(cmd, echo=True)
     if done.status != 0:
         sys.exit(f"the observed run failed ({done.status}):\n{done.output}")
-    return np.stack([frames.read_mesh_ply(run / f"frame_{k:05d}.ply").position for k in range(1, FRAMES + 1)])
+    count = scene_dict["frames"]
+    if "objects" in scene_dict:
+        return np.stack([frames.read_particle_positions(run / f"frame_{k:05d}.ply") for k in range(1, count + 1)])
+    return np.stack([frames.read_mesh_ply(run / f"frame_{k:05d}.ply").position for k in range(1, count + 1)])
 
 
 def explicit_observation(scene: dict) -> dict:
-    """The same scene under explicit FEM at 1e-5 s (the ground truth integrator)."""
+    """The same scene under explicit FEM or MPM at 1e-5 s (the ground truth integrator)."""
     return {**scene, "integrator": {"name": "explicit", "dt": 1e-5}}
 
 
@@ -129,7 +152,8 @@ def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_va
     is the differentiable rollout."""
     observed = torch.from_numpy(observed_frames(scene, out, name))
     steps_per_frame = round(frame_dt / dt)
-    states = [k * steps_per_frame for k in range(1, FRAMES + 1)]
+    frame_count = scene["frames"]
+    states = [k * steps_per_frame for k in range(1, frame_count + 1)]
     log_p = torch.tensor(math.log(start_value), dtype=torch.float64, requires_grad=True)
     optimizer = torch.optim.LBFGS([log_p], lr=1.0, max_iter=max_evaluations, max_eval=max_evaluations,
                                   tolerance_grad=1e-14, tolerance_change=1e-14, line_search_fn="strong_wolfe")
@@ -138,7 +162,7 @@ def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_va
     def closure():
         optimizer.zero_grad()
         start = time.perf_counter()
-        x = positions(torch.exp(log_p), FRAMES * steps_per_frame, states)
+        x = positions(torch.exp(log_p), frame_count * steps_per_frame, states)
         loss = 1e6 * ((x - observed) ** 2).sum(dim=-1).mean()  # mm^2
         loss.backward()
         path.append((float(torch.exp(log_p)), float(loss), float(log_p.grad), time.perf_counter() - start))
@@ -183,6 +207,22 @@ def identify_youngs_modulus(true_E: float, start_E: float, out: Path, max_evalua
                out, max_evaluations, dt)
 
 
+def identify_ball_youngs_modulus(true_E: float, start_E: float, out: Path, max_evaluations: int, observed: str,
+                                 dt: float) -> int:
+    scene = elastic_ball(start_E, "lagged", dt)
+    truth = elastic_ball(true_E, "lagged", dt)
+    if observed == "explicit":
+        truth = explicit_observation(truth)
+    print(f"observed: {truth['integrator']['name']} MPM at {truth['integrator']['dt']:g} s; the fit: lagged at "
+          f"{dt:g} s (elastic: every implicit MPM integrator's step)")
+
+    def positions(E, steps, states):
+        return adjoint.mpm_positions(scene, E, None, steps, dt, states)
+
+    return fit("ball_youngs_modulus", "E", "Pa", truth, FRAME_DT, true_E, start_E, positions, out, max_evaluations,
+               dt)
+
+
 def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int, integrator: str,
                           bar: str = "cantilever", observed: str = "explicit", dt: float = 5e-4) -> int:
     make, frame_dt = (cantilever, FRAME_DT) if bar == "cantilever" else (metal_block, 0.002)
@@ -207,9 +247,10 @@ def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evalua
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("case", choices=["youngs_modulus", "yield_stress"])
-    parser.add_argument("--true-E", type=float, default=2e5, help="the observed run's E, Pa (the fit never sees it)")
-    parser.add_argument("--start-E", type=float, default=1e5, help="the fit's first E, Pa")
+    parser.add_argument("case", choices=["youngs_modulus", "yield_stress", "ball_youngs_modulus"])
+    parser.add_argument("--true-E", type=float, default=None,
+                        help="the observed run's E, Pa (the fit never sees it; default 2e5, the ball 1e5)")
+    parser.add_argument("--start-E", type=float, default=None, help="the fit's first E, Pa (default 1e5, the ball 5e4)")
     parser.add_argument("--true-h0", type=float, default=0.004,
                         help="the observed run's initial hardening h0 = tau_Y / (2 mu) (the fit never sees it)")
     parser.add_argument("--start-h0", type=float, default=0.006, help="the fit's first h0")
@@ -226,6 +267,9 @@ def main() -> int:
                         help="the fit's step, s (default 1e-3; the cantilever 5e-4)")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "identify")
     args = parser.parse_args()
+    if args.case == "ball_youngs_modulus":
+        return identify_ball_youngs_modulus(args.true_E or 1e5, args.start_E or 5e4, args.out, args.max_evaluations,
+                                            args.observed or "explicit", args.dt or 2.5e-4)
     if args.case == "yield_stress":
         cantilever_scene = args.yield_scene == "cantilever"
         observed = args.observed or ("explicit" if cantilever_scene else "implicit")
@@ -235,7 +279,7 @@ def main() -> int:
     if args.observed == "explicit":
         parser.error("--observed explicit: an implicit bounce does not follow explicit's elastic rebound at any E "
                      "(docs/adjoint.md); youngs_modulus observes the fit's own implicit step")
-    return identify_youngs_modulus(args.true_E, args.start_E, args.out, args.max_evaluations,
+    return identify_youngs_modulus(args.true_E or 2e5, args.start_E or 1e5, args.out, args.max_evaluations,
                                    args.integrator or "lagged", args.dt or DT)
 
 

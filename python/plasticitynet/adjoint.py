@@ -10,6 +10,9 @@ operations, so a torch optimizer can fit E or v0 to observed frames.
     E = torch.tensor(1e5, dtype=torch.float64, requires_grad=True)
     x = fem_positions(scene, E, None, steps=50, dt=2e-3, states=[10, 20, 50])   # (3, nodes, dim)
     loss = ((x - observed) ** 2).sum(); loss.backward(); E.grad
+
+`mpm_positions(scene, youngs_modulus, v0, steps, dt, states)` does the same for an implicit MPM rollout of
+elastic particle bodies (plasticitynet_sim.MpmRollout): the particles' positions.
 """
 from __future__ import annotations
 
@@ -27,18 +30,21 @@ def _sim():
 
 
 def with_youngs_modulus(scene: dict, youngs_modulus: float, initial_hardening: float | None = None) -> dict:
-    """A copy of a scene dict whose meshes' material has Young's modulus E (Pa) and, when given, the
+    """A copy of a scene dict whose meshes' and particle objects' materials have Young's modulus E (Pa) and, when given, the
     initial hardening h0 (von Mises: tau_Y = 2 mu h0). The material must be written out in the scene (a
     dict with an "elasticity" block), not a preset's name."""
     out = copy.deepcopy(scene)
-    for k, mesh in enumerate(out.get("meshes", [])):
-        material = mesh.get("material")
-        if not isinstance(material, dict) or "elasticity" not in material:
-            raise ValueError(f"meshes[{k}].material: write the material out (a dict with an \"elasticity\" block) "
-                             "to set its parameters")
-        material["elasticity"]["E"] = float(youngs_modulus)
-        if initial_hardening is not None:
-            material["initial_hardening"] = float(initial_hardening)
+    for field in ("meshes", "objects"):
+        for k, body in enumerate(out.get(field, [])):
+            if body.get("kinematic"):
+                continue
+            material = body.get("material")
+            if not isinstance(material, dict) or "elasticity" not in material:
+                raise ValueError(f"{field}[{k}].material: write the material out (a dict with an \"elasticity\" "
+                                 "block) to set its parameters")
+            material["elasticity"]["E"] = float(youngs_modulus)
+            if initial_hardening is not None:
+                material["initial_hardening"] = float(initial_hardening)
     return out
 
 
@@ -79,3 +85,36 @@ def fem_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | 
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
     return _FemPositions.apply(youngs_modulus, v0, initial_hardening, scene, steps, dt, [int(k) for k in states],
                                newton_tolerance, integrator)
+
+
+class _MpmPositions(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, youngs_modulus, v0, scene, steps, dt, states, newton_tolerance):
+        rollout = _sim().MpmRollout(with_youngs_modulus(scene, float(youngs_modulus)), newton_tolerance)
+        v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
+        x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
+        ctx.rollout, ctx.states, ctx.has_v0 = rollout, list(states), v0 is not None
+        return torch.from_numpy(np.stack([x[k] for k in states]))
+
+    @staticmethod
+    def backward(ctx, grad):
+        g = grad.detach().cpu().numpy().astype(np.float64)
+        dL_dx: dict[int, np.ndarray] = {}
+        for i, k in enumerate(ctx.states):
+            dL_dx[k] = dL_dx.get(k, 0.0) + g[i]
+        out = ctx.rollout.backward(dL_dx)
+        dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
+        dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
+        return dE, dv0, None, None, None, None, None
+
+
+def mpm_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
+                  states: Sequence[int], newton_tolerance: float = 1e-10) -> torch.Tensor:
+    """The particles' positions (len(states), particles, dim) at the kept states of `steps` implicit MPM
+    steps of dt from the scene's particles (v0: their start velocities instead), differentiable in
+    youngs_modulus (a 0-d tensor, Pa) and v0: plasticitynet_sim.MpmRollout, elastic bodies with APIC
+    transfers and slip walls (docs/adjoint.md)."""
+    for k in states:
+        if not 0 <= int(k) <= steps:
+            raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
+    return _MpmPositions.apply(youngs_modulus, v0, scene, steps, dt, [int(k) for k in states], newton_tolerance)

@@ -1,7 +1,8 @@
 """Gradients of simulated outcomes from Python (docs/adjoint.md): plasticitynet_sim.FemRollout against
 central differences of the whole rollout, the torch function plasticitynet.adjoint.fem_positions, a tiny
-identification of Young's modulus, the script's yield stress from an explicit cantilever, and bad requests
-refused naming what is wrong."""
+identification of Young's modulus, the script's yield stress from an explicit cantilever, MpmRollout (the
+MPM adjoint) against central differences and in a tiny identification, and bad requests refused naming what
+is wrong."""
 
 from __future__ import annotations
 
@@ -176,6 +177,79 @@ def test_the_yield_stress_is_identified_from_an_explicit_cantilever_within_two_p
     assert len(result["path"]) <= 20
     assert result["relative_error"] < 0.02, result["identified"]
     assert result["relative_error"] > 1e-6  # a different integrator observed it: not an inverse crime
+
+
+def disk_scene(E: float = 1e5, plasticity: str = "none", transfer: dict | None = None) -> dict:
+    """An elastic disk (MPM, dx 1/32) falling at 2 m/s onto the slip floor."""
+    scene = {"dim": 2, "domain": {"min": [0, 0], "max": [1, 1]}, "dx": 1 / 32, "gravity": [0, -9.8],
+             "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 0},
+             "integrator": {"name": "lagged", "dt": 2e-3},
+             "objects": [{"shape": "disk", "center": [0.5, 0.25], "radius": 0.1, "velocity": [0.3, -2],
+                          "material": {"name": "rubber", "density": 1000,
+                                       "elasticity": {"model": "stvk_hencky", "E": E, "nu": 0.3},
+                                       "plasticity": {"model": plasticity}}}]}
+    if transfer:
+        scene["transfer"] = transfer
+    return scene
+
+
+def test_mpm_rollout_gradient_matches_central_differences():
+    """MpmRollout through torch: dL/dE and dL/dv0 of a loss of two states against central differences."""
+    rng = np.random.default_rng(3)
+    states = [10, 20]
+    E = torch.tensor(1e5, dtype=torch.float64, requires_grad=True)
+    start = pns.MpmRollout(disk_scene()).start()
+    v0 = torch.from_numpy(start["v"]).requires_grad_(True)
+    x = adjoint.mpm_positions(disk_scene(), E, v0, 20, 2e-3, states)
+    w = torch.from_numpy(rng.uniform(-1, 1, x.shape))
+    (w * x).sum().backward()
+
+    def loss(E_value, v):
+        with torch.no_grad():
+            return float((w * adjoint.mpm_positions(disk_scene(), torch.tensor(E_value, dtype=torch.float64), v, 20,
+                                                    2e-3, states)).sum())
+
+    h = 10.0
+    fd_E = (loss(1e5 + h, v0.detach()) - loss(1e5 - h, v0.detach())) / (2 * h)
+    d = torch.from_numpy(rng.uniform(-1, 1, v0.shape))
+    fd_v = (loss(1e5, v0.detach() + 1e-4 * d) - loss(1e5, v0.detach() - 1e-4 * d)) / 2e-4
+    assert float(E.grad) == pytest.approx(fd_E, rel=1e-5)
+    assert float((v0.grad * d).sum()) == pytest.approx(fd_v, rel=1e-5)
+
+
+def test_a_tiny_mpm_identification_recovers_youngs_modulus():
+    """The observed rollout at 1.6e5 Pa; L-BFGS on log E from 1e5 Pa."""
+    states = [5, 10, 15, 20]
+    with torch.no_grad():
+        observed = adjoint.mpm_positions(disk_scene(), torch.tensor(1.6e5, dtype=torch.float64), None, 20, 2e-3, states)
+    log_E = torch.tensor(np.log(1e5), dtype=torch.float64, requires_grad=True)
+    optimizer = torch.optim.LBFGS([log_E], max_iter=20, max_eval=20, tolerance_grad=1e-14, tolerance_change=1e-14,
+                                  line_search_fn="strong_wolfe")
+
+    def closure():
+        optimizer.zero_grad()
+        x = adjoint.mpm_positions(disk_scene(), torch.exp(log_E), None, 20, 2e-3, states)
+        loss = 1e6 * ((x - observed) ** 2).sum(dim=-1).mean()
+        loss.backward()
+        return loss
+
+    optimizer.step(closure)
+    assert float(torch.exp(log_E)) == pytest.approx(1.6e5, rel=1e-3)
+
+
+def test_mpm_rollouts_refuse_what_the_adjoint_does_not_cover():
+    with pytest.raises(ValueError, match=r"materials\[0\]\.plasticity 'drucker_prager'"):
+        pns.MpmRollout(disk_scene(plasticity="drucker_prager"))
+    with pytest.raises(ValueError, match="flip_relaxation_time"):
+        pns.MpmRollout(disk_scene(transfer={"flip_relaxation_time": 0.01}))
+    rollout = pns.MpmRollout(disk_scene())
+    with pytest.raises(ValueError, match="run forward"):
+        rollout.backward({0: np.zeros((rollout.particles, 2))})
+    rollout.forward(3, 2e-3, states=[3])
+    with pytest.raises(ValueError, match=r"dL_dx\[4\]: the rollout kept states 0..3"):
+        rollout.backward({4: np.zeros((rollout.particles, 2))})
+    with pytest.raises(ValueError, match="states: 5 is not a state"):
+        rollout.forward(3, 2e-3, states=[5])
 
 
 def test_bad_requests_are_refused_naming_what():

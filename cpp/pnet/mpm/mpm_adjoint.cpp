@@ -32,7 +32,9 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
 }
 
 template <int dim>
-Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, int steps) {
+Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, int steps,
+                                        const std::function<void(int, const Particles<dim>&)>& observe) {
+    if (steps < 0) throw std::invalid_argument("MpmAdjoint::forward: steps " + std::to_string(steps) + " < 0");
     tape_.clear();
     solutions_.clear();
     dts_.clear();
@@ -40,29 +42,51 @@ Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, 
                                        std::make_unique<ElasticParticleEnergy<dim>>(system_.materials));
     integrator.reset(start);
     Particles<dim> particles = start;
+    if (observe) observe(0, particles);
     for (int k = 0; k < steps; ++k) {
         tape_.push_back(particles);
         integrator.step(particles, dt, k);
         solutions_.push_back(integrator.solution());
         dts_.push_back(dt);
+        if (observe) observe(k + 1, particles);
     }
+    last_size_ = particles.size();
+    forwarded_ = true;
     return particles;
 }
 
 template <int dim>
 MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<Vec<dim>>& x_bar,
                                                   const std::vector<Vec<dim>>& v_bar) const {
-    if (tape_.empty()) throw std::logic_error("MpmAdjoint::backward: no forward pass");
-    const std::size_t n = tape_.front().size();
-    if (x_bar.size() != n || v_bar.size() != n)
-        throw std::invalid_argument("MpmAdjoint::backward: dL/dx and dL/dv need one entry per particle (" +
-                                    std::to_string(n) + ")");
+    std::vector<std::vector<Vec<dim>>> xs(tape_.size() + 1), vs(tape_.size() + 1);
+    xs.back() = x_bar;
+    vs.back() = v_bar;
+    return backward(xs, vs);
+}
+
+template <int dim>
+MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<Vec<dim>>>& x_bar,
+                                                  const std::vector<std::vector<Vec<dim>>>& v_bar) const {
+    if (steps() < 0) throw std::logic_error("MpmAdjoint::backward: no forward pass");
+    const std::size_t states = tape_.size() + 1, n = last_size_;
+    if (x_bar.size() != states || v_bar.size() != states)
+        throw std::invalid_argument("MpmAdjoint::backward: one entry per state (" + std::to_string(states) + ")");
+    for (std::size_t k = 0; k < states; ++k)
+        if ((!x_bar[k].empty() && x_bar[k].size() != n) || (!v_bar[k].empty() && v_bar[k].size() != n))
+            throw std::invalid_argument("MpmAdjoint::backward: state " + std::to_string(k) +
+                                        ": dL/dx and dL/dv need one entry per particle (" + std::to_string(n) + ")");
     MpmRolloutGradient<dim> g;
-    g.x = x_bar;
-    g.v = v_bar;
+    g.x.assign(n, Vec<dim>::Zero());
+    g.v.assign(n, Vec<dim>::Zero());
     g.C.assign(n, Mat<dim>::Zero());
     g.F.assign(n, Mat<dim>::Zero());
-    for (std::size_t k = tape_.size(); k-- > 0;) step_adjoint(k, g);
+    for (std::size_t k = states; k-- > 0;) {
+        for (std::size_t p = 0; p < n; ++p) {
+            if (!x_bar[k].empty()) g.x[p] += x_bar[k][p];
+            if (!v_bar[k].empty()) g.v[p] += v_bar[k][p];
+        }
+        if (k > 0) step_adjoint(k - 1, g);
+    }
     return g;
 }
 

@@ -25,6 +25,7 @@
 // gradient's accuracy follows. Every step's start state and solution are kept (the tape; about 2 sqrt(N)
 // states with checkpoints is the FEM adjoint's and is not yet written here). Refused, naming what:
 // plasticity, AFLIP transfers, a sticky or Coulomb floor, BDF2.
+#include <functional>
 #include <vector>
 
 #include "pnet/mpm/implicit_integrator.hpp"
@@ -44,11 +45,19 @@ public:
     /// Throws std::invalid_argument naming what the adjoint does not cover.
     MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options);
 
-    /// `steps` steps of dt from `start`, kept on the tape; returns the last state.
-    Particles<dim> forward(const Particles<dim>& start, double dt, int steps);
+    /// `steps` steps of dt from `start`, kept on the tape, calling observe(k, state) at each state k =
+    /// 0..steps (where a loss reads them); returns the last state.
+    Particles<dim> forward(const Particles<dim>& start, double dt, int steps,
+                           const std::function<void(int, const Particles<dim>&)>& observe = {});
 
     /// The gradient of L, given dL/dx and dL/dv of the last forward state's particles.
     MpmRolloutGradient<dim> backward(const std::vector<Vec<dim>>& x_bar, const std::vector<Vec<dim>>& v_bar) const;
+    /// The same for a loss of any states: x_bar[k], v_bar[k] (k = 0..steps; an empty entry: L does not
+    /// read that state's positions or velocities).
+    MpmRolloutGradient<dim> backward(const std::vector<std::vector<Vec<dim>>>& x_bar,
+                                     const std::vector<std::vector<Vec<dim>>>& v_bar) const;
+    /// Steps of the last forward pass (-1: none).
+    int steps() const { return forwarded_ ? static_cast<int>(tape_.size()) : -1; }
 
 private:
     /// One step's adjoint: from the cotangents of its output (g, overwritten) to those of its start.
@@ -60,6 +69,8 @@ private:
     std::vector<Particles<dim>> tape_;  // each step's start state
     std::vector<VecX> solutions_;       // each step's solution on its unknowns, before the projection
     std::vector<double> dts_;
+    std::size_t last_size_ = 0;  // particles
+    bool forwarded_ = false;
 };
 
 }  // namespace pnet

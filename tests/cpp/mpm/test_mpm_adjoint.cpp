@@ -125,6 +125,53 @@ TEST(MpmAdjoint2d, ElasticRolloutGradientMatchesCentralDifferences) {
     EXPECT_NEAR(g.youngs_modulus, fd_E, 1e-4 * std::abs(fd_E));
 }
 
+// A loss of an intermediate state and the last: the cotangents enter the backward pass at their states.
+TEST(MpmAdjoint2d, ALossOfSeveralStatesGetsItsGradientAtEach) {
+    const double dt = 2e-3;
+    const int steps = 12;
+    const Scene scene = disk_scene(1e5);
+    const MpmSystem<2> system = make_mpm_system<2>(scene);
+    const Particles<2> start = sample_particles<2>(scene);
+    const std::size_t n = start.size();
+    test::Random random(73);
+    std::vector<Vec<2>> a(n), b(n), dv(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        a[p] = random.uniform_vec<2>(-1.0, 1.0);
+        b[p] = random.uniform_vec<2>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
+    }
+    auto loss = [&](const Particles<2>& from) {
+        MpmAdjoint<2> adjoint(system, tight(), MpmOptions{});
+        double L = 0.0;
+        adjoint.forward(from, dt, steps, [&](int k, const Particles<2>& s) {
+            for (std::size_t p = 0; p < n; ++p) {
+                if (k == 5) L += a[p].dot(s.x[p]);
+                if (k == steps) L += b[p].dot(s.v[p]);
+            }
+        });
+        return L;
+    };
+    MpmAdjoint<2> adjoint(system, tight(), MpmOptions{});
+    adjoint.forward(start, dt, steps);
+    EXPECT_EQ(adjoint.steps(), steps);
+    std::vector<std::vector<Vec<2>>> xs(steps + 1), vs(steps + 1);
+    xs[5] = a;
+    vs[steps] = b;
+    const MpmRolloutGradient<2> g = adjoint.backward(xs, vs);
+    double g_v = 0.0;
+    for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
+    const double h = 1e-4;
+    Particles<2> plus = start, minus = start;
+    for (std::size_t p = 0; p < n; ++p) {
+        plus.v[p] += h * dv[p];
+        minus.v[p] -= h * dv[p];
+    }
+    const double fd = (loss(plus) - loss(minus)) / (2.0 * h);
+    EXPECT_NEAR(g_v, fd, 1e-4 * std::abs(fd));
+    xs[5].resize(3);
+    EXPECT_THROW(adjoint.backward(xs, vs), std::invalid_argument);
+}
+
 TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
     const Scene sand = disk_scene(1e5, "drucker_prager");
     try {
