@@ -151,9 +151,11 @@ py::array_t<double> matrices(const std::vector<Mat<dim>>& M) {
 struct MpmRolloutBase {
     virtual ~MpmRolloutBase() = default;
     virtual py::dict start() const = 0;
-    virtual py::dict forward(int steps, double dt, const py::object& v0, const py::object& states) = 0;
+    virtual py::dict forward(int steps, double dt, const py::object& v0, const py::object& states,
+                             int checkpoint_every) = 0;
     virtual py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const = 0;
     virtual int particles() const = 0;
+    virtual std::size_t peak_states() const = 0;
 };
 
 template <int dim>
@@ -169,15 +171,18 @@ struct MpmRolloutOf final : MpmRolloutBase {
           initial(sample_particles<dim>(scene)),
           adjoint(system, options, MpmOptions{}) {}
     int particles() const override { return static_cast<int>(initial.size()); }
+    std::size_t peak_states() const override { return adjoint.peak_states(); }
     py::dict start() const override {
         py::dict d;
         d["x"] = rows<dim>(initial.x);
         d["v"] = rows<dim>(initial.v);
         return d;
     }
-    py::dict forward(int steps, double dt, const py::object& v0, const py::object& states) override {
+    py::dict forward(int steps, double dt, const py::object& v0, const py::object& states,
+                     int checkpoint_every) override {
         if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
         if (!(dt > 0.0)) throw py::value_error("dt: expected a positive number (s)");
+        if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
         std::vector<char> wanted(static_cast<std::size_t>(steps) + 1, states.is_none());
         if (!states.is_none())
             for (const py::handle k : states) {
@@ -193,12 +198,15 @@ struct MpmRolloutOf final : MpmRolloutBase {
         std::vector<std::vector<Vec<dim>>> xs, vs;
         {
             py::gil_scoped_release release;
-            adjoint.forward(s, dt, steps, [&](int k, const Particles<dim>& state) {
-                if (!wanted[static_cast<std::size_t>(k)]) return;
-                index.push_back(k);
-                xs.push_back(state.x);
-                vs.push_back(state.v);
-            });
+            adjoint.forward(
+                s, dt, steps,
+                [&](int k, const Particles<dim>& state) {
+                    if (!wanted[static_cast<std::size_t>(k)]) return;
+                    index.push_back(k);
+                    xs.push_back(state.x);
+                    vs.push_back(state.v);
+                },
+                checkpoint_every);
         }
         py::dict x, v;
         for (std::size_t j = 0; j < index.size(); ++j) {
@@ -306,13 +314,15 @@ elastic materials (no plasticity), APIC transfers (no transfer.flip_relaxation_t
 elastic materials every implicit MPM integrator's step) at a fixed dt (the advection limit is not
 applied), each solved to newton_tolerance (m/s), which sets how exact the gradient is.
 
-forward(steps, dt, v0=None, states=None) runs the rollout from the scene's particles (v0: their start
-velocities instead, a (particles, dim) array) and returns {"x": {k: array}, "v": {k: array}}, the
-states k asked for (None: all; 0 is the start, k the end of step k). Every step's start is kept (the
-tape). backward(dL_dx, dL_dv) takes dicts {state: (particles, dim) array} of the loss's gradient with
+forward(steps, dt, v0=None, states=None, checkpoint_every=0) runs the rollout from the scene's particles
+(v0: their start velocities instead, a (particles, dim) array) and returns {"x": {k: array}, "v": {k:
+array}}, the states k asked for (None: all; 0 is the start, k the end of step k), keeping a checkpoint
+every checkpoint_every steps (0: about sqrt(steps); 1: every state). backward(dL_dx, dL_dv) takes dicts {state: (particles, dim) array} of the loss's gradient with
 respect to those states and returns {"x0", "v0": (particles, dim), "C0", "F0": (particles, dim, dim)
 arrays, "youngs_modulus": float}: dL/d of the start's positions, velocities, APIC matrices and F, and
-dL/dE (every material's E scaled together), by the adjoint of every step (docs/adjoint.md).)doc")
+dL/dE (every material's E scaled together), by the adjoint of every step, recomputing the steps between
+checkpoints (docs/adjoint.md). peak_states: the most states held at once by the last forward and
+backward.)doc")
         .def(py::init([](const py::object& scene, double newton_tolerance) -> std::unique_ptr<MpmRolloutBase> {
                  Scene s = scene_of(scene);
                  if (!s.has_particles() || s.has_meshes())
@@ -333,7 +343,8 @@ dL/dE (every material's E scaled together), by the adjoint of every step (docs/a
         .def_property_readonly("particles", &MpmRolloutBase::particles)
         .def("start", &MpmRolloutBase::start, "The scene's particles: {\"x\", \"v\"}, (particles, dim) arrays.")
         .def("forward", &MpmRolloutBase::forward, py::arg("steps"), py::arg("dt"), py::arg("v0") = py::none(),
-             py::arg("states") = py::none())
+             py::arg("states") = py::none(), py::arg("checkpoint_every") = 0)
+        .def_property_readonly("peak_states", &MpmRolloutBase::peak_states)
         .def("backward", &MpmRolloutBase::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
 }
 

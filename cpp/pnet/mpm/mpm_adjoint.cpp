@@ -1,5 +1,7 @@
 #include "pnet/mpm/mpm_adjoint.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -33,32 +35,52 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
 
 template <int dim>
 Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, int steps,
-                                        const std::function<void(int, const Particles<dim>&)>& observe) {
-    if (steps < 0) throw std::invalid_argument("MpmAdjoint::forward: steps " + std::to_string(steps) + " < 0");
-    tape_.clear();
-    solutions_.clear();
-    dts_.clear();
+                                        const std::function<void(int, const Particles<dim>&)>& observe,
+                                        int checkpoint_every) {
+    if (!(dt > 0.0) || steps < 0 || checkpoint_every < 0)
+        throw std::invalid_argument("MpmAdjoint::forward: dt > 0, steps >= 0 and checkpoint_every >= 0 are needed");
+    const int every =
+        checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
+    checkpoints_.clear();
     ImplicitIntegrator<dim> integrator(system_, Method::Lagged, options_, mpm_options_,
                                        std::make_unique<ElasticParticleEnergy<dim>>(system_.materials));
     integrator.reset(start);
     Particles<dim> particles = start;
+    checkpoints_[0] = particles;
     if (observe) observe(0, particles);
     for (int k = 0; k < steps; ++k) {
-        tape_.push_back(particles);
         integrator.step(particles, dt, k);
-        solutions_.push_back(integrator.solution());
-        dts_.push_back(dt);
+        if ((k + 1) % every == 0 || k + 1 == steps) checkpoints_[k + 1] = particles;
         if (observe) observe(k + 1, particles);
     }
+    dt_ = dt;
+    steps_ = steps;
     last_size_ = particles.size();
-    forwarded_ = true;
+    peak_states_ = checkpoints_.size();
     return particles;
+}
+
+template <int dim>
+void MpmAdjoint<dim>::replay(int first, int last, std::vector<Particles<dim>>& starts,
+                             std::vector<VecX>& solutions) const {
+    ImplicitIntegrator<dim> integrator(system_, Method::Lagged, options_, mpm_options_,
+                                       std::make_unique<ElasticParticleEnergy<dim>>(system_.materials));
+    Particles<dim> particles = checkpoints_.at(first);
+    integrator.reset(particles);
+    starts.clear();
+    solutions.clear();
+    for (int k = first; k < last; ++k) {
+        starts.push_back(particles);
+        integrator.step(particles, dt_, k);
+        solutions.push_back(integrator.solution());
+    }
 }
 
 template <int dim>
 MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<Vec<dim>>& x_bar,
                                                   const std::vector<Vec<dim>>& v_bar) const {
-    std::vector<std::vector<Vec<dim>>> xs(tape_.size() + 1), vs(tape_.size() + 1);
+    if (steps_ < 0) throw std::logic_error("MpmAdjoint::backward: no forward pass");
+    std::vector<std::vector<Vec<dim>>> xs(steps_ + 1), vs(steps_ + 1);
     xs.back() = x_bar;
     vs.back() = v_bar;
     return backward(xs, vs);
@@ -67,8 +89,8 @@ MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<Vec<dim>>& x
 template <int dim>
 MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<Vec<dim>>>& x_bar,
                                                   const std::vector<std::vector<Vec<dim>>>& v_bar) const {
-    if (steps() < 0) throw std::logic_error("MpmAdjoint::backward: no forward pass");
-    const std::size_t states = tape_.size() + 1, n = last_size_;
+    if (steps_ < 0) throw std::logic_error("MpmAdjoint::backward: no forward pass");
+    const std::size_t states = static_cast<std::size_t>(steps_) + 1, n = last_size_;
     if (x_bar.size() != states || v_bar.size() != states)
         throw std::invalid_argument("MpmAdjoint::backward: one entry per state (" + std::to_string(states) + ")");
     for (std::size_t k = 0; k < states; ++k)
@@ -80,20 +102,33 @@ MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<
     g.v.assign(n, Vec<dim>::Zero());
     g.C.assign(n, Mat<dim>::Zero());
     g.F.assign(n, Mat<dim>::Zero());
-    for (std::size_t k = states; k-- > 0;) {
+    auto add = [&](std::size_t k) {
         for (std::size_t p = 0; p < n; ++p) {
             if (!x_bar[k].empty()) g.x[p] += x_bar[k][p];
             if (!v_bar[k].empty()) g.v[p] += v_bar[k][p];
         }
-        if (k > 0) step_adjoint(k - 1, g);
+    };
+    add(states - 1);
+    // Segment by segment between checkpoints, the last first; each recomputed from its checkpoint.
+    std::vector<int> marks;
+    for (const auto& [step, state] : checkpoints_) marks.push_back(step);
+    std::vector<Particles<dim>> starts;
+    std::vector<VecX> solutions;
+    for (std::size_t m = marks.size() - 1; m-- > 0;) {
+        const int first = marks[m], last = marks[m + 1];
+        replay(first, last, starts, solutions);
+        peak_states_ = std::max(peak_states_, checkpoints_.size() + starts.size());
+        for (int k = last - 1; k >= first; --k) {
+            step_adjoint(starts[k - first], solutions[k - first], k, g);
+            add(static_cast<std::size_t>(k));
+        }
     }
     return g;
 }
 
 template <int dim>
-void MpmAdjoint<dim>::step_adjoint(std::size_t k, MpmRolloutGradient<dim>& g) const {
-    const Particles<dim>& start = tape_[k];
-    const double dt = dts_[k];
+void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, int k, MpmRolloutGradient<dim>& g) const {
+    const double dt = dt_;
     const std::size_t n = start.size();
     constexpr int kStencil = IncrementalPotential<dim>::kStencil;
 
@@ -116,7 +151,6 @@ void MpmAdjoint<dim>::step_adjoint(std::size_t k, MpmRolloutGradient<dim>& g) co
     potential.begin_step(grid, start, dt, solve_boundary);
     potential.set_reference(start.F_elastic);
     potential.set_project_psd(false);
-    const VecX& v = solutions_[k];
     if (v.size() != potential.size()) throw std::logic_error("MpmAdjoint: the step's unknowns changed on replay");
     const VecX& v_star = potential.v_star();
 
@@ -172,7 +206,7 @@ void MpmAdjoint<dim>::step_adjoint(std::size_t k, MpmRolloutGradient<dim>& g) co
     VecX diagonal;
     potential.hessian_diagonal(diagonal);
     VecX lambda;
-    const PcgResult solve = solve_pcg(potential, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-13, 100000);
+    const PcgResult solve = solve_pcg(potential, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-10, 100000);
     if (!solve.converged)
         throw std::runtime_error(
             "MpmAdjoint: step " + std::to_string(k) + ": the adjoint solve did not converge (" +
@@ -190,11 +224,14 @@ void MpmAdjoint<dim>::step_adjoint(std::size_t k, MpmRolloutGradient<dim>& g) co
     }
     std::vector<Mat<dim>> F(n);
     potential.deformation(v, F);
-    for (std::size_t p = 0; p < n; ++p) {
+    std::vector<double> youngs_bar(n);  // summed in particle order after the parallel loop
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
         const Elasticity<dim>& elasticity = system_.materials[start.object[p]].elasticity();
         const Mat<dim>& Fn = start.F_elastic[p];
-        const Mat<dim> P = elasticity.P(F[p]);
-        const Tensor4<dim> dPdF = elasticity.dPdF(F[p], false);
+        const PolarSVD<dim> svd = clamped_svd<dim>(F[p]);  // one decomposition for P and dP/dF
+        const Mat<dim> P = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
+        const Tensor4<dim> dPdF = elasticity.dPdF(svd, false);
         Mat<dim> Lambda = Mat<dim>::Zero(), G = Mat<dim>::Zero();
         const int* dofs = potential.stencil_dofs(p);
         const Vec<dim>* grads = potential.stencil_gradients(p);
@@ -207,7 +244,7 @@ void MpmAdjoint<dim>::step_adjoint(std::size_t k, MpmRolloutGradient<dim>& g) co
         const Mat<dim> Q = unflatten<dim>(dPdF * flatten<dim>(LF));
         const Mat<dim> A = Mat<dim>::Identity() + dt * G;
         F_bar[p] -= V * dt * (A.transpose() * Q + Lambda.transpose() * P);
-        g.youngs_modulus -= V * dt * P.cwiseProduct(LF).sum() / elasticity.params().E;
+        youngs_bar[p] = -V * dt * P.cwiseProduct(LF).sum() / elasticity.params().E;
         const StencilNodeDerivatives<dim> st(grid, start.x[p]);
         int s = 0;
         Vec<dim> xb = Vec<dim>::Zero();
@@ -219,6 +256,7 @@ void MpmAdjoint<dim>::step_adjoint(std::size_t k, MpmRolloutGradient<dim>& g) co
         });
         x_bar[p] -= V * dt * xb;
     }
+    for (double e : youngs_bar) g.youngs_modulus += e;
 
     // P2G: v* = q / m + dt g on the nodes with mass.
     std::vector<Vec<dim>> momentum_bar(storage, Vec<dim>::Zero());

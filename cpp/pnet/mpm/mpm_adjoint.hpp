@@ -22,10 +22,12 @@
 //
 // The forward steps are the production integrator's (ImplicitIntegrator, `lagged`), at a fixed dt (the
 // advection limit is the simulation's, not applied here), solved to the options' tolerance, which the
-// gradient's accuracy follows. Every step's start state and solution are kept (the tape; about 2 sqrt(N)
-// states with checkpoints is the FEM adjoint's and is not yet written here). Refused, naming what:
+// gradient's accuracy follows. The forward pass keeps a checkpoint every C steps (about sqrt(N)); the
+// backward pass recomputes each segment from its checkpoint, the last first (about 2 sqrt(N) states at
+// once), as the FEM adjoint does. Refused, naming what:
 // plasticity, AFLIP transfers, a sticky or Coulomb floor, BDF2.
 #include <functional>
+#include <map>
 #include <vector>
 
 #include "pnet/mpm/implicit_integrator.hpp"
@@ -45,10 +47,12 @@ public:
     /// Throws std::invalid_argument naming what the adjoint does not cover.
     MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options);
 
-    /// `steps` steps of dt from `start`, kept on the tape, calling observe(k, state) at each state k =
-    /// 0..steps (where a loss reads them); returns the last state.
+    /// `steps` steps of dt from `start`, keeping a checkpoint every `checkpoint_every` steps (0:
+    /// ceil(sqrt(steps)); 1: every state), calling observe(k, state) at each state k = 0..steps (where a
+    /// loss reads them); returns the last state.
     Particles<dim> forward(const Particles<dim>& start, double dt, int steps,
-                           const std::function<void(int, const Particles<dim>&)>& observe = {});
+                           const std::function<void(int, const Particles<dim>&)>& observe = {},
+                           int checkpoint_every = 0);
 
     /// The gradient of L, given dL/dx and dL/dv of the last forward state's particles.
     MpmRolloutGradient<dim> backward(const std::vector<Vec<dim>>& x_bar, const std::vector<Vec<dim>>& v_bar) const;
@@ -57,20 +61,27 @@ public:
     MpmRolloutGradient<dim> backward(const std::vector<std::vector<Vec<dim>>>& x_bar,
                                      const std::vector<std::vector<Vec<dim>>>& v_bar) const;
     /// Steps of the last forward pass (-1: none).
-    int steps() const { return forwarded_ ? static_cast<int>(tape_.size()) : -1; }
+    int steps() const { return steps_; }
+    /// The most particle states held at once by the last forward and backward passes (checkpoints and a
+    /// recomputed segment).
+    std::size_t peak_states() const { return peak_states_; }
 
 private:
-    /// One step's adjoint: from the cotangents of its output (g, overwritten) to those of its start.
-    void step_adjoint(std::size_t k, MpmRolloutGradient<dim>& g) const;
+    /// One step's adjoint, the step from `start` whose solution (on its unknowns, before the projection)
+    /// is `solution`: from the cotangents of its output (g, overwritten) to those of its start.
+    void step_adjoint(const Particles<dim>& start, const VecX& solution, int step, MpmRolloutGradient<dim>& g) const;
+    /// The steps first..last from checkpoint `first`: their start states and solutions (recomputed, the
+    /// same to the last bit).
+    void replay(int first, int last, std::vector<Particles<dim>>& starts, std::vector<VecX>& solutions) const;
 
     const MpmSystem<dim>& system_;
     ImplicitOptions options_;
     MpmOptions mpm_options_;
-    std::vector<Particles<dim>> tape_;  // each step's start state
-    std::vector<VecX> solutions_;       // each step's solution on its unknowns, before the projection
-    std::vector<double> dts_;
+    std::map<int, Particles<dim>> checkpoints_;  // state k, every checkpoint_every steps and the last
+    double dt_ = 0.0;
+    int steps_ = -1;
     std::size_t last_size_ = 0;  // particles
-    bool forwarded_ = false;
+    mutable std::size_t peak_states_ = 0;
 };
 
 }  // namespace pnet

@@ -19,7 +19,8 @@
 //
 // A particle's stencil is where it starts; the weights are differentiated within it (a particle crossing
 // a cell boundary changes its stencil's nodes, where w and grad w are continuous but Hess w is not: the
-// derivative there is one-sided). Serial loops: these run once per step of a backward pass.
+// derivative there is one-sided). The particles' cotangents are computed in parallel, the nodes' serially in
+// particle order, so that the result does not depend on the thread count.
 #include <vector>
 
 #include "pnet/mpm/grid.hpp"
@@ -95,7 +96,9 @@ void particles_to_grid_adjoint(const Grid<dim>& grid, const Particles<dim>& part
                                const std::vector<double>& mass_bar, const std::vector<Vec<dim>>& momentum_bar,
                                std::vector<Vec<dim>>& x_bar, std::vector<Vec<dim>>& v_bar,
                                std::vector<Mat<dim>>& C_bar) {
-    for (std::size_t p = 0; p < particles.size(); ++p) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {  // each particle's own entries: no write conflicts
         const StencilNodeDerivatives<dim> st(grid, particles.x[p]);
         const double m = particles.mass[p];
         const Vec<dim>& v = particles.v[p];
@@ -119,7 +122,10 @@ void grid_to_particles_adjoint(const Grid<dim>& grid, const Particles<dim>& star
                                const std::vector<Mat<dim>>& F_trial_bar, std::vector<Vec<dim>>& grid_v_bar,
                                std::vector<Vec<dim>>& x_bar, std::vector<Mat<dim>>& F_bar) {
     const double c = 4.0 * grid.inv_dx() * grid.inv_dx();
-    for (std::size_t p = 0; p < start.size(); ++p) {
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(start.size());
+    // The particles' own cotangents in parallel; the nodes' (a scatter) after, serially, in particle order.
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
         const StencilNodeDerivatives<dim> st(grid, start.x[p]);
         Mat<dim> G = Mat<dim>::Zero();
         st.for_each([&](std::int64_t node, double, const Vec<dim>& grad, const Mat<dim>&, const Vec<dim>&) {
@@ -132,10 +138,18 @@ void grid_to_particles_adjoint(const Grid<dim>& grid, const Particles<dim>& star
         Vec<dim> xb = x_out_bar[p];
         st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Mat<dim>& hess, const Vec<dim>& d) {
             const Vec<dim>& vi = grid_v[node];
-            grid_v_bar[node] += w * u + c * w * Cb * d + Gb * grad;
             xb += grad * (u.dot(vi) + c * vi.dot(Cb * d)) - c * w * Cb.transpose() * vi + hess * (Gb.transpose() * vi);
         });
         x_bar[p] += xb;
+    }
+    for (std::ptrdiff_t p = 0; p < n; ++p) {
+        const StencilNodes<dim> st(grid, start.x[p]);
+        const Vec<dim> u = v_out_bar[p] + dt * x_out_bar[p];
+        const Mat<dim>& Cb = C_out_bar[p];
+        const Mat<dim> Gb = dt * F_trial_bar[p] * start.F_elastic[p].transpose();
+        st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Vec<dim>& d) {
+            grid_v_bar[node] += w * u + c * w * Cb * d + Gb * grad;
+        });
     }
 }
 
