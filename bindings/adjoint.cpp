@@ -23,6 +23,51 @@ std::vector<Vec<dim>> to_points(const py::handle& obj, const std::string& name, 
     return p;
 }
 
+/// The states a forward pass keeps: all (None) or those listed, each in 0..steps (ValueError otherwise).
+std::vector<char> wanted_states(const py::object& states, int steps) {
+    std::vector<char> wanted(static_cast<std::size_t>(steps) + 1, states.is_none());
+    if (!states.is_none())
+        for (const py::handle k : states) {
+            const long state = py::cast<long>(k);
+            if (state < 0 || state > steps)
+                throw py::value_error("states: " + std::to_string(state) + " is not a state of a " +
+                                      std::to_string(steps) + "-step rollout (0.." + std::to_string(steps) + ")");
+            wanted[static_cast<std::size_t>(state)] = 1;
+        }
+    return wanted;
+}
+
+/// The kept states of a forward pass as {"x": {k: array}, "v": {k: array}}.
+template <int dim>
+py::dict kept_states(const std::vector<int>& index, const std::vector<std::vector<Vec<dim>>>& xs,
+                     const std::vector<std::vector<Vec<dim>>>& vs) {
+    py::dict x, v;
+    for (std::size_t j = 0; j < index.size(); ++j) {
+        x[py::int_(index[j])] = rows<dim>(xs[j]);
+        v[py::int_(index[j])] = rows<dim>(vs[j]);
+    }
+    py::dict d;
+    d["x"] = x;
+    d["v"] = v;
+    return d;
+}
+
+/// A loss's cotangents {state: (count, dim) array} into out[state] (None: none), each state in 0..states - 1.
+template <int dim>
+void read_cotangents(const py::object& obj, const std::string& name, std::size_t states, py::ssize_t count,
+                     std::vector<std::vector<Vec<dim>>>& out) {
+    out.assign(states, {});
+    if (obj.is_none()) return;
+    const py::dict d = py::cast<py::dict>(obj);
+    for (const auto& [key, value] : d) {
+        const long k = py::cast<long>(key);
+        if (k < 0 || k >= static_cast<long>(states))
+            throw py::value_error(name + "[" + std::to_string(k) + "]: the rollout kept states 0.." +
+                                  std::to_string(states - 1) + " (the start and each step's end)");
+        out[static_cast<std::size_t>(k)] = to_points<dim>(value, name + "[" + std::to_string(k) + "]", count);
+    }
+}
+
 struct Rollout {
     virtual ~Rollout() = default;
     virtual py::dict start() const = 0;
@@ -66,15 +111,7 @@ struct RolloutOf final : Rollout {
                      const py::object& states) override {
         if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
         if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
-        std::vector<char> wanted(static_cast<std::size_t>(steps) + 1, states.is_none());
-        if (!states.is_none())
-            for (const py::handle k : states) {
-                const long state = py::cast<long>(k);
-                if (state < 0 || state > steps)
-                    throw py::value_error("states: " + std::to_string(state) + " is not a state of a " +
-                                          std::to_string(steps) + "-step rollout (0.." + std::to_string(steps) + ")");
-                wanted[static_cast<std::size_t>(state)] = 1;
-            }
+        const std::vector<char> wanted = wanted_states(states, steps);
         FemState<dim> s = initial;
         if (!x0.is_none()) s.x = to_points<dim>(x0, "x0", nodes());
         if (!v0.is_none()) s.v = to_points<dim>(v0, "v0", nodes());
@@ -91,34 +128,14 @@ struct RolloutOf final : Rollout {
                 vs.push_back(state.v);
             });
         }
-        py::dict x, v;
-        for (std::size_t j = 0; j < index.size(); ++j) {
-            x[py::int_(index[j])] = rows<dim>(xs[j]);
-            v[py::int_(index[j])] = rows<dim>(vs[j]);
-        }
-        py::dict d;
-        d["x"] = x;
-        d["v"] = v;
-        return d;
+        return kept_states<dim>(index, xs, vs);
     }
     py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const override {
         if (adjoint.steps() < 0) throw py::value_error("backward: run forward() first");
         const std::size_t states = static_cast<std::size_t>(adjoint.steps()) + 1;
-        std::vector<std::vector<Vec<dim>>> xs(states), vs(states);
-        auto read = [&](const py::object& obj, const std::string& name, std::vector<std::vector<Vec<dim>>>& out) {
-            if (obj.is_none()) return;
-            const py::dict d = py::cast<py::dict>(obj);
-            for (const auto& [key, value] : d) {
-                const long k = py::cast<long>(key);
-                if (k < 0 || k >= static_cast<long>(states))
-                    throw py::value_error(name + "[" + std::to_string(k) + "]: the rollout kept states 0.." +
-                                          std::to_string(states - 1) + " (the start and each step's end)");
-                out[static_cast<std::size_t>(k)] =
-                    to_points<dim>(value, name + "[" + std::to_string(k) + "]", static_cast<py::ssize_t>(nodes()));
-            }
-        };
-        read(dL_dx, "dL_dx", xs);
-        read(dL_dv, "dL_dv", vs);
+        std::vector<std::vector<Vec<dim>>> xs, vs;
+        read_cotangents<dim>(dL_dx, "dL_dx", states, nodes(), xs);
+        read_cotangents<dim>(dL_dv, "dL_dv", states, nodes(), vs);
         FemRolloutGradient<dim> g;
         {
             py::gil_scoped_release release;
@@ -136,17 +153,6 @@ struct RolloutOf final : Rollout {
         return d;
     }
 };
-
-template <int dim>
-py::array_t<double> matrices(const std::vector<Mat<dim>>& M) {
-    py::array_t<double> out({static_cast<py::ssize_t>(M.size()), static_cast<py::ssize_t>(dim),
-                             static_cast<py::ssize_t>(dim)});
-    double* o = out.mutable_data();
-    for (std::size_t p = 0; p < M.size(); ++p)
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j) o[(p * dim + i) * dim + j] = M[p](i, j);
-    return out;
-}
 
 struct MpmRolloutBase {
     virtual ~MpmRolloutBase() = default;
@@ -183,15 +189,7 @@ struct MpmRolloutOf final : MpmRolloutBase {
         if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
         if (!(dt > 0.0)) throw py::value_error("dt: expected a positive number (s)");
         if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
-        std::vector<char> wanted(static_cast<std::size_t>(steps) + 1, states.is_none());
-        if (!states.is_none())
-            for (const py::handle k : states) {
-                const long state = py::cast<long>(k);
-                if (state < 0 || state > steps)
-                    throw py::value_error("states: " + std::to_string(state) + " is not a state of a " +
-                                          std::to_string(steps) + "-step rollout (0.." + std::to_string(steps) + ")");
-                wanted[static_cast<std::size_t>(state)] = 1;
-            }
+        const std::vector<char> wanted = wanted_states(states, steps);
         Particles<dim> s = initial;
         if (!v0.is_none()) s.v = to_points<dim>(v0, "v0", particles());
         std::vector<int> index;
@@ -208,34 +206,14 @@ struct MpmRolloutOf final : MpmRolloutBase {
                 },
                 checkpoint_every);
         }
-        py::dict x, v;
-        for (std::size_t j = 0; j < index.size(); ++j) {
-            x[py::int_(index[j])] = rows<dim>(xs[j]);
-            v[py::int_(index[j])] = rows<dim>(vs[j]);
-        }
-        py::dict d;
-        d["x"] = x;
-        d["v"] = v;
-        return d;
+        return kept_states<dim>(index, xs, vs);
     }
     py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const override {
         if (adjoint.steps() < 0) throw py::value_error("backward: run forward() first");
         const std::size_t states = static_cast<std::size_t>(adjoint.steps()) + 1;
-        std::vector<std::vector<Vec<dim>>> xs(states), vs(states);
-        auto read = [&](const py::object& obj, const std::string& name, std::vector<std::vector<Vec<dim>>>& out) {
-            if (obj.is_none()) return;
-            const py::dict d = py::cast<py::dict>(obj);
-            for (const auto& [key, value] : d) {
-                const long k = py::cast<long>(key);
-                if (k < 0 || k >= static_cast<long>(states))
-                    throw py::value_error(name + "[" + std::to_string(k) + "]: the rollout kept states 0.." +
-                                          std::to_string(states - 1) + " (the start and each step's end)");
-                out[static_cast<std::size_t>(k)] =
-                    to_points<dim>(value, name + "[" + std::to_string(k) + "]", particles());
-            }
-        };
-        read(dL_dx, "dL_dx", xs);
-        read(dL_dv, "dL_dv", vs);
+        std::vector<std::vector<Vec<dim>>> xs, vs;
+        read_cotangents<dim>(dL_dx, "dL_dx", states, particles(), xs);
+        read_cotangents<dim>(dL_dv, "dL_dv", states, particles(), vs);
         MpmRolloutGradient<dim> g;
         {
             py::gil_scoped_release release;
@@ -244,8 +222,8 @@ struct MpmRolloutOf final : MpmRolloutBase {
         py::dict d;
         d["x0"] = rows<dim>(g.x);
         d["v0"] = rows<dim>(g.v);
-        d["C0"] = matrices<dim>(g.C);
-        d["F0"] = matrices<dim>(g.F);
+        d["C0"] = from_matrices<dim>(g.C);
+        d["F0"] = from_matrices<dim>(g.F);
         d["youngs_modulus"] = g.youngs_modulus;
         return d;
     }
