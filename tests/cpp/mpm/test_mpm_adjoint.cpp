@@ -186,6 +186,64 @@ TEST(MpmAdjoint2d, ALossOfSeveralStatesGetsItsGradientAtEach) {
     EXPECT_THROW(adjoint.backward(xs, vs), std::invalid_argument);
 }
 
+// 3D: an elastic sphere (neo-Hookean snow elasticity, dx 1/16) dropped onto the slip floor.
+TEST(MpmAdjoint3d, ElasticRolloutGradientMatchesCentralDifferences) {
+    const double E = 2e5, dt = 2e-3;
+    const int steps = 12;
+    auto sphere = [](double youngs) {
+        return scene_from_json(nlohmann::json::parse(R"({
+            "dim": 3, "domain": {"min": [0, 0, 0], "max": [1, 1, 1]}, "dx": 0.0625, "gravity": [0, -9.8, 0],
+            "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 0},
+            "integrator": {"name": "lagged", "dt": 2e-3},
+            "objects": [{"shape": "sphere", "center": [0.5, 0.3, 0.5], "radius": 0.12, "velocity": [0.2, -2, 0.1],
+                         "material": {"name": "snowy", "density": 400,
+                                      "elasticity": {"model": "neo_hookean_snow", "E": )" +
+                                                                     std::to_string(youngs) + R"(, "nu": 0.2},
+                                      "plasticity": {"model": "none"}}}]
+        })"),
+                               "<sphere>", ".");
+    };
+    const MpmSystem<3> system = make_mpm_system<3>(sphere(E));
+    const Particles<3> start = sample_particles<3>(sphere(E));
+    const std::size_t n = start.size();
+    test::Random random(79);
+    std::vector<Vec<3>> a(n), b(n), dv(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        a[p] = random.uniform_vec<3>(-1.0, 1.0);
+        b[p] = random.uniform_vec<3>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<3>(-1.0, 1.0);
+    }
+    auto loss = [&](const MpmSystem<3>& s, const Particles<3>& from) {
+        MpmAdjoint<3> adjoint(s, tight(), MpmOptions{});
+        const Particles<3> last = adjoint.forward(from, dt, steps);
+        double L = 0.0;
+        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
+        return L;
+    };
+    MpmAdjoint<3> adjoint(system, tight(), MpmOptions{});
+    const Particles<3> last = adjoint.forward(start, dt, steps);
+    double lowest = 1.0;
+    for (const Vec<3>& x : last.x) lowest = std::min(lowest, x[1]);
+    ASSERT_LT(lowest, 3 * system.dx) << "the sphere must reach the floor's wall nodes";
+    const MpmRolloutGradient<3> g = adjoint.backward(a, b);
+    double g_v = 0.0;
+    for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
+    const double h = 1e-4;
+    Particles<3> plus = start, minus = start;
+    for (std::size_t p = 0; p < n; ++p) {
+        plus.v[p] += h * dv[p];
+        minus.v[p] -= h * dv[p];
+    }
+    const double fd_v = (loss(system, plus) - loss(system, minus)) / (2.0 * h);
+    const double hE = 1e-4 * E;
+    const double fd_E =
+        (loss(make_mpm_system<3>(sphere(E + hE)), start) - loss(make_mpm_system<3>(sphere(E - hE)), start)) / (2.0 * hE);
+    std::printf("MPM rollout 3D, %zu particles, %d steps: dL/dv0 %.10g vs %.10g, dL/dE %.10g vs %.10g\n", n, steps, g_v,
+                fd_v, g.youngs_modulus, fd_E);
+    EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
+    EXPECT_NEAR(g.youngs_modulus, fd_E, 1e-4 * std::abs(fd_E));
+}
+
 TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
     const Scene sand = disk_scene(1e5, "drucker_prager");
     try {
