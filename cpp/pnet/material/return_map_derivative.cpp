@@ -14,6 +14,68 @@ double exp_difference_quotient(double a, double b) {
     return (std::exp(a) - std::exp(b)) / d;
 }
 
+/// The (U, V)-frame derivative of F^E = U diag(Z) V^T, Z = exp(log Z(eps)), given d log Z / d eps and,
+/// for each pair, D = (Z_i - Z_j) / (Sigma_i - Sigma_j) (isotropic_dPdF's structure).
+template <int dim, typename PairQuotient>
+Tensor4<dim> principal_derivative(const Vec<dim>& S, const Vec<dim>& Z, const Mat<dim>& dlogZ, PairQuotient&& D) {
+    Tensor4<dim> A = Tensor4<dim>::Zero();
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j) A(i * dim + i, j * dim + j) = Z[i] * dlogZ(i, j) / S[j];
+    for (int i = 0; i < dim; ++i)
+        for (int j = i + 1; j < dim; ++j) {
+            const double d = D(i, j), e = (Z[i] + Z[j]) / (S[i] + S[j]);
+            const int ij = i * dim + j, ji = j * dim + i;
+            A(ij, ij) = A(ji, ji) = 0.5 * (d + e);
+            A(ij, ji) = A(ji, ij) = 0.5 * (d - e);
+        }
+    return A;
+}
+
+/// Drucker-Prager with StVK-Hencky (the only elasticity it takes).
+template <int dim>
+ReturnMapDerivative<dim> drucker_prager_derivative(const Material<dim>& material, const PolarSVD<dim>& svd) {
+    ReturnMapDerivative<dim> out;
+    const MaterialDescription& m = material.description();
+    const double mu = material.elasticity().mu(), lambda = material.elasticity().lambda();
+    const Vec<dim>& S = svd.Sigma;
+    const Vec<dim> eps = S.array().log().matrix();
+    const double tr = eps.sum();
+    if (tr > 0.0) {  // the apex: Z = 1, F^E = U V^T (its rotation still follows F)
+        out.yielded = true;
+        const Vec<dim> Z = Vec<dim>::Ones();
+        out.dFE_dF =
+            to_f_space<dim>(svd, principal_derivative<dim>(S, Z, Mat<dim>::Zero(), [](int, int) { return 0.0; }));
+        return out;
+    }
+    const Vec<dim> eps_hat = eps - tr / dim * Vec<dim>::Ones();
+    const double L = eps_hat.norm();
+    const double s = std::sin(m.drucker_prager.friction_angle_deg * M_PI / 180.0);
+    const double alpha = std::sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s);
+    const double stiffness = (dim * lambda + 2.0 * mu) / (2.0 * mu);
+    const double c = alpha * stiffness;
+    if (!(L + c * tr > 0.0)) return out;  // inside the cone (the mapping's branch on its surface too)
+    out.yielded = true;
+    const Vec<dim> n = eps_hat / L;
+    const double k = -c * tr / L;  // log Z_i - log Z_j = k (eps_i - eps_j)
+    const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
+    const Mat<dim> dlogZ =
+        mean - c * n * Vec<dim>::Ones().transpose() + k * (Mat<dim>::Identity() - mean - n * n.transpose());
+    const Vec<dim> logZ = tr / dim * Vec<dim>::Ones() - c * tr * n;
+    const Vec<dim> Z = logZ.array().exp().matrix();
+    out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, dlogZ, [&](int i, int j) {
+                                     return k * exp_difference_quotient(logZ[i], logZ[j]) /
+                                            exp_difference_quotient(eps[i], eps[j]);
+                                 }));
+    // d log Z / d phi = -(dc/dphi) tr n, phi in degrees; the stress's tau = 2 mu log Z + lambda tr(log Z) 1
+    // changes by 2 mu d log Z (n has no trace).
+    const double dalpha_ds = std::sqrt(2.0 / 3.0) * 6.0 / ((3.0 - s) * (3.0 - s));
+    const double ds_dphi = std::cos(m.drucker_prager.friction_angle_deg * M_PI / 180.0) * M_PI / 180.0;
+    const Vec<dim> dlogZ_dphi = -(dalpha_ds * ds_dphi * stiffness) * tr * n;
+    out.dFE_dangle = svd.compose(Z.cwiseProduct(dlogZ_dphi));
+    out.dP_dangle = svd.compose(Vec<dim>((2.0 * mu * dlogZ_dphi).cwiseQuotient(S)));
+    return out;
+}
+
 }  // namespace
 
 template <int dim>
@@ -21,6 +83,7 @@ ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, co
     ReturnMapDerivative<dim> out;
     const MaterialDescription& m = material.description();
     if (m.plasticity == PlasticityModel::None) return out;  // F^E = F_trial, h' = h
+    if (m.plasticity == PlasticityModel::DruckerPrager) return drucker_prager_derivative(material, svd);
     if (m.plasticity != PlasticityModel::VonMises || m.elasticity != ElasticityModel::StvkHencky)
         throw std::invalid_argument("return_map_derivative: plasticity \"" + to_string(m.plasticity) + "\" with " +
                                     to_string(m.elasticity) +

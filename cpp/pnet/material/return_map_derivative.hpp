@@ -8,11 +8,14 @@
 // D = (Z_i - Z_j) / (Sigma_i - Sigma_j), E = (Z_i + Z_j) / (Sigma_i + Sigma_j) (isotropic_dPdF's
 // structure), D formed so that it is exact for equal singular values.
 //
-// Written for the materials whose return mapping has a closed form: elastic ones (F^E = F_trial) and
+// Written for the materials whose return mapping has a closed form: elastic ones (F^E = F_trial),
 // von Mises with StVK-Hencky (eq. 22: log Z = m 1 + h n with m the mean log strain and n the unit
-// deviatoric direction, h' = h + xi (L - h), L = |dev log Sigma|, where L > h). At the yield onset
-// (L = h) the derivative is one-sided, the elastic branch's, the branch the mapping takes there.
-// Others (Drucker-Prager, Cam-Clay, von Mises with another elasticity) throw std::invalid_argument.
+// deviatoric direction, h' = h + xi (L - h), L = |dev log Sigma|, where L > h) and Drucker-Prager (its
+// cone: log Z = tr/d 1 - c tr n with tr = tr(log Sigma), c = alpha(phi) (d lambda + 2 mu) / (2 mu), where
+// ||dev log Sigma|| + c tr > 0 and tr <= 0; its apex, tr > 0: Z = 1; with the derivatives in the
+// friction angle phi too). At a branch's boundary (the yield onset, the cone's edge, the apex) the
+// derivative is one-sided, the branch the mapping takes there. Others (Cam-Clay, von Mises with another
+// elasticity) throw std::invalid_argument.
 #include "pnet/material/material.hpp"
 
 namespace pnet {
@@ -24,6 +27,8 @@ struct ReturnMapDerivative {
     Mat<dim> dh_dF = Mat<dim>::Zero();               // d h' / d F_trial
     double dh_dh = 1.0;                              // d h' / d h
     Mat<dim> dP_dh = Mat<dim>::Zero();               // d Ptilde / d h: the return-mapped stress's
+    Mat<dim> dFE_dangle = Mat<dim>::Zero();          // Drucker-Prager: d F^E / d friction_angle_deg (1/degree)
+    Mat<dim> dP_dangle = Mat<dim>::Zero();           // Drucker-Prager: d Ptilde / d friction_angle_deg (Pa/degree)
     bool yielded = false;                            // the plastic branch
 };
 

@@ -1,7 +1,8 @@
 // The derivatives of the return mapping's state update (material/return_map_derivative.hpp; the
 // adjoint of an elastoplastic step, docs/adjoint.md) against central differences of
 // Material::project: F^E and h' with respect to F_trial and h, elastic and yielding, in 2D and 3D, with
-// two equal singular values (3D), one-sided at the yield onset; refused for the materials not written.
+// two equal singular values (3D), one-sided at the yield onset; Drucker-Prager's cone, inside and apex with the
+// friction angle's derivatives; refused for the materials not written.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -81,8 +82,56 @@ TEST(ReturnMapDerivative, IsOneSidedAtTheYieldOnsetAndRefusesWhatIsNotWritten) {
     EXPECT_FALSE(return_map_derivative<2>(metal, svd, L).yielded);
     EXPECT_EQ(return_map_derivative<2>(metal, svd, L).dFE_dF, Tensor4<2>::Identity());
     EXPECT_TRUE(return_map_derivative<2>(metal, svd, L * (1.0 - 1e-9)).yielded);
-    EXPECT_THROW(return_map_derivative<2>(Material<2>(material_preset("sand")), svd, 0.0), std::invalid_argument);
+    EXPECT_THROW(return_map_derivative<2>(Material<2>(material_preset("snow")), svd, 0.0), std::invalid_argument);
     EXPECT_THROW(return_map_derivative<2>(Material<2>(material_preset("metal_nh")), svd, 0.1), std::invalid_argument);
+}
+
+/// Sand (Drucker-Prager) at F = R1 diag(stretch) R2: dF^E/dF, and dF^E and Ptilde in the friction angle,
+/// against central differences.
+template <int dim>
+void check_sand(const Vec<dim>& stretch, ReturnBranch expected, test::Random& rng) {
+    MaterialDescription sand = material_preset("sand");
+    const Material<dim> material(sand);
+    const Mat<dim> F = rotation<dim>(rng) * stretch.asDiagonal() * rotation<dim>(rng);
+    const PolarSVD<dim> svd = clamped_svd<dim>(F);
+    ASSERT_EQ(material.project(F, 0.0).branch, expected) << stretch.transpose();
+    const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, svd, 0.0);
+    EXPECT_EQ(d.yielded, expected != ReturnBranch::Elastic);
+    const double step = 1e-7;
+    double worst = 0.0;
+    for (int k = 0; k < dim * dim; ++k) {
+        Mat<dim> dF = Mat<dim>::Zero();
+        dF(k / dim, k % dim) = step;
+        const Eigen::Matrix<double, dim * dim, 1> fd = flatten<dim>(
+            Mat<dim>((material.project(F + dF, 0.0).F_elastic - material.project(F - dF, 0.0).F_elastic) / (2 * step)));
+        worst = std::max(worst, (d.dFE_dF.col(k) - fd).cwiseAbs().maxCoeff());
+    }
+    EXPECT_LT(worst, 1e-6) << "dF^E/dF, " << to_string(expected) << ", stretch " << stretch.transpose();
+    const double angle = sand.drucker_prager.friction_angle_deg, h = 1e-4;
+    MaterialDescription up = sand, down = sand;
+    up.drucker_prager.friction_angle_deg = angle + h;
+    down.drucker_prager.friction_angle_deg = angle - h;
+    const Material<dim> plus(up), minus(down);
+    const Mat<dim> fd_FE = (plus.project(F, 0.0).F_elastic - minus.project(F, 0.0).F_elastic) / (2 * h);
+    const Mat<dim> fd_P = (plus.elastoplastic_stress(svd, 0.0) - minus.elastoplastic_stress(svd, 0.0)) / (2 * h);
+    EXPECT_LT((d.dFE_dangle - fd_FE).cwiseAbs().maxCoeff(), 1e-8 + 1e-6 * fd_FE.cwiseAbs().maxCoeff()) << "dF^E/dphi";
+    EXPECT_LT((d.dP_dangle - fd_P).cwiseAbs().maxCoeff(), 1e-6 * std::max(1.0, fd_P.cwiseAbs().maxCoeff()))
+        << "dPtilde/dphi";
+    if (expected == ReturnBranch::Cone) EXPECT_GT(d.dP_dangle.cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(ReturnMapDerivative, DruckerPragerMatchesCentralDifferencesOnItsBranches) {
+    test::Random rng(13);
+    for (int trial = 0; trial < 4; ++trial) {
+        // Compression with shear beyond the cone, compression within it, and tension (the apex).
+        const double shear = rng.uniform(0.03, 0.06), squeeze = rng.uniform(0.005, 0.01);
+        check_sand<2>(Vec<2>(std::exp(shear - squeeze), std::exp(-shear - squeeze)), ReturnBranch::Cone, rng);
+        check_sand<2>(Vec<2>(std::exp(0.001 - 0.02), std::exp(-0.001 - 0.02)), ReturnBranch::Elastic, rng);
+        check_sand<2>(Vec<2>(std::exp(0.01 + shear), std::exp(0.01 - 0.5 * shear)), ReturnBranch::Apex, rng);
+        check_sand<3>(Vec<3>(std::exp(shear - squeeze), std::exp(-0.3 * shear - squeeze), std::exp(-0.7 * shear - squeeze)),
+                      ReturnBranch::Cone, rng);
+        check_sand<3>(Vec<3>(std::exp(0.02), std::exp(0.01), std::exp(-0.005)), ReturnBranch::Apex, rng);
+    }
 }
 
 }  // namespace
