@@ -61,5 +61,12 @@ void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil);
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd,
                                              bool keep_skew = false);
+/// The tangent from the return-mapped Kirchhoff stress tau and its derivative dtau/deps (not symmetric
+/// for non-associative flow) where a return mapping gives them in closed form (the adjoint's exact
+/// Drucker-Prager Jacobian, return_map_derivative.hpp); the stencil's version differences them and calls
+/// this.
+template <int dim>
+Tensor4<dim> elastoplastic_tangent_of_derivative(const PolarSVD<dim>& svd, const Vec<dim>& tau, Mat<dim> dtau_deps,
+                                                 bool project_psd, bool keep_skew = false);
 
 }  // namespace pnet

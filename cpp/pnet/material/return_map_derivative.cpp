@@ -1,5 +1,7 @@
 #include "pnet/material/return_map_derivative.hpp"
 
+#include "pnet/material/elastoplastic_tangent.hpp"
+
 #include <cmath>
 #include <stdexcept>
 
@@ -127,6 +129,39 @@ ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, co
     return out;
 }
 
+template <int dim>
+Tensor4<dim> drucker_prager_tangent(const Material<dim>& material, const PolarSVD<dim>& svd) {
+    const MaterialDescription& m = material.description();
+    if (m.plasticity != PlasticityModel::DruckerPrager)
+        throw std::invalid_argument("drucker_prager_tangent: plasticity \"" + to_string(m.plasticity) + "\"");
+    const double mu = material.elasticity().mu(), lambda = material.elasticity().lambda();
+    const Vec<dim> eps = svd.Sigma.array().log().matrix();
+    const double tr = eps.sum();
+    Vec<dim> logZ = eps;
+    Mat<dim> dlogZ = Mat<dim>::Identity();
+    if (tr > 0.0) {  // the apex
+        logZ.setZero();
+        dlogZ.setZero();
+    } else {
+        const Vec<dim> eps_hat = eps - tr / dim * Vec<dim>::Ones();
+        const double L = eps_hat.norm();
+        const double s = std::sin(m.drucker_prager.friction_angle_deg * M_PI / 180.0);
+        const double c = std::sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s) * (dim * lambda + 2.0 * mu) / (2.0 * mu);
+        if (L + c * tr > 0.0) {  // the cone
+            const Vec<dim> n = eps_hat / L;
+            const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
+            logZ = tr / dim * Vec<dim>::Ones() - c * tr * n;
+            dlogZ = mean - c * n * Vec<dim>::Ones().transpose() -
+                    (c * tr / L) * (Mat<dim>::Identity() - mean - n * n.transpose());
+        }
+    }
+    const Vec<dim> tau = 2.0 * mu * logZ + lambda * logZ.sum() * Vec<dim>::Ones();
+    const Mat<dim> dtau = 2.0 * mu * dlogZ + lambda * Vec<dim>::Ones() * dlogZ.colwise().sum();
+    return elastoplastic_tangent_of_derivative<dim>(svd, tau, dtau, false, true);
+}
+
+template Tensor4<2> drucker_prager_tangent<2>(const Material<2>&, const PolarSVD<2>&);
+template Tensor4<3> drucker_prager_tangent<3>(const Material<3>&, const PolarSVD<3>&);
 template ReturnMapDerivative<2> return_map_derivative<2>(const Material<2>&, const PolarSVD<2>&, double);
 template ReturnMapDerivative<3> return_map_derivative<3>(const Material<3>&, const PolarSVD<3>&, double);
 

@@ -32,6 +32,12 @@ struct ReturnMapDerivative {
     bool yielded = false;                            // the plastic branch
 };
 
+/// Drucker-Prager's return-mapped stress Ptilde's derivative dPtilde/dF at F = svd, in closed form (its
+/// skew part kept, unprojected; one-sided at the branches' boundaries): the exact Jacobian where the
+/// consistent tangent's stencil averages two branches within its step of a boundary (the MPM adjoint's).
+template <int dim>
+Tensor4<dim> drucker_prager_tangent(const Material<dim>& material, const PolarSVD<dim>& svd);
+
 /// The derivatives at F_trial = svd (the clamped polar SVD the step's return mapping used) and h.
 template <int dim>
 ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h);

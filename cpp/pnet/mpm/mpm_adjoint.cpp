@@ -6,6 +6,8 @@
 #include <string>
 
 #include "pnet/energy/particle_energy.hpp"
+#include "pnet/energy/return_mapping_energy.hpp"
+#include "pnet/material/return_map_derivative.hpp"
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/mpm/transfer_adjoint.hpp"
 #include "pnet/solver/pcg.hpp"
@@ -13,13 +15,20 @@
 namespace pnet {
 
 template <int dim>
-MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options)
-    : system_(system), options_(options), mpm_options_(mpm_options) {
-    for (std::size_t k = 0; k < system.materials.size(); ++k)
-        if (system.materials[k].description().plasticity != PlasticityModel::None)
+MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options,
+                            Method method)
+    : system_(system), options_(options), mpm_options_(mpm_options), method_(method) {
+    if (method != Method::Lagged && method != Method::ReturnMap)
+        throw std::invalid_argument(std::string("MpmAdjoint: integrator '") + to_string(method) +
+                                    "': the adjoint is of lagged and return_map (plasticitynet converges to "
+                                    "return_map's step)");
+    for (std::size_t k = 0; k < system.materials.size(); ++k) {
+        const PlasticityModel plasticity = system.materials[k].description().plasticity;
+        if (plasticity != PlasticityModel::None && plasticity != PlasticityModel::DruckerPrager)
             throw std::invalid_argument("MpmAdjoint: materials[" + std::to_string(k) + "].plasticity '" +
-                                        to_string(system.materials[k].description().plasticity) +
-                                        "': the MPM adjoint covers elastic materials so far");
+                                        to_string(plasticity) +
+                                        "': the MPM adjoint covers elastic and Drucker-Prager materials so far");
+    }
     if (system.flip_relaxation_time > 0.0)
         throw std::invalid_argument(
             "MpmAdjoint: transfer.flip_relaxation_time: AFLIP transfers are not covered "
@@ -34,6 +43,56 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
 }
 
 template <int dim>
+std::unique_ptr<ImplicitIntegrator<dim>> MpmAdjoint<dim>::make_integrator() const {
+    std::unique_ptr<ParticleEnergy<dim>> energy;
+    if (method_ == Method::ReturnMap)
+        energy = std::make_unique<ReturnMappingEnergy<dim>>(system_.materials, options_.tangent_damping);
+    else
+        energy = std::make_unique<ElasticParticleEnergy<dim>>(system_.materials);
+    return std::make_unique<ImplicitIntegrator<dim>>(system_, method_, options_, mpm_options_, std::move(energy));
+}
+
+namespace {
+
+/// The transpose of a step's Jacobian, J^T d = M d + sum_p V dt^2 B_p^T T_p^T B_p d (B_p d = vec(sum_s d_s
+/// grad w_s^T F^n_p)), matrix-free over the potential's stencils: what lambda solves.
+template <int dim>
+class JacobianTranspose final : public Objective {
+public:
+    JacobianTranspose(const IncrementalPotential<dim>& potential, const Particles<dim>& start,
+                      const std::vector<Tensor4<dim>>& tangent, double dt)
+        : potential_(potential), start_(start), tangent_(tangent), dt_(dt) {}
+    Eigen::Index size() const override { return potential_.size(); }
+    double value(const VecX&) override { return 0.0; }
+    double value_gradient(const VecX&, VecX& g) override { return g.setZero(size()), 0.0; }
+    void prepare_hessian(const VecX&) override {}
+    bool hessian_symmetric() const override { return false; }
+    void hessian_multiply(const VecX& d, VecX& out) const override {
+        constexpr int kStencil = IncrementalPotential<dim>::kStencil;
+        out = potential_.residual_mass().cwiseProduct(d);
+        for (std::size_t p = 0; p < start_.size(); ++p) {  // serially: a scatter, in particle order
+            const int* dofs = potential_.stencil_dofs(p);
+            const Vec<dim>* grads = potential_.stencil_gradients(p);
+            Mat<dim> G = Mat<dim>::Zero();
+            for (int s = 0; s < kStencil; ++s) G += d.template segment<dim>(dim * dofs[s]) * grads[s].transpose();
+            const Mat<dim>& Fn = start_.F_elastic[p];
+            const Mat<dim> stress = unflatten<dim>(tangent_[p].transpose() * flatten<dim>(Mat<dim>(dt_ * G * Fn)));
+            const Mat<dim> force = start_.rest_volume[p] * dt_ * stress * Fn.transpose();
+            for (int s = 0; s < kStencil; ++s) out.template segment<dim>(dim * dofs[s]) += force * grads[s];
+        }
+    }
+    void hessian_diagonal(VecX& diagonal) const override { diagonal = potential_.residual_mass(); }
+
+private:
+    const IncrementalPotential<dim>& potential_;
+    const Particles<dim>& start_;
+    const std::vector<Tensor4<dim>>& tangent_;
+    double dt_;
+};
+
+}  // namespace
+
+template <int dim>
 Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, int steps,
                                         const std::function<void(int, const Particles<dim>&)>& observe,
                                         int checkpoint_every) {
@@ -42,8 +101,8 @@ Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, 
     const int every =
         checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
     checkpoints_.clear();
-    ImplicitIntegrator<dim> integrator(system_, Method::Lagged, options_, mpm_options_,
-                                       std::make_unique<ElasticParticleEnergy<dim>>(system_.materials));
+    const std::unique_ptr<ImplicitIntegrator<dim>> made = make_integrator();
+    ImplicitIntegrator<dim>& integrator = *made;
     integrator.reset(start);
     Particles<dim> particles = start;
     checkpoints_[0] = particles;
@@ -63,8 +122,8 @@ Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, 
 template <int dim>
 void MpmAdjoint<dim>::replay(int first, int last, std::vector<Particles<dim>>& starts,
                              std::vector<VecX>& solutions) const {
-    ImplicitIntegrator<dim> integrator(system_, Method::Lagged, options_, mpm_options_,
-                                       std::make_unique<ElasticParticleEnergy<dim>>(system_.materials));
+    const std::unique_ptr<ImplicitIntegrator<dim>> made = make_integrator();
+    ImplicitIntegrator<dim>& integrator = *made;
     Particles<dim> particles = checkpoints_.at(first);
     integrator.reset(particles);
     starts.clear();
@@ -127,7 +186,8 @@ MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<
 }
 
 template <int dim>
-void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, int k, MpmRolloutGradient<dim>& g) const {
+void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, int k,
+                                   MpmRolloutGradient<dim>& g) const {
     const double dt = dt_;
     const std::size_t n = start.size();
     constexpr int kStencil = IncrementalPotential<dim>::kStencil;
@@ -193,9 +253,52 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     // G2P: the cotangents of the output (x, v, C, F: g) to the grid velocities and the start's x, F.
     std::vector<Vec<dim>> grid_v_bar(storage, Vec<dim>::Zero()), x_bar(n, Vec<dim>::Zero());
     std::vector<Mat<dim>> F_bar(n, Mat<dim>::Zero());
-    grid_to_particles_adjoint<dim>(grid, start, grid_v, dt, g.x, g.v, g.C, g.F, grid_v_bar, x_bar, F_bar);
+    // G2P's return mapping F^E' = Z(F_trial): the trial F's cotangent dF^E/dF_trial^T Fb', and the friction
+    // angle's through dF^E/dphi (F_trial from the projected velocities G2P read).
+    std::vector<Mat<dim>> F_trial_bar = g.F;
+    std::vector<double> mapped_angle_bar(n, 0.0);
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
+        const Material<dim>& material = system_.materials[start.object[p]];
+        if (material.description().plasticity == PlasticityModel::None) continue;
+        const StencilNodes<dim> st(grid, start.x[p]);
+        Mat<dim> G = Mat<dim>::Zero();
+        st.for_each([&](std::int64_t node, double, const Vec<dim>& grad, const Vec<dim>&) {
+            G += grid_v[node] * grad.transpose();
+        });
+        const Mat<dim> F_trial = (Mat<dim>::Identity() + dt * G) * start.F_elastic[p];
+        const ReturnMapDerivative<dim> d =
+            return_map_derivative<dim>(material, clamped_svd<dim>(F_trial), start.hardening[p]);
+        F_trial_bar[p] = unflatten<dim>(d.dFE_dF.transpose() * flatten<dim>(g.F[p]));
+        mapped_angle_bar[p] = g.F[p].cwiseProduct(d.dFE_dangle).sum();
+    }
+    for (double a : mapped_angle_bar) g.friction_angle += a;
+    grid_to_particles_adjoint<dim>(grid, start, grid_v, dt, g.x, g.v, g.C, F_trial_bar, grid_v_bar, x_bar, F_bar);
 
-    // The solve: lambda = H^-1 vb on the unknowns (the projected components' cotangent dropped).
+    // The stress and its exact (unprojected, undamped) tangent at the solution: the elastic ones for
+    // lagged, the return-mapped Ptilde and its consistent tangent with its skew part for return_map.
+    std::vector<Mat<dim>> F(n), P(n);
+    std::vector<Tensor4<dim>> T(n);
+    potential.deformation(v, F);
+    const bool return_map = method_ == Method::ReturnMap;
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
+        const Material<dim>& material = system_.materials[start.object[p]];
+        const PolarSVD<dim> svd = clamped_svd<dim>(F[p]);  // one decomposition for P and its tangent
+        if (return_map) {
+            P[p] = material.elastoplastic_stress(svd, start.hardening[p]);
+            // Drucker-Prager's exact Jacobian (the stencil averages two branches near a boundary).
+            T[p] = material.description().plasticity == PlasticityModel::DruckerPrager
+                       ? drucker_prager_tangent<dim>(material, svd)
+                       : material.elastoplastic_tangent(svd, start.hardening[p], false, true);
+        } else {
+            const Elasticity<dim>& elasticity = material.elasticity();
+            P[p] = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
+            T[p] = elasticity.dPdF(svd, false);
+        }
+    }
+
+    // The solve: J^T lambda = vb on the unknowns (the projected components' cotangent dropped).
     VecX rhs = VecX::Zero(potential.size());
     for (std::int64_t i = 0; i < storage; ++i)
         if (dof[i] >= 0)
@@ -205,15 +308,29 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     potential.value_gradient_hessian(v, residual);
     VecX diagonal;
     potential.hessian_diagonal(diagonal);
+    // Symmetric where the solve's stress is elastic (lagged, or no plasticity): the potential's own
+    // exact Hessian by PCG; else J^T (the consistent tangent's skew part transposed) by BiCGSTAB.
+    bool symmetric = !return_map;
+    if (return_map) {
+        symmetric = true;
+        for (const Material<dim>& m : system_.materials)
+            symmetric = symmetric && m.description().plasticity == PlasticityModel::None;
+    }
     VecX lambda;
-    const PcgResult solve = solve_pcg(potential, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-10, 100000);
+    PcgResult solve;
+    if (symmetric) {
+        solve = solve_pcg(potential, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-11, 100000);
+    } else {
+        const JacobianTranspose<dim> transpose(potential, start, T, dt);
+        BicgstabWorkspace work;
+        solve = solve_bicgstab(transpose, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-11, 100000, work);
+    }
     if (!solve.converged)
-        throw std::runtime_error(
-            "MpmAdjoint: step " + std::to_string(k) + ": the adjoint solve did not converge (" +
-            std::to_string(solve.relative_residual) + " after " + std::to_string(solve.iterations) + " iterations" +
-            (solve.negative_curvature ? ", negative curvature: H is not positive definite" : "") + ")");
+        throw std::runtime_error("MpmAdjoint: step " + std::to_string(k) + ": the adjoint solve did not converge (" +
+                                 std::to_string(solve.relative_residual) + " after " +
+                                 std::to_string(solve.iterations) + " products)");
 
-    // Through the solve: v* and the node masses, the particles' F^n and x (the stress term), E.
+    // Through the solve: v* and the node masses, the particles' F^n and x (the stress term), E, phi.
     std::vector<double> mass_bar(storage, 0.0);
     std::vector<Vec<dim>> v_star_bar(storage, Vec<dim>::Zero());
     for (std::int64_t i = 0; i < storage; ++i) {
@@ -222,16 +339,11 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         v_star_bar[i] = mass[i] * li;
         mass_bar[i] = -li.dot(v.template segment<dim>(dim * dof[i]) - v_star.template segment<dim>(dim * dof[i]));
     }
-    std::vector<Mat<dim>> F(n);
-    potential.deformation(v, F);
-    std::vector<double> youngs_bar(n);  // summed in particle order after the parallel loop
+    std::vector<double> youngs_bar(n, 0.0), angle_bar(n, 0.0);  // summed in particle order after the loop
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
-        const Elasticity<dim>& elasticity = system_.materials[start.object[p]].elasticity();
+        const Material<dim>& material = system_.materials[start.object[p]];
         const Mat<dim>& Fn = start.F_elastic[p];
-        const PolarSVD<dim> svd = clamped_svd<dim>(F[p]);  // one decomposition for P and dP/dF
-        const Mat<dim> P = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
-        const Tensor4<dim> dPdF = elasticity.dPdF(svd, false);
         Mat<dim> Lambda = Mat<dim>::Zero(), G = Mat<dim>::Zero();
         const int* dofs = potential.stencil_dofs(p);
         const Vec<dim>* grads = potential.stencil_gradients(p);
@@ -241,22 +353,29 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         }
         const double V = start.rest_volume[p];
         const Mat<dim> LF = Lambda * Fn;
-        const Mat<dim> Q = unflatten<dim>(dPdF * flatten<dim>(LF));
+        const Mat<dim> Q = unflatten<dim>(T[p].transpose() * flatten<dim>(LF));  // d(P : LF)/dF
         const Mat<dim> A = Mat<dim>::Identity() + dt * G;
-        F_bar[p] -= V * dt * (A.transpose() * Q + Lambda.transpose() * P);
-        youngs_bar[p] = -V * dt * P.cwiseProduct(LF).sum() / elasticity.params().E;
+        F_bar[p] -= V * dt * (A.transpose() * Q + Lambda.transpose() * P[p]);
+        youngs_bar[p] = -V * dt * P[p].cwiseProduct(LF).sum() / material.elasticity().params().E;
+        if (return_map && material.description().plasticity == PlasticityModel::DruckerPrager) {
+            const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, clamped_svd<dim>(F[p]), 0.0);
+            angle_bar[p] = -V * dt * d.dP_dangle.cwiseProduct(LF).sum();
+        }
         const StencilNodeDerivatives<dim> st(grid, start.x[p]);
         int s = 0;
         Vec<dim> xb = Vec<dim>::Zero();
         st.for_each([&](std::int64_t, double, const Vec<dim>&, const Mat<dim>& hess, const Vec<dim>&) {
             const Vec<dim> li = lambda.template segment<dim>(dim * dofs[s]);
             const Vec<dim> vi = v.template segment<dim>(dim * dofs[s]);
-            xb += hess * (Fn * (P.transpose() * li + dt * Q.transpose() * vi));
+            xb += hess * (Fn * (P[p].transpose() * li + dt * Q.transpose() * vi));
             ++s;
         });
         x_bar[p] -= V * dt * xb;
     }
-    for (double e : youngs_bar) g.youngs_modulus += e;
+    for (std::size_t p = 0; p < n; ++p) {
+        g.youngs_modulus += youngs_bar[p];
+        g.friction_angle += angle_bar[p];
+    }
 
     // P2G: v* = q / m + dt g on the nodes with mass.
     std::vector<Vec<dim>> momentum_bar(storage, Vec<dim>::Zero());

@@ -1,9 +1,14 @@
 #pragma once
-// The adjoint of an implicit MPM rollout (issue 57's MPM half, its first part; docs/adjoint.md): the
-// gradient of a loss of the last state's particle positions and velocities with respect to the start's
-// positions, velocities, APIC matrices and F, and to the materials' Young's modulus, for elastic bodies
-// under `lagged` backward Euler (the elastic energy: with no plasticity every implicit MPM integrator
-// solves this step) with APIC transfers and slip walls.
+// The adjoint of an implicit MPM rollout (issue 57's MPM half; docs/adjoint.md): the gradient of a loss
+// of the states' particle positions and velocities with respect to the start's positions, velocities,
+// APIC matrices and F, to the materials' Young's modulus and to Drucker-Prager's friction angle, for
+// elastic and Drucker-Prager bodies under backward Euler with APIC transfers and slip walls: the `lagged`
+// step (the elastic energy, then the return mapping) or `return_map`'s (the return-mapped stress Ptilde
+// and its consistent tangent T, with its skew part, within the solve; plasticitynet converges to it).
+// With plasticity, R's Jacobian M + sum_p V dt^2 B_p^T T_p B_p is not symmetric: lambda solves its
+// transpose (BiCGSTAB on T_p^T), the stress terms below take T^T where the elastic step has dP/dF,
+// G2P's trial F gets dF^E/dF_trial^T of its cotangent (material/return_map_derivative.hpp), and the
+// friction angle's cotangent gathers lambda's dPtilde/dphi term and G2P's dF^E/dphi.
 //
 // A step: P2G (m_i, q_i), v* = q / m + dt g; the solve R(v) = M (v - v*) + sum_p V_p dt P(F_p(v)) F_p^T
 // grad w_ip = 0 with F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p; the slip walls' projection (the
@@ -39,13 +44,17 @@ struct MpmRolloutGradient {
     std::vector<Vec<dim>> x, v;   // per particle: dL/dx^0 (1/m), dL/dv^0 (s/m), times L's unit
     std::vector<Mat<dim>> C, F;   // dL/dC^0 (s), dL/dF^0
     double youngs_modulus = 0.0;  // dL/dE, every material's E scaled together (1/Pa)
+    double friction_angle = 0.0;  // dL/dphi, every Drucker-Prager material's friction angle together (1/degree)
 };
 
 template <int dim>
 class MpmAdjoint {
 public:
-    /// Throws std::invalid_argument naming what the adjoint does not cover.
-    MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options);
+    /// method: Lagged (the elastic energy, the return mapping after the step) or ReturnMap (the
+    /// return-mapped stress and its consistent tangent within the solve). Throws std::invalid_argument
+    /// naming what the adjoint does not cover.
+    MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options,
+               Method method = Method::Lagged);
 
     /// `steps` steps of dt from `start`, keeping a checkpoint every `checkpoint_every` steps (0:
     /// ceil(sqrt(steps)); 1: every state), calling observe(k, state) at each state k = 0..steps (where a
@@ -74,9 +83,13 @@ private:
     /// same to the last bit).
     void replay(int first, int last, std::vector<Particles<dim>>& starts, std::vector<VecX>& solutions) const;
 
+    /// The production integrator of `method_` (forward and replay).
+    std::unique_ptr<ImplicitIntegrator<dim>> make_integrator() const;
+
     const MpmSystem<dim>& system_;
     ImplicitOptions options_;
     MpmOptions mpm_options_;
+    Method method_;
     std::map<int, Particles<dim>> checkpoints_;  // state k, every checkpoint_every steps and the last
     double dt_ = 0.0;
     int steps_ = -1;

@@ -107,6 +107,18 @@ void check_sand(const Vec<dim>& stretch, ReturnBranch expected, test::Random& rn
         worst = std::max(worst, (d.dFE_dF.col(k) - fd).cwiseAbs().maxCoeff());
     }
     EXPECT_LT(worst, 1e-6) << "dF^E/dF, " << to_string(expected) << ", stretch " << stretch.transpose();
+    // The return-mapped stress's exact Jacobian (drucker_prager_tangent), its skew part kept.
+    const Tensor4<dim> T = drucker_prager_tangent<dim>(material, svd);
+    double worst_T = 0.0;
+    for (int k = 0; k < dim * dim; ++k) {
+        Mat<dim> dF = Mat<dim>::Zero();
+        dF(k / dim, k % dim) = step;
+        const Eigen::Matrix<double, dim * dim, 1> fd = flatten<dim>(
+            Mat<dim>((material.elastoplastic_stress(F + dF, 0.0) - material.elastoplastic_stress(F - dF, 0.0)) /
+                     (2 * step)));
+        worst_T = std::max(worst_T, (T.col(k) - fd).cwiseAbs().maxCoeff());
+    }
+    EXPECT_LT(worst_T, 1e-6 * std::max(1.0, T.cwiseAbs().maxCoeff())) << "dPtilde/dF, " << to_string(expected);
     const double angle = sand.drucker_prager.friction_angle_deg, h = 1e-4;
     MaterialDescription up = sand, down = sand;
     up.drucker_prager.friction_angle_deg = angle + h;
