@@ -171,11 +171,11 @@ struct MpmRolloutOf final : MpmRolloutBase {
     Particles<dim> initial;
     MpmAdjoint<dim> adjoint;
 
-    MpmRolloutOf(Scene s, const ImplicitOptions& options)
+    MpmRolloutOf(Scene s, const ImplicitOptions& options, Method method)
         : scene(std::move(s)),
           system(make_mpm_system<dim>(scene)),
           initial(sample_particles<dim>(scene)),
-          adjoint(system, options, MpmOptions{}) {}
+          adjoint(system, options, MpmOptions{}, method) {}
     int particles() const override { return static_cast<int>(initial.size()); }
     std::size_t peak_states() const override { return adjoint.peak_states(); }
     py::dict start() const override {
@@ -225,6 +225,7 @@ struct MpmRolloutOf final : MpmRolloutBase {
         d["C0"] = from_matrices<dim>(g.C);
         d["F0"] = from_matrices<dim>(g.F);
         d["youngs_modulus"] = g.youngs_modulus;
+        d["friction_angle"] = g.friction_angle;
         return d;
     }
 };
@@ -284,24 +285,28 @@ the most states held at once by the last forward and backward.)doc")
         .def_property_readonly("peak_states", &Rollout::peak_states)
         .def("backward", &Rollout::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
 
-    py::class_<MpmRolloutBase>(m, "MpmRollout", R"doc(A rollout of an implicit MPM scene of elastic bodies and its adjoint.
+    py::class_<MpmRolloutBase>(m, "MpmRollout", R"doc(A rollout of an implicit MPM scene and its adjoint.
 
-MpmRollout(scene, newton_tolerance=1e-10): scene as a path, a dict or a Scene with particle objects of
-elastic materials (no plasticity), APIC transfers (no transfer.flip_relaxation_time) and slip walls
-(no sticky or Coulomb floor); ValueError naming what otherwise. Steps are `lagged` backward Euler (for
-elastic materials every implicit MPM integrator's step) at a fixed dt (the advection limit is not
-applied), each solved to newton_tolerance (m/s), which sets how exact the gradient is.
+MpmRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
+particle objects of elastic or Drucker-Prager (sand) materials, APIC transfers (no
+transfer.flip_relaxation_time) and slip walls (no sticky or Coulomb floor); ValueError naming what
+otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
+elastic solve, then the return mapping) or "return_map" (the return-mapped stress within the solve;
+plasticitynet converges to its step), each solved to newton_tolerance (m/s), which sets how exact the
+gradient is.
 
 forward(steps, dt, v0=None, states=None, checkpoint_every=0) runs the rollout from the scene's particles
 (v0: their start velocities instead, a (particles, dim) array) and returns {"x": {k: array}, "v": {k:
 array}}, the states k asked for (None: all; 0 is the start, k the end of step k), keeping a checkpoint
 every checkpoint_every steps (0: about sqrt(steps); 1: every state). backward(dL_dx, dL_dv) takes dicts {state: (particles, dim) array} of the loss's gradient with
 respect to those states and returns {"x0", "v0": (particles, dim), "C0", "F0": (particles, dim, dim)
-arrays, "youngs_modulus": float}: dL/d of the start's positions, velocities, APIC matrices and F, and
-dL/dE (every material's E scaled together), by the adjoint of every step, recomputing the steps between
+arrays, "youngs_modulus", "friction_angle": floats}: dL/d of the start's positions, velocities, APIC
+matrices and F, dL/dE (every material's E scaled together) and dL/dphi (every Drucker-Prager material's
+friction angle, per degree), by the adjoint of every step, recomputing the steps between
 checkpoints (docs/adjoint.md). peak_states: the most states held at once by the last forward and
 backward.)doc")
-        .def(py::init([](const py::object& scene, double newton_tolerance) -> std::unique_ptr<MpmRolloutBase> {
+        .def(py::init([](const py::object& scene, double newton_tolerance,
+                         const std::string& integrator) -> std::unique_ptr<MpmRolloutBase> {
                  Scene s = scene_of(scene);
                  if (!s.has_particles() || s.has_meshes())
                      throw py::value_error(s.file + ": MpmRollout takes a scene of particle objects only");
@@ -311,13 +316,14 @@ backward.)doc")
                  options.newton_acceleration_tolerance = 0.0;
                  options.max_newton_iterations = 1000;
                  try {
-                     if (s.dim == 2) return std::make_unique<MpmRolloutOf<2>>(std::move(s), options);
-                     return std::make_unique<MpmRolloutOf<3>>(std::move(s), options);
+                     const Method method = parse_integrator(integrator, "integrator");
+                     if (s.dim == 2) return std::make_unique<MpmRolloutOf<2>>(std::move(s), options, method);
+                     return std::make_unique<MpmRolloutOf<3>>(std::move(s), options, method);
                  } catch (const std::invalid_argument& e) {
                      throw py::value_error(std::string(e.what()));
                  }
              }),
-             py::arg("scene"), py::arg("newton_tolerance") = 1e-10)
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged")
         .def_property_readonly("particles", &MpmRolloutBase::particles)
         .def("start", &MpmRolloutBase::start, "The scene's particles: {\"x\", \"v\"}, (particles, dim) arrays.")
         .def("forward", &MpmRolloutBase::forward, py::arg("steps"), py::arg("dt"), py::arg("v0") = py::none(),

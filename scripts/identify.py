@@ -58,6 +58,7 @@ from plasticitynet import adjoint, frames  # noqa: E402
 
 FRAME_DT, FRAMES, DT = 0.01, 10, 1e-3
 BALL_FRAMES = 20
+SAND_FRAMES = 25
 
 
 def bouncing_box(E: float, integrator: str = "lagged", dt: float = DT) -> dict:
@@ -121,6 +122,20 @@ def elastic_ball(E: float, integrator: str = "lagged", dt: float = 2.5e-4) -> di
     scene["objects"][0]["material"]["elasticity"]["E"] = E
     scene["frames"] = BALL_FRAMES
     scene["integrator"] = {"name": integrator, "dt": dt, "advection_cfl": 0, "newton_tolerance": 1e-10,
+                           "max_newton_iterations": 1000}
+    return scene
+
+
+def sand_column(friction_angle: float, integrator: str = "return_map", dt: float = 1e-3) -> dict:
+    """scenes/sand_column_2d.json's column (sand, E 3.537e5 Pa) at the friction angle phi for its first
+    SAND_FRAMES frames (the collapse), with APIC transfers and a slip floor (the MPM adjoint's: not yet
+    AFLIP or the Coulomb floor), the implicit steps at dt without the advection limit."""
+    scene = json.loads((ROOT / "scenes" / "sand_column_2d.json").read_text())
+    scene.pop("transfer", None)
+    scene["boundary"] = {"walls": "slip", "sticky_floor_cells": 0}
+    scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = friction_angle
+    scene["frames"] = SAND_FRAMES
+    scene["integrator"] = {"name": integrator, "dt": dt, "advection_cfl": 0, "newton_tolerance": 1e-8,
                            "max_newton_iterations": 1000}
     return scene
 
@@ -223,6 +238,24 @@ def identify_ball_youngs_modulus(true_E: float, start_E: float, out: Path, max_e
                dt)
 
 
+def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_evaluations: int, observed: str,
+                            dt: float) -> int:
+    scene = sand_column(start_phi, "return_map", dt)
+    truth = sand_column(true_phi, "return_map", dt)
+    if observed == "explicit":
+        truth = explicit_observation(truth)
+    print(f"observed: {truth['integrator']['name']} MPM at {truth['integrator']['dt']:g} s; the fit: return_map at "
+          f"{dt:g} s")
+    E = torch.tensor(float(scene["objects"][0]["material"]["elasticity"]["E"]), dtype=torch.float64)
+
+    def positions(phi, steps, states):
+        return adjoint.mpm_positions(scene, E, None, steps, dt, states, newton_tolerance=1e-8, friction_angle=phi,
+                                     integrator="return_map")
+
+    return fit("friction_angle", "phi", "deg", truth, scene["frame_dt"], true_phi, start_phi, positions, out,
+               max_evaluations, dt)
+
+
 def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int, integrator: str,
                           bar: str = "cantilever", observed: str = "explicit", dt: float = 5e-4) -> int:
     make, frame_dt = (cantilever, FRAME_DT) if bar == "cantilever" else (metal_block, 0.002)
@@ -247,7 +280,10 @@ def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evalua
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("case", choices=["youngs_modulus", "yield_stress", "ball_youngs_modulus"])
+    parser.add_argument("case", choices=["youngs_modulus", "yield_stress", "ball_youngs_modulus", "friction_angle"])
+    parser.add_argument("--true-phi", type=float, default=27.0,
+                        help="friction_angle: the observed run's angle, degrees (the fit never sees it)")
+    parser.add_argument("--start-phi", type=float, default=35.0, help="friction_angle: the fit's first angle")
     parser.add_argument("--true-E", type=float, default=None,
                         help="the observed run's E, Pa (the fit never sees it; default 2e5, the ball 1e5)")
     parser.add_argument("--start-E", type=float, default=None, help="the fit's first E, Pa (default 1e5, the ball 5e4)")
@@ -267,6 +303,9 @@ def main() -> int:
                         help="the fit's step, s (default 1e-3; the cantilever 5e-4)")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "identify")
     args = parser.parse_args()
+    if args.case == "friction_angle":
+        return identify_friction_angle(args.true_phi, args.start_phi, args.out, args.max_evaluations,
+                                       args.observed or "explicit", args.dt or 1e-3)
     if args.case == "ball_youngs_modulus":
         return identify_ball_youngs_modulus(args.true_E or 1e5, args.start_E or 5e4, args.out, args.max_evaluations,
                                             args.observed or "explicit", args.dt or 2.5e-4)

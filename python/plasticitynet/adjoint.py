@@ -87,13 +87,31 @@ def fem_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | 
                                newton_tolerance, integrator)
 
 
+def with_friction_angle(scene: dict, friction_angle: float) -> dict:
+    """A copy of a scene dict whose Drucker-Prager objects have the friction angle phi (degrees); their
+    material must be written out (a dict with a "plasticity" block)."""
+    out = copy.deepcopy(scene)
+    for k, body in enumerate(out.get("objects", [])):
+        material = body.get("material")
+        if not isinstance(material, dict) or "plasticity" not in material:
+            raise ValueError(f"objects[{k}].material: write the material out (a dict with a \"plasticity\" "
+                             "block) to set its friction angle")
+        if material["plasticity"].get("model") == "drucker_prager":
+            material["plasticity"]["friction_angle_deg"] = float(friction_angle)
+    return out
+
+
 class _MpmPositions(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, youngs_modulus, v0, scene, steps, dt, states, newton_tolerance):
-        rollout = _sim().MpmRollout(with_youngs_modulus(scene, float(youngs_modulus)), newton_tolerance)
+    def forward(ctx, youngs_modulus, v0, friction_angle, scene, steps, dt, states, newton_tolerance, integrator):
+        s = with_youngs_modulus(scene, float(youngs_modulus))
+        if friction_angle is not None:
+            s = with_friction_angle(s, float(friction_angle))
+        rollout = _sim().MpmRollout(s, newton_tolerance, integrator)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
-        ctx.rollout, ctx.states, ctx.has_v0 = rollout, list(states), v0 is not None
+        ctx.rollout, ctx.states = rollout, list(states)
+        ctx.has_v0, ctx.has_phi = v0 is not None, friction_angle is not None
         return torch.from_numpy(np.stack([x[k] for k in states]))
 
     @staticmethod
@@ -105,16 +123,20 @@ class _MpmPositions(torch.autograd.Function):
         out = ctx.rollout.backward(dL_dx)
         dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
         dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
-        return dE, dv0, None, None, None, None, None
+        dphi = torch.tensor(out["friction_angle"], dtype=torch.float64) if ctx.has_phi else None
+        return dE, dv0, dphi, None, None, None, None, None, None
 
 
 def mpm_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
-                  states: Sequence[int], newton_tolerance: float = 1e-10) -> torch.Tensor:
+                  states: Sequence[int], newton_tolerance: float = 1e-10, friction_angle: torch.Tensor | None = None,
+                  integrator: str = "lagged") -> torch.Tensor:
     """The particles' positions (len(states), particles, dim) at the kept states of `steps` implicit MPM
     steps of dt from the scene's particles (v0: their start velocities instead), differentiable in
-    youngs_modulus (a 0-d tensor, Pa) and v0: plasticitynet_sim.MpmRollout, elastic bodies with APIC
-    transfers and slip walls (docs/adjoint.md)."""
+    youngs_modulus (a 0-d tensor, Pa), v0 and, for Drucker-Prager sand, friction_angle (a 0-d tensor,
+    degrees): plasticitynet_sim.MpmRollout, elastic and sand bodies with APIC transfers and slip walls, the
+    steps "lagged" or "return_map" (docs/adjoint.md)."""
     for k in states:
         if not 0 <= int(k) <= steps:
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
-    return _MpmPositions.apply(youngs_modulus, v0, scene, steps, dt, [int(k) for k in states], newton_tolerance)
+    return _MpmPositions.apply(youngs_modulus, v0, friction_angle, scene, steps, dt, [int(k) for k in states],
+                               newton_tolerance, integrator)

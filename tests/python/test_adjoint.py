@@ -238,8 +238,12 @@ def test_a_tiny_mpm_identification_recovers_youngs_modulus():
 
 
 def test_mpm_rollouts_refuse_what_the_adjoint_does_not_cover():
-    with pytest.raises(ValueError, match=r"materials\[0\]\.plasticity 'drucker_prager'"):
-        pns.MpmRollout(disk_scene(plasticity="drucker_prager"))
+    snow = disk_scene()
+    snow["objects"][0]["material"] = "snow"
+    with pytest.raises(ValueError, match=r"materials\[0\]\.plasticity 'cam_clay'"):
+        pns.MpmRollout(snow)
+    with pytest.raises(ValueError, match="integrator 'plasticitynet'"):
+        pns.MpmRollout(disk_scene(), integrator="plasticitynet")
     with pytest.raises(ValueError, match="flip_relaxation_time"):
         pns.MpmRollout(disk_scene(transfer={"flip_relaxation_time": 0.01}))
     rollout = pns.MpmRollout(disk_scene())
