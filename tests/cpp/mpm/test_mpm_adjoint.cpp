@@ -78,10 +78,13 @@ TEST(MpmAdjoint2d, ElasticRolloutGradientMatchesCentralDifferences) {
     ASSERT_LT(lowest, 3 * system.dx) << "the disk must reach the floor's wall nodes";
     const MpmRolloutGradient<2> g = adjoint.backward(a, b);
 
-    auto along = [&](auto edit, double h) {
+    // Central differences of the rollout along `direction` in one field of every particle's start.
+    auto along = [&](auto field, const auto& direction, double h) {
         Particles<2> plus = start, minus = start;
-        edit(plus, h);
-        edit(minus, -h);
+        for (std::size_t p = 0; p < n; ++p) {
+            (plus.*field)[p] += h * direction[p];
+            (minus.*field)[p] -= h * direction[p];
+        }
         return (loss(system, plus) - loss(system, minus)) / (2.0 * h);
     };
     double g_v = 0.0, g_x = 0.0, g_C = 0.0, g_F = 0.0;
@@ -91,26 +94,10 @@ TEST(MpmAdjoint2d, ElasticRolloutGradientMatchesCentralDifferences) {
         g_C += g.C[p].cwiseProduct(dC[p]).sum();
         g_F += g.F[p].cwiseProduct(dF[p]).sum();
     }
-    const double fd_v = along(
-        [&](Particles<2>& P, double h) {
-            for (std::size_t p = 0; p < n; ++p) P.v[p] += h * dv[p];
-        },
-        1e-4);
-    const double fd_x = along(
-        [&](Particles<2>& P, double h) {
-            for (std::size_t p = 0; p < n; ++p) P.x[p] += h * dx[p];
-        },
-        1e-4);
-    const double fd_C = along(
-        [&](Particles<2>& P, double h) {
-            for (std::size_t p = 0; p < n; ++p) P.C[p] += h * dC[p];
-        },
-        1e-4);
-    const double fd_F = along(
-        [&](Particles<2>& P, double h) {
-            for (std::size_t p = 0; p < n; ++p) P.F_elastic[p] += h * dF[p];
-        },
-        1e-6);
+    const double fd_v = along(&Particles<2>::v, dv, 1e-4);
+    const double fd_x = along(&Particles<2>::x, dx, 1e-4);
+    const double fd_C = along(&Particles<2>::C, dC, 1e-4);
+    const double fd_F = along(&Particles<2>::F_elastic, dF, 1e-6);
     const double hE = 1e-4 * E;
     const double fd_E =
         (loss(make_mpm_system<2>(disk_scene(E + hE)), start) - loss(make_mpm_system<2>(disk_scene(E - hE)), start)) /
