@@ -41,6 +41,17 @@ ImplicitOptions tight() {
     return o;
 }
 
+/// Central differences of loss(start with v_p + h dv_p) along the velocity direction dv.
+template <int dim, typename Loss>
+double along_velocities(const Loss& loss, const Particles<dim>& start, const std::vector<Vec<dim>>& dv, double h) {
+    Particles<dim> plus = start, minus = start;
+    for (std::size_t p = 0; p < start.size(); ++p) {
+        plus.v[p] += h * dv[p];
+        minus.v[p] -= h * dv[p];
+    }
+    return (loss(plus) - loss(minus)) / (2.0 * h);
+}
+
 TEST(MpmAdjoint2d, ElasticRolloutGradientMatchesCentralDifferences) {
     const double E = 1e5, dt = 2e-3;
     const int steps = 20;
@@ -148,13 +159,7 @@ TEST(MpmAdjoint2d, ALossOfSeveralStatesGetsItsGradientAtEach) {
     const MpmRolloutGradient<2> g = adjoint.backward(xs, vs);
     double g_v = 0.0;
     for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
-    const double h = 1e-4;
-    Particles<2> plus = start, minus = start;
-    for (std::size_t p = 0; p < n; ++p) {
-        plus.v[p] += h * dv[p];
-        minus.v[p] -= h * dv[p];
-    }
-    const double fd = (loss(plus) - loss(minus)) / (2.0 * h);
+    const double fd = along_velocities<2>(loss, start, dv, 1e-4);
     EXPECT_NEAR(g_v, fd, 1e-4 * std::abs(fd));
     // Every state kept (checkpoint_every 1) or a checkpoint every 5 steps with the segments recomputed:
     // the same gradient to the last bit.
@@ -218,13 +223,8 @@ TEST(MpmAdjoint3d, ElasticRolloutGradientMatchesCentralDifferences) {
     const MpmRolloutGradient<3> g = adjoint.backward(a, b);
     double g_v = 0.0;
     for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
-    const double h = 1e-4;
-    Particles<3> plus = start, minus = start;
-    for (std::size_t p = 0; p < n; ++p) {
-        plus.v[p] += h * dv[p];
-        minus.v[p] -= h * dv[p];
-    }
-    const double fd_v = (loss(system, plus) - loss(system, minus)) / (2.0 * h);
+    const double fd_v =
+        along_velocities<3>([&](const Particles<3>& from) { return loss(system, from); }, start, dv, 1e-4);
     const double hE = 1e-4 * E;
     const double fd_E =
         (loss(make_mpm_system<3>(sphere(E + hE)), start) - loss(make_mpm_system<3>(sphere(E - hE)), start)) /
@@ -289,13 +289,8 @@ void check_sand(Method method) {
     const MpmRolloutGradient<2> g = adjoint.backward(a, b);
     double g_v = 0.0;
     for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
-    const double h = 1e-4;
-    Particles<2> plus = start, minus = start;
-    for (std::size_t p = 0; p < n; ++p) {
-        plus.v[p] += h * dv[p];
-        minus.v[p] -= h * dv[p];
-    }
-    const double fd_v = (loss(system, plus) - loss(system, minus)) / (2.0 * h);
+    const double fd_v =
+        along_velocities<2>([&](const Particles<2>& from) { return loss(system, from); }, start, dv, 1e-4);
     const double hE = 1e-4 * E, hphi = 1e-3;
     const double fd_E = (loss(make_mpm_system<2>(sand_scene(E + hE, angle)), start) -
                          loss(make_mpm_system<2>(sand_scene(E - hE, angle)), start)) /
