@@ -6,9 +6,10 @@
 // step (the elastic energy, then the return mapping) or `return_map`'s (the return-mapped stress Ptilde
 // and its consistent tangent T, with its skew part, within the solve; plasticitynet converges to it).
 // With plasticity, R's Jacobian M + sum_p V dt^2 B_p^T T_p B_p is not symmetric: lambda solves its
-// transpose (BiCGSTAB on T_p^T), the stress terms below take T^T where the elastic step has dP/dF,
-// G2P's trial F gets dF^E/dF_trial^T of its cotangent (material/return_map_derivative.hpp), and the
-// friction angle's cotangent gathers lambda's dPtilde/dphi term and G2P's dF^E/dphi.
+// transpose (assembled, sparse LU; T is Drucker-Prager's exact Jacobian, drucker_prager_tangent), the
+// stress terms below take T^T where the elastic step has dP/dF, G2P's trial F gets dF^E/dF_trial^T of its
+// cotangent (material/return_map_derivative.hpp), and the friction angle's cotangent gathers lambda's
+// dPtilde/dphi term and G2P's dF^E/dphi.
 //
 // A step: P2G (m_i, q_i), v* = q / m + dt g; the solve R(v) = M (v - v*) + sum_p V_p dt P(F_p(v)) F_p^T
 // grad w_ip = 0 with F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p; the slip walls' projection (the
@@ -25,12 +26,14 @@
 //   Eb -= sum_p S_p / E (the energy is linear in E at fixed nu);
 // and P2G's adjoint from qb_i = vb*_i / m_i, mb_i -= vb*_i . q_i / m_i^2.
 //
-// The forward steps are the production integrator's (ImplicitIntegrator, `lagged`), at a fixed dt (the
-// advection limit is the simulation's, not applied here), solved to the options' tolerance, which the
-// gradient's accuracy follows. The forward pass keeps a checkpoint every C steps (about sqrt(N)); the
+// The forward steps are the production integrator's (ImplicitIntegrator, `lagged` or `return_map`), at a
+// fixed dt (the advection limit is the simulation's, not applied here), solved to the options' tolerance,
+// which the gradient's accuracy follows. The forward pass keeps a checkpoint every C steps (about sqrt(N)); the
 // backward pass recomputes each segment from its checkpoint, the last first (about 2 sqrt(N) states at
-// once), as the FEM adjoint does. Refused, naming what:
-// plasticity, AFLIP transfers, a sticky or Coulomb floor, BDF2.
+// once), as the FEM adjoint does. Known to be wrong, an open bug: return_map's adjoint of sand resting on
+// the floor from F = I (the sand column: it diverges from central differences within a few steps, while
+// it matches them to 1e-8 on a compressed block; docs/adjoint.md). Refused, naming what: Cam-Clay and
+// von Mises, AFLIP transfers, a sticky or Coulomb floor, BDF2.
 #include <functional>
 #include <map>
 #include <vector>
