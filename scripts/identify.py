@@ -5,6 +5,7 @@
     scripts/identify.py ball_youngs_modulus [--true-E 1e5] [--start-E 5e4] [--observed explicit|implicit]
     scripts/identify.py yield_stress [--true-h0 0.004] [--start-h0 0.006] [--out out/identify]
         [--yield-scene cantilever|impact] [--observed explicit|implicit]
+    scripts/identify.py friction_angle [--true-phi 27] [--start-phi 35]   (does not identify it yet: below)
     [--integrator lagged|return_map]: the fit's steps (default lagged for E, return_map for the yield stress)
     [--dt S]: the fit's step (default 1e-3 s; the cantilever 5e-4 s)
 
