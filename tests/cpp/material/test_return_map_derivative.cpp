@@ -129,7 +129,9 @@ void check_sand(const Vec<dim>& stretch, ReturnBranch expected, test::Random& rn
     EXPECT_LT((d.dFE_dangle - fd_FE).cwiseAbs().maxCoeff(), 1e-8 + 1e-6 * fd_FE.cwiseAbs().maxCoeff()) << "dF^E/dphi";
     EXPECT_LT((d.dP_dangle - fd_P).cwiseAbs().maxCoeff(), 1e-6 * std::max(1.0, fd_P.cwiseAbs().maxCoeff()))
         << "dPtilde/dphi";
-    if (expected == ReturnBranch::Cone) EXPECT_GT(d.dP_dangle.cwiseAbs().maxCoeff(), 0.0);
+    if (expected == ReturnBranch::Cone) {
+        EXPECT_GT(d.dP_dangle.cwiseAbs().maxCoeff(), 0.0);
+    }
 }
 
 TEST(ReturnMapDerivative, DruckerPragerMatchesCentralDifferencesOnItsBranches) {
