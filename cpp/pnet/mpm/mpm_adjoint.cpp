@@ -239,7 +239,7 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
 
     // The stress and its exact (unprojected, undamped) tangent at the solution: the elastic ones for
     // lagged, the return-mapped Ptilde and its consistent tangent with its skew part for return_map.
-    std::vector<Mat<dim>> F(n), P(n);
+    std::vector<Mat<dim>> F(n), P(n), dP_dangle(n, Mat<dim>::Zero());
     std::vector<Tensor4<dim>> T(n);
     potential.deformation(v, F);
     const bool return_map = method_ == Method::ReturnMap;
@@ -249,10 +249,13 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         const PolarSVD<dim> svd = clamped_svd<dim>(F[p]);  // one decomposition for P and its tangent
         if (return_map) {
             P[p] = material.elastoplastic_stress(svd, start.hardening[p]);
-            // Drucker-Prager's exact Jacobian (the stencil averages two branches near a boundary).
-            T[p] = material.description().plasticity == PlasticityModel::DruckerPrager
-                       ? drucker_prager_tangent<dim>(material, svd)
-                       : material.elastoplastic_tangent(svd, start.hardening[p], false, true);
+            if (material.description().plasticity == PlasticityModel::DruckerPrager) {
+                // The exact Jacobian (the stencil averages two branches near a boundary), and Ptilde in phi.
+                T[p] = drucker_prager_tangent<dim>(material, svd);
+                dP_dangle[p] = return_map_derivative<dim>(material, svd, 0.0).dP_dangle;
+            } else {
+                T[p] = material.elastoplastic_tangent(svd, start.hardening[p], false, true);
+            }
         } else {
             const Elasticity<dim>& elasticity = material.elasticity();
             P[p] = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
@@ -266,21 +269,18 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         if (dof[i] >= 0)
             for (int a = 0; a < dim; ++a)
                 if (!held[i][a]) rhs[dim * dof[i] + a] = grid_v_bar[i][a];
-    VecX residual;
-    potential.value_gradient_hessian(v, residual);
-    VecX diagonal;
-    potential.hessian_diagonal(diagonal);
-    // Symmetric where the solve's stress is elastic (lagged, or no plasticity): the potential's own
-    // exact Hessian by PCG; else J^T (the consistent tangent's skew part transposed) by BiCGSTAB.
-    bool symmetric = !return_map;
-    if (return_map) {
-        symmetric = true;
-        for (const Material<dim>& m : system_.materials)
-            symmetric = symmetric && m.description().plasticity == PlasticityModel::None;
-    }
+    // Symmetric where the solve's stress is elastic (lagged, or no plasticity): the potential's own exact
+    // Hessian by PCG; else J^T (the consistent tangent's skew part transposed) by sparse LU.
+    const bool symmetric =
+        !return_map || std::all_of(system_.materials.begin(), system_.materials.end(), [](const Material<dim>& m) {
+            return m.description().plasticity == PlasticityModel::None;
+        });
     VecX lambda;
     PcgResult solve;
     if (symmetric) {
+        VecX residual, diagonal;
+        potential.value_gradient_hessian(v, residual);
+        potential.hessian_diagonal(diagonal);
         solve = solve_pcg(potential, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-11, 100000);
     } else {
         // J^T = M + sum_p V dt^2 B_p^T T_p^T B_p assembled and factorized by sparse LU: the unprojected
@@ -352,10 +352,7 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         const Mat<dim> A = Mat<dim>::Identity() + dt * G;
         F_bar[p] -= V * dt * (A.transpose() * Q + Lambda.transpose() * P[p]);
         youngs_bar[p] = -V * dt * P[p].cwiseProduct(LF).sum() / material.elasticity().params().E;
-        if (return_map && material.description().plasticity == PlasticityModel::DruckerPrager) {
-            const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, clamped_svd<dim>(F[p]), 0.0);
-            angle_bar[p] = -V * dt * d.dP_dangle.cwiseProduct(LF).sum();
-        }
+        angle_bar[p] = -V * dt * dP_dangle[p].cwiseProduct(LF).sum();  // 0 unless return_map's sand
         const StencilNodeDerivatives<dim> st(grid, start.x[p]);
         int s = 0;
         Vec<dim> xb = Vec<dim>::Zero();
