@@ -33,48 +33,75 @@ Tensor4<dim> principal_derivative(const Vec<dim>& S, const Vec<dim>& Z, const Ma
     return A;
 }
 
+/// Drucker-Prager's projection in Hencky strain with its Jacobian, on the branch the mapping takes (one-sided
+/// at the boundaries): log Z = eps inside the cone, 0 at the apex (tr > 0), and on the cone log Z = tr/d 1 -
+/// c tr n with d log Z / d eps = 1 1^T / d - c n 1^T + k (I - 1 1^T / d - n n^T), k = -c tr / ||dev eps||
+/// (so log Z_i - log Z_j = k (eps_i - eps_j)); c = alpha(phi) stiffness, stiffness = (d lambda + 2 mu) / (2 mu).
+template <int dim>
+struct DruckerPragerStrain {
+    ReturnBranch branch = ReturnBranch::Elastic;
+    Vec<dim> eps, logZ, n = Vec<dim>::Zero();
+    Mat<dim> dlogZ = Mat<dim>::Identity();
+    double tr = 0.0, k = 1.0, stiffness = 0.0;
+
+    DruckerPragerStrain(const Material<dim>& material, const Vec<dim>& Sigma) {
+        const double mu = material.elasticity().mu(), lambda = material.elasticity().lambda();
+        eps = Sigma.array().log().matrix();
+        logZ = eps;
+        tr = eps.sum();
+        stiffness = (dim * lambda + 2.0 * mu) / (2.0 * mu);
+        if (tr > 0.0) {
+            branch = ReturnBranch::Apex;
+            logZ.setZero();
+            dlogZ.setZero();
+            return;
+        }
+        const Vec<dim> eps_hat = eps - tr / dim * Vec<dim>::Ones();
+        const double L = eps_hat.norm();
+        const double c = alpha(material) * stiffness;
+        if (!(L + c * tr > 0.0)) return;  // inside the cone (the mapping's branch on its surface too)
+        branch = ReturnBranch::Cone;
+        n = eps_hat / L;
+        k = -c * tr / L;
+        const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
+        dlogZ = mean - c * n * Vec<dim>::Ones().transpose() + k * (Mat<dim>::Identity() - mean - n * n.transpose());
+        logZ = tr / dim * Vec<dim>::Ones() - c * tr * n;
+    }
+    static double sine(const Material<dim>& material) {
+        return std::sin(material.description().drucker_prager.friction_angle_deg * M_PI / 180.0);
+    }
+    static double alpha(const Material<dim>& material) {
+        const double s = sine(material);
+        return std::sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s);
+    }
+};
+
 /// Drucker-Prager with StVK-Hencky (the only elasticity it takes).
 template <int dim>
 ReturnMapDerivative<dim> drucker_prager_derivative(const Material<dim>& material, const PolarSVD<dim>& svd) {
     ReturnMapDerivative<dim> out;
-    const MaterialDescription& m = material.description();
-    const double mu = material.elasticity().mu(), lambda = material.elasticity().lambda();
+    const DruckerPragerStrain<dim> z(material, svd.Sigma);
+    if (z.branch == ReturnBranch::Elastic) return out;
+    out.yielded = true;
     const Vec<dim>& S = svd.Sigma;
-    const Vec<dim> eps = S.array().log().matrix();
-    const double tr = eps.sum();
-    if (tr > 0.0) {  // the apex: Z = 1, F^E = U V^T (its rotation still follows F)
-        out.yielded = true;
-        const Vec<dim> Z = Vec<dim>::Ones();
-        out.dFE_dF =
-            to_f_space<dim>(svd, principal_derivative<dim>(S, Z, Mat<dim>::Zero(), [](int, int) { return 0.0; }));
+    const Vec<dim> Z = z.logZ.array().exp().matrix();
+    if (z.branch == ReturnBranch::Apex) {  // Z = 1, F^E = U V^T (its rotation still follows F)
+        out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, z.dlogZ, [](int, int) { return 0.0; }));
         return out;
     }
-    const Vec<dim> eps_hat = eps - tr / dim * Vec<dim>::Ones();
-    const double L = eps_hat.norm();
-    const double s = std::sin(m.drucker_prager.friction_angle_deg * M_PI / 180.0);
-    const double alpha = std::sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s);
-    const double stiffness = (dim * lambda + 2.0 * mu) / (2.0 * mu);
-    const double c = alpha * stiffness;
-    if (!(L + c * tr > 0.0)) return out;  // inside the cone (the mapping's branch on its surface too)
-    out.yielded = true;
-    const Vec<dim> n = eps_hat / L;
-    const double k = -c * tr / L;  // log Z_i - log Z_j = k (eps_i - eps_j)
-    const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
-    const Mat<dim> dlogZ =
-        mean - c * n * Vec<dim>::Ones().transpose() + k * (Mat<dim>::Identity() - mean - n * n.transpose());
-    const Vec<dim> logZ = tr / dim * Vec<dim>::Ones() - c * tr * n;
-    const Vec<dim> Z = logZ.array().exp().matrix();
-    out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, dlogZ, [&](int i, int j) {
-                                     return k * exp_difference_quotient(logZ[i], logZ[j]) /
-                                            exp_difference_quotient(eps[i], eps[j]);
+    out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, z.dlogZ, [&](int i, int j) {
+                                     return z.k * exp_difference_quotient(z.logZ[i], z.logZ[j]) /
+                                            exp_difference_quotient(z.eps[i], z.eps[j]);
                                  }));
     // d log Z / d phi = -(dc/dphi) tr n, phi in degrees; the stress's tau = 2 mu log Z + lambda tr(log Z) 1
     // changes by 2 mu d log Z (n has no trace).
+    const double s = DruckerPragerStrain<dim>::sine(material);
     const double dalpha_ds = std::sqrt(2.0 / 3.0) * 6.0 / ((3.0 - s) * (3.0 - s));
-    const double ds_dphi = std::cos(m.drucker_prager.friction_angle_deg * M_PI / 180.0) * M_PI / 180.0;
-    const Vec<dim> dlogZ_dphi = -(dalpha_ds * ds_dphi * stiffness) * tr * n;
+    const double ds_dphi =
+        std::cos(material.description().drucker_prager.friction_angle_deg * M_PI / 180.0) * M_PI / 180.0;
+    const Vec<dim> dlogZ_dphi = -(dalpha_ds * ds_dphi * z.stiffness) * z.tr * z.n;
     out.dFE_dangle = svd.compose(Z.cwiseProduct(dlogZ_dphi));
-    out.dP_dangle = svd.compose(Vec<dim>((2.0 * mu * dlogZ_dphi).cwiseQuotient(S)));
+    out.dP_dangle = svd.compose(Vec<dim>((2.0 * material.elasticity().mu() * dlogZ_dphi).cwiseQuotient(S)));
     return out;
 }
 
@@ -104,22 +131,12 @@ ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, co
     const Mat<dim> dlogZ = Mat<dim>::Constant(1.0 / dim) + c * (P - n * n.transpose());
     const Vec<dim> logZ = mean * Vec<dim>::Ones() + c * eps_hat;
     const Vec<dim> Z = logZ.array().exp().matrix();
-    // The (U, V) frame: dZ_i / dSigma_j = Z_i dlogZ_ij / Sigma_j on the diagonal entries, the pairs'
-    // blocks off it.
-    Tensor4<dim> A = Tensor4<dim>::Zero();
-    for (int i = 0; i < dim; ++i)
-        for (int j = 0; j < dim; ++j) A(i * dim + i, j * dim + j) = Z[i] * dlogZ(i, j) / S[j];
-    for (int i = 0; i < dim; ++i)
-        for (int j = i + 1; j < dim; ++j) {
-            // D = (Z_i - Z_j) / (Sigma_i - Sigma_j) = e^mean c q(c eps_hat_i, c eps_hat_j) / q(eps_i, eps_j).
-            const double D = std::exp(mean) * c * exp_difference_quotient(c * eps_hat[i], c * eps_hat[j]) /
-                             exp_difference_quotient(eps[i], eps[j]);
-            const double E = (Z[i] + Z[j]) / (S[i] + S[j]);
-            const int ij = i * dim + j, ji = j * dim + i;
-            A(ij, ij) = A(ji, ji) = 0.5 * (D + E);
-            A(ij, ji) = A(ji, ij) = 0.5 * (D - E);
-        }
-    out.dFE_dF = to_f_space<dim>(svd, A);
+    // D = (Z_i - Z_j) / (Sigma_i - Sigma_j) = e^mean c q(c eps_hat_i, c eps_hat_j) / q(eps_i, eps_j).
+    out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, dlogZ, [&](int i, int j) {
+                                     return std::exp(mean) * c *
+                                            exp_difference_quotient(c * eps_hat[i], c * eps_hat[j]) /
+                                            exp_difference_quotient(eps[i], eps[j]);
+                                 }));
     // d log Z / dh = n; h' = h + xi (L - h): dh'/d eps = xi n, dh'/dh = 1 - xi.
     out.dFE_dh = svd.compose(Z.cwiseProduct(n));
     out.dh_dF = svd.compose(Vec<dim>(xi * n.cwiseQuotient(S)));
@@ -135,28 +152,9 @@ Tensor4<dim> drucker_prager_tangent(const Material<dim>& material, const PolarSV
     if (m.plasticity != PlasticityModel::DruckerPrager)
         throw std::invalid_argument("drucker_prager_tangent: plasticity \"" + to_string(m.plasticity) + "\"");
     const double mu = material.elasticity().mu(), lambda = material.elasticity().lambda();
-    const Vec<dim> eps = svd.Sigma.array().log().matrix();
-    const double tr = eps.sum();
-    Vec<dim> logZ = eps;
-    Mat<dim> dlogZ = Mat<dim>::Identity();
-    if (tr > 0.0) {  // the apex
-        logZ.setZero();
-        dlogZ.setZero();
-    } else {
-        const Vec<dim> eps_hat = eps - tr / dim * Vec<dim>::Ones();
-        const double L = eps_hat.norm();
-        const double s = std::sin(m.drucker_prager.friction_angle_deg * M_PI / 180.0);
-        const double c = std::sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s) * (dim * lambda + 2.0 * mu) / (2.0 * mu);
-        if (L + c * tr > 0.0) {  // the cone
-            const Vec<dim> n = eps_hat / L;
-            const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
-            logZ = tr / dim * Vec<dim>::Ones() - c * tr * n;
-            dlogZ = mean - c * n * Vec<dim>::Ones().transpose() -
-                    (c * tr / L) * (Mat<dim>::Identity() - mean - n * n.transpose());
-        }
-    }
-    const Vec<dim> tau = 2.0 * mu * logZ + lambda * logZ.sum() * Vec<dim>::Ones();
-    const Mat<dim> dtau = 2.0 * mu * dlogZ + lambda * Vec<dim>::Ones() * dlogZ.colwise().sum();
+    const DruckerPragerStrain<dim> z(material, svd.Sigma);
+    const Vec<dim> tau = 2.0 * mu * z.logZ + lambda * z.logZ.sum() * Vec<dim>::Ones();
+    const Mat<dim> dtau = 2.0 * mu * z.dlogZ + lambda * Vec<dim>::Ones() * z.dlogZ.colwise().sum();
     return elastoplastic_tangent_of_derivative<dim>(svd, tau, dtau, false, true);
 }
 
