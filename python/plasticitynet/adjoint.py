@@ -48,6 +48,16 @@ def with_youngs_modulus(scene: dict, youngs_modulus: float, initial_hardening: f
     return out
 
 
+def _state_cotangents(grad: torch.Tensor, states: Sequence[int]) -> dict[int, np.ndarray]:
+    """The positions' gradient (len(states), points, dim) as {state: array} for a rollout's backward; a state
+    asked for twice sums its cotangents."""
+    g = grad.detach().cpu().numpy().astype(np.float64)
+    dL_dx: dict[int, np.ndarray] = {}
+    for i, k in enumerate(states):
+        dL_dx[k] = dL_dx.get(k, 0.0) + g[i]
+    return dL_dx
+
+
 class _FemPositions(torch.autograd.Function):
     @staticmethod
     def forward(ctx, youngs_modulus, v0, initial_hardening, scene, steps, dt, states, newton_tolerance, integrator):
@@ -61,11 +71,7 @@ class _FemPositions(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad):
-        g = grad.detach().cpu().numpy().astype(np.float64)
-        dL_dx: dict[int, np.ndarray] = {}
-        for i, k in enumerate(ctx.states):  # a state asked for twice sums its cotangents
-            dL_dx[k] = dL_dx.get(k, 0.0) + g[i]
-        out = ctx.rollout.backward(dL_dx)
+        out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
         dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
         dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
         dh0 = torch.tensor(out["initial_hardening"], dtype=torch.float64) if ctx.has_h0 else None
@@ -116,11 +122,7 @@ class _MpmPositions(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad):
-        g = grad.detach().cpu().numpy().astype(np.float64)
-        dL_dx: dict[int, np.ndarray] = {}
-        for i, k in enumerate(ctx.states):
-            dL_dx[k] = dL_dx.get(k, 0.0) + g[i]
-        out = ctx.rollout.backward(dL_dx)
+        out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
         dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
         dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
         dphi = torch.tensor(out["friction_angle"], dtype=torch.float64) if ctx.has_phi else None
