@@ -317,15 +317,6 @@ backward.)doc")
                  options.max_newton_iterations = 1000;
                  try {
                      const Method method = parse_integrator(integrator, "integrator");
-                     // return_map's sand adjoint matches central differences on a compressed block (the C++
-                     // test) but diverges from them within a few steps on the sand column (an open bug,
-                     // docs/adjoint.md): refused here until it is found.
-                     for (const SceneObject& object : s.objects)
-                         if (method == Method::ReturnMap &&
-                             object.material.plasticity == PlasticityModel::DruckerPrager)
-                             throw py::value_error(s.file + ": " + object.json_path +
-                                                   ".material: return_map's adjoint of Drucker-Prager sand is not "
-                                                   "verified on flows at rest on a floor; use integrator=\"lagged\"");
                      if (s.dim == 2) return std::make_unique<MpmRolloutOf<2>>(std::move(s), options, method);
                      return std::make_unique<MpmRolloutOf<3>>(std::move(s), options, method);
                  } catch (const std::invalid_argument& e) {

@@ -29,6 +29,10 @@ public:
     /// The same projection in Hencky strain: log Z from eps = log Sigma (no log or exp: the
     /// consistent tangent evaluates it 2d + 1 times per point).
     Vec<dim> project_strain(const Vec<dim>& eps, ReturnBranch* branch = nullptr) const;
+    /// k with dev(log Z) = k dev(eps) on the branch project_strain takes: 1 inside the cone, 1 - dgamma /
+    /// ||dev eps|| on it, 0 at the apex. So tau_i - tau_j = k 2 mu (eps_i - eps_j), the rotational part of the
+    /// consistent tangent without cancellation where principal strains nearly coincide.
+    double deviatoric_scale(const Vec<dim>& eps) const;
 
     /// y(tau) = ||dev tau|| + alpha tr(tau), Pa; <= 0 inside the elastic cone.
     double yield_function(const Vec<dim>& tau) const;

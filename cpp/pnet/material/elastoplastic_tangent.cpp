@@ -40,21 +40,22 @@ void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil) {
 
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd,
-                                             bool keep_skew) {
+                                             bool keep_skew, const Mat<dim>* pair_quotient) {
     Mat<dim> dtau;
     for (int j = 0; j < dim; ++j) dtau.col(j) = (tau[1 + 2 * j] - tau[2 + 2 * j]) / (2.0 * kDelta);
-    return elastoplastic_tangent_of_derivative<dim>(svd, tau[0], dtau, project_psd, keep_skew);
+    return elastoplastic_tangent_of_derivative<dim>(svd, tau[0], dtau, project_psd, keep_skew, pair_quotient);
 }
 
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_derivative(const PolarSVD<dim>& svd, const Vec<dim>& t, Mat<dim> dtau,
-                                                 bool project_psd, bool keep_skew) {
+                                                 bool project_psd, bool keep_skew, const Mat<dim>* pair_quotient) {
     const Vec<dim>& S = svd.Sigma;
     const Vec<dim> eps = S.array().log().matrix();
     const Mat<dim> skew = 0.5 * (dtau - dtau.transpose());
     dtau = 0.5 * (dtau + dtau.transpose()).eval();
     auto quotient = [&](int i, int j) {
         if (std::abs(eps[i] - eps[j]) > kCloseLog) return (t[i] - t[j]) / (S[i] - S[j]);
+        if (pair_quotient) return (*pair_quotient)(i, j);
         // The limit Sigma_i -> Sigma_j: d(tau_i - tau_j)/d eps_i / Sigma_i.
         return (dtau(i, i) - dtau(j, i)) / (0.5 * (S[i] + S[j]));
     };
@@ -99,10 +100,12 @@ template void tangent_stencil<2>(const Vec<2>&, Vec<2>*);
 template void tangent_stencil<3>(const Vec<3>&, Vec<3>*);
 template void tangent_strain_stencil<2>(const Vec<2>&, Vec<2>*);
 template void tangent_strain_stencil<3>(const Vec<3>&, Vec<3>*);
-template Tensor4<2> elastoplastic_tangent_of_stress<2>(const PolarSVD<2>&, const Vec<2>*, bool, bool);
-template Tensor4<3> elastoplastic_tangent_of_stress<3>(const PolarSVD<3>&, const Vec<3>*, bool, bool);
-template Tensor4<2> elastoplastic_tangent_of_derivative<2>(const PolarSVD<2>&, const Vec<2>&, Mat<2>, bool, bool);
-template Tensor4<3> elastoplastic_tangent_of_derivative<3>(const PolarSVD<3>&, const Vec<3>&, Mat<3>, bool, bool);
+template Tensor4<2> elastoplastic_tangent_of_stress<2>(const PolarSVD<2>&, const Vec<2>*, bool, bool, const Mat<2>*);
+template Tensor4<3> elastoplastic_tangent_of_stress<3>(const PolarSVD<3>&, const Vec<3>*, bool, bool, const Mat<3>*);
+template Tensor4<2> elastoplastic_tangent_of_derivative<2>(const PolarSVD<2>&, const Vec<2>&, Mat<2>, bool, bool,
+                                                            const Mat<2>*);
+template Tensor4<3> elastoplastic_tangent_of_derivative<3>(const PolarSVD<3>&, const Vec<3>&, Mat<3>, bool, bool,
+                                                            const Mat<3>*);
 template Tensor4<2> elastoplastic_tangent_from<2>(const PolarSVD<2>&, const Elasticity<2>&, const Vec<2>*, bool, bool);
 template Tensor4<3> elastoplastic_tangent_from<3>(const PolarSVD<3>&, const Elasticity<3>&, const Vec<3>*, bool, bool);
 

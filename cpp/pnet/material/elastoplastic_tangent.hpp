@@ -60,13 +60,23 @@ template <int dim>
 void tangent_strain_stencil(const Vec<dim>& eps, Vec<dim>* stencil);
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec<dim>* tau, bool project_psd,
-                                             bool keep_skew = false);
+                                             bool keep_skew = false, const Mat<dim>* pair_quotient = nullptr);
 /// The tangent from the return-mapped Kirchhoff stress tau and its derivative dtau/deps (not symmetric
 /// for non-associative flow) where a return mapping gives them in closed form (the adjoint's exact
 /// Drucker-Prager Jacobian, return_map_derivative.hpp); the stencil's version differences them and calls
 /// this.
+///
+/// The rotational part takes the difference quotients (tau_i - tau_j) / (Sigma_i - Sigma_j); for singular
+/// values within kCloseLog (1e-4 in log) of each other, where they cancel, `pair_quotient(i, j)` where the
+/// caller gives it, formed without cancellation from what the return is, else their limit from dtau_deps.
+/// That limit holds only where tau_Z is smooth across equal principal strains, and on Drucker-Prager's
+/// cone it is not (the return scales the deviatoric strain by k = 1 - dgamma / |dev eps|, which depends on
+/// the direction it comes from; the limit took the cone's derivative across its edge and was negative, and
+/// near the cone's tip the stencil's points straddle the branches): the Drucker-Prager callers pass
+/// 2 mu k (eps_i - eps_j) / (Sigma_i - Sigma_j).
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_derivative(const PolarSVD<dim>& svd, const Vec<dim>& tau, Mat<dim> dtau_deps,
-                                                 bool project_psd, bool keep_skew = false);
+                                                 bool project_psd, bool keep_skew = false,
+                                                 const Mat<dim>* pair_quotient = nullptr);
 
 }  // namespace pnet

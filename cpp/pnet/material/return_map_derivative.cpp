@@ -155,7 +155,14 @@ Tensor4<dim> drucker_prager_tangent(const Material<dim>& material, const PolarSV
     const DruckerPragerStrain<dim> z(material, svd.Sigma);
     const Vec<dim> tau = 2.0 * mu * z.logZ + lambda * z.logZ.sum() * Vec<dim>::Ones();
     const Mat<dim> dtau = 2.0 * mu * z.dlogZ + lambda * Vec<dim>::Ones() * z.dlogZ.colwise().sum();
-    return elastoplastic_tangent_of_derivative<dim>(svd, tau, dtau, false, true);
+    // The rotational part where principal strains nearly coincide: log Z_i - log Z_j = k (eps_i - eps_j) on the
+    // branch taken (DruckerPrager::deviatoric_scale), exact there (elastoplastic_tangent.hpp).
+    const double k = z.branch == ReturnBranch::Apex ? 0.0 : z.k;
+    Mat<dim> quotient = Mat<dim>::Zero();
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j)
+            if (i != j) quotient(i, j) = k * material.elasticity().tau_difference_quotient(svd.Sigma, i, j);
+    return elastoplastic_tangent_of_derivative<dim>(svd, tau, dtau, false, true, &quotient);
 }
 
 template Tensor4<2> drucker_prager_tangent<2>(const Material<2>&, const PolarSVD<2>&);

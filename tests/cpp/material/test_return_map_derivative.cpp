@@ -89,7 +89,7 @@ TEST(ReturnMapDerivative, IsOneSidedAtTheYieldOnsetAndRefusesWhatIsNotWritten) {
 /// Sand (Drucker-Prager) at F = R1 diag(stretch) R2: dF^E/dF, and dF^E and Ptilde in the friction angle,
 /// against central differences.
 template <int dim>
-void check_sand(const Vec<dim>& stretch, ReturnBranch expected, test::Random& rng) {
+void check_sand(const Vec<dim>& stretch, ReturnBranch expected, test::Random& rng, double step = 1e-7) {
     MaterialDescription sand = material_preset("sand");
     const Material<dim> material(sand);
     const Mat<dim> F = rotation<dim>(rng) * stretch.asDiagonal() * rotation<dim>(rng);
@@ -97,7 +97,6 @@ void check_sand(const Vec<dim>& stretch, ReturnBranch expected, test::Random& rn
     ASSERT_EQ(material.project(F, 0.0).branch, expected) << stretch.transpose();
     const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, svd, 0.0);
     EXPECT_EQ(d.yielded, expected != ReturnBranch::Elastic);
-    const double step = 1e-7;
     double worst = 0.0;
     for (int k = 0; k < dim * dim; ++k) {
         Mat<dim> dF = Mat<dim>::Zero();
@@ -145,6 +144,21 @@ TEST(ReturnMapDerivative, DruckerPragerMatchesCentralDifferencesOnItsBranches) {
         check_sand<3>(Vec<3>(std::exp(shear - squeeze), std::exp(-0.3 * shear - squeeze), std::exp(-0.7 * shear - squeeze)),
                       ReturnBranch::Cone, rng);
         check_sand<3>(Vec<3>(std::exp(0.02), std::exp(0.01), std::exp(-0.005)), ReturnBranch::Apex, rng);
+    }
+}
+
+TEST(ReturnMapDerivative, DruckerPragerTangentIsExactOnTheConeAtNearlyEqualSingularValues) {
+    // Strains of 1e-5, as at a sand pile's free surface: principal strains under 1e-4 apart (within the
+    // tangent's kCloseLog), beyond the cone. The limit of (tau_i - tau_j) / (Sigma_i - Sigma_j) from dtau/deps
+    // is negative there (the cone's derivative taken across its edge at equal strains); the quotient is 2 mu k.
+    // Differences of 1e-8, a thousandth of the distance to the branches' boundaries.
+    test::Random rng(29);
+    for (int trial = 0; trial < 4; ++trial) {
+        const double shear = rng.uniform(3e-5, 4.5e-5), squeeze = rng.uniform(5e-6, 1e-5);
+        check_sand<2>(Vec<2>(std::exp(shear - squeeze), std::exp(-shear - squeeze)), ReturnBranch::Cone, rng, 1e-8);
+        check_sand<3>(Vec<3>(std::exp(shear - squeeze), std::exp(-0.2 * shear - squeeze),
+                             std::exp(-0.8 * shear - squeeze)),
+                      ReturnBranch::Cone, rng, 1e-8);
     }
 }
 

@@ -312,6 +312,79 @@ TEST(MpmAdjoint2d, DruckerPragerRolloutGradientMatchesCentralDifferences) {
     check_sand(Method::Lagged);
 }
 
+// A sand column (330 particles) standing on the slip floor from F = I, under `return_map`, as scripts/identify.py
+// friction_angle fits it: its free surface sits at the cone's tip, strains of 1e-5 with principal strains closer
+// than the consistent tangent's kCloseLog, where the tangent's limit quotient was negative and the adjoint grew
+// 1.8x per step (dL/dv0 -219 after 12 steps against central differences' 0.2-0.4). dL/dphi of the positions
+// after 60 steps against central differences; dL/dv0 of a loss of positions and velocities stays within the
+// spread of central differences at two steps (the free surface's particles change branch under any
+// perturbation of the velocities, so differences of different size disagree by tens of percent).
+Scene column_scene(double angle) {
+    return scene_from_json(nlohmann::json::parse(std::string(R"({
+        "dim": 2, "domain": {"min": [0, 0], "max": [1, 1]}, "dx": 0.015625, "gravity": [0, -9.8],
+        "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 0},
+        "integrator": {"name": "return_map", "dt": 1e-3},
+        "objects": [{"shape": "box", "min": [0.45, 0.046875], "max": [0.55, 0.25],
+                     "material": {"name": "sand", "density": 2200,
+                                  "elasticity": {"model": "stvk_hencky", "E": 3.537e5, "nu": 0.3},
+                                  "plasticity": {"model": "drucker_prager", "friction_angle_deg": )") +
+                                                 std::to_string(angle) + R"(}}}]})"),
+                           "<column>", ".");
+}
+
+TEST(MpmAdjoint2d, ASandColumnAtRestFromTheConesTipHasItsFrictionAngleGradient) {
+    const double angle = 30.0, dt = 1e-3;
+    const MpmSystem<2> system = make_mpm_system<2>(column_scene(angle));
+    const Particles<2> start = sample_particles<2>(column_scene(angle));
+    const std::size_t n = start.size();
+    test::Random random(83);
+    std::vector<Vec<2>> a(n), b(n), dv(n), none(n, Vec<2>::Zero());
+    for (std::size_t p = 0; p < n; ++p) {
+        a[p] = random.uniform_vec<2>(-1.0, 1.0);
+        b[p] = random.uniform_vec<2>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
+    }
+    auto rollout = [&](const MpmSystem<2>& s, const Particles<2>& from, int steps) {
+        MpmAdjoint<2> adjoint(s, tight(), MpmOptions{}, Method::ReturnMap);
+        return adjoint.forward(from, dt, steps);
+    };
+    auto positions = [&](const Particles<2>& last) {
+        double L = 0.0;
+        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]);
+        return L;
+    };
+    const int steps = 60;
+    MpmAdjoint<2> adjoint(system, tight(), MpmOptions{}, Method::ReturnMap);
+    adjoint.forward(start, dt, steps);
+    const double g_phi = adjoint.backward(a, none).friction_angle;
+    const double hphi = 1e-3;
+    const double fd_phi = (positions(rollout(make_mpm_system<2>(column_scene(angle + hphi)), start, steps)) -
+                           positions(rollout(make_mpm_system<2>(column_scene(angle - hphi)), start, steps))) /
+                          (2.0 * hphi);
+    std::printf("sand column at rest, %zu particles, %d steps: dL/dphi %.10g vs %.10g\n", n, steps, g_phi, fd_phi);
+    EXPECT_GT(std::abs(fd_phi), 1e-5);
+    EXPECT_NEAR(g_phi, fd_phi, 1e-4 * std::abs(fd_phi));
+
+    const int short_steps = 12;
+    MpmAdjoint<2> short_adjoint(system, tight(), MpmOptions{}, Method::ReturnMap);
+    short_adjoint.forward(start, dt, short_steps);
+    const MpmRolloutGradient<2> g = short_adjoint.backward(a, b);
+    double g_v = 0.0;
+    for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
+    auto loss = [&](const Particles<2>& from) {
+        const Particles<2> last = rollout(system, from, short_steps);
+        double L = positions(last);
+        for (std::size_t p = 0; p < n; ++p) L += b[p].dot(last.v[p]);
+        return L;
+    };
+    const double fd_coarse = along_velocities<2>(loss, start, dv, 1e-4), fd_fine = along_velocities<2>(loss, start, dv, 1e-6);
+    std::printf("the same, %d steps: dL/dv0 %.10g vs %.10g (h 1e-4) and %.10g (h 1e-6)\n", short_steps, g_v, fd_coarse,
+                fd_fine);
+    const double low = std::min(fd_coarse, fd_fine), high = std::max(fd_coarse, fd_fine), spread = high - low;
+    EXPECT_GT(g_v, low - spread);
+    EXPECT_LT(g_v, high + spread);
+}
+
 TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
     MpmSystem<2> snow = make_mpm_system<2>(disk_scene(1e5));
     snow.materials[0] = Material<2>(material_preset("snow"));
