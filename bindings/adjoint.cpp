@@ -182,6 +182,9 @@ struct MpmRolloutOf final : MpmRolloutBase {
         py::dict d;
         d["x"] = rows<dim>(initial.x);
         d["v"] = rows<dim>(initial.v);
+        py::array_t<double> mass(static_cast<py::ssize_t>(initial.size()));
+        std::copy(initial.mass.begin(), initial.mass.end(), mass.mutable_data());
+        d["mass"] = mass;
         return d;
     }
     py::dict forward(int steps, double dt, const py::object& v0, const py::object& states,
@@ -325,7 +328,9 @@ backward.)doc")
              }),
              py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged")
         .def_property_readonly("particles", &MpmRolloutBase::particles)
-        .def("start", &MpmRolloutBase::start, "The scene's particles: {\"x\", \"v\"}, (particles, dim) arrays.")
+        .def("start", &MpmRolloutBase::start,
+             "The scene's particles: {\"x\", \"v\"}, (particles, dim) arrays, and \"mass\", (particles,), kg (per "
+             "metre of depth in 2D).")
         .def("forward", &MpmRolloutBase::forward, py::arg("steps"), py::arg("dt"), py::arg("v0") = py::none(),
              py::arg("states") = py::none(), py::arg("checkpoint_every") = 0)
         .def_property_readonly("peak_states", &MpmRolloutBase::peak_states)

@@ -5,8 +5,10 @@
     scripts/identify.py ball_youngs_modulus [--true-E 1e5] [--start-E 5e4] [--observed explicit|implicit]
     scripts/identify.py yield_stress [--true-h0 0.004] [--start-h0 0.006] [--out out/identify]
         [--yield-scene cantilever|impact] [--observed explicit|implicit]
-    scripts/identify.py friction_angle [--true-phi 27] [--start-phi 35]   (does not identify it yet: below)
-    [--integrator lagged|return_map]: the fit's steps (default lagged for E, return_map for the yield stress)
+    scripts/identify.py friction_angle [--true-phi 27] [--start-phi 35] [--observed explicit|implicit]
+        [--loss positions|profile]
+    [--integrator lagged|return_map]: the fit's steps (default lagged for E, return_map for the yield stress
+    and the friction angle)
     [--dt S]: the fit's step (default 1e-3 s; the cantilever 5e-4 s)
 
 youngs_modulus: an elastic box (FEM, neo-Hookean, bouncing_box() below) dropped onto the ground
@@ -33,12 +35,12 @@ the slip floor, its first 0.2 s (the fall and the bounce). The observed run is e
 each evaluation an implicit MPM rollout at --dt (2.5e-4 s) and its adjoint (plasticitynet.adjoint
 .mpm_positions). The implicit bounce's own damping is in the result (docs/adjoint.md).
 
-friction_angle: the sand column (scenes/sand_column_2d.json at twice its dx, APIC transfers, a slip floor)
-observed by explicit MPM at 1e-5 s at --true-phi, fitted from --start-phi through the MPM adjoint of the
-`lagged` step. It does not identify the angle yet: lagged's column at 1e-3 s is far from explicit's (6474
-mm^2 at 35 degrees), and the fit runs to 0 degrees; return_map's sand adjoint, which would fit the step
-that is close, diverges from central differences on this column (docs/adjoint.md). The shipped column's
-AFLIP transfers and Coulomb floor are not in the adjoint either.
+friction_angle: the sand column (scenes/sand_column_2d.json at twice its dx, 1846 particles, APIC transfers, a
+slip floor; its first 0.3 s, the collapse) observed by explicit MPM at 1e-5 s at --true-phi, fitted from
+--start-phi through the MPM adjoint of `return_map`'s step at --dt (1e-3 s), the particles' mean squared
+distance at the 15 frames. The implicit step's own distance from explicit's is in the result (docs/adjoint.md).
+The shipped column's AFLIP transfers and Coulomb floor are not in the MPM adjoint yet; `lagged` does not
+identify the angle (its column is far from explicit's, and its fit runs to 0 degrees).
 """
 from __future__ import annotations
 
@@ -58,6 +60,8 @@ launch.with_simulator()
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+
+import plasticitynet_sim  # noqa: E402
 
 from plasticitynet import adjoint, frames  # noqa: E402
 
@@ -148,8 +152,9 @@ def sand_column(friction_angle: float, integrator: str = "return_map", dt: float
     return scene
 
 
-def observed_frames(scene_dict: dict, out: Path, name: str) -> np.ndarray:
-    """The observed run's node (particle) positions at frames 1..frames, (frames, points, dim)."""
+def observed_frames(scene_dict: dict, out: Path, name: str, with_mass: bool = False):
+    """The observed run's node (particle) positions at frames 1..frames, (frames, points, dim); with_mass
+    (particles): and their masses, (frames, points)."""
     out.mkdir(parents=True, exist_ok=True)
     scene = out / f"{name}_observed_scene.json"
     scene.write_text(json.dumps(scene_dict, indent=1))
@@ -159,6 +164,9 @@ def observed_frames(scene_dict: dict, out: Path, name: str) -> np.ndarray:
     if done.status != 0:
         sys.exit(f"the observed run failed ({done.status}):\n{done.output}")
     count = scene_dict["frames"]
+    if with_mass:
+        read = [plasticitynet_sim.read_particle_frame(str(run / f"frame_{k:05d}.ply")) for k in range(1, count + 1)]
+        return np.stack([d["position"] for d in read]), np.stack([d["mass"] for d in read])
     if "objects" in scene_dict:
         return np.stack([frames.read_particle_positions(run / f"frame_{k:05d}.ply") for k in range(1, count + 1)])
     return np.stack([frames.read_mesh_ply(run / f"frame_{k:05d}.ply").position for k in range(1, count + 1)])
@@ -170,10 +178,23 @@ def explicit_observation(scene: dict) -> dict:
 
 
 def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_value: float, start_value: float,
-        positions, out: Path, max_evaluations: int, dt: float = DT) -> int:
+        positions, out: Path, max_evaluations: int, dt: float = DT, profile=None) -> int:
     """L-BFGS on log p of the mean squared nodal distance to the observed frames; positions(scene, p, states)
-    is the differentiable rollout."""
-    observed = torch.from_numpy(observed_frames(scene, out, name))
+    is the differentiable rollout. With profile = (the fit's particle masses, density): the mean squared
+    difference of the deposits' height profiles instead (adjoint.height_profile; no particle correspondence)."""
+    if profile is None:
+        observed = torch.from_numpy(observed_frames(scene, out, name))
+
+        def discrepancy(x):  # m^2
+            return ((x - observed) ** 2).sum(dim=-1).mean()
+    else:
+        fit_mass, density = profile
+        x_seen, m_seen = observed_frames(scene, out, name, with_mass=True)
+        observed = torch.stack([adjoint.height_profile(torch.from_numpy(x), m, scene, density)
+                                for x, m in zip(x_seen, m_seen)])
+
+        def discrepancy(x):  # m^2
+            return ((adjoint.height_profile(x, fit_mass, scene, density) - observed) ** 2).mean()
     steps_per_frame = round(frame_dt / dt)
     frame_count = scene["frames"]
     states = [k * steps_per_frame for k in range(1, frame_count + 1)]
@@ -186,7 +207,7 @@ def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_va
         optimizer.zero_grad()
         start = time.perf_counter()
         x = positions(torch.exp(log_p), frame_count * steps_per_frame, states)
-        loss = 1e6 * ((x - observed) ** 2).sum(dim=-1).mean()  # mm^2
+        loss = 1e6 * discrepancy(x)  # mm^2
         loss.backward()
         path.append((float(torch.exp(log_p)), float(loss), float(log_p.grad), time.perf_counter() - start))
         p, L, g, seconds = path[-1]
@@ -247,7 +268,7 @@ def identify_ball_youngs_modulus(true_E: float, start_E: float, out: Path, max_e
 
 
 def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_evaluations: int, observed: str,
-                            dt: float, integrator: str = "lagged") -> int:
+                            dt: float, integrator: str = "return_map", loss: str = "positions") -> int:
     scene = sand_column(start_phi, integrator, dt)
     truth = sand_column(true_phi, integrator, dt)
     if observed == "explicit":
@@ -260,8 +281,13 @@ def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_ev
         return adjoint.mpm_positions(scene, E, None, steps, dt, states, newton_tolerance=1e-10, friction_angle=phi,
                                      integrator=integrator)
 
-    return fit("friction_angle", "phi", "deg", truth, scene["frame_dt"], true_phi, start_phi, positions, out,
-               max_evaluations, dt)
+    profile = None
+    if loss == "profile":
+        material = scene["objects"][0]["material"]
+        profile = (plasticitynet_sim.MpmRollout(scene).start()["mass"], float(material["density"]))
+        print("the loss: the deposits' height profiles on the scene's grid at each frame (no particle correspondence)")
+    return fit("friction_angle" if loss == "positions" else "friction_angle_profile", "phi", "deg", truth,
+               scene["frame_dt"], true_phi, start_phi, positions, out, max_evaluations, dt, profile)
 
 
 def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int, integrator: str,
@@ -301,19 +327,25 @@ def main() -> int:
     parser.add_argument("--max-evaluations", type=int, default=20)
     parser.add_argument("--integrator", choices=["lagged", "return_map"], default=None,
                         help="the fit's steps (and the observed run's, where it is implicit); default lagged for "
-                             "youngs_modulus, return_map for yield_stress")
+                             "youngs_modulus, return_map for yield_stress and friction_angle")
     parser.add_argument("--yield-scene", choices=["cantilever", "impact"], default="cantilever",
                         help="yield_stress: the clamped bar sagging under gravity, or the block hitting the ground")
     parser.add_argument("--observed", choices=["explicit", "implicit"], default=None,
-                        help="yield_stress: the observed run by explicit FEM at 1e-5 s (default for the cantilever) or "
-                             "by the fit's own implicit step (default for the impact)")
+                        help="yield_stress, ball_youngs_modulus, friction_angle: the observed run by explicit FEM or "
+                             "MPM at 1e-5 s (the default, but for the impact) or by the fit's own implicit step")
     parser.add_argument("--dt", type=float, default=None,
                         help="the fit's step, s (default 1e-3; the cantilever 5e-4)")
+    parser.add_argument("--loss", choices=["positions", "profile"], default="positions",
+                        help="friction_angle: the particles' mean squared distance to the observed ones, or the "
+                             "deposits' height profiles on the grid (no particle correspondence)")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "identify")
     args = parser.parse_args()
+    if args.loss != "positions" and args.case != "friction_angle":
+        parser.error(f"--loss {args.loss}: only friction_angle fits a height profile")
     if args.case == "friction_angle":
         return identify_friction_angle(args.true_phi, args.start_phi, args.out, args.max_evaluations,
-                                       args.observed or "explicit", args.dt or 1e-3, args.integrator or "lagged")
+                                       args.observed or "explicit", args.dt or 1e-3, args.integrator or "return_map",
+                                       args.loss)
     if args.case == "ball_youngs_modulus":
         return identify_ball_youngs_modulus(args.true_E or 1e5, args.start_E or 5e4, args.out, args.max_evaluations,
                                             args.observed or "explicit", args.dt or 2.5e-4)

@@ -13,10 +13,17 @@ operations, so a torch optimizer can fit E or v0 to observed frames.
 
 `mpm_positions(scene, youngs_modulus, v0, steps, dt, states)` does the same for an implicit MPM rollout of
 elastic particle bodies (plasticitynet_sim.MpmRollout): the particles' positions.
+
+Losses that need no particle correspondence: `grid_mass(x, mass, scene)` is the particles' mass on the
+scene's grid (Simulation.grid_mass(), the quadratic B-spline), differentiable in the positions, and
+`height_profile(x, mass, scene, density)` the deposit's height over each grid column (the mass above a
+node of the floor's line or plane over density dx^(dim-1)); observed frames of another run, another
+resolution or another particle count compare through them.
 """
 from __future__ import annotations
 
 import copy
+import math
 from typing import Sequence
 
 import numpy as np
@@ -142,3 +149,67 @@ def mpm_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | 
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
     return _MpmPositions.apply(youngs_modulus, v0, friction_angle, scene, steps, dt, [int(k) for k in states],
                                newton_tolerance, integrator)
+
+
+def _grid_of(scene: dict) -> tuple[np.ndarray, list[int], float]:
+    """The origin, node counts and dx of the grid Simulation.grid_mass() rasterizes on (metrics/iou.cpp)."""
+    try:
+        lo = np.asarray(scene["domain"]["min"], dtype=np.float64)
+        hi = np.asarray(scene["domain"]["max"], dtype=np.float64)
+        dx = float(scene["dx"])
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"scene: a grid needs domain.min, domain.max and dx ({e})") from None
+    if not dx > 0.0:
+        raise ValueError(f"scene.dx: expected a positive number, got {dx}")
+    nodes = []
+    for axis, extent in enumerate(hi - lo):
+        r = extent / dx
+        if not r >= 2.0:
+            raise ValueError(f"scene.domain: axis {axis} spans {r:g} cells; need at least 2")
+        nodes.append(int(math.ceil(r - 1e-9 * r)) + 1)
+    return lo, nodes, dx
+
+
+def grid_mass(x: torch.Tensor, mass, scene: dict) -> torch.Tensor:
+    """The particles' mass on the scene's grid, kg (per metre of depth in 2D): shape (..., nodes_x, nodes_y[,
+    nodes_z]) for positions x of shape (..., particles, dim), node [i, j(, k)] at domain.min + (i, j, k) dx,
+    what plasticitynet_sim.Simulation.grid_mass() gives for the same particles (the quadratic B-spline;
+    positions within a cell of the domain's edge are moved onto it, as there). Differentiable in x (torch
+    autograd: the weights' derivative), so a loss of it pulls back through mpm_positions."""
+    origin, nodes, dx = _grid_of(scene)
+    dim = len(nodes)
+    if x.shape[-1] != dim:
+        raise ValueError(f"x: expected positions of shape (..., particles, {dim}), got {tuple(x.shape)}")
+    m = torch.as_tensor(mass, dtype=x.dtype, device=x.device)
+    if m.shape != x.shape[-2:-1]:
+        raise ValueError(f"mass: expected {x.shape[-2]} masses, got shape {tuple(m.shape)}")
+    batch = x.shape[:-2]
+    flat = x.reshape(-1, x.shape[-2], dim)
+    s = (flat - torch.as_tensor(origin, dtype=x.dtype, device=x.device)) / dx
+    upper = torch.tensor([n - 2 for n in nodes], dtype=x.dtype, device=x.device)
+    s = torch.minimum(torch.clamp(s, min=1.0), upper)
+    base = torch.floor(s.detach() - 0.5)
+    f = s - base
+    w = torch.stack([0.5 * (1.5 - f) ** 2, 0.75 - (f - 1.0) ** 2, 0.5 * (f - 0.5) ** 2], dim=-1)  # (B, n, dim, 3)
+    base = base.long()
+    strides = [int(np.prod(nodes[a + 1:])) for a in range(dim)]
+    size = int(np.prod(nodes))
+    out = x.new_zeros(flat.shape[0], size)
+    for offsets in np.ndindex(*([3] * dim)):
+        index = sum((base[..., a] + int(offsets[a])) * strides[a] for a in range(dim))
+        weight = m * torch.prod(torch.stack([w[..., a, offsets[a]] for a in range(dim)], dim=-1), dim=-1)
+        out = out.scatter_add(1, index, weight)
+    return out.reshape(*batch, *nodes)
+
+
+def height_profile(x: torch.Tensor, mass, scene: dict, density: float) -> torch.Tensor:
+    """The deposit's height over each node of the floor's line (2D: shape (..., nodes_x)) or plane (3D:
+    (..., nodes_x, nodes_z)), m: the grid mass above it (grid_mass, summed along y, gravity's axis) over
+    density dx^(dim-1), the height of material at that density. A loss of it needs no particle
+    correspondence: an observed run's profile is taken from its own particles."""
+    if not density > 0.0:
+        raise ValueError(f"density: expected a positive number (kg/m^3), got {density}")
+    g = grid_mass(x, mass, scene)
+    dim = x.shape[-1]
+    dx = float(scene["dx"])
+    return g.sum(dim=g.dim() - dim + 1) / (density * dx ** (dim - 1))

