@@ -291,9 +291,8 @@ the most states held at once by the last forward and backward.)doc")
     py::class_<MpmRolloutBase>(m, "MpmRollout", R"doc(A rollout of an implicit MPM scene and its adjoint.
 
 MpmRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
-particle objects of elastic or Drucker-Prager (sand) materials, APIC transfers (no
-transfer.flip_relaxation_time) and slip walls (no sticky or Coulomb floor); ValueError naming what
-otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
+particle objects of elastic or Drucker-Prager (sand) materials, APIC or AFLIP transfers and slip walls
+(no sticky or Coulomb floor); ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
 elastic solve, then the return mapping) or "return_map" (the return-mapped stress within the solve;
 plasticitynet converges to its step), each solved to newton_tolerance (m/s), which sets how exact the
 gradient is.

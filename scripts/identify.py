@@ -39,7 +39,8 @@ friction_angle: the sand column (scenes/sand_column_2d.json at twice its dx, 184
 slip floor; its first 0.3 s, the collapse) observed by explicit MPM at 1e-5 s at --true-phi, fitted from
 --start-phi through the MPM adjoint of `return_map`'s step at --dt (1e-3 s), the particles' mean squared
 distance at the 15 frames. The implicit step's own distance from explicit's is in the result (docs/adjoint.md).
-The shipped column's AFLIP transfers and Coulomb floor are not in the MPM adjoint yet; `lagged` does not
+The shipped column's Coulomb floor is not in the MPM adjoint yet (so the fit's column has APIC transfers
+and a slip floor); `lagged` does not
 identify the angle (its column is far from explicit's, and its fit runs to 0 degrees).
 """
 from __future__ import annotations
@@ -138,7 +139,7 @@ def elastic_ball(E: float, integrator: str = "lagged", dt: float = 2.5e-4) -> di
 def sand_column(friction_angle: float, integrator: str = "return_map", dt: float = 1e-3) -> dict:
     """scenes/sand_column_2d.json's column (sand, E 3.537e5 Pa) at twice its dx, at the friction angle phi,
     for its first SAND_FRAMES frames (0.3 s of the collapse), with APIC transfers and a slip floor (the MPM
-    adjoint's: not yet AFLIP or the Coulomb floor), the implicit steps at dt without the advection limit,
+    adjoint's: not yet the Coulomb floor), the implicit steps at dt without the advection limit,
     Newton to 1e-10 m/s."""
     scene = json.loads((ROOT / "scenes" / "sand_column_2d.json").read_text())
     scene["dx"] *= 2  # 1/128 m: about 1900 particles (a quarter of the shipped column's), for the fit's time

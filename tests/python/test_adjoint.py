@@ -194,20 +194,23 @@ def disk_scene(E: float = 1e5, plasticity: str = "none", transfer: dict | None =
     return scene
 
 
-def test_mpm_rollout_gradient_matches_central_differences():
-    """MpmRollout through torch: dL/dE and dL/dv0 of a loss of two states against central differences."""
+@pytest.mark.parametrize("transfer", [None, {"flip_relaxation_time": 0.01}], ids=["apic", "aflip"])
+def test_mpm_rollout_gradient_matches_central_differences(transfer):
+    """MpmRollout through torch: dL/dE and dL/dv0 of a loss of two states against central differences, with
+    APIC and with AFLIP transfers."""
     rng = np.random.default_rng(3)
     states = [10, 20]
+    scene = disk_scene(transfer=transfer)
     E = torch.tensor(1e5, dtype=torch.float64, requires_grad=True)
-    start = pns.MpmRollout(disk_scene()).start()
+    start = pns.MpmRollout(scene).start()
     v0 = torch.from_numpy(start["v"]).requires_grad_(True)
-    x = adjoint.mpm_positions(disk_scene(), E, v0, 20, 2e-3, states)
+    x = adjoint.mpm_positions(scene, E, v0, 20, 2e-3, states)
     w = torch.from_numpy(rng.uniform(-1, 1, x.shape))
     (w * x).sum().backward()
 
     def loss(E_value, v):
         with torch.no_grad():
-            return float((w * adjoint.mpm_positions(disk_scene(), torch.tensor(E_value, dtype=torch.float64), v, 20,
+            return float((w * adjoint.mpm_positions(scene, torch.tensor(E_value, dtype=torch.float64), v, 20,
                                                     2e-3, states)).sum())
 
     h = 10.0
@@ -334,8 +337,10 @@ def test_mpm_rollouts_refuse_what_the_adjoint_does_not_cover():
         pns.MpmRollout(snow)
     with pytest.raises(ValueError, match="integrator 'plasticitynet'"):
         pns.MpmRollout(disk_scene(), integrator="plasticitynet")
-    with pytest.raises(ValueError, match="flip_relaxation_time"):
-        pns.MpmRollout(disk_scene(transfer={"flip_relaxation_time": 0.01}))
+    sticky = disk_scene()
+    sticky["boundary"]["sticky_floor_cells"] = 3
+    with pytest.raises(ValueError, match="boundary: a sticky floor"):
+        pns.MpmRollout(sticky)
     rollout = pns.MpmRollout(disk_scene())
     with pytest.raises(ValueError, match="run forward"):
         rollout.backward({0: np.zeros((rollout.particles, 2))})

@@ -31,10 +31,6 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
                                         to_string(plasticity) +
                                         "': the MPM adjoint covers elastic and Drucker-Prager materials so far");
     }
-    if (system.flip_relaxation_time > 0.0)
-        throw std::invalid_argument(
-            "MpmAdjoint: transfer.flip_relaxation_time: AFLIP transfers are not covered "
-            "(APIC is)");
     if (system.boundary.sticky_floor_cells > 0)
         throw std::invalid_argument(std::string("MpmAdjoint: boundary: a ") +
                                     (system.boundary.coulomb_floor() ? "Coulomb" : "sticky") +
@@ -219,6 +215,14 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     // angle's through dF^E/dphi (F_trial from the projected velocities G2P read).
     std::vector<Mat<dim>> F_trial_bar = g.F;
     std::vector<double> mapped_angle_bar(n, 0.0);
+    // AFLIP: v_p' = (G2P's v_p) + alpha r_p, r_p = v_p - sum_i w_ip u_i with u_i = q_i / m_i of P2G's grid
+    // (transfer.hpp): r_p's cotangent alpha vb_p', taken before G2P's adjoint reads vb'.
+    const double alpha = flip_fraction(dt, system_.flip_relaxation_time);
+    std::vector<Vec<dim>> residual_bar;
+    if (alpha > 0.0) {
+        residual_bar.resize(n);
+        for (std::size_t p = 0; p < n; ++p) residual_bar[p] = alpha * g.v[p];
+    }
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
         const Material<dim>& material = system_.materials[start.object[p]];
@@ -369,6 +373,21 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         g.friction_angle += angle_bar[p];
     }
 
+    // AFLIP's residual: its cotangent rb_p to v_p (after P2G's adjoint, below), to x_p through the weights
+    // (-sum_i (rb_p . u_i) grad w_ip), and to u_i = q_i / m_i, which is v*_i - dt g: -sum_p w_ip rb_p joins
+    // v*'s cotangent (serially, in particle order: the sum does not depend on the thread count).
+    if (alpha > 0.0) {
+        for (std::size_t p = 0; p < n; ++p) {
+            const StencilNodes<dim> st(grid, start.x[p]);
+            st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Vec<dim>&) {
+                if (!(mass[node] > 0.0)) return;  // as velocity_residual: a node without mass has no u_i
+                const Vec<dim> u = momentum[node] / mass[node];
+                x_bar[p] -= residual_bar[p].dot(u) * grad;
+                v_star_bar[node] -= w * residual_bar[p];
+            });
+        }
+    }
+
     // P2G: v* = q / m + dt g on the nodes with mass.
     std::vector<Vec<dim>> momentum_bar(storage, Vec<dim>::Zero());
     for (std::int64_t i = 0; i < storage; ++i) {
@@ -379,6 +398,8 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     std::vector<Vec<dim>> v_bar(n, Vec<dim>::Zero());
     std::vector<Mat<dim>> C_bar(n, Mat<dim>::Zero());
     particles_to_grid_adjoint<dim>(grid, start, mass_bar, momentum_bar, x_bar, v_bar, C_bar);
+    if (alpha > 0.0)
+        for (std::size_t p = 0; p < n; ++p) v_bar[p] += residual_bar[p];
     g.x = std::move(x_bar);
     g.v = std::move(v_bar);
     g.C = std::move(C_bar);

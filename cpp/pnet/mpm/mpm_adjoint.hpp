@@ -2,7 +2,7 @@
 // The adjoint of an implicit MPM rollout (issue 57's MPM half; docs/adjoint.md): the gradient of a loss
 // of the states' particle positions and velocities with respect to the start's positions, velocities,
 // APIC matrices and F, to the materials' Young's modulus and to Drucker-Prager's friction angle, for
-// elastic and Drucker-Prager bodies under backward Euler with APIC transfers and slip walls: the `lagged`
+// elastic and Drucker-Prager bodies under backward Euler with APIC or AFLIP transfers and slip walls: the `lagged`
 // step (the elastic energy, then the return mapping) or `return_map`'s (the return-mapped stress Ptilde
 // and its consistent tangent T, with its skew part, within the solve; plasticitynet converges to it).
 // With plasticity, R's Jacobian M + sum_p V dt^2 B_p^T T_p B_p is not symmetric: lambda solves its
@@ -32,7 +32,7 @@
 // backward pass recomputes each segment from its checkpoint, the last first (about 2 sqrt(N) states at
 // once), as the FEM adjoint does. Sand at rest from F = I (a column's free surface) sits at the cone's tip,
 // where the projection has no derivative: the gradient is one-sided there (docs/adjoint.md). Refused,
-// naming what: Cam-Clay and von Mises, AFLIP transfers, a sticky or Coulomb floor, BDF2.
+// naming what: Cam-Clay and von Mises, a sticky or Coulomb floor, BDF2.
 #include <functional>
 #include <map>
 #include <vector>
