@@ -241,14 +241,46 @@ def test_a_tiny_mpm_identification_recovers_youngs_modulus():
     assert float(torch.exp(log_E)) == pytest.approx(1.6e5, rel=1e-3)
 
 
-@pytest.mark.parametrize("integrator", ["lagged", "return_map"])
-def test_a_sand_rollouts_friction_angle_gradient_matches_central_differences(integrator):
-    """A sand block (Drucker-Prager, 30 degrees) dropped onto the slip floor: dL/dphi through torch."""
-    scene = disk_scene()
+def sand_block_scene(transfer: dict | None = None) -> dict:
+    """A sand block (Drucker-Prager, 30 degrees, dx 1/32) thrown at 1.5 m/s onto the slip floor."""
+    scene = disk_scene(transfer=transfer)
     scene["objects"][0] = {"shape": "box", "min": [0.42, 0.12], "max": [0.58, 0.3], "velocity": [0.2, -1.5],
                            "material": {"name": "sand", "density": 2200,
                                         "elasticity": {"model": "stvk_hencky", "E": 3.5e5, "nu": 0.3},
                                         "plasticity": {"model": "drucker_prager", "friction_angle_deg": 30.0}}}
+    return scene
+
+
+def test_a_tiny_friction_angle_identification_recovers_it():
+    """The sand block under return_map (AFLIP transfers) observed at 27 degrees; L-BFGS on log phi from 35
+    degrees on the particles' positions at four states."""
+    scene = sand_block_scene({"flip_relaxation_time": 0.01})
+    E = torch.tensor(3.5e5, dtype=torch.float64)
+    states = [5, 10, 15, 20]
+
+    def positions(phi):
+        return adjoint.mpm_positions(scene, E, None, 20, 2e-3, states, friction_angle=phi, integrator="return_map")
+
+    with torch.no_grad():
+        observed = positions(torch.tensor(27.0, dtype=torch.float64))
+    log_phi = torch.tensor(np.log(35.0), dtype=torch.float64, requires_grad=True)
+    optimizer = torch.optim.LBFGS([log_phi], max_iter=20, max_eval=20, tolerance_grad=1e-14, tolerance_change=1e-14,
+                                  line_search_fn="strong_wolfe")
+
+    def closure():
+        optimizer.zero_grad()
+        loss = 1e6 * ((positions(torch.exp(log_phi)) - observed) ** 2).sum(dim=-1).mean()
+        loss.backward()
+        return loss
+
+    optimizer.step(closure)
+    assert float(torch.exp(log_phi)) == pytest.approx(27.0, rel=1e-4)
+
+
+@pytest.mark.parametrize("integrator", ["lagged", "return_map"])
+def test_a_sand_rollouts_friction_angle_gradient_matches_central_differences(integrator):
+    """A sand block (Drucker-Prager, 30 degrees) dropped onto the slip floor: dL/dphi through torch."""
+    scene = sand_block_scene()
     E = torch.tensor(3.5e5, dtype=torch.float64)
     phi = torch.tensor(30.0, dtype=torch.float64, requires_grad=True)
     x = adjoint.mpm_positions(scene, E, None, 20, 2e-3, [10, 20], friction_angle=phi, integrator=integrator)
@@ -295,11 +327,7 @@ def test_grid_mass_is_the_simulators_and_differentiable(name):
 def test_a_height_profile_loss_gets_the_friction_angles_gradient():
     """A loss of the deposit's height profile (no particle correspondence) through mpm_positions: dL/dphi of a
     sand block dropped onto the floor, under return_map, against central differences."""
-    scene = disk_scene()
-    scene["objects"][0] = {"shape": "box", "min": [0.42, 0.12], "max": [0.58, 0.3], "velocity": [0.2, -1.5],
-                           "material": {"name": "sand", "density": 2200,
-                                        "elasticity": {"model": "stvk_hencky", "E": 3.5e5, "nu": 0.3},
-                                        "plasticity": {"model": "drucker_prager", "friction_angle_deg": 30.0}}}
+    scene = sand_block_scene()
     E = torch.tensor(3.5e5, dtype=torch.float64)
     m = pns.MpmRollout(scene).start()["mass"]
     target = torch.linspace(0.0, 0.05, 33, dtype=torch.float64)
