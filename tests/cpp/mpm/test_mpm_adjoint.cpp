@@ -213,41 +213,46 @@ TEST(MpmAdjoint3d, ElasticRolloutGradientMatchesCentralDifferences) {
         })"),
                                "<sphere>", ".");
     };
-    const MpmSystem<3> system = make_mpm_system<3>(sphere(E));
-    const Particles<3> start = sample_particles<3>(sphere(E));
-    const std::size_t n = start.size();
-    test::Random random(79);
-    std::vector<Vec<3>> a(n), b(n), dv(n);
-    for (std::size_t p = 0; p < n; ++p) {
-        a[p] = random.uniform_vec<3>(-1.0, 1.0);
-        b[p] = random.uniform_vec<3>(-1.0, 1.0);
-        dv[p] = random.uniform_vec<3>(-1.0, 1.0);
+    for (double flip : {0.0, 0.01}) {  // APIC and AFLIP transfers
+        auto make = [&](double youngs) {
+            MpmSystem<3> system = make_mpm_system<3>(sphere(youngs));
+            system.flip_relaxation_time = flip;
+            return system;
+        };
+        const MpmSystem<3> system = make(E);
+        const Particles<3> start = sample_particles<3>(sphere(E));
+        const std::size_t n = start.size();
+        test::Random random(79);
+        std::vector<Vec<3>> a(n), b(n), dv(n);
+        for (std::size_t p = 0; p < n; ++p) {
+            a[p] = random.uniform_vec<3>(-1.0, 1.0);
+            b[p] = random.uniform_vec<3>(-1.0, 1.0);
+            dv[p] = random.uniform_vec<3>(-1.0, 1.0);
+        }
+        auto loss = [&](const MpmSystem<3>& s, const Particles<3>& from) {
+            MpmAdjoint<3> adjoint(s, tight(), MpmOptions{});
+            const Particles<3> last = adjoint.forward(from, dt, steps);
+            double L = 0.0;
+            for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
+            return L;
+        };
+        MpmAdjoint<3> adjoint(system, tight(), MpmOptions{});
+        const Particles<3> last = adjoint.forward(start, dt, steps);
+        double lowest = 1.0;
+        for (const Vec<3>& x : last.x) lowest = std::min(lowest, x[1]);
+        ASSERT_LT(lowest, 3 * system.dx) << "the sphere must reach the floor's wall nodes";
+        const MpmRolloutGradient<3> g = adjoint.backward(a, b);
+        double g_v = 0.0;
+        for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
+        const double fd_v =
+            along_velocities<3>([&](const Particles<3>& from) { return loss(system, from); }, start, dv, 1e-4);
+        const double hE = 1e-4 * E;
+        const double fd_E = (loss(make(E + hE), start) - loss(make(E - hE), start)) / (2.0 * hE);
+        std::printf("MPM rollout 3D (%s), %zu particles, %d steps: dL/dv0 %.10g vs %.10g, dL/dE %.10g vs %.10g\n",
+                    flip > 0.0 ? "AFLIP" : "APIC", n, steps, g_v, fd_v, g.youngs_modulus, fd_E);
+        EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
+        EXPECT_NEAR(g.youngs_modulus, fd_E, 1e-4 * std::abs(fd_E));
     }
-    auto loss = [&](const MpmSystem<3>& s, const Particles<3>& from) {
-        MpmAdjoint<3> adjoint(s, tight(), MpmOptions{});
-        const Particles<3> last = adjoint.forward(from, dt, steps);
-        double L = 0.0;
-        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
-        return L;
-    };
-    MpmAdjoint<3> adjoint(system, tight(), MpmOptions{});
-    const Particles<3> last = adjoint.forward(start, dt, steps);
-    double lowest = 1.0;
-    for (const Vec<3>& x : last.x) lowest = std::min(lowest, x[1]);
-    ASSERT_LT(lowest, 3 * system.dx) << "the sphere must reach the floor's wall nodes";
-    const MpmRolloutGradient<3> g = adjoint.backward(a, b);
-    double g_v = 0.0;
-    for (std::size_t p = 0; p < n; ++p) g_v += g.v[p].dot(dv[p]);
-    const double fd_v =
-        along_velocities<3>([&](const Particles<3>& from) { return loss(system, from); }, start, dv, 1e-4);
-    const double hE = 1e-4 * E;
-    const double fd_E =
-        (loss(make_mpm_system<3>(sphere(E + hE)), start) - loss(make_mpm_system<3>(sphere(E - hE)), start)) /
-        (2.0 * hE);
-    std::printf("MPM rollout 3D, %zu particles, %d steps: dL/dv0 %.10g vs %.10g, dL/dE %.10g vs %.10g\n", n, steps, g_v,
-                fd_v, g.youngs_modulus, fd_E);
-    EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
-    EXPECT_NEAR(g.youngs_modulus, fd_E, 1e-4 * std::abs(fd_E));
 }
 
 // Sand (Drucker-Prager, the friction angle 30 degrees) dropped onto the slip floor, under `return_map` (the
