@@ -53,11 +53,11 @@ Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, ReturnBranch* b
 
 template <int dim>
 double DruckerPrager<dim>::deviatoric_scale(const Vec<dim>& eps) const {
-    const double tr_eps = eps.sum();
-    if (tr_eps > 0.0) return 0.0;
-    const double eps_hat_norm = (eps - tr_eps / dim * Vec<dim>::Ones()).norm();
-    const double dgamma = eps_hat_norm + alpha_ * (dim * lambda_ + 2.0 * mu_) * tr_eps / (2.0 * mu_);
-    return dgamma > 0.0 ? 1.0 - dgamma / eps_hat_norm : 1.0;
+    ReturnBranch branch;
+    const Vec<dim> eps_Z = project_strain(eps, &branch);
+    if (branch != ReturnBranch::Cone) return branch == ReturnBranch::Apex ? 0.0 : 1.0;
+    const auto dev = [](const Vec<dim>& e) { return Vec<dim>(e - e.sum() / dim * Vec<dim>::Ones()); };
+    return dev(eps_Z).norm() / dev(eps).norm();  // > 0 on the cone
 }
 
 template <int dim>
