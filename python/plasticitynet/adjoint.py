@@ -12,7 +12,8 @@ operations, so a torch optimizer can fit E or v0 to observed frames.
     loss = ((x - observed) ** 2).sum(); loss.backward(); E.grad
 
 `mpm_positions(scene, youngs_modulus, v0, steps, dt, states)` does the same for an implicit MPM rollout of
-elastic particle bodies (plasticitynet_sim.MpmRollout): the particles' positions.
+elastic and Drucker-Prager (sand) particle bodies (plasticitynet_sim.MpmRollout): the particles' positions,
+differentiable in E, v0 and the friction angle.
 
 Losses that need no particle correspondence: `grid_mass(x, mass, scene)` is the particles' mass on the
 scene's grid (Simulation.grid_mass(), the quadratic B-spline), differentiable in the positions, and
