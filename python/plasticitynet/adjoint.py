@@ -66,6 +66,16 @@ def _state_cotangents(grad: torch.Tensor, states: Sequence[int]) -> dict[int, np
     return dL_dx
 
 
+def _rollout_backward(ctx, grad, parameter: str):
+    """The gradients a rollout's positions pass back to (E, v0, the third parameter `parameter`, and nothing
+    for the rest of the forward's arguments), by the adjoint of the rollout ctx.rollout kept."""
+    out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
+    dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
+    dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
+    dp = torch.tensor(out[parameter], dtype=torch.float64) if ctx.has_parameter else None
+    return dE, dv0, dp, None, None, None, None, None, None
+
+
 class _FemPositions(torch.autograd.Function):
     @staticmethod
     def forward(ctx, youngs_modulus, v0, initial_hardening, scene, steps, dt, states, newton_tolerance, integrator):
@@ -74,16 +84,12 @@ class _FemPositions(torch.autograd.Function):
                                     integrator)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
-        ctx.rollout, ctx.states, ctx.has_v0, ctx.has_h0 = rollout, list(states), v0 is not None, h0 is not None
+        ctx.rollout, ctx.states, ctx.has_v0, ctx.has_parameter = rollout, list(states), v0 is not None, h0 is not None
         return torch.from_numpy(np.stack([x[k] for k in states]))
 
     @staticmethod
     def backward(ctx, grad):
-        out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
-        dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
-        dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
-        dh0 = torch.tensor(out["initial_hardening"], dtype=torch.float64) if ctx.has_h0 else None
-        return dE, dv0, dh0, None, None, None, None, None, None
+        return _rollout_backward(ctx, grad, "initial_hardening")
 
 
 def fem_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
@@ -125,16 +131,12 @@ class _MpmPositions(torch.autograd.Function):
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
         ctx.rollout, ctx.states = rollout, list(states)
-        ctx.has_v0, ctx.has_phi = v0 is not None, friction_angle is not None
+        ctx.has_v0, ctx.has_parameter = v0 is not None, friction_angle is not None
         return torch.from_numpy(np.stack([x[k] for k in states]))
 
     @staticmethod
     def backward(ctx, grad):
-        out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
-        dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
-        dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
-        dphi = torch.tensor(out["friction_angle"], dtype=torch.float64) if ctx.has_phi else None
-        return dE, dv0, dphi, None, None, None, None, None, None
+        return _rollout_backward(ctx, grad, "friction_angle")
 
 
 def mpm_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
