@@ -178,6 +178,18 @@ def explicit_observation(scene: dict) -> dict:
     return {**scene, "integrator": {"name": "explicit", "dt": 1e-5}}
 
 
+def fit_and_observed(make, start_value: float, true_value: float, observed: str, fit_label: str, dt: float,
+                     kind: str = "", note: str = "") -> tuple[dict, dict]:
+    """The fit's scene make(start_value) and the observed run's make(true_value), that one under explicit at 1e-5 s
+    where observed is "explicit"; prints which runs they are (kind: " MPM" for particle scenes)."""
+    scene, truth = make(start_value), make(true_value)
+    if observed == "explicit":
+        truth = explicit_observation(truth)
+    print(f"observed: {truth['integrator']['name']}{kind} at {truth['integrator']['dt']:g} s; the fit: {fit_label} at "
+          f"{dt:g} s{note}")
+    return scene, truth
+
+
 def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_value: float, start_value: float,
         positions, out: Path, max_evaluations: int, dt: float = DT, profile=None) -> int:
     """L-BFGS on log p of the mean squared nodal distance to the observed frames; positions(scene, p, states)
@@ -254,12 +266,8 @@ def identify_youngs_modulus(true_E: float, start_E: float, out: Path, max_evalua
 
 def identify_ball_youngs_modulus(true_E: float, start_E: float, out: Path, max_evaluations: int, observed: str,
                                  dt: float) -> int:
-    scene = elastic_ball(start_E, "lagged", dt)
-    truth = elastic_ball(true_E, "lagged", dt)
-    if observed == "explicit":
-        truth = explicit_observation(truth)
-    print(f"observed: {truth['integrator']['name']} MPM at {truth['integrator']['dt']:g} s; the fit: lagged at "
-          f"{dt:g} s (elastic: every implicit MPM integrator's step)")
+    scene, truth = fit_and_observed(lambda E: elastic_ball(E, "lagged", dt), start_E, true_E, observed, "lagged", dt,
+                                    " MPM", " (elastic: every implicit MPM integrator's step)")
 
     def positions(E, steps, states):
         return adjoint.mpm_positions(scene, E, None, steps, dt, states)
@@ -270,12 +278,8 @@ def identify_ball_youngs_modulus(true_E: float, start_E: float, out: Path, max_e
 
 def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_evaluations: int, observed: str,
                             dt: float, integrator: str = "return_map", loss: str = "positions") -> int:
-    scene = sand_column(start_phi, integrator, dt)
-    truth = sand_column(true_phi, integrator, dt)
-    if observed == "explicit":
-        truth = explicit_observation(truth)
-    print(f"observed: {truth['integrator']['name']} MPM at {truth['integrator']['dt']:g} s; the fit: {integrator} at "
-          f"{dt:g} s")
+    scene, truth = fit_and_observed(lambda phi: sand_column(phi, integrator, dt), start_phi, true_phi, observed,
+                                    integrator, dt, " MPM")
     E = torch.tensor(float(scene["objects"][0]["material"]["elasticity"]["E"]), dtype=torch.float64)
 
     def positions(phi, steps, states):
@@ -294,12 +298,7 @@ def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_ev
 def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int, integrator: str,
                           bar: str = "cantilever", observed: str = "explicit", dt: float = 5e-4) -> int:
     make, frame_dt = (cantilever, FRAME_DT) if bar == "cantilever" else (metal_block, 0.002)
-    scene = make(start_h0, integrator, dt)
-    truth = make(true_h0, integrator, dt)
-    if observed == "explicit":
-        truth = explicit_observation(truth)
-    print(f"observed: {truth['integrator']['name']} at {truth['integrator']['dt']:g} s; the fit: {integrator} at "
-          f"{dt:g} s")
+    scene, truth = fit_and_observed(lambda h0: make(h0, integrator, dt), start_h0, true_h0, observed, integrator, dt)
     mu = 1e7 / (2 * 1.3)
     print(f"yield stress tau_Y = 2 mu h0 with mu = {mu:.6g} Pa: the true {2 * mu * true_h0:.6g} Pa")
 
