@@ -47,6 +47,15 @@ Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec
 }
 
 template <int dim>
+Mat<dim> deviatoric_scale_quotients(const Elasticity<dim>& elasticity, const Vec<dim>& Sigma, double k) {
+    Mat<dim> quotient = Mat<dim>::Zero();
+    for (int i = 0; i < dim; ++i)
+        for (int j = 0; j < dim; ++j)
+            if (i != j) quotient(i, j) = k * elasticity.tau_difference_quotient(Sigma, i, j);
+    return quotient;
+}
+
+template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_derivative(const PolarSVD<dim>& svd, const Vec<dim>& t, Mat<dim> dtau,
                                                  bool project_psd, bool keep_skew, const Mat<dim>* pair_quotient) {
     const Vec<dim>& S = svd.Sigma;
@@ -106,6 +115,8 @@ template Tensor4<2> elastoplastic_tangent_of_derivative<2>(const PolarSVD<2>&, c
                                                             const Mat<2>*);
 template Tensor4<3> elastoplastic_tangent_of_derivative<3>(const PolarSVD<3>&, const Vec<3>&, Mat<3>, bool, bool,
                                                             const Mat<3>*);
+template Mat<2> deviatoric_scale_quotients<2>(const Elasticity<2>&, const Vec<2>&, double);
+template Mat<3> deviatoric_scale_quotients<3>(const Elasticity<3>&, const Vec<3>&, double);
 template Tensor4<2> elastoplastic_tangent_from<2>(const PolarSVD<2>&, const Elasticity<2>&, const Vec<2>*, bool, bool);
 template Tensor4<3> elastoplastic_tangent_from<3>(const PolarSVD<3>&, const Elasticity<3>&, const Vec<3>*, bool, bool);
 

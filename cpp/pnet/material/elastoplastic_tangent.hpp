@@ -74,6 +74,12 @@ Tensor4<dim> elastoplastic_tangent_of_stress(const PolarSVD<dim>& svd, const Vec
 /// the direction it comes from; the limit took the cone's derivative across its edge and was negative, and
 /// near the cone's tip the stencil's points straddle the branches): the Drucker-Prager callers pass
 /// 2 mu k (eps_i - eps_j) / (Sigma_i - Sigma_j).
+/// The pair quotients of a return that scales the deviatoric Hencky strain by k, with StVK-Hencky elasticity
+/// (Drucker-Prager, DruckerPrager::deviatoric_scale): (tau_i - tau_j) / (Sigma_i - Sigma_j) = k 2 mu (eps_i -
+/// eps_j) / (Sigma_i - Sigma_j), exact for equal singular values too (zero on the diagonal).
+template <int dim>
+Mat<dim> deviatoric_scale_quotients(const Elasticity<dim>& elasticity, const Vec<dim>& Sigma, double k);
+
 template <int dim>
 Tensor4<dim> elastoplastic_tangent_of_derivative(const PolarSVD<dim>& svd, const Vec<dim>& tau, Mat<dim> dtau_deps,
                                                  bool project_psd, bool keep_skew = false,

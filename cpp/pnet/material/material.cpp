@@ -283,11 +283,8 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
         // The rotational part where principal strains nearly coincide (a pile's free surface, near the
         // cone's tip): k 2 mu (eps_i - eps_j) / (Sigma_i - Sigma_j), not the limit from the stencil
         // (elastoplastic_tangent.hpp).
-        const double k = drucker_prager->deviatoric_scale(strain[0]);
-        Mat<dim> quotient = Mat<dim>::Zero();
-        for (int i = 0; i < dim; ++i)
-            for (int j = 0; j < dim; ++j)
-                if (i != j) quotient(i, j) = k * elasticity_.tau_difference_quotient(svd.Sigma, i, j);
+        const Mat<dim> quotient =
+            deviatoric_scale_quotients<dim>(elasticity_, svd.Sigma, drucker_prager->deviatoric_scale(strain[0]));
         return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd, keep_skew, &quotient);
     }
     return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd, keep_skew);

@@ -157,11 +157,8 @@ Tensor4<dim> drucker_prager_tangent(const Material<dim>& material, const PolarSV
     const Mat<dim> dtau = 2.0 * mu * z.dlogZ + lambda * Vec<dim>::Ones() * z.dlogZ.colwise().sum();
     // The rotational part where principal strains nearly coincide: log Z_i - log Z_j = k (eps_i - eps_j) on the
     // branch taken (DruckerPrager::deviatoric_scale), exact there (elastoplastic_tangent.hpp).
-    const double k = z.branch == ReturnBranch::Apex ? 0.0 : z.k;
-    Mat<dim> quotient = Mat<dim>::Zero();
-    for (int i = 0; i < dim; ++i)
-        for (int j = 0; j < dim; ++j)
-            if (i != j) quotient(i, j) = k * material.elasticity().tau_difference_quotient(svd.Sigma, i, j);
+    const Mat<dim> quotient = deviatoric_scale_quotients<dim>(material.elasticity(), svd.Sigma,
+                                                              z.branch == ReturnBranch::Apex ? 0.0 : z.k);
     return elastoplastic_tangent_of_derivative<dim>(svd, tau, dtau, false, true, &quotient);
 }
 
