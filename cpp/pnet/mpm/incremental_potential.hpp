@@ -90,6 +90,8 @@ public:
     const VecX& residual_mass() const { return residual_mass_; }
     /// Nodes that are unknowns.
     std::size_t nodes() const { return dof_node_.size(); }
+    /// The grid storage index of unknown node k (its components dim k + a).
+    std::int64_t dof_node(std::size_t k) const { return dof_node_[k]; }
 
     /// F_p(v) of every particle.
     void deformation(const VecX& v, std::vector<Mat<dim>>& F) const override;

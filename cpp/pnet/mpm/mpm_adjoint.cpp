@@ -172,18 +172,9 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     if (v.size() != potential.size()) throw std::logic_error("MpmAdjoint: the step's unknowns changed on replay");
     const VecX& v_star = potential.v_star();
 
-    // Storage index <-> unknown, from the stencils.
+    // Storage index -> unknown node (-1: a node no particle's stencil reaches).
     std::vector<int> dof(storage, -1);
-    std::vector<std::int64_t> node_of(static_cast<std::size_t>(potential.size() / dim), -1);
-    for (std::size_t p = 0; p < n; ++p) {
-        const StencilNodeDerivatives<dim> st(grid, start.x[p]);
-        int s = 0;
-        st.for_each([&](std::int64_t node, double, const Vec<dim>&, const Mat<dim>&, const Vec<dim>&) {
-            const int d = potential.stencil_dofs(p)[s++];
-            dof[node] = d;
-            node_of[d] = node;
-        });
-    }
+    for (std::size_t k = 0; k < potential.nodes(); ++k) dof[potential.dof_node(k)] = static_cast<int>(k);
 
     // The grid velocity G2P read: the solution with the slip walls' projection; the components it set
     // to 0 are held.
