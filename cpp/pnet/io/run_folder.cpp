@@ -1,6 +1,10 @@
 #include "pnet/io/run_folder.hpp"
 
+#include <signal.h>
+#include <sys/types.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -105,6 +109,27 @@ std::size_t clear_run_folder(const fs::path& dir) {
     const std::vector<fs::path> files = run_files(dir);
     for (const fs::path& p : files) fs::remove_all(p);
     return files.size();
+}
+
+std::size_t remove_stale_temporaries(const fs::path& dir) {
+    if (!fs::is_directory(dir)) return 0;
+    std::vector<fs::path> doomed;
+    for (const fs::directory_entry& entry : fs::directory_iterator(dir)) {
+        if (!entry.is_regular_file()) continue;
+        const std::string name = entry.path().filename().string();
+        const std::size_t mark = name.rfind(".tmp.");
+        if (mark == std::string::npos) continue;
+        const std::string pid = name.substr(mark + 5), target = name.substr(0, mark);
+        if (pid.empty() || pid.size() > 9 || pid.find_first_not_of("0123456789") != std::string::npos) continue;
+        const bool run_file = frame_file_number(target) >= 0 ||
+                              std::find(std::begin(kRunFiles), std::end(kRunFiles), target) != std::end(kRunFiles);
+        // A writer that still runs (kill(pid, 0) succeeds, or the process is another user's) keeps its file.
+        const bool writer_alive = ::kill(static_cast<pid_t>(std::stol(pid)), 0) == 0 || errno == EPERM;
+        if (run_file && !writer_alive) doomed.push_back(entry.path());
+    }
+    std::size_t removed = 0;
+    for (const fs::path& p : doomed) removed += fs::remove(p) ? 1 : 0;
+    return removed;
 }
 
 std::size_t remove_frames_after(const fs::path& dir, int last) {

@@ -9,7 +9,8 @@
 //
 //   fresh run into a folder holding another run: refused (RunFolderError) unless overwrite, which
 //     removes that run's files first (and nothing else of the folder);
-//   resumed run: keeps its run_id and drops the frames after the checkpoint (they are rewritten).
+//   resumed run: keeps its run_id and drops the frames after the checkpoint (they are rewritten);
+//   either removes the temporary files a killed writer left (remove_stale_temporaries).
 #include <cstddef>
 #include <filesystem>
 #include <stdexcept>
@@ -40,6 +41,10 @@ void check_run_folder(const std::filesystem::path& dir, bool overwrite);
 
 /// Removes run_files(dir); returns how many entries were removed.
 std::size_t clear_run_folder(const std::filesystem::path& dir);
+
+/// Removes the temporary files a killed run left in `dir`: "<run file>.tmp.<pid>" (write_file_atomically) of a
+/// run file or frame file whose writer `pid` no longer runs; returns how many.
+std::size_t remove_stale_temporaries(const std::filesystem::path& dir);
 
 /// Removes the frame files of `dir` numbered above `last`; returns how many.
 std::size_t remove_frames_after(const std::filesystem::path& dir, int last);

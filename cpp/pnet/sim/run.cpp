@@ -63,7 +63,9 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
         // The run goes on under its own id; the frames after the checkpoint are rewritten.
         o.run_id = recorded_run_id(out);
         remove_frames_after(out, sim.frame());
+        remove_stale_temporaries(out);  // the killed run's half-written files
     } else {
+        remove_stale_temporaries(out);
         if (const std::size_t removed = clear_run_folder(out))
             std::fprintf(stderr, "--overwrite: removed %zu files of the previous run in %s\n", removed,
                          out.string().c_str());

@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <set>
@@ -89,6 +90,23 @@ TEST(RunFolder, FramesAfterACheckpointAreRemoved) {
     EXPECT_EQ(remove_frames_after(dir.file(""), 2), 3u);
     EXPECT_EQ(names(run_files(dir.file(""))),
               (std::set<std::string>{"frame_00001.ply", "frame_00002.png", "stats.csv"}));
+}
+
+// A run killed while it wrote a file leaves that file's "<name>.tmp.<pid>" (write_file_atomically); a resumed
+// or overwriting run removes those of a run file whose writer is gone, and nothing else.
+TEST(RunFolder, AKilledWritersTemporaryFilesAreRemoved) {
+    TempDir dir;
+    const std::string alive = std::to_string(::getpid());
+    for (const char* f : {"stats.csv.tmp.999999999", "frame_00003.ply.tmp.999999998", "checkpoint.bin.tmp.999999997",
+                          "notes.txt.tmp.999999999", "stats.csv.tmp.x1", "stats.csv"})
+        write_file(dir.file(f), "x");
+    write_file(dir.file("steps.csv.tmp." + alive), "x");  // a live writer's (this process)
+    EXPECT_EQ(remove_stale_temporaries(dir.file("")), 3u);
+    std::set<std::string> left;
+    for (const fs::directory_entry& e : fs::directory_iterator(dir.file(""))) left.insert(e.path().filename().string());
+    EXPECT_EQ(left, (std::set<std::string>{"notes.txt.tmp.999999999", "stats.csv.tmp.x1", "stats.csv",
+                                           "steps.csv.tmp." + alive}));
+    EXPECT_EQ(remove_stale_temporaries(dir.file("missing")), 0u);
 }
 
 TEST(RunFolder, RunIds) {
