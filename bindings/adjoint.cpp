@@ -229,6 +229,13 @@ struct MpmRolloutOf final : MpmRolloutBase {
         d["F0"] = from_matrices<dim>(g.F);
         d["youngs_modulus"] = g.youngs_modulus;
         d["friction_angle"] = g.friction_angle;
+        d["xi"] = g.xi;
+        d["beta"] = g.beta;
+        py::array_t<double> h(static_cast<py::ssize_t>(g.hardening.size()));
+        double total = 0.0;
+        for (std::size_t p = 0; p < g.hardening.size(); ++p) total += h.mutable_data()[p] = g.hardening[p];
+        d["hardening"] = h;
+        d["initial_hardening"] = total;
         return d;
     }
 };
@@ -291,8 +298,9 @@ the most states held at once by the last forward and backward.)doc")
     py::class_<MpmRolloutBase>(m, "MpmRollout", R"doc(A rollout of an implicit MPM scene and its adjoint.
 
 MpmRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
-particle objects of elastic or Drucker-Prager (sand) materials, APIC or AFLIP transfers and slip walls
-(no sticky or Coulomb floor); ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
+particle objects of elastic, Drucker-Prager (sand), Cam-Clay (snow, its exact variant) or von Mises
+(metal, StVK-Hencky) materials, APIC or AFLIP transfers and slip walls (no sticky or Coulomb floor);
+ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
 elastic solve, then the return mapping) or "return_map" (the return-mapped stress within the solve;
 plasticitynet converges to its step), each solved to newton_tolerance (m/s), which sets how exact the
 gradient is.
@@ -302,9 +310,11 @@ forward(steps, dt, v0=None, states=None, checkpoint_every=0) runs the rollout fr
 array}}, the states k asked for (None: all; 0 is the start, k the end of step k), keeping a checkpoint
 every checkpoint_every steps (0: about sqrt(steps); 1: every state). backward(dL_dx, dL_dv) takes dicts {state: (particles, dim) array} of the loss's gradient with
 respect to those states and returns {"x0", "v0": (particles, dim), "C0", "F0": (particles, dim, dim)
-arrays, "youngs_modulus", "friction_angle": floats}: dL/d of the start's positions, velocities, APIC
-matrices and F, dL/dE (every material's E scaled together) and dL/dphi (every Drucker-Prager material's
-friction angle, per degree), by the adjoint of every step, recomputing the steps between
+arrays, "hardening": (particles,) array, "youngs_modulus", "friction_angle", "xi", "beta",
+"initial_hardening": floats}: dL/d of the start's positions, velocities, APIC matrices, F and hardening
+(Cam-Clay's a, von Mises' h = tau_Y / (2 mu)), dL/dE (every material's E scaled together), dL/dphi (every
+Drucker-Prager and Cam-Clay material's friction angle, per degree), dL/dxi and dL/dbeta (Cam-Clay's) and
+dL/dh0 (every particle's start hardening together), by the adjoint of every step, recomputing the steps between
 checkpoints (docs/adjoint.md). peak_states: the most states held at once by the last forward and
 backward.)doc")
         .def(py::init([](const py::object& scene, double newton_tolerance,

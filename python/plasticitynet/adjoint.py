@@ -12,8 +12,8 @@ operations, so a torch optimizer can fit E or v0 to observed frames.
     loss = ((x - observed) ** 2).sum(); loss.backward(); E.grad
 
 `mpm_positions(scene, youngs_modulus, v0, steps, dt, states)` does the same for an implicit MPM rollout of
-elastic and Drucker-Prager (sand) particle bodies (plasticitynet_sim.MpmRollout): the particles' positions,
-differentiable in E, v0 and the friction angle.
+elastic, sand, snow and metal particle bodies (plasticitynet_sim.MpmRollout): the particles' positions,
+differentiable in E, v0, the friction angle, Cam-Clay's xi and beta and the initial hardening.
 
 Losses that need no particle correspondence: `grid_mass(x, mass, scene)` is the particles' mass on the
 scene's grid (Simulation.grid_mass(), the quadratic B-spline), differentiable in the positions, and
@@ -107,51 +107,77 @@ def fem_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | 
                                newton_tolerance, integrator)
 
 
-def with_friction_angle(scene: dict, friction_angle: float) -> dict:
-    """A copy of a scene dict whose Drucker-Prager objects have the friction angle phi (degrees); their
-    material must be written out (a dict with a "plasticity" block)."""
+# The plasticity parameters mpm_positions differentiates: (its keyword, the scene's field, the models that have it).
+_PLASTICITY_PARAMETERS = (
+    ("friction_angle", "friction_angle_deg", ("drucker_prager", "cam_clay")),
+    ("xi", "xi", ("cam_clay",)),
+    ("beta", "beta", ("cam_clay",)),
+)
+
+
+def with_plasticity(scene: dict, field: str, value: float, models: Sequence[str]) -> dict:
+    """A copy of a scene dict whose particle objects of the plasticity models `models` have the plasticity field
+    `field` (e.g. "friction_angle_deg", "xi") set to value; their material must be written out (a dict with a
+    "plasticity" block)."""
     out = copy.deepcopy(scene)
     for k, body in enumerate(out.get("objects", [])):
         material = body.get("material")
         if not isinstance(material, dict) or "plasticity" not in material:
             raise ValueError(f"objects[{k}].material: write the material out (a dict with a \"plasticity\" "
-                             "block) to set its friction angle")
-        if material["plasticity"].get("model") == "drucker_prager":
-            material["plasticity"]["friction_angle_deg"] = float(friction_angle)
+                             f"block) to set plasticity.{field}")
+        if material["plasticity"].get("model") in models:
+            material["plasticity"][field] = float(value)
     return out
+
+
+def with_friction_angle(scene: dict, friction_angle: float) -> dict:
+    """A copy of a scene dict whose Drucker-Prager and Cam-Clay objects have the friction angle phi (degrees)."""
+    return with_plasticity(scene, "friction_angle_deg", friction_angle, ("drucker_prager", "cam_clay"))
 
 
 class _MpmPositions(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, youngs_modulus, v0, friction_angle, scene, steps, dt, states, newton_tolerance, integrator):
-        s = with_youngs_modulus(scene, float(youngs_modulus))
-        if friction_angle is not None:
-            s = with_friction_angle(s, float(friction_angle))
+    def forward(ctx, youngs_modulus, v0, scene, steps, dt, states, newton_tolerance, integrator, initial_hardening,
+                *plasticity):
+        h0 = None if initial_hardening is None else float(initial_hardening)
+        s = with_youngs_modulus(scene, float(youngs_modulus), h0)
+        for (_, field, models), value in zip(_PLASTICITY_PARAMETERS, plasticity):
+            if value is not None:
+                s = with_plasticity(s, field, float(value), models)
         rollout = _sim().MpmRollout(s, newton_tolerance, integrator)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
-        ctx.rollout, ctx.states = rollout, list(states)
-        ctx.has_v0, ctx.has_parameter = v0 is not None, friction_angle is not None
+        ctx.rollout, ctx.states, ctx.has_v0 = rollout, list(states), v0 is not None
+        ctx.given = [initial_hardening is not None] + [value is not None for value in plasticity]
         return torch.from_numpy(np.stack([x[k] for k in states]))
 
     @staticmethod
     def backward(ctx, grad):
-        return _rollout_backward(ctx, grad, "friction_angle")
+        out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
+        names = ["initial_hardening"] + [name for name, _, _ in _PLASTICITY_PARAMETERS]
+        parameters = [torch.tensor(out[name], dtype=torch.float64) if given else None
+                      for name, given in zip(names, ctx.given)]
+        dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
+        dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
+        return (dE, dv0, None, None, None, None, None, None, *parameters)
 
 
 def mpm_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
                   states: Sequence[int], newton_tolerance: float = 1e-10, friction_angle: torch.Tensor | None = None,
-                  integrator: str = "lagged") -> torch.Tensor:
+                  integrator: str = "lagged", xi: torch.Tensor | None = None, beta: torch.Tensor | None = None,
+                  initial_hardening: torch.Tensor | None = None) -> torch.Tensor:
     """The particles' positions (len(states), particles, dim) at the kept states of `steps` implicit MPM
     steps of dt from the scene's particles (v0: their start velocities instead), differentiable in
-    youngs_modulus (a 0-d tensor, Pa), v0 and, for Drucker-Prager sand, friction_angle (a 0-d tensor,
-    degrees): plasticitynet_sim.MpmRollout, elastic and sand bodies with APIC transfers and slip walls, the
-    steps "lagged" or "return_map" (docs/adjoint.md)."""
+    youngs_modulus (a 0-d tensor, Pa), v0 and, where given (0-d tensors that set every object's value):
+    friction_angle (degrees; Drucker-Prager sand and Cam-Clay snow), Cam-Clay's xi and beta, and
+    initial_hardening (Cam-Clay's a; von Mises' h0 = tau_Y / (2 mu)): plasticitynet_sim.MpmRollout, elastic,
+    sand, snow and metal bodies with APIC or AFLIP transfers and slip walls, the steps "lagged" or "return_map"
+    (docs/adjoint.md)."""
     for k in states:
         if not 0 <= int(k) <= steps:
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
-    return _MpmPositions.apply(youngs_modulus, v0, friction_angle, scene, steps, dt, [int(k) for k in states],
-                               newton_tolerance, integrator)
+    return _MpmPositions.apply(youngs_modulus, v0, scene, steps, dt, [int(k) for k in states], newton_tolerance,
+                               integrator, initial_hardening, friction_angle, xi, beta)
 
 
 def _grid_of(scene: dict) -> tuple[np.ndarray, list[int], float]:

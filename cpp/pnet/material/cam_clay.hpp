@@ -31,6 +31,11 @@ struct CamClayParams {
     void validate() const;
 };
 
+/// The directions Cam-Clay's derivatives are taken in (return_map_derivative.cpp, on math/dual2.hpp's Dual1):
+/// the singular values, then the hardening a, xi, beta and M.
+template <int dim>
+constexpr int kCamClayDirections = dim + 4;
+
 template <int dim>
 class CamClay {
 public:
@@ -57,10 +62,33 @@ public:
 
     /// p0 = K sinh(xi max(-a, 0)), Pa.
     double p0(double a) const;
+
+    /// What project() and project_tau() compute, on any scalar type S (double, or the forward-mode dual
+    /// numbers their derivatives are taken with: material/return_map_derivative.cpp), with the parameters
+    /// xi, beta and M as arguments. `scale` is the factor the projection scales the deviatoric stress by
+    /// (1 inside, 0 at the tips, ||s_new|| / ||s|| on the ellipse): Z_i - Z_j = scale (Sigma_i^2 - Sigma_j^2) /
+    /// (Z_i + Z_j) and tau_i - tau_j = scale mu J^{-2/d} (Sigma_i^2 - Sigma_j^2), the pair quotients without
+    /// cancellation. Instantiated for double and for return_map_derivative.cpp's dual numbers.
+    template <typename S>
+    struct Projected {
+        Eigen::Matrix<S, dim, 1> Z;
+        S hardening, scale;
+        ReturnBranch branch;
+    };
+    template <typename S>
+    Projected<S> project_with(const Eigen::Matrix<S, dim, 1>& Sigma, const S& a, const S& xi, const S& beta,
+                              const S& M) const;
+    template <typename S>
+    Eigen::Matrix<S, dim, 1> project_tau_with(const Eigen::Matrix<S, dim, 1>& Sigma, const S& p0, const S& beta,
+                                              const S& M, S* scale = nullptr) const;
+    /// p0 on any scalar type, xi an argument.
+    template <typename S>
+    S p0_with(const S& a, const S& xi) const;
     /// M = sqrt(2/3) 2 sin(phi)/(3 - sin(phi)) d / sqrt(2/(6-d)).
     double M() const { return M_; }
 
     const CamClayParams& params() const { return params_; }
+    double mu() const { return mu_; }
 
 private:
     CamClayParams params_;

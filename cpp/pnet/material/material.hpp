@@ -67,6 +67,11 @@ public:
 
     const MaterialDescription& description() const { return description_; }
     const Elasticity<dim>& elasticity() const { return elasticity_; }
+    /// The plasticity model when it is a Model (DruckerPrager<dim>, CamClay<dim>, VonMises<dim>), else null.
+    template <typename Model>
+    const Model* plasticity_model() const {
+        return std::get_if<Model>(&plasticity_);
+    }
 
     /// Z(Sigma, h) on clamped singular values. Throws std::invalid_argument for
     /// a non-finite hardening state (or a negative von Mises one).

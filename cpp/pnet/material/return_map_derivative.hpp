@@ -14,11 +14,21 @@
 // cone: log Z = tr/d 1 - c tr n with tr = tr(log Sigma), c = alpha(phi) (d lambda + 2 mu) / (2 mu), where
 // ||dev log Sigma|| + c tr > 0 and tr <= 0; its apex, tr > 0: Z = 1; with the derivatives in the
 // friction angle phi too). At a branch's boundary (the yield onset, the cone's edge, the apex) the
-// derivative is one-sided, the branch the mapping takes there. Others (Cam-Clay, von Mises with another
+// derivative is one-sided, the branch the mapping takes there. Cam-Clay's exact variant (J kept; the paper's
+// is refused) through forward-mode dual numbers of its own projection (CamClay::project_with, math/dual.hpp),
+// with its pair quotients D = k (Sigma_i + Sigma_j) / (Z_i + Z_j), k the deviatoric scale; the hardening a
+// and the parameters xi, beta and the friction angle (through M) too. Others (von Mises with another
 // elasticity) throw std::invalid_argument.
+#include <array>
+
 #include "pnet/material/material.hpp"
 
 namespace pnet {
+
+/// The plasticity parameters whose derivatives the adjoint takes: the friction angle (Drucker-Prager,
+/// Cam-Clay; per degree) and Cam-Clay's xi and beta.
+enum class PlasticityParameter : int { FrictionAngle = 0, Xi = 1, Beta = 2 };
+constexpr int kPlasticityParameters = 3;
 
 template <int dim>
 struct ReturnMapDerivative {
@@ -27,9 +37,12 @@ struct ReturnMapDerivative {
     Mat<dim> dh_dF = Mat<dim>::Zero();               // d h' / d F_trial
     double dh_dh = 1.0;                              // d h' / d h
     Mat<dim> dP_dh = Mat<dim>::Zero();               // d Ptilde / d h: the return-mapped stress's
-    Mat<dim> dFE_dangle = Mat<dim>::Zero();          // Drucker-Prager: d F^E / d friction_angle_deg (1/degree)
-    Mat<dim> dP_dangle = Mat<dim>::Zero();           // Drucker-Prager: d Ptilde / d friction_angle_deg (Pa/degree)
-    bool yielded = false;                            // the plastic branch
+    /// In the plasticity parameters (indexed by PlasticityParameter; zero where the model has none): d F^E,
+    /// d h' and d Ptilde at F_trial (Pa per unit; per degree for the friction angle).
+    std::array<Mat<dim>, kPlasticityParameters> dFE_dparameter = {Mat<dim>::Zero(), Mat<dim>::Zero(), Mat<dim>::Zero()};
+    std::array<double, kPlasticityParameters> dh_dparameter = {0.0, 0.0, 0.0};
+    std::array<Mat<dim>, kPlasticityParameters> dP_dparameter = {Mat<dim>::Zero(), Mat<dim>::Zero(), Mat<dim>::Zero()};
+    bool yielded = false;  // the plastic branch
 };
 
 /// Drucker-Prager's return-mapped stress Ptilde's derivative dPtilde/dF at F = svd, in closed form (its
@@ -37,6 +50,13 @@ struct ReturnMapDerivative {
 /// consistent tangent's stencil averages two branches within its step of a boundary (the MPM adjoint's).
 template <int dim>
 Tensor4<dim> drucker_prager_tangent(const Material<dim>& material, const PolarSVD<dim>& svd);
+
+/// The return-mapped stress's Jacobian dPtilde/dF at F = svd, the hardening held at h (its skew part kept,
+/// unprojected): exact where the return mapping's derivative is written (Drucker-Prager, Cam-Clay's exact
+/// variant, von Mises with StVK-Hencky; one-sided at the branches' boundaries, where the stencil would average
+/// two branches), else Material::elastoplastic_tangent's stencil.
+template <int dim>
+Tensor4<dim> return_map_tangent(const Material<dim>& material, const PolarSVD<dim>& svd, double h);
 
 /// The derivatives at F_trial = svd (the clamped polar SVD the step's return mapping used) and h.
 template <int dim>

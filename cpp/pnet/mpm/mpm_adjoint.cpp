@@ -25,11 +25,15 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
                                     "': the adjoint is of lagged and return_map (plasticitynet converges to "
                                     "return_map's step)");
     for (std::size_t k = 0; k < system.materials.size(); ++k) {
-        const PlasticityModel plasticity = system.materials[k].description().plasticity;
-        if (plasticity != PlasticityModel::None && plasticity != PlasticityModel::DruckerPrager)
-            throw std::invalid_argument("MpmAdjoint: materials[" + std::to_string(k) + "].plasticity '" +
-                                        to_string(plasticity) +
-                                        "': the MPM adjoint covers elastic and Drucker-Prager materials so far");
+        const MaterialDescription& m = system.materials[k].description();
+        const std::string field = "MpmAdjoint: materials[" + std::to_string(k) + "].";
+        if (m.plasticity == PlasticityModel::CamClay && m.cam_clay.variant != CamClayVariant::Exact)
+            throw std::invalid_argument(field + "plasticity.variant '" + to_string(m.cam_clay.variant) +
+                                        "': the adjoint differentiates Cam-Clay's exact variant (J kept)");
+        if (m.plasticity == PlasticityModel::VonMises && m.elasticity != ElasticityModel::StvkHencky)
+            throw std::invalid_argument(field + "elasticity '" + to_string(m.elasticity) +
+                                        "': the adjoint differentiates von Mises with stvk_hencky (its closed-form "
+                                        "return mapping)");
     }
     if (system.boundary.sticky_floor_cells > 0)
         throw std::invalid_argument(std::string("MpmAdjoint: boundary: a ") +
@@ -119,6 +123,7 @@ MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<
     g.v.assign(n, Vec<dim>::Zero());
     g.C.assign(n, Mat<dim>::Zero());
     g.F.assign(n, Mat<dim>::Zero());
+    g.hardening.assign(n, 0.0);
     auto add = [&](std::size_t k) {
         for (std::size_t p = 0; p < n; ++p) {
             if (!x_bar[k].empty()) g.x[p] += x_bar[k][p];
@@ -202,10 +207,13 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     // G2P: the cotangents of the output (x, v, C, F: g) to the grid velocities and the start's x, F.
     std::vector<Vec<dim>> grid_v_bar(storage, Vec<dim>::Zero()), x_bar(n, Vec<dim>::Zero());
     std::vector<Mat<dim>> F_bar(n, Mat<dim>::Zero());
-    // G2P's return mapping F^E' = Z(F_trial): the trial F's cotangent dF^E/dF_trial^T Fb', and the friction
-    // angle's through dF^E/dphi (F_trial from the projected velocities G2P read).
+    // G2P's return mapping F^E' = Z(F_trial, h), h' = h'(F_trial, h): the trial F's cotangent dF^E/dF_trial^T Fb'
+    // + dh'/dF_trial hb', the start hardening's dF^E/dh : Fb' + dh'/dh hb', and each plasticity parameter's
+    // through dF^E/dparameter and dh'/dparameter (F_trial from the projected velocities G2P read).
     std::vector<Mat<dim>> F_trial_bar = g.F;
-    std::vector<double> mapped_angle_bar(n, 0.0);
+    std::vector<double> h_bar = g.hardening;
+    using Parameters = std::array<double, kPlasticityParameters>;
+    std::vector<Parameters> mapped_parameter_bar(n, Parameters{});
     // AFLIP: v_p' = (G2P's v_p) + alpha r_p, r_p = v_p - sum_i w_ip u_i with u_i = q_i / m_i of P2G's grid
     // (transfer.hpp): r_p's cotangent alpha vb_p', taken before G2P's adjoint reads vb'.
     const double alpha = flip_fraction(dt, system_.flip_relaxation_time);
@@ -226,15 +234,22 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         const Mat<dim> F_trial = (Mat<dim>::Identity() + dt * G) * start.F_elastic[p];
         const ReturnMapDerivative<dim> d =
             return_map_derivative<dim>(material, clamped_svd<dim>(F_trial), start.hardening[p]);
-        F_trial_bar[p] = unflatten<dim>(d.dFE_dF.transpose() * flatten<dim>(g.F[p]));
-        mapped_angle_bar[p] = g.F[p].cwiseProduct(d.dFE_dangle).sum();
+        F_trial_bar[p] = unflatten<dim>(d.dFE_dF.transpose() * flatten<dim>(g.F[p])) + g.hardening[p] * d.dh_dF;
+        h_bar[p] = g.F[p].cwiseProduct(d.dFE_dh).sum() + d.dh_dh * g.hardening[p];
+        for (int q = 0; q < kPlasticityParameters; ++q)
+            mapped_parameter_bar[p][q] =
+                g.F[p].cwiseProduct(d.dFE_dparameter[q]).sum() + d.dh_dparameter[q] * g.hardening[p];
     }
-    for (double a : mapped_angle_bar) g.friction_angle += a;
+    Parameters parameter_bar{};
+    for (const Parameters& a : mapped_parameter_bar)
+        for (int q = 0; q < kPlasticityParameters; ++q) parameter_bar[q] += a[q];
     grid_to_particles_adjoint<dim>(grid, start, grid_v, dt, g.x, g.v, g.C, F_trial_bar, grid_v_bar, x_bar, F_bar);
 
     // The stress and its exact (unprojected, undamped) tangent at the solution: the elastic ones for
     // lagged, the return-mapped Ptilde and its consistent tangent with its skew part for return_map.
-    std::vector<Mat<dim>> F(n), P(n), dP_dangle(n, Mat<dim>::Zero());
+    // return_map's stress depends on the start's hardening and the plasticity parameters too.
+    std::vector<Mat<dim>> F(n), P(n), dP_dh(n, Mat<dim>::Zero());
+    std::vector<std::array<Mat<dim>, kPlasticityParameters>> dP_dparameter(n);
     std::vector<Tensor4<dim>> T(n);
     potential.deformation(v, F);
     const bool return_map = method_ == Method::ReturnMap;
@@ -242,14 +257,17 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
         const Material<dim>& material = system_.materials[start.object[p]];
         const PolarSVD<dim> svd = clamped_svd<dim>(F[p]);  // one decomposition for P and its tangent
+        dP_dparameter[p].fill(Mat<dim>::Zero());
         if (return_map) {
-            P[p] = material.elastoplastic_stress(svd, start.hardening[p]);
-            if (material.description().plasticity == PlasticityModel::DruckerPrager) {
-                // The exact Jacobian (the stencil averages two branches near a boundary), and Ptilde in phi.
-                T[p] = drucker_prager_tangent<dim>(material, svd);
-                dP_dangle[p] = return_map_derivative<dim>(material, svd, 0.0).dP_dangle;
-            } else {
-                T[p] = material.elastoplastic_tangent(svd, start.hardening[p], false, true);
+            const double h = start.hardening[p];
+            P[p] = material.elastoplastic_stress(svd, h);
+            // The exact Jacobian where written (the stencil averages two branches near a boundary), and Ptilde
+            // in h and the plasticity parameters.
+            T[p] = return_map_tangent<dim>(material, svd, h);
+            if (material.description().plasticity != PlasticityModel::None) {
+                const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, svd, h);
+                dP_dh[p] = d.dP_dh;
+                dP_dparameter[p] = d.dP_dparameter;
             }
         } else {
             const Elasticity<dim>& elasticity = material.elasticity();
@@ -329,7 +347,8 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         v_star_bar[i] = mass[i] * li;
         mass_bar[i] = -li.dot(v.template segment<dim>(dim * dof[i]) - v_star.template segment<dim>(dim * dof[i]));
     }
-    std::vector<double> youngs_bar(n, 0.0), angle_bar(n, 0.0);  // summed in particle order after the loop
+    std::vector<double> youngs_bar(n, 0.0);  // summed in particle order after the loop
+    std::vector<Parameters> solve_parameter_bar(n, Parameters{});
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
         const Material<dim>& material = system_.materials[start.object[p]];
@@ -347,7 +366,10 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         const Mat<dim> A = Mat<dim>::Identity() + dt * G;
         F_bar[p] -= V * dt * (A.transpose() * Q + Lambda.transpose() * P[p]);
         youngs_bar[p] = -V * dt * P[p].cwiseProduct(LF).sum() / material.elasticity().params().E;
-        angle_bar[p] = -V * dt * dP_dangle[p].cwiseProduct(LF).sum();  // 0 unless return_map's sand
+        // 0 unless return_map's plasticity
+        h_bar[p] -= V * dt * dP_dh[p].cwiseProduct(LF).sum();
+        for (int q = 0; q < kPlasticityParameters; ++q)
+            solve_parameter_bar[p][q] = -V * dt * dP_dparameter[p][q].cwiseProduct(LF).sum();
         const StencilNodeDerivatives<dim> st(grid, start.x[p]);
         int s = 0;
         Vec<dim> xb = Vec<dim>::Zero();
@@ -361,8 +383,11 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     }
     for (std::size_t p = 0; p < n; ++p) {
         g.youngs_modulus += youngs_bar[p];
-        g.friction_angle += angle_bar[p];
+        for (int q = 0; q < kPlasticityParameters; ++q) parameter_bar[q] += solve_parameter_bar[p][q];
     }
+    g.friction_angle += parameter_bar[static_cast<int>(PlasticityParameter::FrictionAngle)];
+    g.xi += parameter_bar[static_cast<int>(PlasticityParameter::Xi)];
+    g.beta += parameter_bar[static_cast<int>(PlasticityParameter::Beta)];
 
     // AFLIP's residual: its cotangent rb_p to v_p (after P2G's adjoint, below), to x_p through the weights
     // (-sum_i (rb_p . u_i) grad w_ip), and to u_i = q_i / m_i, which is v*_i - dt g: -sum_p w_ip rb_p joins
@@ -395,6 +420,7 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     g.v = std::move(v_bar);
     g.C = std::move(C_bar);
     g.F = std::move(F_bar);
+    g.hardening = std::move(h_bar);
 }
 
 template class MpmAdjoint<2>;

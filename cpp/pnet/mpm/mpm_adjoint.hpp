@@ -1,15 +1,18 @@
 #pragma once
 // The adjoint of an implicit MPM rollout (issue 57's MPM half; docs/adjoint.md): the gradient of a loss
 // of the states' particle positions and velocities with respect to the start's positions, velocities,
-// APIC matrices and F, to the materials' Young's modulus and to Drucker-Prager's friction angle, for
-// elastic and Drucker-Prager bodies under backward Euler with APIC or AFLIP transfers and slip walls: the `lagged`
+// APIC matrices, F and hardening, to the materials' Young's modulus and to their plasticity parameters (the
+// friction angle of Drucker-Prager and Cam-Clay, Cam-Clay's xi and beta), for elastic, Drucker-Prager sand,
+// Cam-Clay snow (its exact variant) and von Mises metal (StVK-Hencky) bodies under backward Euler with APIC or
+// AFLIP transfers and slip walls: the `lagged`
 // step (the elastic energy, then the return mapping) or `return_map`'s (the return-mapped stress Ptilde
 // and its consistent tangent T, with its skew part, within the solve; plasticitynet converges to it).
 // With plasticity, R's Jacobian M + sum_p V dt^2 B_p^T T_p B_p is not symmetric: lambda solves its
-// transpose (assembled, sparse LU; T is Drucker-Prager's exact Jacobian, drucker_prager_tangent), the
-// stress terms below take T^T where the elastic step has dP/dF, G2P's trial F gets dF^E/dF_trial^T of its
-// cotangent (material/return_map_derivative.hpp), and the friction angle's cotangent gathers lambda's
-// dPtilde/dphi term and G2P's dF^E/dphi.
+// transpose (assembled, sparse LU; T is the return mapping's exact Jacobian where written, return_map_tangent),
+// the stress terms below take T^T where the elastic step has dP/dF, G2P's trial F gets dF^E/dF_trial^T and
+// dh'/dF_trial of its F's and hardening's cotangents (material/return_map_derivative.hpp), the start's
+// hardening gets dF^E/dh, dh'/dh and lambda's dPtilde/dh term, and each plasticity parameter's cotangent
+// gathers lambda's dPtilde/dparameter term and G2P's dF^E/dparameter and dh'/dparameter.
 //
 // A step: P2G (m_i, q_i), v* = q / m + dt g; the solve R(v) = M (v - v*) + sum_p V_p dt P(F_p(v)) F_p^T
 // grad w_ip = 0 with F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p; the slip walls' projection (the
@@ -32,7 +35,7 @@
 // backward pass recomputes each segment from its checkpoint, the last first (about 2 sqrt(N) states at
 // once), as the FEM adjoint does. Sand at rest from F = I (a column's free surface) sits at the cone's tip,
 // where the projection has no derivative: the gradient is one-sided there (docs/adjoint.md). Refused,
-// naming what: Cam-Clay and von Mises, a sticky or Coulomb floor, BDF2.
+// naming what: Cam-Clay's paper variant, von Mises with another elasticity, a sticky or Coulomb floor, BDF2.
 #include <functional>
 #include <map>
 #include <vector>
@@ -45,8 +48,11 @@ template <int dim>
 struct MpmRolloutGradient {
     std::vector<Vec<dim>> x, v;   // per particle: dL/dx^0 (1/m), dL/dv^0 (s/m), times L's unit
     std::vector<Mat<dim>> C, F;   // dL/dC^0 (s), dL/dF^0
-    double youngs_modulus = 0.0;  // dL/dE, every material's E scaled together (1/Pa)
-    double friction_angle = 0.0;  // dL/dphi, every Drucker-Prager material's friction angle together (1/degree)
+    std::vector<double> hardening;  // per particle: dL/dh^0 (Cam-Clay a; von Mises h = tau_Y / (2 mu))
+    double youngs_modulus = 0.0;    // dL/dE, every material's E scaled together (1/Pa)
+    /// dL/dphi: every Drucker-Prager and Cam-Clay material's friction angle together (1/degree).
+    double friction_angle = 0.0;
+    double xi = 0.0, beta = 0.0;  // dL/dxi, dL/dbeta: every Cam-Clay material's together
 };
 
 template <int dim>

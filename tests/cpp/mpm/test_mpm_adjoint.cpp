@@ -7,7 +7,10 @@
 
 #include <cstdio>
 
+#include <nlohmann/json.hpp>
+
 #include "pnet/energy/return_mapping_energy.hpp"
+#include "pnet/material/material_json.hpp"
 #include "pnet/mpm/mpm_adjoint.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/scene/scene.hpp"
@@ -405,14 +408,126 @@ TEST(MpmAdjoint2d, ASandColumnAtRestFromTheConesTipHasItsFrictionAngleGradient) 
     EXPECT_LT(g_v, high + spread);
 }
 
+// A block of a plastic material with hardening (snow: Cam-Clay, a = -0.1; metal: von Mises with StVK-Hencky)
+// thrown onto the slip floor, under `return_map` and `lagged`: dL/dv0, dL/dE, dL/d of each plasticity parameter
+// and dL/dh0 along a random direction against central differences of the whole rollout. The hardening's
+// cotangent carries each step's return mapping back (h' = h'(F_trial, h), and return_map's stress in h).
+Scene hardening_block_scene(const MaterialDescription& material) {
+    nlohmann::json scene = nlohmann::json::parse(R"({
+        "dim": 2, "domain": {"min": [0, 0], "max": [1, 1]}, "dx": 0.03125, "gravity": [0, -9.8],
+        "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 0},
+        "integrator": {"name": "return_map", "dt": 2e-3},
+        "objects": [{"shape": "box", "min": [0.42, 0.12], "max": [0.58, 0.26], "velocity": [0.4, -2.5]}]
+    })");
+    scene["objects"][0]["material"] = material_to_json(material);
+    return scene_from_json(scene, "<block>", ".");
+}
+
+void check_hardening_block(const MaterialDescription& material, Method method, const std::vector<std::string>& fields) {
+    const double dt = 2e-3;
+    const int steps = 20;
+    const MpmSystem<2> system = make_mpm_system<2>(hardening_block_scene(material));
+    const Particles<2> start = sample_particles<2>(hardening_block_scene(material));
+    const std::size_t n = start.size();
+    test::Random random(89);
+    std::vector<Vec<2>> a(n), b(n), dv(n);
+    std::vector<double> dh(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        a[p] = random.uniform_vec<2>(-1.0, 1.0);
+        b[p] = random.uniform_vec<2>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
+        dh[p] = random.uniform(-1.0, 1.0);
+    }
+    auto loss = [&](const MaterialDescription& m, const Particles<2>& from) {
+        MpmSystem<2> s = system;
+        s.materials[0] = Material<2>(m);
+        MpmAdjoint<2> adjoint(s, tight(), MpmOptions{}, method);
+        const Particles<2> last = adjoint.forward(from, dt, steps);
+        double L = 0.0;
+        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
+        return L;
+    };
+    MpmAdjoint<2> adjoint(system, tight(), MpmOptions{}, method);
+    const Particles<2> last = adjoint.forward(start, dt, steps);
+    int hardened = 0;
+    for (std::size_t p = 0; p < n; ++p) hardened += last.hardening[p] != start.hardening[p];
+    ASSERT_GT(hardened, static_cast<int>(n) / 5) << "the block must yield";
+    const MpmRolloutGradient<2> g = adjoint.backward(a, b);
+    double g_v = 0.0, g_h = 0.0;
+    for (std::size_t p = 0; p < n; ++p) {
+        g_v += g.v[p].dot(dv[p]);
+        g_h += g.hardening[p] * dh[p];
+    }
+    // Differences of 1e-5 m/s, 1e-6 in h and 1e-6 relative in the parameters: at 10 times these, particles that
+    // change branch (yield onset, the ellipse's tips) within the step move them by up to 10% (the metal's dL/dh0).
+    const double fd_v = along_velocities<2>([&](const Particles<2>& from) { return loss(material, from); }, start, dv,
+                                            1e-5);
+    const double step_h = 1e-6;
+    Particles<2> plus = start, minus = start;
+    for (std::size_t p = 0; p < n; ++p) {
+        plus.hardening[p] += step_h * dh[p];
+        minus.hardening[p] -= step_h * dh[p];
+    }
+    const double fd_h = (loss(material, plus) - loss(material, minus)) / (2.0 * step_h);
+    std::printf("MPM %s rollout (%s), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs %.10g, dL/dh0 %.10g vs "
+                "%.10g\n",
+                material.name.c_str(), to_string(method), n, hardened, steps, g_v, fd_v, g_h, fd_h);
+    EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
+    EXPECT_NEAR(g_h, fd_h, 1e-4 * std::abs(fd_h));
+    for (const std::string& field : fields) {
+        MaterialDescription up = material, down = material;
+        double *value_up, *value_down, adjoint_value;
+        if (field == "elasticity.E") {
+            value_up = &up.elastic.E;
+            value_down = &down.elastic.E;
+            adjoint_value = g.youngs_modulus;
+        } else {
+            value_up = material_parameter(up, field);
+            value_down = material_parameter(down, field);
+            adjoint_value = field == "plasticity.xi" ? g.xi : field == "plasticity.beta" ? g.beta : g.friction_angle;
+        }
+        const double h = 1e-6 * *value_up;
+        *value_up += h;
+        *value_down -= h;
+        const double fd = (loss(up, start) - loss(down, start)) / (2.0 * h);
+        std::printf("  dL/d%s %.10g vs %.10g\n", field.c_str(), adjoint_value, fd);
+        EXPECT_NEAR(adjoint_value, fd, 1e-4 * std::abs(fd)) << field;
+    }
+}
+
+TEST(MpmAdjoint2d, CamClayRolloutGradientMatchesCentralDifferences) {
+    const std::vector<std::string> fields = {"elasticity.E", "plasticity.friction_angle_deg", "plasticity.xi",
+                                             "plasticity.beta"};
+    check_hardening_block(material_preset("snow"), Method::ReturnMap, fields);
+    check_hardening_block(material_preset("snow"), Method::Lagged, fields);
+}
+
+TEST(MpmAdjoint2d, VonMisesRolloutGradientMatchesCentralDifferences) {
+    MaterialDescription metal = material_preset("metal");
+    metal.elastic.E = 2e6;
+    metal.initial_hardening = 0.02;
+    check_hardening_block(metal, Method::ReturnMap, {"elasticity.E"});
+    check_hardening_block(metal, Method::Lagged, {"elasticity.E"});
+}
+
 TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
     MpmSystem<2> snow = make_mpm_system<2>(disk_scene(1e5));
-    snow.materials[0] = Material<2>(material_preset("snow"));
+    MaterialDescription paper = material_preset("snow");
+    paper.cam_clay.variant = CamClayVariant::Paper;
+    snow.materials[0] = Material<2>(paper);
     try {
         MpmAdjoint<2>(snow, tight(), MpmOptions{});
         FAIL() << "expected std::invalid_argument";
     } catch (const std::invalid_argument& e) {
-        EXPECT_NE(std::string(e.what()).find("materials[0].plasticity 'cam_clay'"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("materials[0].plasticity.variant 'paper'"), std::string::npos) << e.what();
+    }
+    MpmSystem<2> metal_nh = make_mpm_system<2>(disk_scene(1e5));
+    metal_nh.materials[0] = Material<2>(material_preset("metal_nh"));
+    try {
+        MpmAdjoint<2>(metal_nh, tight(), MpmOptions{});
+        FAIL() << "expected std::invalid_argument";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("materials[0].elasticity"), std::string::npos) << e.what();
     }
     EXPECT_THROW(MpmAdjoint<2>(make_mpm_system<2>(disk_scene(1e5)), tight(), MpmOptions{}, Method::PlasticityNet),
                  std::invalid_argument);
