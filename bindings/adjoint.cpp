@@ -299,8 +299,8 @@ the most states held at once by the last forward and backward.)doc")
 
 MpmRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
 particle objects of elastic, Drucker-Prager (sand), Cam-Clay (snow, its exact variant) or von Mises
-(metal, StVK-Hencky) materials, APIC or AFLIP transfers and slip walls (no sticky or Coulomb floor);
-ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
+(metal, StVK-Hencky) materials, APIC or AFLIP transfers, slip walls and a sticky floor (no Coulomb
+floor); ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
 elastic solve, then the return mapping) or "return_map" (the return-mapped stress within the solve;
 plasticitynet converges to its step), each solved to newton_tolerance (m/s), which sets how exact the
 gradient is.

@@ -406,10 +406,10 @@ def test_mpm_rollouts_refuse_what_the_adjoint_does_not_cover():
         pns.MpmRollout(paper_snow)
     with pytest.raises(ValueError, match="integrator 'plasticitynet'"):
         pns.MpmRollout(disk_scene(), integrator="plasticitynet")
-    sticky = disk_scene()
-    sticky["boundary"]["sticky_floor_cells"] = 3
-    with pytest.raises(ValueError, match="boundary: a sticky floor"):
-        pns.MpmRollout(sticky)
+    coulomb = disk_scene()
+    coulomb["boundary"].update({"sticky_floor_cells": 3, "floor_friction": 0.5})
+    with pytest.raises(ValueError, match="boundary: a Coulomb floor"):
+        pns.MpmRollout(coulomb)
     rollout = pns.MpmRollout(disk_scene())
     with pytest.raises(ValueError, match="run forward"):
         rollout.backward({0: np.zeros((rollout.particles, 2))})

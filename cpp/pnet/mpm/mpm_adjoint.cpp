@@ -35,10 +35,9 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
                                         "': the adjoint differentiates von Mises with stvk_hencky (its closed-form "
                                         "return mapping)");
     }
-    if (system.boundary.sticky_floor_cells > 0)
-        throw std::invalid_argument(std::string("MpmAdjoint: boundary: a ") +
-                                    (system.boundary.coulomb_floor() ? "Coulomb" : "sticky") +
-                                    " floor is not covered (slip walls are)");
+    if (system.boundary.coulomb_floor() && system.boundary.sticky_floor_cells > 0)
+        throw std::invalid_argument(
+            "MpmAdjoint: boundary: a Coulomb floor is not covered (slip walls and the sticky floor are)");
     if (options.time_integrator != "backward_euler")
         throw std::invalid_argument("MpmAdjoint: time_integrator '" + options.time_integrator +
                                     "': backward Euler only");
@@ -276,12 +275,14 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         }
     }
 
-    // The solve: J^T lambda = vb on the unknowns (the projected components' cotangent dropped).
+    // The solve: J^T lambda = vb on the unknowns (the projected components' cotangent dropped). The
+    // components the solve holds (the sticky floor's nodes: free 0) are constants: lambda is 0 there.
+    const VecX& free = potential.free_components();
     VecX rhs = VecX::Zero(potential.size());
     for (std::int64_t i = 0; i < storage; ++i)
         if (dof[i] >= 0)
             for (int a = 0; a < dim; ++a)
-                if (!held[i][a]) rhs[dim * dof[i] + a] = grid_v_bar[i][a];
+                if (!held[i][a]) rhs[dim * dof[i] + a] = free[dim * dof[i] + a] * grid_v_bar[i][a];
     // Symmetric where the solve's stress is elastic (lagged, or no plasticity): the potential's own exact
     // Hessian by PCG; else J^T (the consistent tangent's skew part transposed) by sparse LU.
     const bool symmetric =
@@ -302,8 +303,9 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         const Eigen::Index size = potential.size();
         std::vector<Eigen::Triplet<double>> triplets;
         triplets.reserve(static_cast<std::size_t>(size) + n * kStencil * kStencil * dim * dim);
+        // On the free components; the held ones' rows and columns are the identity's.
         const VecX& node_mass = potential.residual_mass();
-        for (Eigen::Index i = 0; i < size; ++i) triplets.emplace_back(i, i, node_mass[i]);
+        for (Eigen::Index i = 0; i < size; ++i) triplets.emplace_back(i, i, free[i] > 0.0 ? node_mass[i] : 1.0);
         for (std::size_t p = 0; p < n; ++p) {
             const int* dofs = potential.stencil_dofs(p);
             const Vec<dim>* grads = potential.stencil_gradients(p);
@@ -314,6 +316,7 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
                 for (int r = 0; r < kStencil; ++r)
                     for (int a = 0; a < dim; ++a)
                         for (int b = 0; b < dim; ++b) {
+                            if (free[dim * dofs[q] + a] == 0.0 || free[dim * dofs[r] + b] == 0.0) continue;
                             double value = 0.0;  // J((q, a), (r, b)) = V dt^2 g_q . T[(a, .), (b, .)] g_r
                             for (int j = 0; j < dim; ++j)
                                 for (int l = 0; l < dim; ++l)

@@ -412,7 +412,8 @@ TEST(MpmAdjoint2d, ASandColumnAtRestFromTheConesTipHasItsFrictionAngleGradient) 
 // thrown onto the slip floor, under `return_map` and `lagged`: dL/dv0, dL/dE, dL/d of each plasticity parameter
 // and dL/dh0 along a random direction against central differences of the whole rollout. The hardening's
 // cotangent carries each step's return mapping back (h' = h'(F_trial, h), and return_map's stress in h).
-Scene hardening_block_scene(const MaterialDescription& material) {
+Scene hardening_block_scene(const MaterialDescription& material, int sticky_floor_cells = 0,
+                            double flip_relaxation_time = 0.0) {
     nlohmann::json scene = nlohmann::json::parse(R"({
         "dim": 2, "domain": {"min": [0, 0], "max": [1, 1]}, "dx": 0.03125, "gravity": [0, -9.8],
         "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 0},
@@ -420,14 +421,18 @@ Scene hardening_block_scene(const MaterialDescription& material) {
         "objects": [{"shape": "box", "min": [0.42, 0.12], "max": [0.58, 0.26], "velocity": [0.4, -2.5]}]
     })");
     scene["objects"][0]["material"] = material_to_json(material);
+    scene["boundary"]["sticky_floor_cells"] = sticky_floor_cells;
+    if (flip_relaxation_time > 0.0) scene["transfer"] = {{"flip_relaxation_time", flip_relaxation_time}};
     return scene_from_json(scene, "<block>", ".");
 }
 
-void check_hardening_block(const MaterialDescription& material, Method method, const std::vector<std::string>& fields) {
+void check_hardening_block(const MaterialDescription& material, Method method, const std::vector<std::string>& fields,
+                           int sticky_floor_cells = 0, double flip_relaxation_time = 0.0) {
     const double dt = 2e-3;
     const int steps = 20;
-    const MpmSystem<2> system = make_mpm_system<2>(hardening_block_scene(material));
-    const Particles<2> start = sample_particles<2>(hardening_block_scene(material));
+    const Scene scene = hardening_block_scene(material, sticky_floor_cells, flip_relaxation_time);
+    const MpmSystem<2> system = make_mpm_system<2>(scene);
+    const Particles<2> start = sample_particles<2>(scene);
     const std::size_t n = start.size();
     test::Random random(89);
     std::vector<Vec<2>> a(n), b(n), dv(n);
@@ -469,9 +474,10 @@ void check_hardening_block(const MaterialDescription& material, Method method, c
         minus.hardening[p] -= step_h * dh[p];
     }
     const double fd_h = (loss(material, plus) - loss(material, minus)) / (2.0 * step_h);
-    std::printf("MPM %s rollout (%s), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs %.10g, dL/dh0 %.10g vs "
+    std::printf("MPM %s rollout (%s%s), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs %.10g, dL/dh0 %.10g vs "
                 "%.10g\n",
-                material.name.c_str(), to_string(method), n, hardened, steps, g_v, fd_v, g_h, fd_h);
+                material.name.c_str(), to_string(method), sticky_floor_cells > 0 ? ", sticky floor, AFLIP" : "", n,
+                hardened, steps, g_v, fd_v, g_h, fd_h);
     EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
     EXPECT_NEAR(g_h, fd_h, 1e-4 * std::abs(fd_h));
     for (const std::string& field : fields) {
@@ -508,6 +514,14 @@ TEST(MpmAdjoint2d, VonMisesRolloutGradientMatchesCentralDifferences) {
     metal.initial_hardening = 0.02;
     check_hardening_block(metal, Method::ReturnMap, {"elasticity.E"});
     check_hardening_block(metal, Method::Lagged, {"elasticity.E"});
+}
+
+// The snowball's boundary and transfers: a sticky floor (its three cells of nodes held at 0 by the solve)
+// and AFLIP.
+TEST(MpmAdjoint2d, CamClayOnTheStickyFloorWithAflipMatchesCentralDifferences) {
+    const std::vector<std::string> fields = {"elasticity.E", "plasticity.xi"};
+    check_hardening_block(material_preset("snow"), Method::ReturnMap, fields, 3, 0.01);
+    check_hardening_block(material_preset("snow"), Method::Lagged, fields, 3, 0.01);
 }
 
 TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
