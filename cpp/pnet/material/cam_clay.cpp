@@ -221,8 +221,9 @@ Eigen::Matrix<S, dim, 1> CamClay<dim>::project_tau_with(const Eigen::Matrix<S, d
         const S q2_factor = 0.5 * (6.0 - dim) * (1.0 + 2.0 * beta);
         const S pressure_term = M * M * (p + beta * p_0) * (p - p_0);
         const S s2 = s.squaredNorm();
-        if (!(q2_factor * s2 + pressure_term <= 0.0)) k = sqrt(-pressure_term / q2_factor) / sqrt(s2);
-        tau = (q2_factor * s2 + pressure_term <= 0.0 ? s : Vector(k * s)) - S(p) * ones;
+        const bool inside = q2_factor * s2 + pressure_term <= 0.0;  // tested once: one branch for tau and k
+        if (!inside) k = sqrt(-pressure_term / q2_factor) / sqrt(s2);
+        tau = (inside ? s : Vector(k * s)) - S(p) * ones;
     }
     if (scale) *scale = k;
     return tau;
