@@ -162,6 +162,7 @@ struct MpmRolloutBase {
     virtual py::dict backward(const py::object& dL_dx, const py::object& dL_dv) const = 0;
     virtual int particles() const = 0;
     virtual std::size_t peak_states() const = 0;
+    virtual int unconverged_steps() const = 0;
 };
 
 template <int dim>
@@ -178,6 +179,7 @@ struct MpmRolloutOf final : MpmRolloutBase {
           adjoint(system, options, MpmOptions{}, method) {}
     int particles() const override { return static_cast<int>(initial.size()); }
     std::size_t peak_states() const override { return adjoint.peak_states(); }
+    int unconverged_steps() const override { return adjoint.unconverged_steps(); }
     py::dict start() const override {
         py::dict d;
         d["x"] = rows<dim>(initial.x);
@@ -299,8 +301,8 @@ the most states held at once by the last forward and backward.)doc")
 
 MpmRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
 particle objects of elastic, Drucker-Prager (sand), Cam-Clay (snow, its exact variant) or von Mises
-(metal, StVK-Hencky) materials, APIC or AFLIP transfers, slip walls and a sticky floor (no Coulomb
-floor); ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
+(metal, StVK-Hencky) materials, APIC or AFLIP transfers, slip walls and a sticky or Coulomb floor (the
+Coulomb floor under "return_map": its friction within the one solve); ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
 elastic solve, then the return mapping) or "return_map" (the return-mapped stress within the solve;
 plasticitynet converges to its step), each solved to newton_tolerance (m/s), which sets how exact the
 gradient is.
@@ -316,7 +318,8 @@ arrays, "hardening": (particles,) array, "youngs_modulus", "friction_angle", "xi
 Drucker-Prager and Cam-Clay material's friction angle, per degree), dL/dxi and dL/dbeta (Cam-Clay's) and
 dL/dh0 (every particle's start hardening together), by the adjoint of every step, recomputing the steps between
 checkpoints (docs/adjoint.md). peak_states: the most states held at once by the last forward and
-backward.)doc")
+backward; unconverged_steps: the last forward's steps whose solve stopped short of newton_tolerance (the
+gradient is then that of the path taken).)doc")
         .def(py::init([](const py::object& scene, double newton_tolerance,
                          const std::string& integrator) -> std::unique_ptr<MpmRolloutBase> {
                  Scene s = scene_of(scene);
@@ -343,6 +346,7 @@ backward.)doc")
         .def("forward", &MpmRolloutBase::forward, py::arg("steps"), py::arg("dt"), py::arg("v0") = py::none(),
              py::arg("states") = py::none(), py::arg("checkpoint_every") = 0)
         .def_property_readonly("peak_states", &MpmRolloutBase::peak_states)
+        .def_property_readonly("unconverged_steps", &MpmRolloutBase::unconverged_steps)
         .def("backward", &MpmRolloutBase::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
 }
 

@@ -136,16 +136,18 @@ def elastic_ball(E: float, integrator: str = "lagged", dt: float = 2.5e-4) -> di
     return scene
 
 
-def sand_column(friction_angle: float, integrator: str = "return_map", dt: float = 1e-3) -> dict:
+def sand_column(friction_angle: float, integrator: str = "return_map", dt: float = 1e-3, floor: str = "coulomb") -> dict:
     """scenes/sand_column_2d.json's column (sand, E 3.537e5 Pa) at twice its dx, at the friction angle phi,
-    for its first SAND_FRAMES frames (0.3 s of the collapse), with APIC transfers and a slip floor (the MPM
-    adjoint's: not yet the Coulomb floor), the implicit steps at dt without the advection limit,
-    Newton to 1e-10 m/s."""
+    for its first SAND_FRAMES frames (0.3 s of the collapse), the implicit steps at dt without the
+    advection limit, Newton to 1e-10 m/s. floor "coulomb": the shipped column's AFLIP transfers and Coulomb
+    floor (mu 0.5774, known to the fit); "slip": APIC transfers and a slip floor (the fit before the MPM
+    adjoint had the Coulomb floor)."""
     scene = json.loads((ROOT / "scenes" / "sand_column_2d.json").read_text())
     scene["dx"] *= 2  # 1/128 m: about 1900 particles (a quarter of the shipped column's), for the fit's time
     scene["objects"][0]["min"][1] = 3 * scene["dx"]  # on the floor's wall nodes, as the shipped column
-    scene.pop("transfer", None)
-    scene["boundary"] = {"walls": "slip", "sticky_floor_cells": 0}
+    if floor == "slip":
+        scene.pop("transfer", None)
+        scene["boundary"] = {"walls": "slip", "sticky_floor_cells": 0}
     scene["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = friction_angle
     scene["frames"] = SAND_FRAMES
     scene["integrator"] = {"name": integrator, "dt": dt, "advection_cfl": 0, "newton_tolerance": 1e-10,

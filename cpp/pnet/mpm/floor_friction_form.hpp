@@ -75,6 +75,9 @@ public:
         Eigen::Matrix<double, dim - 1, 1> coupling;  // mu f1 u / |u| (0 where J <= 0): d force / d J
     };
     const std::vector<NewtonContact>& newton_contacts() const { return newton_contacts_; }
+    /// begin_newton()'s Coulomb coefficient and the slip velocity below which the friction is smoothed (m/s).
+    double mu() const { return mu_; }
+    double eps_v() const { return eps_v_; }
     const std::vector<Contact>& contacts() const { return contacts_; }
 
     double value(const VecX& v) override;

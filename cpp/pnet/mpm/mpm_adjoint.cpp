@@ -7,6 +7,7 @@
 
 #include <Eigen/SparseLU>
 
+#include "pnet/contact/friction.hpp"
 #include "pnet/energy/particle_energy.hpp"
 #include "pnet/energy/return_mapping_energy.hpp"
 #include "pnet/material/return_map_derivative.hpp"
@@ -35,9 +36,18 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
                                         "': the adjoint differentiates von Mises with stvk_hencky (its closed-form "
                                         "return mapping)");
     }
-    if (system.boundary.coulomb_floor() && system.boundary.sticky_floor_cells > 0)
-        throw std::invalid_argument(
-            "MpmAdjoint: boundary: a Coulomb floor is not covered (slip walls and the sticky floor are)");
+    // A Coulomb floor's friction in the one solve's residual (FloorFrictionForm::begin_newton), without the
+    // passes a failed one solve falls back to under "auto": the gradient is that of R(v) = 0 with the friction.
+    // That solve is return_map's (under its work line search; lagged solves the floor in passes, whose fixed
+    // point after a few passes is not R = 0).
+    if (system.boundary.coulomb_floor() && system.boundary.sticky_floor_cells > 0) {
+        if (method != Method::ReturnMap)
+            throw std::invalid_argument(std::string("MpmAdjoint: boundary.floor_friction with integrator '") +
+                                        to_string(method) +
+                                        "': a Coulomb floor's adjoint is return_map's (its friction within the one "
+                                        "solve; lagged solves the floor in passes)");
+        mpm_options_.floor_friction_solve = "newton";
+    }
     if (options.time_integrator != "backward_euler")
         throw std::invalid_argument("MpmAdjoint: time_integrator '" + options.time_integrator +
                                     "': backward Euler only");
@@ -62,6 +72,7 @@ Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, 
     const int every =
         checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
     checkpoints_.clear();
+    unconverged_ = 0;
     const std::unique_ptr<ImplicitIntegrator<dim>> made = make_integrator();
     ImplicitIntegrator<dim>& integrator = *made;
     integrator.reset(start);
@@ -69,7 +80,7 @@ Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, 
     checkpoints_[0] = particles;
     if (observe) observe(0, particles);
     for (int k = 0; k < steps; ++k) {
-        integrator.step(particles, dt, k);
+        if (!integrator.step(particles, dt, k).converged) ++unconverged_;
         if ((k + 1) % every == 0 || k + 1 == steps) checkpoints_[k + 1] = particles;
         if (observe) observe(k + 1, particles);
     }
@@ -167,39 +178,66 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     }
     BoundaryConditions solve_boundary = system_.boundary;
     solve_boundary.slip_walls = false;
-    grid.update_velocity(dt, system_.gravity, solve_boundary);
+    grid.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
+    const bool coulomb = solve_boundary.coulomb_floor() && solve_boundary.sticky_floor_cells > 0;
+    // v* as update_velocity left it: on a Coulomb floor's held normal rows, the velocity the floor stops (the
+    // potential's v* is 0 there), which the floor's impulse J_k = (the stress term)_k,y - m_k v*_k,y reads.
+    std::vector<Vec<dim>> node_v_star(storage);
+    for (std::int64_t i = 0; i < storage; ++i) node_v_star[i] = grid.node(i).momentum;
     ElasticParticleEnergy<dim> energy(system_.materials);
     IncrementalPotential<dim> potential(energy);
+    potential.set_floor_friction_newton(coulomb);
     potential.begin_step(grid, start, dt, solve_boundary);
     potential.set_reference(start.F_elastic);
     potential.set_project_psd(false);
     if (v.size() != potential.size()) throw std::logic_error("MpmAdjoint: the step's unknowns changed on replay");
-    const VecX& v_star = potential.v_star();
 
     // Storage index -> unknown node (-1: a node no particle's stencil reaches).
     std::vector<int> dof(storage, -1);
     for (std::size_t k = 0; k < potential.nodes(); ++k) dof[potential.dof_node(k)] = static_cast<int>(k);
 
-    // The grid velocity G2P read: the solution with the slip walls' projection; the components it set
-    // to 0 are held.
+    // The grid velocity G2P read: the solution projected as Grid::apply_boundary does after the solve, and
+    // the projection's Jacobian A_i (its active set held; one-sided where a component is exactly at 0).
+    // On a Coulomb floor's layer a node still moving into it (a normal the solve left free) loses its
+    // normal velocity and mu |v_y| of its tangential speed; then the slip walls zero their wall-ward
+    // components.
     std::vector<Vec<dim>> grid_v(storage, Vec<dim>::Zero());
-    std::vector<std::array<bool, dim>> held(storage);
+    std::vector<Mat<dim>> projection(storage, Mat<dim>::Identity());
+    const BoundaryConditions& bc = system_.boundary;
     for (std::int64_t i = 0; i < storage; ++i) {
-        held[i].fill(false);
         if (dof[i] < 0) continue;
         Vec<dim> vi = v.template segment<dim>(dim * dof[i]);
-        if (system_.boundary.slip_walls) {
-            int coord[dim];
-            grid.coordinates(i, coord);
+        Mat<dim>& A = projection[i];
+        int coord[dim];
+        grid.coordinates(i, coord);
+        if (coulomb && bc.in_floor(coord[1]) && vi[1] < 0.0) {
+            // v_t' = v_t (1 - mu p / |v_t|) with p = -v_y, where |v_t| > mu p; else 0. v_y' = 0.
+            const double p = -vi[1];
+            Vec<dim> t = vi;
+            t[1] = 0.0;
+            const double length = t.norm();
+            A.setZero();
+            if (length > bc.floor_friction * p) {
+                const Vec<dim> n = t / length;
+                for (int a = 0; a < dim; ++a) {
+                    if (a == 1) continue;
+                    for (int b = 0; b < dim; ++b)
+                        if (b != 1)
+                            A(a, b) = (a == b ? 1.0 : 0.0) - bc.floor_friction * p / length * ((a == b ? 1.0 : 0.0) - n[a] * n[b]);
+                    A(a, 1) = bc.floor_friction * n[a];  // d v_t' / d v_y = mu t / |t|
+                }
+            }
+            coulomb_projection<dim>(vi, p, bc.floor_friction);
+        }
+        if (bc.slip_walls)
             for (int a = 0; a < dim; ++a) {
                 const bool low = coord[a] < Grid<dim>::kWallNodes && vi[a] < 0.0;
                 const bool high = coord[a] >= grid.nodes(a) - Grid<dim>::kWallNodes && vi[a] > 0.0;
                 if (low || high) {
                     vi[a] = 0.0;
-                    held[i][a] = true;
+                    A.row(a).setZero();
                 }
             }
-        }
         grid_v[i] = vi;
     }
 
@@ -275,20 +313,72 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         }
     }
 
-    // The solve: J^T lambda = vb on the unknowns (the projected components' cotangent dropped). The
-    // components the solve holds (the sticky floor's nodes: free 0) are constants: lambda is 0 there.
+    // The solve: J^T lambda = A^T vb on the unknowns (the projection's adjoint). The components the solve
+    // holds (the sticky floor's nodes, a Coulomb floor's pressing normals: free 0) are constants: lambda is 0
+    // there (but a Coulomb contact's normal row, below).
     const VecX& free = potential.free_components();
     VecX rhs = VecX::Zero(potential.size());
     for (std::int64_t i = 0; i < storage; ++i)
-        if (dof[i] >= 0)
-            for (int a = 0; a < dim; ++a)
-                if (!held[i][a]) rhs[dim * dof[i] + a] = free[dim * dof[i] + a] * grid_v_bar[i][a];
-    // Symmetric where the solve's stress is elastic (lagged, or no plasticity): the potential's own exact
-    // Hessian by PCG; else J^T (the consistent tangent's skew part transposed) by sparse LU.
+        if (dof[i] >= 0) {
+            const Vec<dim> unprojected_bar = projection[i].transpose() * grid_v_bar[i];
+            for (int a = 0; a < dim; ++a) rhs[dim * dof[i] + a] = free[dim * dof[i] + a] * unprojected_bar[a];
+        }
+    // The Coulomb floor's contacts (the nodes whose normal velocity the solve holds): the friction on node k's
+    // tangential velocity u_k is c_k(u_k) J_k(v), c = mu f1(|u|) u / |u|, with J_k the floor's normal impulse,
+    // the residual's row (k, y) with v*_k,y as update_velocity left it. So J = dR/dv has J_k dc/du in the slip
+    // and c_k (row (k, y) of the stress term's Jacobian) on the tangential rows. J^T lambda = vb is solved with
+    // the held normal rows as unknowns too, mu_k = c_k . lambda_k,t: then lambda's row (k, y) carries the
+    // impulse's cotangent to v*_k,y, the node's mass and the particles like any row's.
+    struct FloorContact {
+        int dof;
+        double impulse = 0.0;  // J_k at the solution (<= 0: the floor pulls, no friction)
+        Eigen::Matrix<double, dim - 1, 1> c = Eigen::Matrix<double, dim - 1, 1>::Zero();
+        Eigen::Matrix<double, dim - 1, dim - 1> dc = Eigen::Matrix<double, dim - 1, dim - 1>::Zero();
+    };
+    std::vector<FloorContact> contacts;
+    std::vector<int> contact_of;  // unknown node -> its contact (-1: none)
+    if (coulomb) {
+        const FloorFrictionForm<dim>& form = potential.floor_friction_form();
+        contact_of.assign(potential.nodes(), -1);
+        for (const auto& c : form.newton_contacts()) {
+            contact_of[c.dof] = static_cast<int>(contacts.size());
+            contacts.push_back({c.dof, -c.normal_momentum});
+        }
+        for (std::size_t p = 0; p < n; ++p) {  // the stress term's rows (k, y), in particle order
+            const int* dofs = potential.stencil_dofs(p);
+            const Vec<dim>* grads = potential.stencil_gradients(p);
+            for (int s = 0; s < kStencil; ++s)
+                if (contact_of[dofs[s]] >= 0)
+                    contacts[contact_of[dofs[s]]].impulse +=
+                        start.rest_volume[p] * dt * (P[p] * start.F_elastic[p].transpose() * grads[s])[1];
+        }
+        const double mu = form.mu(), eps = form.eps_v();
+        for (FloorContact& c : contacts) {
+            if (!(c.impulse > 0.0)) continue;
+            Eigen::Matrix<double, dim - 1, 1> u;
+            for (int t = 0; t < dim - 1; ++t) u[t] = v[dim * c.dof + (t == 0 ? 0 : 2)];
+            const double s = u.norm(), f1_over_s = friction_f1_over_x(s, eps);
+            c.c = mu * f1_over_s * u;
+            // d(f1(s) u / s)/du = f1'(s) u u^T / s^2 + f1(s) / s (I - u u^T / s^2) (f1'(0) = f1(s) / s at 0).
+            const Eigen::Matrix<double, dim - 1, dim - 1> I = Eigen::Matrix<double, dim - 1, dim - 1>::Identity();
+            const Eigen::Matrix<double, dim - 1, dim - 1> uu =
+                s > 0.0 ? Eigen::Matrix<double, dim - 1, dim - 1>(u * u.transpose() / (s * s))
+                        : Eigen::Matrix<double, dim - 1, dim - 1>::Zero();
+            c.dc = mu * c.impulse * (friction_f1_derivative(s, eps) * uu + f1_over_s * (I - uu));
+        }
+    }
+    auto contact_normal = [&](Eigen::Index i) {  // a held normal row of a contact
+        return coulomb && i % dim == 1 && contact_of[i / dim] >= 0;
+    };
+
+    // Symmetric where the solve's stress is elastic (lagged, or no plasticity) and no floor's friction is in
+    // it: the potential's own exact Hessian by PCG; else J^T (the consistent tangent's skew part transposed,
+    // the friction's) by sparse LU.
     const bool symmetric =
-        !return_map || std::all_of(system_.materials.begin(), system_.materials.end(), [](const Material<dim>& m) {
-            return m.description().plasticity == PlasticityModel::None;
-        });
+        !coulomb &&
+        (!return_map || std::all_of(system_.materials.begin(), system_.materials.end(), [](const Material<dim>& m) {
+             return m.description().plasticity == PlasticityModel::None;
+         }));
     VecX lambda;
     PcgResult solve;
     if (symmetric) {
@@ -303,9 +393,20 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         const Eigen::Index size = potential.size();
         std::vector<Eigen::Triplet<double>> triplets;
         triplets.reserve(static_cast<std::size_t>(size) + n * kStencil * kStencil * dim * dim);
-        // On the free components; the held ones' rows and columns are the identity's.
+        // On the free components; the held ones' rows and columns are the identity's, but a contact's normal
+        // row: mu_k - c_k . lambda_k,t = 0, with its column (k, y) of the stress term on the free rows.
         const VecX& node_mass = potential.residual_mass();
         for (Eigen::Index i = 0; i < size; ++i) triplets.emplace_back(i, i, free[i] > 0.0 ? node_mass[i] : 1.0);
+        for (const FloorContact& c : contacts)
+            for (int t = 0; t < dim - 1; ++t) {
+                const Eigen::Index it = dim * c.dof + (t == 0 ? 0 : 2);
+                if (free[it] == 0.0) continue;
+                triplets.emplace_back(dim * c.dof + 1, it, -c.c[t]);
+                for (int r = 0; r < dim - 1; ++r) {  // J_k dc/du, transposed
+                    const Eigen::Index ir = dim * c.dof + (r == 0 ? 0 : 2);
+                    if (free[ir] > 0.0) triplets.emplace_back(ir, it, c.dc(t, r));
+                }
+            }
         for (std::size_t p = 0; p < n; ++p) {
             const int* dofs = potential.stencil_dofs(p);
             const Vec<dim>* grads = potential.stencil_gradients(p);
@@ -316,7 +417,8 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
                 for (int r = 0; r < kStencil; ++r)
                     for (int a = 0; a < dim; ++a)
                         for (int b = 0; b < dim; ++b) {
-                            if (free[dim * dofs[q] + a] == 0.0 || free[dim * dofs[r] + b] == 0.0) continue;
+                            if (free[dim * dofs[r] + b] == 0.0) continue;  // J^T's row: a free column of J
+                            if (free[dim * dofs[q] + a] == 0.0 && !contact_normal(dim * dofs[q] + a)) continue;
                             double value = 0.0;  // J((q, a), (r, b)) = V dt^2 g_q . T[(a, .), (b, .)] g_r
                             for (int j = 0; j < dim; ++j)
                                 for (int l = 0; l < dim; ++l)
@@ -348,7 +450,7 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         if (dof[i] < 0) continue;
         const Vec<dim> li = lambda.template segment<dim>(dim * dof[i]);
         v_star_bar[i] = mass[i] * li;
-        mass_bar[i] = -li.dot(v.template segment<dim>(dim * dof[i]) - v_star.template segment<dim>(dim * dof[i]));
+        mass_bar[i] = -li.dot(v.template segment<dim>(dim * dof[i]) - node_v_star[i]);
     }
     std::vector<double> youngs_bar(n, 0.0);  // summed in particle order after the loop
     std::vector<Parameters> solve_parameter_bar(n, Parameters{});

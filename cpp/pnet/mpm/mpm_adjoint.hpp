@@ -80,6 +80,9 @@ public:
                                      const std::vector<std::vector<Vec<dim>>>& v_bar) const;
     /// Steps of the last forward pass (-1: none).
     int steps() const { return steps_; }
+    /// Its steps whose solve did not reach the tolerance (Newton's cap, a failed line search): the gradient
+    /// is then that of the path taken, not of converged steps.
+    int unconverged_steps() const { return unconverged_; }
     /// The most particle states held at once by the last forward and backward passes (checkpoints and a
     /// recomputed segment).
     std::size_t peak_states() const { return peak_states_; }
@@ -101,7 +104,7 @@ private:
     Method method_;
     std::map<int, Particles<dim>> checkpoints_;  // state k, every checkpoint_every steps and the last
     double dt_ = 0.0;
-    int steps_ = -1;
+    int steps_ = -1, unconverged_ = 0;
     std::size_t last_size_ = 0;  // particles
     mutable std::size_t peak_states_ = 0;
 };

@@ -413,7 +413,7 @@ TEST(MpmAdjoint2d, ASandColumnAtRestFromTheConesTipHasItsFrictionAngleGradient) 
 // and dL/dh0 along a random direction against central differences of the whole rollout. The hardening's
 // cotangent carries each step's return mapping back (h' = h'(F_trial, h), and return_map's stress in h).
 Scene hardening_block_scene(const MaterialDescription& material, int sticky_floor_cells = 0,
-                            double flip_relaxation_time = 0.0) {
+                            double flip_relaxation_time = 0.0, double floor_friction = -1.0) {
     nlohmann::json scene = nlohmann::json::parse(R"({
         "dim": 2, "domain": {"min": [0, 0], "max": [1, 1]}, "dx": 0.03125, "gravity": [0, -9.8],
         "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 0},
@@ -422,15 +422,19 @@ Scene hardening_block_scene(const MaterialDescription& material, int sticky_floo
     })");
     scene["objects"][0]["material"] = material_to_json(material);
     scene["boundary"]["sticky_floor_cells"] = sticky_floor_cells;
+    if (floor_friction >= 0.0) {  // a Coulomb floor, the block sliding along it
+        scene["boundary"]["floor_friction"] = floor_friction;
+        scene["objects"][0]["velocity"] = {1.5, -2.0};
+    }
     if (flip_relaxation_time > 0.0) scene["transfer"] = {{"flip_relaxation_time", flip_relaxation_time}};
     return scene_from_json(scene, "<block>", ".");
 }
 
 void check_hardening_block(const MaterialDescription& material, Method method, const std::vector<std::string>& fields,
-                           int sticky_floor_cells = 0, double flip_relaxation_time = 0.0) {
+                           int sticky_floor_cells = 0, double flip_relaxation_time = 0.0, double floor_friction = -1.0) {
     const double dt = 2e-3;
-    const int steps = 20;
-    const Scene scene = hardening_block_scene(material, sticky_floor_cells, flip_relaxation_time);
+    const int steps = floor_friction >= 0.0 ? 8 : 20;
+    const Scene scene = hardening_block_scene(material, sticky_floor_cells, flip_relaxation_time, floor_friction);
     const MpmSystem<2> system = make_mpm_system<2>(scene);
     const Particles<2> start = sample_particles<2>(scene);
     const std::size_t n = start.size();
@@ -454,6 +458,7 @@ void check_hardening_block(const MaterialDescription& material, Method method, c
     };
     MpmAdjoint<2> adjoint(system, tight(), MpmOptions{}, method);
     const Particles<2> last = adjoint.forward(start, dt, steps);
+    ASSERT_EQ(adjoint.unconverged_steps(), 0) << "the gradient is of converged steps";
     int hardened = 0;
     for (std::size_t p = 0; p < n; ++p) hardened += last.hardening[p] != start.hardening[p];
     ASSERT_GT(hardened, static_cast<int>(n) / 5) << "the block must yield";
@@ -476,7 +481,8 @@ void check_hardening_block(const MaterialDescription& material, Method method, c
     const double fd_h = (loss(material, plus) - loss(material, minus)) / (2.0 * step_h);
     std::printf("MPM %s rollout (%s%s), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs %.10g, dL/dh0 %.10g vs "
                 "%.10g\n",
-                material.name.c_str(), to_string(method), sticky_floor_cells > 0 ? ", sticky floor, AFLIP" : "", n,
+                material.name.c_str(), to_string(method),
+                floor_friction >= 0.0 ? ", Coulomb floor" : sticky_floor_cells > 0 ? ", sticky floor, AFLIP" : "", n,
                 hardened, steps, g_v, fd_v, g_h, fd_h);
     EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
     EXPECT_NEAR(g_h, fd_h, 1e-4 * std::abs(fd_h));
@@ -524,6 +530,18 @@ TEST(MpmAdjoint2d, CamClayOnTheStickyFloorWithAflipMatchesCentralDifferences) {
     check_hardening_block(material_preset("snow"), Method::Lagged, fields, 3, 0.01);
 }
 
+// The Coulomb floor (mu 0.3, and 0) in return_map's one solve (its friction in the residual, J_k the floor's
+// normal impulse at v), the block sliding along it for 8 steps (0.016 s: later steps of this block stop at
+// Newton's cap short of 1e-11 m/s): the friction's Jacobian (mu J_k f1'(|u|) in the slip, and its coupling
+// through J_k to the held normal rows) in J^T, the held rows' cotangent to v*_y and the particles, and the
+// floor's projection after the solve (a node still moving into the layer loses its normal velocity and mu
+// |v_y| of its tangential speed).
+TEST(MpmAdjoint2d, CamClayOnTheCoulombFloorMatchesCentralDifferences) {
+    const std::vector<std::string> fields = {"elasticity.E", "plasticity.xi"};
+    check_hardening_block(material_preset("snow"), Method::ReturnMap, fields, 3, 0.0, 0.3);
+    check_hardening_block(material_preset("snow"), Method::ReturnMap, fields, 3, 0.0, 0.0);  // held normals alone
+}
+
 TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
     MpmSystem<2> snow = make_mpm_system<2>(disk_scene(1e5));
     MaterialDescription paper = material_preset("snow");
@@ -534,6 +552,16 @@ TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
         FAIL() << "expected std::invalid_argument";
     } catch (const std::invalid_argument& e) {
         EXPECT_NE(std::string(e.what()).find("materials[0].plasticity.variant 'paper'"), std::string::npos) << e.what();
+    }
+    MpmSystem<2> coulomb = make_mpm_system<2>(disk_scene(1e5));
+    coulomb.boundary.sticky_floor_cells = 3;
+    coulomb.boundary.floor_friction = 0.3;
+    try {
+        MpmAdjoint<2>(coulomb, tight(), MpmOptions{}, Method::Lagged);
+        FAIL() << "expected std::invalid_argument";
+    } catch (const std::invalid_argument& e) {
+        EXPECT_NE(std::string(e.what()).find("boundary.floor_friction with integrator 'lagged'"), std::string::npos)
+            << e.what();
     }
     MpmSystem<2> metal_nh = make_mpm_system<2>(disk_scene(1e5));
     metal_nh.materials[0] = Material<2>(material_preset("metal_nh"));
