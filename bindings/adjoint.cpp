@@ -68,6 +68,16 @@ void read_cotangents(const py::object& obj, const std::string& name, std::size_t
     }
 }
 
+/// d["hardening"]: dL/dh0 per element or particle, and d["initial_hardening"]: their sum (every one's start
+/// hardening moved together).
+void add_hardening(const std::vector<double>& hardening, py::dict& d) {
+    py::array_t<double> h(static_cast<py::ssize_t>(hardening.size()));
+    double total = 0.0;
+    for (std::size_t k = 0; k < hardening.size(); ++k) total += h.mutable_data()[k] = hardening[k];
+    d["hardening"] = h;
+    d["initial_hardening"] = total;
+}
+
 struct Rollout {
     virtual ~Rollout() = default;
     virtual py::dict start() const = 0;
@@ -145,11 +155,7 @@ struct RolloutOf final : Rollout {
         d["x0"] = rows<dim>(g.x);
         d["v0"] = rows<dim>(g.v);
         d["youngs_modulus"] = g.youngs_modulus;
-        py::array_t<double> h(static_cast<py::ssize_t>(g.hardening.size()));
-        double total = 0.0;
-        for (std::size_t e = 0; e < g.hardening.size(); ++e) total += h.mutable_data()[e] = g.hardening[e];
-        d["hardening"] = h;
-        d["initial_hardening"] = total;
+        add_hardening(g.hardening, d);
         return d;
     }
 };
@@ -233,11 +239,7 @@ struct MpmRolloutOf final : MpmRolloutBase {
         d["friction_angle"] = g.friction_angle;
         d["xi"] = g.xi;
         d["beta"] = g.beta;
-        py::array_t<double> h(static_cast<py::ssize_t>(g.hardening.size()));
-        double total = 0.0;
-        for (std::size_t p = 0; p < g.hardening.size(); ++p) total += h.mutable_data()[p] = g.hardening[p];
-        d["hardening"] = h;
-        d["initial_hardening"] = total;
+        add_hardening(g.hardening, d);
         return d;
     }
 };

@@ -35,13 +35,13 @@ the slip floor, its first 0.2 s (the fall and the bounce). The observed run is e
 each evaluation an implicit MPM rollout at --dt (2.5e-4 s) and its adjoint (plasticitynet.adjoint
 .mpm_positions). The implicit bounce's own damping is in the result (docs/adjoint.md).
 
-friction_angle: the sand column (scenes/sand_column_2d.json at twice its dx, 1846 particles, APIC transfers, a
-slip floor; its first 0.3 s, the collapse) observed by explicit MPM at 1e-5 s at --true-phi, fitted from
---start-phi through the MPM adjoint of `return_map`'s step at --dt (1e-3 s), the particles' mean squared
-distance at the 15 frames. The implicit step's own distance from explicit's is in the result (docs/adjoint.md).
-The shipped column's Coulomb floor is not in the MPM adjoint yet (so the fit's column has APIC transfers
-and a slip floor); `lagged` does not
-identify the angle (its column is far from explicit's, and its fit runs to 0 degrees).
+friction_angle: the sand column (scenes/sand_column_2d.json at twice its dx, 1846 particles, its AFLIP transfers
+and Coulomb floor, the floor's friction known; its first 0.3 s, the collapse) observed by explicit MPM at 1e-5 s
+at --true-phi, fitted from --start-phi through the MPM adjoint of `return_map`'s step at --dt (1e-3 s), the
+particles' mean squared distance at the 15 frames (--loss profile: the deposits' height profiles). The implicit
+step's own distance from explicit's is in the result (docs/adjoint.md). --floor slip: APIC transfers and a
+slip floor instead (the fit before the adjoint had the Coulomb floor). `lagged` does not identify the angle
+(its column is far from explicit's, and its fit runs to 0 degrees; on the Coulomb floor it is refused).
 """
 from __future__ import annotations
 
@@ -279,8 +279,9 @@ def identify_ball_youngs_modulus(true_E: float, start_E: float, out: Path, max_e
 
 
 def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_evaluations: int, observed: str,
-                            dt: float, integrator: str = "return_map", loss: str = "positions") -> int:
-    scene, truth = fit_and_observed(lambda phi: sand_column(phi, integrator, dt), start_phi, true_phi, observed,
+                            dt: float, integrator: str = "return_map", loss: str = "positions",
+                            floor: str = "coulomb") -> int:
+    scene, truth = fit_and_observed(lambda phi: sand_column(phi, integrator, dt, floor), start_phi, true_phi, observed,
                                     integrator, dt, " MPM")
     E = torch.tensor(float(scene["objects"][0]["material"]["elasticity"]["E"]), dtype=torch.float64)
 
@@ -293,8 +294,9 @@ def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_ev
         material = scene["objects"][0]["material"]
         profile = (plasticitynet_sim.MpmRollout(scene).start()["mass"], float(material["density"]))
         print("the loss: the deposits' height profiles on the scene's grid at each frame (no particle correspondence)")
-    return fit("friction_angle" if loss == "positions" else "friction_angle_profile", "phi", "deg", truth,
-               scene["frame_dt"], true_phi, start_phi, positions, out, max_evaluations, dt, profile)
+    name = "friction_angle" + ("" if loss == "positions" else "_profile") + ("" if floor == "coulomb" else "_slip_floor")
+    return fit(name, "phi", "deg", truth, scene["frame_dt"], true_phi, start_phi, positions, out, max_evaluations, dt,
+               profile)
 
 
 def identify_yield_stress(true_h0: float, start_h0: float, out: Path, max_evaluations: int, integrator: str,
@@ -340,6 +342,9 @@ def main() -> int:
     parser.add_argument("--loss", choices=["positions", "profile"], default="positions",
                         help="friction_angle: the particles' mean squared distance to the observed ones, or the "
                              "deposits' height profiles on the grid (no particle correspondence)")
+    parser.add_argument("--floor", choices=["coulomb", "slip"], default="coulomb",
+                        help="friction_angle: the shipped column's Coulomb floor and AFLIP transfers (default), or a "
+                             "slip floor with APIC transfers (results named *_slip_floor)")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "identify")
     args = parser.parse_args()
     if args.loss != "positions" and args.case != "friction_angle":
@@ -347,7 +352,7 @@ def main() -> int:
     if args.case == "friction_angle":
         return identify_friction_angle(args.true_phi, args.start_phi, args.out, args.max_evaluations,
                                        args.observed or "explicit", args.dt or 1e-3, args.integrator or "return_map",
-                                       args.loss)
+                                       args.loss, args.floor)
     if args.case == "ball_youngs_modulus":
         return identify_ball_youngs_modulus(args.true_E or 1e5, args.start_E or 5e4, args.out, args.max_evaluations,
                                             args.observed or "explicit", args.dt or 2.5e-4)

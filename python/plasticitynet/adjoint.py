@@ -171,7 +171,8 @@ def mpm_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | 
     youngs_modulus (a 0-d tensor, Pa), v0 and, where given (0-d tensors that set every object's value):
     friction_angle (degrees; Drucker-Prager sand and Cam-Clay snow), Cam-Clay's xi and beta, and
     initial_hardening (Cam-Clay's a; von Mises' h0 = tau_Y / (2 mu)): plasticitynet_sim.MpmRollout, elastic,
-    sand, snow and metal bodies with APIC or AFLIP transfers, slip walls and a sticky floor, the steps "lagged" or "return_map"
+    sand, snow and metal bodies with APIC or AFLIP transfers, slip walls and a sticky or Coulomb floor (the latter
+    under "return_map"), the steps "lagged" or "return_map"
     (docs/adjoint.md)."""
     for k in states:
         if not 0 <= int(k) <= steps:

@@ -4,7 +4,7 @@
 // APIC matrices, F and hardening, to the materials' Young's modulus and to their plasticity parameters (the
 // friction angle of Drucker-Prager and Cam-Clay, Cam-Clay's xi and beta), for elastic, Drucker-Prager sand,
 // Cam-Clay snow (its exact variant) and von Mises metal (StVK-Hencky) bodies under backward Euler with APIC or
-// AFLIP transfers, slip walls and a sticky floor: the `lagged`
+// AFLIP transfers, slip walls and a sticky or Coulomb floor: the `lagged`
 // step (the elastic energy, then the return mapping) or `return_map`'s (the return-mapped stress Ptilde
 // and its consistent tangent T, with its skew part, within the solve; plasticitynet converges to it).
 // With plasticity, R's Jacobian M + sum_p V dt^2 B_p^T T_p B_p is not symmetric: lambda solves its
@@ -35,8 +35,11 @@
 // backward pass recomputes each segment from its checkpoint, the last first (about 2 sqrt(N) states at
 // once), as the FEM adjoint does. Sand at rest from F = I (a column's free surface) sits at the cone's tip,
 // where the projection has no derivative: the gradient is one-sided there (docs/adjoint.md). Refused,
-// naming what: Cam-Clay's paper variant, von Mises with another elasticity, a Coulomb floor, BDF2. The sticky
-// floor's nodes are held at 0 by the solve: constants, whose lambda is 0.
+// naming what: Cam-Clay's paper variant, von Mises with another elasticity, a Coulomb floor under lagged, BDF2.
+// The sticky floor's nodes are held at 0 by the solve: constants, whose lambda is 0. A Coulomb floor (return_map:
+// its friction in the one solve, floor_friction_solve "newton") adds the friction's Jacobian to J^T, with the
+// held normal rows of its contacts as unknowns that carry the floor impulse's cotangent, and the floor's
+// projection after the solve (docs/adjoint.md).
 #include <functional>
 #include <map>
 #include <vector>

@@ -44,6 +44,14 @@ ImplicitOptions tight() {
     return o;
 }
 
+/// L = sum_p a_p . x_p + b_p . v_p of a state.
+template <int dim>
+double linear_loss(const Particles<dim>& state, const std::vector<Vec<dim>>& a, const std::vector<Vec<dim>>& b) {
+    double L = 0.0;
+    for (std::size_t p = 0; p < state.size(); ++p) L += a[p].dot(state.x[p]) + b[p].dot(state.v[p]);
+    return L;
+}
+
 /// Central differences of loss(start with v_p + h dv_p) along the velocity direction dv.
 template <int dim, typename Loss>
 double along_velocities(const Loss& loss, const Particles<dim>& start, const std::vector<Vec<dim>>& dv, double h) {
@@ -90,10 +98,7 @@ TEST_P(MpmAdjointTransfers, ElasticRolloutGradientMatchesCentralDifferences) {
     const MpmOptions mpm;
     auto loss = [&](const MpmSystem<2>& s, const Particles<2>& from) {
         MpmAdjoint<2> adjoint(s, tight(), mpm);
-        const Particles<2> last = adjoint.forward(from, dt, steps);
-        double L = 0.0;
-        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
-        return L;
+        return linear_loss(adjoint.forward(from, dt, steps), a, b);
     };
 
     MpmAdjoint<2> adjoint(system, tight(), mpm);
@@ -234,10 +239,7 @@ TEST(MpmAdjoint3d, ElasticRolloutGradientMatchesCentralDifferences) {
         }
         auto loss = [&](const MpmSystem<3>& s, const Particles<3>& from) {
             MpmAdjoint<3> adjoint(s, tight(), MpmOptions{});
-            const Particles<3> last = adjoint.forward(from, dt, steps);
-            double L = 0.0;
-            for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
-            return L;
+            return linear_loss(adjoint.forward(from, dt, steps), a, b);
         };
         MpmAdjoint<3> adjoint(system, tight(), MpmOptions{});
         const Particles<3> last = adjoint.forward(start, dt, steps);
@@ -294,10 +296,7 @@ void check_sand(Method method) {
     }
     auto loss = [&](const MpmSystem<2>& s, const Particles<2>& from) {
         MpmAdjoint<2> adjoint(s, tight(), MpmOptions{}, method);
-        const Particles<2> last = adjoint.forward(from, dt, steps);
-        double L = 0.0;
-        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
-        return L;
+        return linear_loss(adjoint.forward(from, dt, steps), a, b);
     };
     MpmAdjoint<2> adjoint(system, tight(), MpmOptions{}, method);
     const Particles<2> last = adjoint.forward(start, dt, steps);
@@ -451,10 +450,7 @@ void check_hardening_block(const MaterialDescription& material, Method method, c
         MpmSystem<2> s = system;
         s.materials[0] = Material<2>(m);
         MpmAdjoint<2> adjoint(s, tight(), MpmOptions{}, method);
-        const Particles<2> last = adjoint.forward(from, dt, steps);
-        double L = 0.0;
-        for (std::size_t p = 0; p < n; ++p) L += a[p].dot(last.x[p]) + b[p].dot(last.v[p]);
-        return L;
+        return linear_loss(adjoint.forward(from, dt, steps), a, b);
     };
     MpmAdjoint<2> adjoint(system, tight(), MpmOptions{}, method);
     const Particles<2> last = adjoint.forward(start, dt, steps);
