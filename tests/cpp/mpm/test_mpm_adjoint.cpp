@@ -260,6 +260,69 @@ TEST(MpmAdjoint3d, ElasticRolloutGradientMatchesCentralDifferences) {
     }
 }
 
+// 3D snow (Cam-Clay, the snow preset) thrown onto the sticky floor (snowball_3d's), under `return_map`: dL/dv0,
+// dL/dxi and dL/dh0 against central differences (steps of 1e-5 m/s, 1e-6 relative and 1e-6).
+TEST(MpmAdjoint3d, CamClayOnTheStickyFloorMatchesCentralDifferences) {
+    const double dt = 2e-3;
+    const int steps = 10;
+    auto sphere = [](const MaterialDescription& material) {
+        nlohmann::json scene = nlohmann::json::parse(R"({
+            "dim": 3, "domain": {"min": [0, 0, 0], "max": [1, 1, 1]}, "dx": 0.0625, "gravity": [0, -9.8, 0],
+            "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 3},
+            "integrator": {"name": "return_map", "dt": 2e-3},
+            "objects": [{"shape": "sphere", "center": [0.5, 0.32, 0.5], "radius": 0.12, "velocity": [0.3, -3, 0.1]}]
+        })");
+        scene["objects"][0]["material"] = material_to_json(material);
+        return scene_from_json(scene, "<snow sphere>", ".");
+    };
+    const MaterialDescription snow = material_preset("snow");
+    const MpmSystem<3> system = make_mpm_system<3>(sphere(snow));
+    const Particles<3> start = sample_particles<3>(sphere(snow));
+    const std::size_t n = start.size();
+    test::Random random(97);
+    std::vector<Vec<3>> a(n), b(n), dv(n);
+    std::vector<double> dh(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        a[p] = random.uniform_vec<3>(-1.0, 1.0);
+        b[p] = random.uniform_vec<3>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<3>(-1.0, 1.0);
+        dh[p] = random.uniform(-1.0, 1.0);
+    }
+    auto loss = [&](const MaterialDescription& m, const Particles<3>& from) {
+        MpmAdjoint<3> adjoint(make_mpm_system<3>(sphere(m)), tight(), MpmOptions{}, Method::ReturnMap);
+        return linear_loss(adjoint.forward(from, dt, steps), a, b);
+    };
+    MpmAdjoint<3> adjoint(system, tight(), MpmOptions{}, Method::ReturnMap);
+    const Particles<3> last = adjoint.forward(start, dt, steps);
+    ASSERT_EQ(adjoint.unconverged_steps(), 0);
+    int hardened = 0;
+    for (std::size_t p = 0; p < n; ++p) hardened += last.hardening[p] != start.hardening[p];
+    ASSERT_GT(hardened, static_cast<int>(n) / 5) << "the snow must yield";
+    const MpmRolloutGradient<3> g = adjoint.backward(a, b);
+    double g_v = 0.0, g_h = 0.0;
+    for (std::size_t p = 0; p < n; ++p) {
+        g_v += g.v[p].dot(dv[p]);
+        g_h += g.hardening[p] * dh[p];
+    }
+    const double fd_v = along_velocities<3>([&](const Particles<3>& from) { return loss(snow, from); }, start, dv, 1e-5);
+    Particles<3> plus = start, minus = start;
+    for (std::size_t p = 0; p < n; ++p) {
+        plus.hardening[p] += 1e-6 * dh[p];
+        minus.hardening[p] -= 1e-6 * dh[p];
+    }
+    const double fd_h = (loss(snow, plus) - loss(snow, minus)) / 2e-6;
+    MaterialDescription up = snow, down = snow;
+    up.cam_clay.xi += 1e-6 * snow.cam_clay.xi;
+    down.cam_clay.xi -= 1e-6 * snow.cam_clay.xi;
+    const double fd_xi = (loss(up, start) - loss(down, start)) / (2e-6 * snow.cam_clay.xi);
+    std::printf("MPM snow rollout 3D (return_map, sticky floor), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs "
+                "%.10g, dL/dh0 %.10g vs %.10g, dL/dxi %.10g vs %.10g\n",
+                n, hardened, steps, g_v, fd_v, g_h, fd_h, g.xi, fd_xi);
+    EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
+    EXPECT_NEAR(g_h, fd_h, 1e-4 * std::abs(fd_h));
+    EXPECT_NEAR(g.xi, fd_xi, 1e-4 * std::abs(fd_xi));
+}
+
 // Sand (Drucker-Prager, the friction angle 30 degrees) dropped onto the slip floor, under `return_map` (the
 // return-mapped stress and its non-symmetric tangent in the solve) and `lagged` (the elastic solve, the
 // return mapping after): dL/dv0, dL/dE and dL/dphi against central differences.
