@@ -386,17 +386,19 @@ fitted by the classical implicit step at 5e-4 s), Young's modulus of the MPM ela
 floor (observed by explicit MPM at 1e-5 s, fitted at 2.5e-4 s), and the friction angle of the collapsing
 sand column (MPM, observed by explicit MPM at 1e-5 s at 27 degrees, fitted from 35 by the classical implicit
 step at 1e-3 s, on the particles' positions and, without particle correspondence, on the deposit's height
-profile), each fitted to frames of the observed run by L-BFGS on the log of the parameter.
+profile; on the shipped column's Coulomb floor with AFLIP transfers, and, `*_slip_floor`, on a slip floor with
+APIC transfers), each fitted to frames of the observed run by L-BFGS on the log of the parameter.
 Each evaluation is a forward rollout and its adjoint. Regenerate:
 `python3 scripts/identify.py youngs_modulus --out notebooks/results/identify`,
 `python3 scripts/identify.py yield_stress --out notebooks/results/identify`,
 `python3 scripts/identify.py ball_youngs_modulus --out notebooks/results/identify`,
 `python3 scripts/identify.py friction_angle --out notebooks/results/identify` and
-`python3 scripts/identify.py friction_angle --loss profile --out notebooks/results/identify` (the JSON and
-PNG files; the observed runs' folders are not kept)."""),
+`python3 scripts/identify.py friction_angle --loss profile --out notebooks/results/identify`, each of the two
+also with `--floor slip` (the JSON and PNG files; the observed runs' folders are not kept)."""),
     new_code_cell(PREAMBLE),
     new_code_cell('''cases = {"youngs_modulus": ("E", "Pa"), "yield_stress": ("h0", ""), "ball_youngs_modulus": ("E", "Pa"),
-         "friction_angle": ("phi", "deg"), "friction_angle_profile": ("phi", "deg")}
+         "friction_angle": ("phi", "deg"), "friction_angle_profile": ("phi", "deg"),
+         "friction_angle_slip_floor": ("phi", "deg"), "friction_angle_profile_slip_floor": ("phi", "deg")}
 fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
 rows = ["| case | true | start | identified | relative error | evaluations |", "|---|---|---|---|---|---|"]
 for name, (symbol, unit) in cases.items():

@@ -218,7 +218,12 @@ def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_va
                                   tolerance_grad=1e-14, tolerance_change=1e-14, line_search_fn="strong_wolfe")
     path = []
 
+    class Budget(Exception):
+        """max_evaluations reached: L-BFGS's strong-Wolfe search may ask for more within its last iteration."""
+
     def closure():
+        if len(path) >= max_evaluations:
+            raise Budget
         optimizer.zero_grad()
         start = time.perf_counter()
         x = positions(torch.exp(log_p), frame_count * steps_per_frame, states)
@@ -230,7 +235,10 @@ def fit(name: str, symbol: str, unit: str, scene: dict, frame_dt: float, true_va
               f"({seconds:.2f} s)", flush=True)
         return loss
 
-    optimizer.step(closure)
+    try:
+        optimizer.step(closure)
+    except Budget:
+        print(f"stopped at {max_evaluations} evaluations (--max-evaluations)")
     best = min(path, key=lambda q: q[1])
     error = abs(best[0] - true_value) / true_value
     print(f"identified {symbol} = {best[0]:.6g} {unit} against the true {true_value:.6g} {unit} ({100 * error:.3g}%), "
@@ -292,7 +300,8 @@ def identify_friction_angle(true_phi: float, start_phi: float, out: Path, max_ev
     profile = None
     if loss == "profile":
         material = scene["objects"][0]["material"]
-        profile = (plasticitynet_sim.MpmRollout(scene).start()["mass"], float(material["density"]))
+        masses = plasticitynet_sim.MpmRollout(scene, integrator=integrator).start()["mass"]
+        profile = (masses, float(material["density"]))
         print("the loss: the deposits' height profiles on the scene's grid at each frame (no particle correspondence)")
     name = "friction_angle" + ("" if loss == "positions" else "_profile") + ("" if floor == "coulomb" else "_slip_floor")
     return fit(name, "phi", "deg", truth, scene["frame_dt"], true_phi, start_phi, positions, out, max_evaluations, dt,
