@@ -17,6 +17,105 @@
 
 namespace pnet {
 
+namespace {
+
+/// Grid::apply_boundary's projection of node i's velocity v after the solve (v projected in place) and its
+/// Jacobian, its active set held (one-sided where a component is exactly at 0): on a Coulomb floor's layer a
+/// node still moving into it (a normal the solve left free) loses its normal velocity and mu |v_y| of its
+/// tangential speed (all of it where that is more); then the slip walls zero their wall-ward components.
+template <int dim>
+Mat<dim> project_after_solve(const Grid<dim>& grid, std::int64_t i, const BoundaryConditions& bc, bool coulomb,
+                             Vec<dim>& v) {
+    Mat<dim> A = Mat<dim>::Identity();
+    int coord[dim];
+    grid.coordinates(i, coord);
+    if (coulomb && bc.in_floor(coord[1]) && v[1] < 0.0) {
+        // v_t' = v_t (1 - mu p / |v_t|) with p = -v_y where |v_t| > mu p, else 0; v_y' = 0.
+        const double p = -v[1], mu = bc.floor_friction;
+        Vec<dim> t = v;
+        t[1] = 0.0;
+        const double length = t.norm();
+        A.setZero();
+        if (length > mu * p) {
+            const Vec<dim> n = t / length;
+            for (int a = 0; a < dim; ++a) {
+                if (a == 1) continue;
+                for (int b = 0; b < dim; ++b) {
+                    if (b == 1) continue;
+                    const double delta = a == b ? 1.0 : 0.0;
+                    A(a, b) = delta - mu * p / length * (delta - n[a] * n[b]);
+                }
+                A(a, 1) = mu * n[a];  // d v_t' / d v_y = mu t / |t|
+            }
+        }
+        coulomb_projection<dim>(v, p, mu);
+    }
+    if (bc.slip_walls)
+        for (int a = 0; a < dim; ++a) {
+            const bool low = coord[a] < Grid<dim>::kWallNodes && v[a] < 0.0;
+            const bool high = coord[a] >= grid.nodes(a) - Grid<dim>::kWallNodes && v[a] > 0.0;
+            if (low || high) {
+                v[a] = 0.0;
+                A.row(a).setZero();
+            }
+        }
+    return A;
+}
+
+/// A Coulomb floor's contact at the step's solution: its node's unknown, the floor's normal impulse J_k (the
+/// residual's held row (k, y) with v*_k,y as update_velocity left it; <= 0: the floor pulls, no friction), the
+/// friction's coefficient c = mu f1(|u|) u / |u| on the node's tangential velocity u (the force c J_k) and
+/// J_k dc/du.
+template <int dim>
+struct FloorContact {
+    using Tangent = Eigen::Matrix<double, dim - 1, 1>;
+    using TangentMatrix = Eigen::Matrix<double, dim - 1, dim - 1>;
+    int dof;
+    double impulse = 0.0;
+    Tangent c = Tangent::Zero();
+    TangentMatrix dc = TangentMatrix::Zero();
+};
+
+/// The potential's Coulomb floor's contacts (FloorFrictionForm::begin_newton's nodes) at the solution v, with
+/// the particles' stress P there; contact_of: unknown node -> its contact (-1: none).
+template <int dim>
+std::vector<FloorContact<dim>> floor_contacts(const IncrementalPotential<dim>& potential, const Particles<dim>& start,
+                                              const std::vector<Mat<dim>>& P, const VecX& v, double dt,
+                                              std::vector<int>& contact_of) {
+    using Contact = FloorContact<dim>;
+    const FloorFrictionForm<dim>& form = potential.floor_friction_form();
+    std::vector<Contact> contacts;
+    contact_of.assign(potential.nodes(), -1);
+    for (const auto& c : form.newton_contacts()) {
+        contact_of[c.dof] = static_cast<int>(contacts.size());
+        contacts.push_back({c.dof, -c.normal_momentum});
+    }
+    for (std::size_t p = 0; p < start.size(); ++p) {  // the stress term's rows (k, y), in particle order
+        const int* dofs = potential.stencil_dofs(p);
+        const Vec<dim>* grads = potential.stencil_gradients(p);
+        for (int s = 0; s < IncrementalPotential<dim>::kStencil; ++s)
+            if (contact_of[dofs[s]] >= 0)
+                contacts[contact_of[dofs[s]]].impulse +=
+                    start.rest_volume[p] * dt * (P[p] * start.F_elastic[p].transpose() * grads[s])[1];
+    }
+    const double mu = form.mu(), eps = form.eps_v();
+    for (Contact& c : contacts) {
+        if (!(c.impulse > 0.0)) continue;
+        typename Contact::Tangent u;
+        for (int t = 0; t < dim - 1; ++t) u[t] = v[dim * c.dof + (t == 0 ? 0 : 2)];
+        const double slip = u.norm(), f1_over_s = friction_f1_over_x(slip, eps);
+        c.c = mu * f1_over_s * u;
+        // d(f1(s) u / s)/du = f1'(s) u u^T / s^2 + f1(s) / s (I - u u^T / s^2) (f1'(0) = f1(s) / s at 0).
+        using TangentMatrix = typename Contact::TangentMatrix;
+        const TangentMatrix I = TangentMatrix::Identity();
+        const TangentMatrix uu = slip > 0.0 ? TangentMatrix(u * u.transpose() / (slip * slip)) : TangentMatrix::Zero();
+        c.dc = mu * c.impulse * (friction_f1_derivative(slip, eps) * uu + f1_over_s * (I - uu));
+    }
+    return contacts;
+}
+
+}  // namespace
+
 template <int dim>
 MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options,
                             Method method)
@@ -197,48 +296,13 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     for (std::size_t k = 0; k < potential.nodes(); ++k) dof[potential.dof_node(k)] = static_cast<int>(k);
 
     // The grid velocity G2P read: the solution projected as Grid::apply_boundary does after the solve, and
-    // the projection's Jacobian A_i (its active set held; one-sided where a component is exactly at 0).
-    // On a Coulomb floor's layer a node still moving into it (a normal the solve left free) loses its
-    // normal velocity and mu |v_y| of its tangential speed; then the slip walls zero their wall-ward
-    // components.
+    // the projection's Jacobian A_i.
     std::vector<Vec<dim>> grid_v(storage, Vec<dim>::Zero());
     std::vector<Mat<dim>> projection(storage, Mat<dim>::Identity());
-    const BoundaryConditions& bc = system_.boundary;
     for (std::int64_t i = 0; i < storage; ++i) {
         if (dof[i] < 0) continue;
-        Vec<dim> vi = v.template segment<dim>(dim * dof[i]);
-        Mat<dim>& A = projection[i];
-        int coord[dim];
-        grid.coordinates(i, coord);
-        if (coulomb && bc.in_floor(coord[1]) && vi[1] < 0.0) {
-            // v_t' = v_t (1 - mu p / |v_t|) with p = -v_y, where |v_t| > mu p; else 0. v_y' = 0.
-            const double p = -vi[1];
-            Vec<dim> t = vi;
-            t[1] = 0.0;
-            const double length = t.norm();
-            A.setZero();
-            if (length > bc.floor_friction * p) {
-                const Vec<dim> n = t / length;
-                for (int a = 0; a < dim; ++a) {
-                    if (a == 1) continue;
-                    for (int b = 0; b < dim; ++b)
-                        if (b != 1)
-                            A(a, b) = (a == b ? 1.0 : 0.0) - bc.floor_friction * p / length * ((a == b ? 1.0 : 0.0) - n[a] * n[b]);
-                    A(a, 1) = bc.floor_friction * n[a];  // d v_t' / d v_y = mu t / |t|
-                }
-            }
-            coulomb_projection<dim>(vi, p, bc.floor_friction);
-        }
-        if (bc.slip_walls)
-            for (int a = 0; a < dim; ++a) {
-                const bool low = coord[a] < Grid<dim>::kWallNodes && vi[a] < 0.0;
-                const bool high = coord[a] >= grid.nodes(a) - Grid<dim>::kWallNodes && vi[a] > 0.0;
-                if (low || high) {
-                    vi[a] = 0.0;
-                    A.row(a).setZero();
-                }
-            }
-        grid_v[i] = vi;
+        grid_v[i] = v.template segment<dim>(dim * dof[i]);
+        projection[i] = project_after_solve<dim>(grid, i, system_.boundary, coulomb, grid_v[i]);
     }
 
     // G2P: the cotangents of the output (x, v, C, F: g) to the grid velocities and the start's x, F.
@@ -329,44 +393,9 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     // and c_k (row (k, y) of the stress term's Jacobian) on the tangential rows. J^T lambda = vb is solved with
     // the held normal rows as unknowns too, mu_k = c_k . lambda_k,t: then lambda's row (k, y) carries the
     // impulse's cotangent to v*_k,y, the node's mass and the particles like any row's.
-    struct FloorContact {
-        int dof;
-        double impulse = 0.0;  // J_k at the solution (<= 0: the floor pulls, no friction)
-        Eigen::Matrix<double, dim - 1, 1> c = Eigen::Matrix<double, dim - 1, 1>::Zero();
-        Eigen::Matrix<double, dim - 1, dim - 1> dc = Eigen::Matrix<double, dim - 1, dim - 1>::Zero();
-    };
-    std::vector<FloorContact> contacts;
     std::vector<int> contact_of;  // unknown node -> its contact (-1: none)
-    if (coulomb) {
-        const FloorFrictionForm<dim>& form = potential.floor_friction_form();
-        contact_of.assign(potential.nodes(), -1);
-        for (const auto& c : form.newton_contacts()) {
-            contact_of[c.dof] = static_cast<int>(contacts.size());
-            contacts.push_back({c.dof, -c.normal_momentum});
-        }
-        for (std::size_t p = 0; p < n; ++p) {  // the stress term's rows (k, y), in particle order
-            const int* dofs = potential.stencil_dofs(p);
-            const Vec<dim>* grads = potential.stencil_gradients(p);
-            for (int s = 0; s < kStencil; ++s)
-                if (contact_of[dofs[s]] >= 0)
-                    contacts[contact_of[dofs[s]]].impulse +=
-                        start.rest_volume[p] * dt * (P[p] * start.F_elastic[p].transpose() * grads[s])[1];
-        }
-        const double mu = form.mu(), eps = form.eps_v();
-        for (FloorContact& c : contacts) {
-            if (!(c.impulse > 0.0)) continue;
-            Eigen::Matrix<double, dim - 1, 1> u;
-            for (int t = 0; t < dim - 1; ++t) u[t] = v[dim * c.dof + (t == 0 ? 0 : 2)];
-            const double s = u.norm(), f1_over_s = friction_f1_over_x(s, eps);
-            c.c = mu * f1_over_s * u;
-            // d(f1(s) u / s)/du = f1'(s) u u^T / s^2 + f1(s) / s (I - u u^T / s^2) (f1'(0) = f1(s) / s at 0).
-            const Eigen::Matrix<double, dim - 1, dim - 1> I = Eigen::Matrix<double, dim - 1, dim - 1>::Identity();
-            const Eigen::Matrix<double, dim - 1, dim - 1> uu =
-                s > 0.0 ? Eigen::Matrix<double, dim - 1, dim - 1>(u * u.transpose() / (s * s))
-                        : Eigen::Matrix<double, dim - 1, dim - 1>::Zero();
-            c.dc = mu * c.impulse * (friction_f1_derivative(s, eps) * uu + f1_over_s * (I - uu));
-        }
-    }
+    const std::vector<FloorContact<dim>> contacts =
+        coulomb ? floor_contacts<dim>(potential, start, P, v, dt, contact_of) : std::vector<FloorContact<dim>>{};
     auto contact_normal = [&](Eigen::Index i) {  // a held normal row of a contact
         return coulomb && i % dim == 1 && contact_of[i / dim] >= 0;
     };
@@ -397,7 +426,7 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         // row: mu_k - c_k . lambda_k,t = 0, with its column (k, y) of the stress term on the free rows.
         const VecX& node_mass = potential.residual_mass();
         for (Eigen::Index i = 0; i < size; ++i) triplets.emplace_back(i, i, free[i] > 0.0 ? node_mass[i] : 1.0);
-        for (const FloorContact& c : contacts)
+        for (const FloorContact<dim>& c : contacts)
             for (int t = 0; t < dim - 1; ++t) {
                 const Eigen::Index it = dim * c.dof + (t == 0 ? 0 : 2);
                 if (free[it] == 0.0) continue;
