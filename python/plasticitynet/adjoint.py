@@ -118,8 +118,9 @@ _PLASTICITY_PARAMETERS = (
 def with_plasticity(scene: dict, field: str, value: float, models: Sequence[str]) -> dict:
     """A copy of a scene dict whose particle objects of the plasticity models `models` have the plasticity field
     `field` (e.g. "friction_angle_deg", "xi") set to value; their material must be written out (a dict with a
-    "plasticity" block)."""
+    "plasticity" block), and one object at least must have one of the models (ValueError naming the field)."""
     out = copy.deepcopy(scene)
+    found = False
     for k, body in enumerate(out.get("objects", [])):
         material = body.get("material")
         if not isinstance(material, dict) or "plasticity" not in material:
@@ -127,6 +128,10 @@ def with_plasticity(scene: dict, field: str, value: float, models: Sequence[str]
                              f"block) to set plasticity.{field}")
         if material["plasticity"].get("model") in models:
             material["plasticity"][field] = float(value)
+            found = True
+    if not found:
+        raise ValueError(f"no object's material has plasticity.{field} (model {' or '.join(models)}): the scene's "
+                         "gradient in it would be 0")
     return out
 
 
@@ -141,9 +146,12 @@ class _MpmPositions(torch.autograd.Function):
                 *plasticity):
         h0 = None if initial_hardening is None else float(initial_hardening)
         s = with_youngs_modulus(scene, float(youngs_modulus), h0)
-        for (_, field, models), value in zip(_PLASTICITY_PARAMETERS, plasticity):
+        for (name, field, models), value in zip(_PLASTICITY_PARAMETERS, plasticity):
             if value is not None:
-                s = with_plasticity(s, field, float(value), models)
+                try:
+                    s = with_plasticity(s, field, float(value), models)
+                except ValueError as e:
+                    raise ValueError(f"{name}: {e}") from None
         rollout = _sim().MpmRollout(s, newton_tolerance, integrator)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]

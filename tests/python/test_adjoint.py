@@ -420,6 +420,15 @@ def test_mpm_rollouts_refuse_what_the_adjoint_does_not_cover():
         rollout.forward(3, 2e-3, states=[5])
 
 
+def test_a_plasticity_parameter_no_object_has_is_refused_naming_it():
+    """xi of a sand scene (Cam-Clay's, not Drucker-Prager's) would move nothing and have a zero gradient."""
+    E = torch.tensor(3.5e5, dtype=torch.float64)
+    with pytest.raises(ValueError, match=r"xi: no object's material has plasticity\.xi \(model cam_clay\)"):
+        adjoint.mpm_positions(sand_block_scene(), E, None, 2, 2e-3, [2], xi=torch.tensor(0.5, dtype=torch.float64))
+    with pytest.raises(ValueError, match=r"friction_angle: no object's material has plasticity\.friction_angle_deg"):
+        adjoint.mpm_positions(disk_scene(), E, None, 2, 2e-3, [2], friction_angle=torch.tensor(30.0, dtype=torch.float64))
+
+
 def test_bad_requests_are_refused_naming_what():
     with pytest.raises(ValueError, match="states: 16"):
         adjoint.fem_positions(box_scene(), torch.tensor(1e5, dtype=torch.float64), None, STEPS, DT, [16])
