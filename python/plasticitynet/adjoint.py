@@ -135,11 +135,6 @@ def with_plasticity(scene: dict, field: str, value: float, models: Sequence[str]
     return out
 
 
-def with_friction_angle(scene: dict, friction_angle: float) -> dict:
-    """A copy of a scene dict whose Drucker-Prager and Cam-Clay objects have the friction angle phi (degrees)."""
-    return with_plasticity(scene, "friction_angle_deg", friction_angle, ("drucker_prager", "cam_clay"))
-
-
 class _MpmPositions(torch.autograd.Function):
     @staticmethod
     def forward(ctx, youngs_modulus, v0, scene, steps, dt, states, newton_tolerance, integrator, initial_hardening,
