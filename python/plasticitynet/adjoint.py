@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import copy
 import math
+import warnings
 from typing import Sequence
 
 import numpy as np
@@ -150,6 +151,10 @@ class _MpmPositions(torch.autograd.Function):
         rollout = _sim().MpmRollout(s, newton_tolerance, integrator)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
+        if rollout.unconverged_steps:
+            warnings.warn(f"{rollout.unconverged_steps} of {steps} steps stopped short of newton_tolerance "
+                          f"({newton_tolerance:g} m/s): the gradient is that of the path taken, not of converged "
+                          "steps (docs/adjoint.md)", RuntimeWarning, stacklevel=2)
         ctx.rollout, ctx.states, ctx.has_v0 = rollout, list(states), v0 is not None
         ctx.given = [initial_hardening is not None] + [value is not None for value in plasticity]
         return torch.from_numpy(np.stack([x[k] for k in states]))

@@ -420,6 +420,18 @@ def test_mpm_rollouts_refuse_what_the_adjoint_does_not_cover():
         rollout.forward(3, 2e-3, states=[5])
 
 
+def test_a_rollout_with_unconverged_steps_says_so():
+    """The snow block asked for a residual below round-off (1e-16 m/s): its steps past the free fall's first (whose
+    stress stays 0) stop short of it, mpm_positions warns and the rollout counts them; at 1e-10 m/s none does."""
+    scene = snow_block_scene()
+    with pytest.warns(RuntimeWarning, match=r"1 of 2 steps stopped short of newton_tolerance \(1e-16 m/s\)"):
+        adjoint.mpm_positions(scene, torch.tensor(1.4e5, dtype=torch.float64), None, 2, 2e-3, [2],
+                              newton_tolerance=1e-16, integrator="return_map")
+    rollout = pns.MpmRollout(scene, 1e-10, "return_map")
+    rollout.forward(2, 2e-3, states=[2])
+    assert rollout.unconverged_steps == 0
+
+
 def test_a_plasticity_parameter_no_object_has_is_refused_naming_it():
     """xi of a sand scene (Cam-Clay's, not Drucker-Prager's) would move nothing and have a zero gradient."""
     E = torch.tensor(3.5e5, dtype=torch.float64)
