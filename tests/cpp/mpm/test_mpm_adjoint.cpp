@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <functional>
 
 #include <nlohmann/json.hpp>
 
@@ -260,69 +261,6 @@ TEST(MpmAdjoint3d, ElasticRolloutGradientMatchesCentralDifferences) {
     }
 }
 
-// 3D snow (Cam-Clay, the snow preset) thrown onto the sticky floor (snowball_3d's), under `return_map`: dL/dv0,
-// dL/dxi and dL/dh0 against central differences (steps of 1e-5 m/s, 1e-6 relative and 1e-6).
-TEST(MpmAdjoint3d, CamClayOnTheStickyFloorMatchesCentralDifferences) {
-    const double dt = 2e-3;
-    const int steps = 10;
-    auto sphere = [](const MaterialDescription& material) {
-        nlohmann::json scene = nlohmann::json::parse(R"({
-            "dim": 3, "domain": {"min": [0, 0, 0], "max": [1, 1, 1]}, "dx": 0.0625, "gravity": [0, -9.8, 0],
-            "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 3},
-            "integrator": {"name": "return_map", "dt": 2e-3},
-            "objects": [{"shape": "sphere", "center": [0.5, 0.32, 0.5], "radius": 0.12, "velocity": [0.3, -3, 0.1]}]
-        })");
-        scene["objects"][0]["material"] = material_to_json(material);
-        return scene_from_json(scene, "<snow sphere>", ".");
-    };
-    const MaterialDescription snow = material_preset("snow");
-    const MpmSystem<3> system = make_mpm_system<3>(sphere(snow));
-    const Particles<3> start = sample_particles<3>(sphere(snow));
-    const std::size_t n = start.size();
-    test::Random random(97);
-    std::vector<Vec<3>> a(n), b(n), dv(n);
-    std::vector<double> dh(n);
-    for (std::size_t p = 0; p < n; ++p) {
-        a[p] = random.uniform_vec<3>(-1.0, 1.0);
-        b[p] = random.uniform_vec<3>(-1.0, 1.0);
-        dv[p] = random.uniform_vec<3>(-1.0, 1.0);
-        dh[p] = random.uniform(-1.0, 1.0);
-    }
-    auto loss = [&](const MaterialDescription& m, const Particles<3>& from) {
-        MpmAdjoint<3> adjoint(make_mpm_system<3>(sphere(m)), tight(), MpmOptions{}, Method::ReturnMap);
-        return linear_loss(adjoint.forward(from, dt, steps), a, b);
-    };
-    MpmAdjoint<3> adjoint(system, tight(), MpmOptions{}, Method::ReturnMap);
-    const Particles<3> last = adjoint.forward(start, dt, steps);
-    ASSERT_EQ(adjoint.unconverged_steps(), 0);
-    int hardened = 0;
-    for (std::size_t p = 0; p < n; ++p) hardened += last.hardening[p] != start.hardening[p];
-    ASSERT_GT(hardened, static_cast<int>(n) / 5) << "the snow must yield";
-    const MpmRolloutGradient<3> g = adjoint.backward(a, b);
-    double g_v = 0.0, g_h = 0.0;
-    for (std::size_t p = 0; p < n; ++p) {
-        g_v += g.v[p].dot(dv[p]);
-        g_h += g.hardening[p] * dh[p];
-    }
-    const double fd_v = along_velocities<3>([&](const Particles<3>& from) { return loss(snow, from); }, start, dv, 1e-5);
-    Particles<3> plus = start, minus = start;
-    for (std::size_t p = 0; p < n; ++p) {
-        plus.hardening[p] += 1e-6 * dh[p];
-        minus.hardening[p] -= 1e-6 * dh[p];
-    }
-    const double fd_h = (loss(snow, plus) - loss(snow, minus)) / 2e-6;
-    MaterialDescription up = snow, down = snow;
-    up.cam_clay.xi += 1e-6 * snow.cam_clay.xi;
-    down.cam_clay.xi -= 1e-6 * snow.cam_clay.xi;
-    const double fd_xi = (loss(up, start) - loss(down, start)) / (2e-6 * snow.cam_clay.xi);
-    std::printf("MPM snow rollout 3D (return_map, sticky floor), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs "
-                "%.10g, dL/dh0 %.10g vs %.10g, dL/dxi %.10g vs %.10g\n",
-                n, hardened, steps, g_v, fd_v, g_h, fd_h, g.xi, fd_xi);
-    EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
-    EXPECT_NEAR(g_h, fd_h, 1e-4 * std::abs(fd_h));
-    EXPECT_NEAR(g.xi, fd_xi, 1e-4 * std::abs(fd_xi));
-}
-
 // Sand (Drucker-Prager, the friction angle 30 degrees) dropped onto the slip floor, under `return_map` (the
 // return-mapped stress and its non-symmetric tangent in the solve) and `lagged` (the elastic solve, the
 // return mapping after): dL/dv0, dL/dE and dL/dphi against central differences.
@@ -492,37 +430,40 @@ Scene hardening_block_scene(const MaterialDescription& material, int sticky_floo
     return scene_from_json(scene, "<block>", ".");
 }
 
-void check_hardening_block(const MaterialDescription& material, Method method, const std::vector<std::string>& fields,
-                           int sticky_floor_cells = 0, double flip_relaxation_time = 0.0, double floor_friction = -1.0,
-                           const ImplicitOptions& options = tight()) {
+/// The hardening rollout's check: scene_of(material) (its particles and material) for `steps` steps of 2e-3 s under
+/// `method`, a random linear loss of the last positions and velocities; dL/dv0 and dL/dh0 along random
+/// directions and dL/d of each field ("elasticity.E", a plasticity parameter) against central differences.
+template <int dim>
+void check_hardening_rollout(const std::function<Scene(const MaterialDescription&)>& scene_of,
+                             const MaterialDescription& material, Method method, const std::vector<std::string>& fields,
+                             int steps, const ImplicitOptions& options, const std::string& label) {
     const double dt = 2e-3;
-    const int steps = 20;
-    const Scene scene = hardening_block_scene(material, sticky_floor_cells, flip_relaxation_time, floor_friction);
-    const MpmSystem<2> system = make_mpm_system<2>(scene);
-    const Particles<2> start = sample_particles<2>(scene);
+    const Scene scene = scene_of(material);
+    const MpmSystem<dim> system = make_mpm_system<dim>(scene);
+    const Particles<dim> start = sample_particles<dim>(scene);
     const std::size_t n = start.size();
     test::Random random(89);
-    std::vector<Vec<2>> a(n), b(n), dv(n);
+    std::vector<Vec<dim>> a(n), b(n), dv(n);
     std::vector<double> dh(n);
     for (std::size_t p = 0; p < n; ++p) {
-        a[p] = random.uniform_vec<2>(-1.0, 1.0);
-        b[p] = random.uniform_vec<2>(-1.0, 1.0);
-        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
+        a[p] = random.uniform_vec<dim>(-1.0, 1.0);
+        b[p] = random.uniform_vec<dim>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<dim>(-1.0, 1.0);
         dh[p] = random.uniform(-1.0, 1.0);
     }
-    auto loss = [&](const MaterialDescription& m, const Particles<2>& from) {
-        MpmSystem<2> s = system;
-        s.materials[0] = Material<2>(m);
-        MpmAdjoint<2> adjoint(s, options, MpmOptions{}, method);
+    auto loss = [&](const MaterialDescription& m, const Particles<dim>& from) {
+        MpmSystem<dim> s = system;
+        s.materials[0] = Material<dim>(m);
+        MpmAdjoint<dim> adjoint(s, options, MpmOptions{}, method);
         return linear_loss(adjoint.forward(from, dt, steps), a, b);
     };
-    MpmAdjoint<2> adjoint(system, options, MpmOptions{}, method);
-    const Particles<2> last = adjoint.forward(start, dt, steps);
+    MpmAdjoint<dim> adjoint(system, options, MpmOptions{}, method);
+    const Particles<dim> last = adjoint.forward(start, dt, steps);
     ASSERT_EQ(adjoint.unconverged_steps(), 0) << "the gradient is of converged steps";
     int hardened = 0;
     for (std::size_t p = 0; p < n; ++p) hardened += last.hardening[p] != start.hardening[p];
-    ASSERT_GT(hardened, static_cast<int>(n) / 5) << "the block must yield";
-    const MpmRolloutGradient<2> g = adjoint.backward(a, b);
+    ASSERT_GT(hardened, static_cast<int>(n) / 5) << "the body must yield";
+    const MpmRolloutGradient<dim> g = adjoint.backward(a, b);
     double g_v = 0.0, g_h = 0.0;
     for (std::size_t p = 0; p < n; ++p) {
         g_v += g.v[p].dot(dv[p]);
@@ -530,20 +471,18 @@ void check_hardening_block(const MaterialDescription& material, Method method, c
     }
     // Differences of 1e-5 m/s, 1e-6 in h and 1e-6 relative in the parameters: at 10 times these, particles that
     // change branch (yield onset, the ellipse's tips) within the step move them by up to 10% (the metal's dL/dh0).
-    const double fd_v = along_velocities<2>([&](const Particles<2>& from) { return loss(material, from); }, start, dv,
-                                            1e-5);
+    const double fd_v =
+        along_velocities<dim>([&](const Particles<dim>& from) { return loss(material, from); }, start, dv, 1e-5);
     const double step_h = 1e-6;
-    Particles<2> plus = start, minus = start;
+    Particles<dim> plus = start, minus = start;
     for (std::size_t p = 0; p < n; ++p) {
         plus.hardening[p] += step_h * dh[p];
         minus.hardening[p] -= step_h * dh[p];
     }
     const double fd_h = (loss(material, plus) - loss(material, minus)) / (2.0 * step_h);
-    std::printf("MPM %s rollout (%s%s), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs %.10g, dL/dh0 %.10g vs "
-                "%.10g\n",
-                material.name.c_str(), to_string(method),
-                floor_friction >= 0.0 ? ", Coulomb floor" : sticky_floor_cells > 0 ? ", sticky floor, AFLIP" : "", n,
-                hardened, steps, g_v, fd_v, g_h, fd_h);
+    std::printf("MPM %s rollout %dD (%s%s), %zu particles (%d hardened), %d steps: dL/dv0 %.10g vs %.10g, dL/dh0 %.10g "
+                "vs %.10g\n",
+                material.name.c_str(), dim, to_string(method), label.c_str(), n, hardened, steps, g_v, fd_v, g_h, fd_h);
     EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v));
     EXPECT_NEAR(g_h, fd_h, 1e-4 * std::abs(fd_h));
     for (const std::string& field : fields) {
@@ -565,6 +504,17 @@ void check_hardening_block(const MaterialDescription& material, Method method, c
         std::printf("  dL/d%s %.10g vs %.10g\n", field.c_str(), adjoint_value, fd);
         EXPECT_NEAR(adjoint_value, fd, 1e-4 * std::abs(fd)) << field;
     }
+}
+
+void check_hardening_block(const MaterialDescription& material, Method method, const std::vector<std::string>& fields,
+                           int sticky_floor_cells = 0, double flip_relaxation_time = 0.0, double floor_friction = -1.0,
+                           const ImplicitOptions& options = tight()) {
+    check_hardening_rollout<2>(
+        [&](const MaterialDescription& m) {
+            return hardening_block_scene(m, sticky_floor_cells, flip_relaxation_time, floor_friction);
+        },
+        material, method, fields, 20, options,
+        floor_friction >= 0.0 ? ", Coulomb floor" : sticky_floor_cells > 0 ? ", sticky floor, AFLIP" : "");
 }
 
 TEST(MpmAdjoint2d, CamClayRolloutGradientMatchesCentralDifferences) {
@@ -602,6 +552,24 @@ TEST(MpmAdjoint2d, CamClayOnTheCoulombFloorMatchesCentralDifferences) {
     options.max_newton_iterations = 2000;
     check_hardening_block(material_preset("snow"), Method::ReturnMap, fields, 3, 0.0, 0.3, options);
     check_hardening_block(material_preset("snow"), Method::ReturnMap, fields, 3, 0.0, 0.0, options);  // held normals
+}
+
+// 3D snow (Cam-Clay, the snow preset) thrown onto the sticky floor (snowball_3d's), under `return_map`: dL/dv0,
+// dL/dh0 and dL/dxi against central differences.
+Scene snow_sphere_scene(const MaterialDescription& material) {
+    nlohmann::json scene = nlohmann::json::parse(R"({
+        "dim": 3, "domain": {"min": [0, 0, 0], "max": [1, 1, 1]}, "dx": 0.0625, "gravity": [0, -9.8, 0],
+        "particles_per_cell": 2, "boundary": {"walls": "slip", "sticky_floor_cells": 3},
+        "integrator": {"name": "return_map", "dt": 2e-3},
+        "objects": [{"shape": "sphere", "center": [0.5, 0.32, 0.5], "radius": 0.12, "velocity": [0.3, -3, 0.1]}]
+    })");
+    scene["objects"][0]["material"] = material_to_json(material);
+    return scene_from_json(scene, "<snow sphere>", ".");
+}
+
+TEST(MpmAdjoint3d, CamClayOnTheStickyFloorMatchesCentralDifferences) {
+    check_hardening_rollout<3>(snow_sphere_scene, material_preset("snow"), Method::ReturnMap, {"plasticity.xi"}, 10,
+                               tight(), ", sticky floor");
 }
 
 TEST(MpmAdjoint2d, RefusesWhatItDoesNotCover) {
