@@ -45,6 +45,22 @@ ImplicitOptions tight() {
     return o;
 }
 
+/// Per particle, in this order from Random(seed): the loss's weights a_p and b_p (linear_loss) and a direction
+/// dv_p of the start's velocities, each uniform in [-1, 1] per component.
+template <int dim>
+void loss_directions(std::size_t n, unsigned seed, std::vector<Vec<dim>>& a, std::vector<Vec<dim>>& b,
+                     std::vector<Vec<dim>>& dv) {
+    test::Random random(seed);
+    a.resize(n);
+    b.resize(n);
+    dv.resize(n);
+    for (std::size_t p = 0; p < n; ++p) {
+        a[p] = random.uniform_vec<dim>(-1.0, 1.0);
+        b[p] = random.uniform_vec<dim>(-1.0, 1.0);
+        dv[p] = random.uniform_vec<dim>(-1.0, 1.0);
+    }
+}
+
 /// L = sum_p a_p . x_p + b_p . v_p of a state.
 template <int dim>
 double linear_loss(const Particles<dim>& state, const std::vector<Vec<dim>>& a, const std::vector<Vec<dim>>& b) {
@@ -156,13 +172,8 @@ TEST(MpmAdjoint2d, ALossOfSeveralStatesGetsItsGradientAtEach) {
     const MpmSystem<2> system = make_mpm_system<2>(scene);
     const Particles<2> start = sample_particles<2>(scene);
     const std::size_t n = start.size();
-    test::Random random(73);
-    std::vector<Vec<2>> a(n), b(n), dv(n);
-    for (std::size_t p = 0; p < n; ++p) {
-        a[p] = random.uniform_vec<2>(-1.0, 1.0);
-        b[p] = random.uniform_vec<2>(-1.0, 1.0);
-        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
-    }
+    std::vector<Vec<2>> a, b, dv;
+    loss_directions<2>(n, 73, a, b, dv);
     auto loss = [&](const Particles<2>& from) {
         MpmAdjoint<2> adjoint(system, tight(), MpmOptions{});
         double L = 0.0;
@@ -231,13 +242,8 @@ TEST(MpmAdjoint3d, ElasticRolloutGradientMatchesCentralDifferences) {
         const MpmSystem<3> system = make(E);
         const Particles<3> start = sample_particles<3>(sphere(E));
         const std::size_t n = start.size();
-        test::Random random(79);
-        std::vector<Vec<3>> a(n), b(n), dv(n);
-        for (std::size_t p = 0; p < n; ++p) {
-            a[p] = random.uniform_vec<3>(-1.0, 1.0);
-            b[p] = random.uniform_vec<3>(-1.0, 1.0);
-            dv[p] = random.uniform_vec<3>(-1.0, 1.0);
-        }
+        std::vector<Vec<3>> a, b, dv;
+        loss_directions<3>(n, 79, a, b, dv);
         auto loss = [&](const MpmSystem<3>& s, const Particles<3>& from) {
             MpmAdjoint<3> adjoint(s, tight(), MpmOptions{});
             return linear_loss(adjoint.forward(from, dt, steps), a, b);
@@ -288,13 +294,8 @@ void check_sand(Method method) {
     Particles<2> start = sample_particles<2>(sand_scene(E, angle));
     for (Mat<2>& F : start.F_elastic) F = 0.99 * Mat<2>::Identity();
     const std::size_t n = start.size();
-    test::Random random(83);
-    std::vector<Vec<2>> a(n), b(n), dv(n);
-    for (std::size_t p = 0; p < n; ++p) {
-        a[p] = random.uniform_vec<2>(-1.0, 1.0);
-        b[p] = random.uniform_vec<2>(-1.0, 1.0);
-        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
-    }
+    std::vector<Vec<2>> a, b, dv;
+    loss_directions<2>(n, 83, a, b, dv);
     auto loss = [&](const MpmSystem<2>& s, const Particles<2>& from) {
         MpmAdjoint<2> adjoint(s, tight(), MpmOptions{}, method);
         return linear_loss(adjoint.forward(from, dt, steps), a, b);
@@ -360,13 +361,9 @@ TEST(MpmAdjoint2d, ASandColumnAtRestFromTheConesTipHasItsFrictionAngleGradient) 
     const MpmSystem<2> system = make_mpm_system<2>(column_scene(angle));
     const Particles<2> start = sample_particles<2>(column_scene(angle));
     const std::size_t n = start.size();
-    test::Random random(83);
-    std::vector<Vec<2>> a(n), b(n), dv(n), none(n, Vec<2>::Zero());
-    for (std::size_t p = 0; p < n; ++p) {
-        a[p] = random.uniform_vec<2>(-1.0, 1.0);
-        b[p] = random.uniform_vec<2>(-1.0, 1.0);
-        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
-    }
+    std::vector<Vec<2>> a, b, dv;
+    loss_directions<2>(n, 83, a, b, dv);
+    std::vector<Vec<2>> none(n, Vec<2>::Zero());
     auto rollout = [&](const MpmSystem<2>& s, const Particles<2>& from, int steps) {
         MpmAdjoint<2> adjoint(s, tight(), MpmOptions{}, Method::ReturnMap);
         return adjoint.forward(from, dt, steps);
