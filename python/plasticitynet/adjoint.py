@@ -67,14 +67,14 @@ def _state_cotangents(grad: torch.Tensor, states: Sequence[int]) -> dict[int, np
     return dL_dx
 
 
-def _rollout_backward(ctx, grad, parameter: str):
-    """The gradients a rollout's positions pass back to (E, v0, the third parameter `parameter`, and nothing
-    for the rest of the forward's arguments), by the adjoint of the rollout ctx.rollout kept."""
+def _rollout_gradients(ctx, grad, parameters: Sequence[str]):
+    """dL/dE, dL/dv0 (None where v0 was not given) and dL/d of each named parameter (None where ctx.given says it
+    was not given), by the adjoint of the rollout ctx.rollout kept."""
     out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
     dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
     dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
-    dp = torch.tensor(out[parameter], dtype=torch.float64) if ctx.has_parameter else None
-    return dE, dv0, dp, None, None, None, None, None, None
+    return dE, dv0, [torch.tensor(out[name], dtype=torch.float64) if given else None
+                     for name, given in zip(parameters, ctx.given)]
 
 
 class _FemPositions(torch.autograd.Function):
@@ -85,12 +85,13 @@ class _FemPositions(torch.autograd.Function):
                                     integrator)
         v = None if v0 is None else v0.detach().cpu().numpy().astype(np.float64)
         x = rollout.forward(int(steps), float(dt), v0=v, states=sorted(set(states)))["x"]
-        ctx.rollout, ctx.states, ctx.has_v0, ctx.has_parameter = rollout, list(states), v0 is not None, h0 is not None
+        ctx.rollout, ctx.states, ctx.has_v0, ctx.given = rollout, list(states), v0 is not None, [h0 is not None]
         return torch.from_numpy(np.stack([x[k] for k in states]))
 
     @staticmethod
     def backward(ctx, grad):
-        return _rollout_backward(ctx, grad, "initial_hardening")
+        dE, dv0, (dh0,) = _rollout_gradients(ctx, grad, ["initial_hardening"])
+        return dE, dv0, dh0, None, None, None, None, None, None
 
 
 def fem_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | None, steps: int, dt: float,
@@ -161,12 +162,8 @@ class _MpmPositions(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad):
-        out = ctx.rollout.backward(_state_cotangents(grad, ctx.states))
         names = ["initial_hardening"] + [name for name, _, _ in _PLASTICITY_PARAMETERS]
-        parameters = [torch.tensor(out[name], dtype=torch.float64) if given else None
-                      for name, given in zip(names, ctx.given)]
-        dE = torch.tensor(out["youngs_modulus"], dtype=torch.float64)
-        dv0 = torch.from_numpy(out["v0"]) if ctx.has_v0 else None
+        dE, dv0, parameters = _rollout_gradients(ctx, grad, names)
         return (dE, dv0, None, None, None, None, None, None, *parameters)
 
 

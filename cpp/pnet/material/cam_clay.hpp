@@ -88,7 +88,6 @@ public:
     double M() const { return M_; }
 
     const CamClayParams& params() const { return params_; }
-    double mu() const { return mu_; }
 
 private:
     CamClayParams params_;

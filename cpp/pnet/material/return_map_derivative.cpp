@@ -105,21 +105,20 @@ struct VonMisesStrain {
 
 /// Drucker-Prager with StVK-Hencky (the only elasticity it takes).
 template <int dim>
-ReturnMapDerivative<dim> drucker_prager_derivative(const Material<dim>& material, const PolarSVD<dim>& svd) {
+ReturnMapDerivative<dim> drucker_prager_derivative(const Material<dim>& material, const PolarSVD<dim>& svd,
+                                                   bool update) {
     ReturnMapDerivative<dim> out;
     const DruckerPragerStrain<dim> z(material, svd.Sigma);
     if (z.branch == ReturnBranch::Elastic) return out;
     out.yielded = true;
     const Vec<dim>& S = svd.Sigma;
     const Vec<dim> Z = z.logZ.array().exp().matrix();
-    if (z.branch == ReturnBranch::Apex) {  // Z = 1, F^E = U V^T (its rotation still follows F)
-        out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, Z.asDiagonal() * z.dlogZ, [](int, int) { return 0.0; }));
+    if (z.branch == ReturnBranch::Apex) {  // Z = 1, F^E = U V^T (its rotation still follows F); Ptilde = 0
+        if (update)
+            out.dFE_dF = to_f_space<dim>(
+                svd, principal_derivative<dim>(S, Z, Z.asDiagonal() * z.dlogZ, [](int, int) { return 0.0; }));
         return out;
     }
-    out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, Z.asDiagonal() * z.dlogZ, [&](int i, int j) {
-                                     return z.k * exp_difference_quotient(z.logZ[i], z.logZ[j]) /
-                                            exp_difference_quotient(z.eps[i], z.eps[j]);
-                                 }));
     // d log Z / d phi = -(dc/dphi) tr n, phi in degrees; the stress's tau = 2 mu log Z + lambda tr(log Z) 1
     // changes by 2 mu d log Z (n has no trace).
     const double s = DruckerPragerStrain<dim>::sine(material);
@@ -128,13 +127,18 @@ ReturnMapDerivative<dim> drucker_prager_derivative(const Material<dim>& material
         std::cos(material.description().drucker_prager.friction_angle_deg * M_PI / 180.0) * M_PI / 180.0;
     const Vec<dim> dlogZ_dphi = -(dalpha_ds * ds_dphi * z.stiffness) * z.tr * z.n;
     constexpr int angle = static_cast<int>(PlasticityParameter::FrictionAngle);
-    out.dFE_dparameter[angle] = svd.compose(Z.cwiseProduct(dlogZ_dphi));
     out.dP_dparameter[angle] =
         svd.compose(Vec<dim>((2.0 * material.elasticity().mu() * dlogZ_dphi).cwiseQuotient(S)));
+    if (!update) return out;
+    out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, Z.asDiagonal() * z.dlogZ, [&](int i, int j) {
+                                     return z.k * exp_difference_quotient(z.logZ[i], z.logZ[j]) /
+                                            exp_difference_quotient(z.eps[i], z.eps[j]);
+                                 }));
+    out.dFE_dparameter[angle] = svd.compose(Z.cwiseProduct(dlogZ_dphi));
     return out;
 }
 
-/// Cam-Clay's exact variant on dual numbers (math/dual.hpp): the projection Z(Sigma, a), the new hardening a',
+/// Cam-Clay's exact variant on dual numbers (Dual1, math/dual2.hpp): the projection Z(Sigma, a), the new hardening a',
 /// the return-mapped Kirchhoff stress tau(Sigma, p0(a)) and their derivatives in Sigma, a, xi, beta and M;
 /// k and k_tau the deviatoric scales of the projection and of the stress's (CamClay::project_with).
 template <int dim>
@@ -172,10 +176,11 @@ struct CamClayDuals {
 };
 
 template <int dim>
-ReturnMapDerivative<dim> cam_clay_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h) {
+ReturnMapDerivative<dim> cam_clay_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h,
+                                             bool update) {
     const CamClay<dim>& model = *material.template plasticity_model<CamClay<dim>>();
     using Duals = CamClayDuals<dim>;
-    const Duals duals(model, svd.Sigma, h, true);
+    const Duals duals(model, svd.Sigma, h, update);
     const auto& r = duals.projected;
     ReturnMapDerivative<dim> out;
     const Vec<dim>& S = svd.Sigma;
@@ -189,7 +194,7 @@ ReturnMapDerivative<dim> cam_clay_derivative(const Material<dim>& material, cons
     Vec<dim> dtau_da;
     for (int i = 0; i < dim; ++i) dtau_da[i] = duals.tau[i].gradient[Duals::kA];
     out.dP_dh = svd.compose(Vec<dim>(dtau_da.cwiseQuotient(S)));
-    if (r.branch == ReturnBranch::Elastic) return out;  // F^E = F_trial, a' = a
+    if (!update || r.branch == ReturnBranch::Elastic) return out;  // elastic: F^E = F_trial, a' = a
     out.yielded = true;
     Vec<dim> Z, dZ_da, dh_dS;
     Mat<dim> dZ_deps;
@@ -217,12 +222,13 @@ ReturnMapDerivative<dim> cam_clay_derivative(const Material<dim>& material, cons
 }  // namespace
 
 template <int dim>
-ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h) {
+ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h,
+                                               bool update) {
     ReturnMapDerivative<dim> out;
     const MaterialDescription& m = material.description();
     if (m.plasticity == PlasticityModel::None) return out;  // F^E = F_trial, h' = h
-    if (m.plasticity == PlasticityModel::DruckerPrager) return drucker_prager_derivative(material, svd);
-    if (m.plasticity == PlasticityModel::CamClay) return cam_clay_derivative(material, svd, h);
+    if (m.plasticity == PlasticityModel::DruckerPrager) return drucker_prager_derivative(material, svd, update);
+    if (m.plasticity == PlasticityModel::CamClay) return cam_clay_derivative(material, svd, h, update);
     if (m.plasticity != PlasticityModel::VonMises || m.elasticity != ElasticityModel::StvkHencky)
         throw std::invalid_argument("return_map_derivative: plasticity \"" + to_string(m.plasticity) + "\" with " +
                                     to_string(m.elasticity) +
@@ -233,6 +239,9 @@ ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, co
     out.yielded = true;
     const double xi = m.von_mises.hardening_coefficient;
     const Vec<dim> Z = z.logZ.array().exp().matrix();
+    // Ptilde = U diag(tau(Z) / Sigma) V^T: d tau / dh = (d tau / d eps)(Z) n.
+    out.dP_dh = svd.compose(Vec<dim>((material.elasticity().dtau_deps(Z) * z.n).cwiseQuotient(S)));
+    if (!update) return out;
     // D = (Z_i - Z_j) / (Sigma_i - Sigma_j) = e^mean c q(c eps_hat_i, c eps_hat_j) / q(eps_i, eps_j).
     out.dFE_dF = to_f_space<dim>(svd, principal_derivative<dim>(S, Z, Z.asDiagonal() * z.dlogZ, [&](int i, int j) {
                                      return std::exp(z.mean) * z.c *
@@ -243,8 +252,6 @@ ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, co
     out.dFE_dh = svd.compose(Z.cwiseProduct(z.n));
     out.dh_dF = svd.compose(Vec<dim>(xi * z.n.cwiseQuotient(S)));
     out.dh_dh = 1.0 - xi;
-    // Ptilde = U diag(tau(Z) / Sigma) V^T: d tau / dh = (d tau / d eps)(Z) n.
-    out.dP_dh = svd.compose(Vec<dim>((material.elasticity().dtau_deps(Z) * z.n).cwiseQuotient(S)));
     return out;
 }
 
@@ -295,7 +302,7 @@ template Tensor4<2> return_map_tangent<2>(const Material<2>&, const PolarSVD<2>&
 template Tensor4<3> return_map_tangent<3>(const Material<3>&, const PolarSVD<3>&, double);
 template Tensor4<2> drucker_prager_tangent<2>(const Material<2>&, const PolarSVD<2>&);
 template Tensor4<3> drucker_prager_tangent<3>(const Material<3>&, const PolarSVD<3>&);
-template ReturnMapDerivative<2> return_map_derivative<2>(const Material<2>&, const PolarSVD<2>&, double);
-template ReturnMapDerivative<3> return_map_derivative<3>(const Material<3>&, const PolarSVD<3>&, double);
+template ReturnMapDerivative<2> return_map_derivative<2>(const Material<2>&, const PolarSVD<2>&, double, bool);
+template ReturnMapDerivative<3> return_map_derivative<3>(const Material<3>&, const PolarSVD<3>&, double, bool);
 
 }  // namespace pnet

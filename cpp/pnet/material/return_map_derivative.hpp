@@ -58,8 +58,10 @@ Tensor4<dim> drucker_prager_tangent(const Material<dim>& material, const PolarSV
 template <int dim>
 Tensor4<dim> return_map_tangent(const Material<dim>& material, const PolarSVD<dim>& svd, double h);
 
-/// The derivatives at F_trial = svd (the clamped polar SVD the step's return mapping used) and h.
+/// The derivatives at F_trial = svd (the clamped polar SVD the step's return mapping used) and h. update false:
+/// the return-mapped stress's alone (dP_dh, dP_dparameter), for a solve's stress at F (not the state's update).
 template <int dim>
-ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h);
+ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h,
+                                               bool update = true);
 
 }  // namespace pnet

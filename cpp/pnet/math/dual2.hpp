@@ -1,8 +1,9 @@
 #pragma once
 // Forward-mode automatic differentiation in n variables, for closed-form
 // formulas written once and templated on the scalar (the contact distances,
-// contact/distance/point_triangle_edge_edge.cpp; the Cam-Clay projection, material/cam_clay.cpp): Dual1
-// carries a value and its gradient, Dual2 also its Hessian. Arithmetic follows the chain rule of each operation, e.g. for a product
+// contact/distance/point_triangle_edge_edge.cpp; the Cam-Clay projection,
+// material/cam_clay.cpp): Dual1 carries a value and its gradient, Dual2 also
+// its Hessian. Arithmetic follows the chain rule of each operation, e.g. for a product
 //   (ab)' = a' b + a b',   (ab)'' = a'' b + a b'' + a' b'^T + b' a'^T,
 // and for a quotient q = a / b (from (qb)'' = a''):
 //   q' = (a' - q b') / b,  q'' = (a'' - q b'' - q' b'^T - b' q'^T) / b,

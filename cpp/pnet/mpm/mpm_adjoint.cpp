@@ -366,7 +366,7 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
             // in h and the plasticity parameters.
             T[p] = return_map_tangent<dim>(material, svd, h);
             if (material.description().plasticity != PlasticityModel::None) {
-                const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, svd, h);
+                const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, svd, h, false);
                 dP_dh[p] = d.dP_dh;
                 dP_dparameter[p] = d.dP_dparameter;
             }

@@ -52,6 +52,9 @@ void check(const Material<dim>& material, const Vec<dim>& stretch, double h, boo
         (material.elastoplastic_stress(svd, h + step) - material.elastoplastic_stress(svd, h - step)) / (2 * step);
     EXPECT_LT((d.dP_dh - fd_P).cwiseAbs().maxCoeff(), 1e-6 * std::max(1.0, fd_P.cwiseAbs().maxCoeff()))
         << "dPtilde/dh";
+    const ReturnMapDerivative<dim> stress_only = return_map_derivative<dim>(material, svd, h, false);
+    EXPECT_EQ(stress_only.dP_dh, d.dP_dh);
+    for (int q = 0; q < kPlasticityParameters; ++q) EXPECT_EQ(stress_only.dP_dparameter[q], d.dP_dparameter[q]);
     // The return-mapped stress's exact Jacobian (return_map_tangent), its skew part kept.
     const Tensor4<dim> T = return_map_tangent<dim>(material, svd, h);
     const double dF_step = 1e-7;
@@ -209,6 +212,7 @@ void check_sand(const Vec<dim>& stretch, ReturnBranch expected, test::Random& rn
     const Mat<dim> fd_FE = (plus.project(F, 0.0).F_elastic - minus.project(F, 0.0).F_elastic) / (2 * h);
     const Mat<dim> fd_P = (plus.elastoplastic_stress(svd, 0.0) - minus.elastoplastic_stress(svd, 0.0)) / (2 * h);
     EXPECT_LT((d.dFE_dparameter[kAngle] - fd_FE).cwiseAbs().maxCoeff(), 1e-8 + 1e-6 * fd_FE.cwiseAbs().maxCoeff()) << "dF^E/dphi";
+    EXPECT_EQ(return_map_derivative<dim>(material, svd, 0.0, false).dP_dparameter[kAngle], d.dP_dparameter[kAngle]);
     EXPECT_LT((d.dP_dparameter[kAngle] - fd_P).cwiseAbs().maxCoeff(), 1e-6 * std::max(1.0, fd_P.cwiseAbs().maxCoeff()))
         << "dPtilde/dphi";
     if (expected == ReturnBranch::Cone) {
