@@ -62,20 +62,6 @@ Mat<dim> project_after_solve(const Grid<dim>& grid, std::int64_t i, const Bounda
     return A;
 }
 
-/// A Coulomb floor's contact at the step's solution: its node's unknown, the floor's normal impulse J_k (the
-/// residual's held row (k, y) with v*_k,y as update_velocity left it; <= 0: the floor pulls, no friction), the
-/// friction's coefficient c = mu f1(|u|) u / |u| on the node's tangential velocity u (the force c J_k) and
-/// J_k dc/du.
-template <int dim>
-struct FloorContact {
-    using Tangent = Eigen::Matrix<double, dim - 1, 1>;
-    using TangentMatrix = Eigen::Matrix<double, dim - 1, dim - 1>;
-    int dof;
-    double impulse = 0.0;
-    Tangent c = Tangent::Zero();
-    TangentMatrix dc = TangentMatrix::Zero();
-};
-
 /// The potential's Coulomb floor's contacts (FloorFrictionForm::begin_newton's nodes) at the solution v, with
 /// the particles' stress P there; contact_of: unknown node -> its contact (-1: none).
 template <int dim>
@@ -112,6 +98,19 @@ std::vector<FloorContact<dim>> floor_contacts(const IncrementalPotential<dim>& p
         c.dc = mu * c.impulse * (friction_f1_derivative(slip, eps) * uu + f1_over_s * (I - uu));
     }
     return contacts;
+}
+
+VecX solve_transposed(const SparseMatrix& transpose, const VecX& rhs, int step, PcgResult& solve) {
+    Eigen::SparseLU<SparseMatrix> lu;
+    lu.compute(transpose);
+    if (lu.info() != Eigen::Success)
+        throw std::runtime_error("MpmAdjoint: step " + std::to_string(step) + ": the step's Jacobian is singular (" +
+                                 lu.lastErrorMessage() + ")");
+    VecX lambda = lu.solve(rhs);
+    solve.iterations = 1;
+    solve.relative_residual = (transpose * lambda - rhs).norm() / std::max(rhs.norm(), 1e-300);
+    solve.converged = solve.relative_residual <= 1e-9;
+    return lambda;
 }
 
 }  // namespace
@@ -258,228 +257,258 @@ MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<
 }
 
 template <int dim>
-void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, int k,
-                                   MpmRolloutGradient<dim>& g) const {
-    const double dt = dt_;
-    const std::size_t n = start.size();
-    constexpr int kStencil = IncrementalPotential<dim>::kStencil;
-
+MpmStepAdjoint<dim>::MpmStepAdjoint(const MpmSystem<dim>& system, Method method, const Particles<dim>& start,
+                                    const VecX& v, double dt)
+    : system_(system),
+      method_(method),
+      start_(start),
+      v_(v),
+      dt_(dt),
+      n_(start.size()),
+      grid_(system.origin, system.dx, system.cells),
+      energy_(system.materials),
+      potential_(energy_) {
     // The step's grid and potential, as the integrator set them up (the same deterministic P2G, so the
     // same unknowns as its solution's).
-    Grid<dim> grid(system_.origin, system_.dx, system_.cells);
-    particles_to_grid<dim>(grid, start, nullptr);
-    const std::int64_t storage = grid.storage_size();
-    std::vector<double> mass(storage);
-    std::vector<Vec<dim>> momentum(storage);
-    for (std::int64_t i = 0; i < storage; ++i) {
-        mass[i] = grid.node(i).mass;
-        momentum[i] = grid.node(i).momentum;
+    particles_to_grid<dim>(grid_, start, nullptr);
+    storage_ = grid_.storage_size();
+    mass_.resize(storage_);
+    momentum_.resize(storage_);
+    for (std::int64_t i = 0; i < storage_; ++i) {
+        mass_[i] = grid_.node(i).mass;
+        momentum_[i] = grid_.node(i).momentum;
     }
-    BoundaryConditions solve_boundary = system_.boundary;
+    BoundaryConditions solve_boundary = system.boundary;
     solve_boundary.slip_walls = false;
-    grid.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
-    const bool coulomb = solve_boundary.coulomb_floor() && solve_boundary.sticky_floor_cells > 0;
+    grid_.update_velocity(dt, system.gravity, unprojected_floor(solve_boundary));
+    coulomb_ = solve_boundary.coulomb_floor() && solve_boundary.sticky_floor_cells > 0;
     // v* as update_velocity left it: on a Coulomb floor's held normal rows, the velocity the floor stops (the
     // potential's v* is 0 there), which the floor's impulse J_k = (the stress term)_k,y - m_k v*_k,y reads.
-    std::vector<Vec<dim>> node_v_star(storage);
-    for (std::int64_t i = 0; i < storage; ++i) node_v_star[i] = grid.node(i).momentum;
-    ElasticParticleEnergy<dim> energy(system_.materials);
-    IncrementalPotential<dim> potential(energy);
-    potential.set_floor_friction_newton(coulomb);
-    potential.begin_step(grid, start, dt, solve_boundary);
-    potential.set_reference(start.F_elastic);
-    potential.set_project_psd(false);
-    if (v.size() != potential.size()) throw std::logic_error("MpmAdjoint: the step's unknowns changed on replay");
+    node_v_star_.resize(storage_);
+    for (std::int64_t i = 0; i < storage_; ++i) node_v_star_[i] = grid_.node(i).momentum;
+    potential_.set_floor_friction_newton(coulomb_);
+    potential_.begin_step(grid_, start, dt, solve_boundary);
+    potential_.set_reference(start.F_elastic);
+    potential_.set_project_psd(false);
+    if (v.size() != potential_.size()) throw std::logic_error("MpmAdjoint: the step's unknowns changed on replay");
 
     // Storage index -> unknown node (-1: a node no particle's stencil reaches).
-    std::vector<int> dof(storage, -1);
-    for (std::size_t k = 0; k < potential.nodes(); ++k) dof[potential.dof_node(k)] = static_cast<int>(k);
+    dof_.assign(storage_, -1);
+    for (std::size_t k = 0; k < potential_.nodes(); ++k) dof_[potential_.dof_node(k)] = static_cast<int>(k);
 
     // The grid velocity G2P read: the solution projected as Grid::apply_boundary does after the solve, and
     // the projection's Jacobian A_i.
-    std::vector<Vec<dim>> grid_v(storage, Vec<dim>::Zero());
-    std::vector<Mat<dim>> projection(storage, Mat<dim>::Identity());
-    for (std::int64_t i = 0; i < storage; ++i) {
-        if (dof[i] < 0) continue;
-        grid_v[i] = v.template segment<dim>(dim * dof[i]);
-        projection[i] = project_after_solve<dim>(grid, i, system_.boundary, coulomb, grid_v[i]);
+    grid_v_.assign(storage_, Vec<dim>::Zero());
+    projection_.assign(storage_, Mat<dim>::Identity());
+    for (std::int64_t i = 0; i < storage_; ++i) {
+        if (dof_[i] < 0) continue;
+        grid_v_[i] = v.template segment<dim>(dim * dof_[i]);
+        projection_[i] = project_after_solve<dim>(grid_, i, system.boundary, coulomb_, grid_v_[i]);
     }
-
-    // G2P: the cotangents of the output (x, v, C, F: g) to the grid velocities and the start's x, F.
-    std::vector<Vec<dim>> grid_v_bar(storage, Vec<dim>::Zero()), x_bar(n, Vec<dim>::Zero());
-    std::vector<Mat<dim>> F_bar(n, Mat<dim>::Zero());
-    // G2P's return mapping F^E' = Z(F_trial, h), h' = h'(F_trial, h): the trial F's cotangent dF^E/dF_trial^T Fb'
-    // + dh'/dF_trial hb', the start hardening's dF^E/dh : Fb' + dh'/dh hb', and each plasticity parameter's
-    // through dF^E/dparameter and dh'/dparameter (F_trial from the projected velocities G2P read).
-    std::vector<Mat<dim>> F_trial_bar = g.F;
-    std::vector<double> h_bar = g.hardening;
-    using Parameters = std::array<double, kPlasticityParameters>;
-    std::vector<Parameters> mapped_parameter_bar(n, Parameters{});
-    // AFLIP: v_p' = (G2P's v_p) + alpha r_p, r_p = v_p - sum_i w_ip u_i with u_i = q_i / m_i of P2G's grid
-    // (transfer.hpp): r_p's cotangent alpha vb_p', taken before G2P's adjoint reads vb'.
-    const double alpha = flip_fraction(dt, system_.flip_relaxation_time);
-    std::vector<Vec<dim>> residual_bar;
-    if (alpha > 0.0) {
-        residual_bar.resize(n);
-        for (std::size_t p = 0; p < n; ++p) residual_bar[p] = alpha * g.v[p];
-    }
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
-        const Material<dim>& material = system_.materials[start.object[p]];
-        if (material.description().plasticity == PlasticityModel::None) continue;
-        const StencilNodes<dim> st(grid, start.x[p]);
-        Mat<dim> G = Mat<dim>::Zero();
-        st.for_each([&](std::int64_t node, double, const Vec<dim>& grad, const Vec<dim>&) {
-            G += grid_v[node] * grad.transpose();
-        });
-        const Mat<dim> F_trial = (Mat<dim>::Identity() + dt * G) * start.F_elastic[p];
-        const ReturnMapDerivative<dim> d =
-            return_map_derivative<dim>(material, clamped_svd<dim>(F_trial), start.hardening[p]);
-        F_trial_bar[p] = unflatten<dim>(d.dFE_dF.transpose() * flatten<dim>(g.F[p])) + g.hardening[p] * d.dh_dF;
-        h_bar[p] = g.F[p].cwiseProduct(d.dFE_dh).sum() + d.dh_dh * g.hardening[p];
-        for (int q = 0; q < kPlasticityParameters; ++q)
-            mapped_parameter_bar[p][q] =
-                g.F[p].cwiseProduct(d.dFE_dparameter[q]).sum() + d.dh_dparameter[q] * g.hardening[p];
-    }
-    Parameters parameter_bar{};
-    for (const Parameters& a : mapped_parameter_bar)
-        for (int q = 0; q < kPlasticityParameters; ++q) parameter_bar[q] += a[q];
-    grid_to_particles_adjoint<dim>(grid, start, grid_v, dt, g.x, g.v, g.C, F_trial_bar, grid_v_bar, x_bar, F_bar);
 
     // The stress and its exact (unprojected, undamped) tangent at the solution: the elastic ones for
     // lagged, the return-mapped Ptilde and its consistent tangent with its skew part for return_map.
     // return_map's stress depends on the start's hardening and the plasticity parameters too.
-    std::vector<Mat<dim>> F(n), P(n), dP_dh(n, Mat<dim>::Zero());
-    std::vector<std::array<Mat<dim>, kPlasticityParameters>> dP_dparameter(n);
-    std::vector<Tensor4<dim>> T(n);
-    potential.deformation(v, F);
-    const bool return_map = method_ == Method::ReturnMap;
+    const std::size_t n = n_;
+    F_.resize(n);
+    P_.resize(n);
+    dP_dh_.assign(n, Mat<dim>::Zero());
+    dP_dparameter_.resize(n);
+    T_.resize(n);
+    potential_.deformation(v, F_);
+    const bool return_map = method == Method::ReturnMap;
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
-        const Material<dim>& material = system_.materials[start.object[p]];
-        const PolarSVD<dim> svd = clamped_svd<dim>(F[p]);  // one decomposition for P and its tangent
-        dP_dparameter[p].fill(Mat<dim>::Zero());
+        const Material<dim>& material = system.materials[start.object[p]];
+        const PolarSVD<dim> svd = clamped_svd<dim>(F_[p]);  // one decomposition for P and its tangent
+        dP_dparameter_[p].fill(Mat<dim>::Zero());
         if (return_map) {
             const double h = start.hardening[p];
-            P[p] = material.elastoplastic_stress(svd, h);
+            P_[p] = material.elastoplastic_stress(svd, h);
             // The exact Jacobian where written (the stencil averages two branches near a boundary), and Ptilde
             // in h and the plasticity parameters.
-            T[p] = return_map_tangent<dim>(material, svd, h);
+            T_[p] = return_map_tangent<dim>(material, svd, h);
             if (material.description().plasticity != PlasticityModel::None) {
                 const ReturnMapDerivative<dim> d = return_map_derivative<dim>(material, svd, h, false);
-                dP_dh[p] = d.dP_dh;
-                dP_dparameter[p] = d.dP_dparameter;
+                dP_dh_[p] = d.dP_dh;
+                dP_dparameter_[p] = d.dP_dparameter;
             }
         } else {
             const Elasticity<dim>& elasticity = material.elasticity();
-            P[p] = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
-            T[p] = elasticity.dPdF(svd, false);
+            P_[p] = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
+            T_[p] = elasticity.dPdF(svd, false);
         }
     }
-
-    // The solve: J^T lambda = A^T vb on the unknowns (the projection's adjoint). The components the solve
-    // holds (the sticky floor's nodes, a Coulomb floor's pressing normals: free 0) are constants: lambda is 0
-    // there (but a Coulomb contact's normal row, below).
-    const VecX& free = potential.free_components();
-    VecX rhs = VecX::Zero(potential.size());
-    for (std::int64_t i = 0; i < storage; ++i)
-        if (dof[i] >= 0) {
-            const Vec<dim> unprojected_bar = projection[i].transpose() * grid_v_bar[i];
-            for (int a = 0; a < dim; ++a) rhs[dim * dof[i] + a] = free[dim * dof[i] + a] * unprojected_bar[a];
-        }
     // The Coulomb floor's contacts (the nodes whose normal velocity the solve holds): the friction on node k's
     // tangential velocity u_k is c_k(u_k) J_k(v), c = mu f1(|u|) u / |u|, with J_k the floor's normal impulse,
     // the residual's row (k, y) with v*_k,y as update_velocity left it. So J = dR/dv has J_k dc/du in the slip
     // and c_k (row (k, y) of the stress term's Jacobian) on the tangential rows. J^T lambda = vb is solved with
     // the held normal rows as unknowns too, mu_k = c_k . lambda_k,t: then lambda's row (k, y) carries the
     // impulse's cotangent to v*_k,y, the node's mass and the particles like any row's.
-    std::vector<int> contact_of;  // unknown node -> its contact (-1: none)
-    const std::vector<FloorContact<dim>> contacts =
-        coulomb ? floor_contacts<dim>(potential, start, P, v, dt, contact_of) : std::vector<FloorContact<dim>>{};
-    auto contact_normal = [&](Eigen::Index i) {  // a held normal row of a contact
-        return coulomb && i % dim == 1 && contact_of[i / dim] >= 0;
-    };
+    if (coulomb_) contacts_ = floor_contacts<dim>(potential_, start, P_, v, dt, contact_of_);
+}
 
+template <int dim>
+bool MpmStepAdjoint<dim>::symmetric() const {
     // Symmetric where the solve's stress is elastic (lagged, or no plasticity) and no floor's friction is in
-    // it: the potential's own exact Hessian by PCG; else J^T (the consistent tangent's skew part transposed,
-    // the friction's) by sparse LU.
-    const bool symmetric =
-        !coulomb &&
-        (!return_map || std::all_of(system_.materials.begin(), system_.materials.end(), [](const Material<dim>& m) {
-             return m.description().plasticity == PlasticityModel::None;
-         }));
+    // it.
+    return !coulomb_ && (method_ != Method::ReturnMap ||
+                         std::all_of(system_.materials.begin(), system_.materials.end(), [](const Material<dim>& m) {
+                             return m.description().plasticity == PlasticityModel::None;
+                         }));
+}
+
+template <int dim>
+VecX MpmStepAdjoint<dim>::output_adjoint(const MpmRolloutGradient<dim>& g) {
+    const double dt = dt_;
+    const std::size_t n = n_;
+    const Particles<dim>& start = start_;
+    // G2P: the cotangents of the output (x, v, C, F: g) to the grid velocities and the start's x, F.
+    std::vector<Vec<dim>> grid_v_bar(storage_, Vec<dim>::Zero());
+    x_bar_.assign(n, Vec<dim>::Zero());
+    F_bar_.assign(n, Mat<dim>::Zero());
+    // G2P's return mapping F^E' = Z(F_trial, h), h' = h'(F_trial, h): the trial F's cotangent dF^E/dF_trial^T Fb'
+    // + dh'/dF_trial hb', the start hardening's dF^E/dh : Fb' + dh'/dh hb', and each plasticity parameter's
+    // through dF^E/dparameter and dh'/dparameter (F_trial from the projected velocities G2P read).
+    std::vector<Mat<dim>> F_trial_bar = g.F;
+    h_bar_ = g.hardening;
+    std::vector<Parameters> mapped_parameter_bar(n, Parameters{});
+    // AFLIP: v_p' = (G2P's v_p) + alpha r_p, r_p = v_p - sum_i w_ip u_i with u_i = q_i / m_i of P2G's grid
+    // (transfer.hpp): r_p's cotangent alpha vb_p', taken before G2P's adjoint reads vb'.
+    alpha_ = flip_fraction(dt, system_.flip_relaxation_time);
+    residual_bar_.clear();
+    if (alpha_ > 0.0) {
+        residual_bar_.resize(n);
+        for (std::size_t p = 0; p < n; ++p) residual_bar_[p] = alpha_ * g.v[p];
+    }
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(n); ++p) {
+        const Material<dim>& material = system_.materials[start.object[p]];
+        if (material.description().plasticity == PlasticityModel::None) continue;
+        const StencilNodes<dim> st(grid_, start.x[p]);
+        Mat<dim> G = Mat<dim>::Zero();
+        st.for_each([&](std::int64_t node, double, const Vec<dim>& grad, const Vec<dim>&) {
+            G += grid_v_[node] * grad.transpose();
+        });
+        const Mat<dim> F_trial = (Mat<dim>::Identity() + dt * G) * start.F_elastic[p];
+        const ReturnMapDerivative<dim> d =
+            return_map_derivative<dim>(material, clamped_svd<dim>(F_trial), start.hardening[p]);
+        F_trial_bar[p] = unflatten<dim>(d.dFE_dF.transpose() * flatten<dim>(g.F[p])) + g.hardening[p] * d.dh_dF;
+        h_bar_[p] = g.F[p].cwiseProduct(d.dFE_dh).sum() + d.dh_dh * g.hardening[p];
+        for (int q = 0; q < kPlasticityParameters; ++q)
+            mapped_parameter_bar[p][q] =
+                g.F[p].cwiseProduct(d.dFE_dparameter[q]).sum() + d.dh_dparameter[q] * g.hardening[p];
+    }
+    parameter_bar_ = Parameters{};
+    for (const Parameters& a : mapped_parameter_bar)
+        for (int q = 0; q < kPlasticityParameters; ++q) parameter_bar_[q] += a[q];
+    grid_to_particles_adjoint<dim>(grid_, start, grid_v_, dt, g.x, g.v, g.C, F_trial_bar, grid_v_bar, x_bar_, F_bar_);
+
+    // The solve's right-hand side: A^T vb on the unknowns (the projection's adjoint). The components the solve
+    // holds (the sticky floor's nodes, a Coulomb floor's pressing normals: free 0) are constants: lambda is 0
+    // there (but a Coulomb contact's normal row, jacobian_transpose).
+    const VecX& free = potential_.free_components();
+    VecX rhs = VecX::Zero(potential_.size());
+    for (std::int64_t i = 0; i < storage_; ++i)
+        if (dof_[i] >= 0) {
+            const Vec<dim> unprojected_bar = projection_[i].transpose() * grid_v_bar[i];
+            for (int a = 0; a < dim; ++a) rhs[dim * dof_[i] + a] = free[dim * dof_[i] + a] * unprojected_bar[a];
+        }
+    return rhs;
+}
+
+template <int dim>
+void MpmStepAdjoint<dim>::jacobian_transpose(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset) const {
+    constexpr int kStencil = IncrementalPotential<dim>::kStencil;
+    const double dt = dt_;
+    const Particles<dim>& start = start_;
+    const VecX& free = potential_.free_components();
+    auto contact_normal = [&](Eigen::Index i) {  // a held normal row of a contact
+        return coulomb_ && i % dim == 1 && contact_of_[i / dim] >= 0;
+    };
+    // J^T = M + sum_p V dt^2 B_p^T T_p^T B_p, on the free components; the held ones' rows and columns are the
+    // identity's, but a contact's normal row: mu_k - c_k . lambda_k,t = 0, with its column (k, y) of the stress
+    // term on the free rows.
+    const Eigen::Index size = potential_.size();
+    triplets.reserve(triplets.size() + static_cast<std::size_t>(size) + n_ * kStencil * kStencil * dim * dim);
+    const VecX& node_mass = potential_.residual_mass();
+    for (Eigen::Index i = 0; i < size; ++i)
+        triplets.emplace_back(offset + i, offset + i, free[i] > 0.0 ? node_mass[i] : 1.0);
+    for (const FloorContact<dim>& c : contacts_)
+        for (int t = 0; t < dim - 1; ++t) {
+            const Eigen::Index it = dim * c.dof + (t == 0 ? 0 : 2);
+            if (free[it] == 0.0) continue;
+            triplets.emplace_back(offset + dim * c.dof + 1, offset + it, -c.c[t]);
+            for (int r = 0; r < dim - 1; ++r) {  // J_k dc/du, transposed
+                const Eigen::Index ir = dim * c.dof + (r == 0 ? 0 : 2);
+                if (free[ir] > 0.0) triplets.emplace_back(offset + ir, offset + it, c.dc(t, r));
+            }
+        }
+    for (std::size_t p = 0; p < n_; ++p) {
+        const int* dofs = potential_.stencil_dofs(p);
+        const Vec<dim>* grads = potential_.stencil_gradients(p);
+        const double scale = start.rest_volume[p] * dt * dt;
+        Vec<dim> g_of[kStencil];
+        for (int q = 0; q < kStencil; ++q) g_of[q] = start.F_elastic[p].transpose() * grads[q];
+        for (int q = 0; q < kStencil; ++q)
+            for (int r = 0; r < kStencil; ++r)
+                for (int a = 0; a < dim; ++a)
+                    for (int b = 0; b < dim; ++b) {
+                        if (free[dim * dofs[r] + b] == 0.0) continue;  // J^T's row: a free column of J
+                        if (free[dim * dofs[q] + a] == 0.0 && !contact_normal(dim * dofs[q] + a)) continue;
+                        double value = 0.0;  // J((q, a), (r, b)) = V dt^2 g_q . T[(a, .), (b, .)] g_r
+                        for (int j = 0; j < dim; ++j)
+                            for (int l = 0; l < dim; ++l)
+                                value += g_of[q][j] * T_[p](a * dim + j, b * dim + l) * g_of[r][l];
+                        triplets.emplace_back(offset + dim * dofs[r] + b, offset + dim * dofs[q] + a,
+                                              scale * value);  // J^T
+                    }
+    }
+}
+
+template <int dim>
+VecX MpmStepAdjoint<dim>::solve(const VecX& rhs, int step) {
+    // Symmetric: the potential's own exact Hessian by PCG; else J^T (the consistent tangent's skew part
+    // transposed, the friction's) by sparse LU.
     VecX lambda;
     PcgResult solve;
-    if (symmetric) {
+    if (symmetric()) {
         VecX residual, diagonal;
-        potential.value_gradient_hessian(v, residual);
-        potential.hessian_diagonal(diagonal);
-        solve = solve_pcg(potential, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-11, 100000);
+        potential_.value_gradient_hessian(v_, residual);
+        potential_.hessian_diagonal(diagonal);
+        solve = solve_pcg(potential_, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-11, 100000);
     } else {
-        // J^T = M + sum_p V dt^2 B_p^T T_p^T B_p assembled and factorized by sparse LU: the unprojected
-        // consistent tangent of perfect plasticity can make J indefinite, where BiCGSTAB with Jacobi stalled
-        // (the sand column: 0.057 of the right-hand side left after 6168 products).
-        const Eigen::Index size = potential.size();
+        // J^T assembled and factorized by sparse LU: the unprojected consistent tangent of perfect plasticity
+        // can make J indefinite, where BiCGSTAB with Jacobi stalled (the sand column: 0.057 of the right-hand
+        // side left after 6168 products).
         std::vector<Eigen::Triplet<double>> triplets;
-        triplets.reserve(static_cast<std::size_t>(size) + n * kStencil * kStencil * dim * dim);
-        // On the free components; the held ones' rows and columns are the identity's, but a contact's normal
-        // row: mu_k - c_k . lambda_k,t = 0, with its column (k, y) of the stress term on the free rows.
-        const VecX& node_mass = potential.residual_mass();
-        for (Eigen::Index i = 0; i < size; ++i) triplets.emplace_back(i, i, free[i] > 0.0 ? node_mass[i] : 1.0);
-        for (const FloorContact<dim>& c : contacts)
-            for (int t = 0; t < dim - 1; ++t) {
-                const Eigen::Index it = dim * c.dof + (t == 0 ? 0 : 2);
-                if (free[it] == 0.0) continue;
-                triplets.emplace_back(dim * c.dof + 1, it, -c.c[t]);
-                for (int r = 0; r < dim - 1; ++r) {  // J_k dc/du, transposed
-                    const Eigen::Index ir = dim * c.dof + (r == 0 ? 0 : 2);
-                    if (free[ir] > 0.0) triplets.emplace_back(ir, it, c.dc(t, r));
-                }
-            }
-        for (std::size_t p = 0; p < n; ++p) {
-            const int* dofs = potential.stencil_dofs(p);
-            const Vec<dim>* grads = potential.stencil_gradients(p);
-            const double scale = start.rest_volume[p] * dt * dt;
-            Vec<dim> g_of[kStencil];
-            for (int q = 0; q < kStencil; ++q) g_of[q] = start.F_elastic[p].transpose() * grads[q];
-            for (int q = 0; q < kStencil; ++q)
-                for (int r = 0; r < kStencil; ++r)
-                    for (int a = 0; a < dim; ++a)
-                        for (int b = 0; b < dim; ++b) {
-                            if (free[dim * dofs[r] + b] == 0.0) continue;  // J^T's row: a free column of J
-                            if (free[dim * dofs[q] + a] == 0.0 && !contact_normal(dim * dofs[q] + a)) continue;
-                            double value = 0.0;  // J((q, a), (r, b)) = V dt^2 g_q . T[(a, .), (b, .)] g_r
-                            for (int j = 0; j < dim; ++j)
-                                for (int l = 0; l < dim; ++l)
-                                    value += g_of[q][j] * T[p](a * dim + j, b * dim + l) * g_of[r][l];
-                            triplets.emplace_back(dim * dofs[r] + b, dim * dofs[q] + a, scale * value);  // J^T
-                        }
-        }
-        SparseMatrix transpose(size, size);
+        jacobian_transpose(triplets);
+        SparseMatrix transpose(potential_.size(), potential_.size());
         transpose.setFromTriplets(triplets.begin(), triplets.end());
-        Eigen::SparseLU<SparseMatrix> lu;
-        lu.compute(transpose);
-        if (lu.info() != Eigen::Success)
-            throw std::runtime_error("MpmAdjoint: step " + std::to_string(k) + ": the step's Jacobian is singular (" +
-                                     lu.lastErrorMessage() + ")");
-        lambda = lu.solve(rhs);
-        solve.iterations = 1;
-        solve.relative_residual = (transpose * lambda - rhs).norm() / std::max(rhs.norm(), 1e-300);
-        solve.converged = solve.relative_residual <= 1e-9;
+        lambda = solve_transposed(transpose, rhs, step, solve);
     }
     if (!solve.converged)
-        throw std::runtime_error("MpmAdjoint: step " + std::to_string(k) + ": the adjoint solve did not converge (" +
-                                 std::to_string(solve.relative_residual) + " after " +
-                                 std::to_string(solve.iterations) + " products)");
+        throw std::runtime_error("MpmAdjoint: step " + std::to_string(step) +
+                                 ": the adjoint solve did not converge (" + std::to_string(solve.relative_residual) +
+                                 " after " + std::to_string(solve.iterations) + " products)");
+    return lambda;
+}
 
+template <int dim>
+void MpmStepAdjoint<dim>::input_adjoint(const VecX& lambda, MpmRolloutGradient<dim>& g) {
+    const double dt = dt_;
+    const std::size_t n = n_;
+    const Particles<dim>& start = start_;
+    const VecX& v = v_;
+    constexpr int kStencil = IncrementalPotential<dim>::kStencil;
     // Through the solve: v* and the node masses, the particles' F^n and x (the stress term), E, phi.
-    std::vector<double> mass_bar(storage, 0.0);
-    std::vector<Vec<dim>> v_star_bar(storage, Vec<dim>::Zero());
-    for (std::int64_t i = 0; i < storage; ++i) {
-        if (dof[i] < 0) continue;
-        const Vec<dim> li = lambda.template segment<dim>(dim * dof[i]);
-        v_star_bar[i] = mass[i] * li;
-        mass_bar[i] = -li.dot(v.template segment<dim>(dim * dof[i]) - node_v_star[i]);
+    std::vector<double> mass_bar(storage_, 0.0);
+    std::vector<Vec<dim>> v_star_bar(storage_, Vec<dim>::Zero());
+    for (std::int64_t i = 0; i < storage_; ++i) {
+        if (dof_[i] < 0) continue;
+        const Vec<dim> li = lambda.template segment<dim>(dim * dof_[i]);
+        v_star_bar[i] = mass_[i] * li;
+        mass_bar[i] = -li.dot(v.template segment<dim>(dim * dof_[i]) - node_v_star_[i]);
     }
     std::vector<double> youngs_bar(n, 0.0);  // summed in particle order after the loop
     std::vector<Parameters> solve_parameter_bar(n, Parameters{});
@@ -488,33 +517,34 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
         const Material<dim>& material = system_.materials[start.object[p]];
         const Mat<dim>& Fn = start.F_elastic[p];
         Mat<dim> Lambda = Mat<dim>::Zero(), G = Mat<dim>::Zero();
-        const int* dofs = potential.stencil_dofs(p);
-        const Vec<dim>* grads = potential.stencil_gradients(p);
+        const int* dofs = potential_.stencil_dofs(p);
+        const Vec<dim>* grads = potential_.stencil_gradients(p);
         for (int s = 0; s < kStencil; ++s) {
             Lambda += lambda.template segment<dim>(dim * dofs[s]) * grads[s].transpose();
             G += v.template segment<dim>(dim * dofs[s]) * grads[s].transpose();
         }
         const double V = start.rest_volume[p];
         const Mat<dim> LF = Lambda * Fn;
-        const Mat<dim> Q = unflatten<dim>(T[p].transpose() * flatten<dim>(LF));  // d(P : LF)/dF
+        const Mat<dim> Q = unflatten<dim>(T_[p].transpose() * flatten<dim>(LF));  // d(P : LF)/dF
         const Mat<dim> A = Mat<dim>::Identity() + dt * G;
-        F_bar[p] -= V * dt * (A.transpose() * Q + Lambda.transpose() * P[p]);
-        youngs_bar[p] = -V * dt * P[p].cwiseProduct(LF).sum() / material.elasticity().params().E;
+        F_bar_[p] -= V * dt * (A.transpose() * Q + Lambda.transpose() * P_[p]);
+        youngs_bar[p] = -V * dt * P_[p].cwiseProduct(LF).sum() / material.elasticity().params().E;
         // 0 unless return_map's plasticity
-        h_bar[p] -= V * dt * dP_dh[p].cwiseProduct(LF).sum();
+        h_bar_[p] -= V * dt * dP_dh_[p].cwiseProduct(LF).sum();
         for (int q = 0; q < kPlasticityParameters; ++q)
-            solve_parameter_bar[p][q] = -V * dt * dP_dparameter[p][q].cwiseProduct(LF).sum();
-        const StencilNodeDerivatives<dim> st(grid, start.x[p]);
+            solve_parameter_bar[p][q] = -V * dt * dP_dparameter_[p][q].cwiseProduct(LF).sum();
+        const StencilNodeDerivatives<dim> st(grid_, start.x[p]);
         int s = 0;
         Vec<dim> xb = Vec<dim>::Zero();
         st.for_each([&](std::int64_t, double, const Vec<dim>&, const Mat<dim>& hess, const Vec<dim>&) {
             const Vec<dim> li = lambda.template segment<dim>(dim * dofs[s]);
             const Vec<dim> vi = v.template segment<dim>(dim * dofs[s]);
-            xb += hess * (Fn * (P[p].transpose() * li + dt * Q.transpose() * vi));
+            xb += hess * (Fn * (P_[p].transpose() * li + dt * Q.transpose() * vi));
             ++s;
         });
-        x_bar[p] -= V * dt * xb;
+        x_bar_[p] -= V * dt * xb;
     }
+    Parameters parameter_bar = parameter_bar_;
     for (std::size_t p = 0; p < n; ++p) {
         g.youngs_modulus += youngs_bar[p];
         for (int q = 0; q < kPlasticityParameters; ++q) parameter_bar[q] += solve_parameter_bar[p][q];
@@ -526,37 +556,47 @@ void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, i
     // AFLIP's residual: its cotangent rb_p to v_p (after P2G's adjoint, below), to x_p through the weights
     // (-sum_i (rb_p . u_i) grad w_ip), and to u_i = q_i / m_i, which is v*_i - dt g: -sum_p w_ip rb_p joins
     // v*'s cotangent (serially, in particle order: the sum does not depend on the thread count).
-    if (alpha > 0.0) {
+    if (alpha_ > 0.0) {
         for (std::size_t p = 0; p < n; ++p) {
-            const StencilNodes<dim> st(grid, start.x[p]);
+            const StencilNodes<dim> st(grid_, start.x[p]);
             st.for_each([&](std::int64_t node, double w, const Vec<dim>& grad, const Vec<dim>&) {
-                if (!(mass[node] > 0.0)) return;  // as velocity_residual: a node without mass has no u_i
-                const Vec<dim> u = momentum[node] / mass[node];
-                x_bar[p] -= residual_bar[p].dot(u) * grad;
-                v_star_bar[node] -= w * residual_bar[p];
+                if (!(mass_[node] > 0.0)) return;  // as velocity_residual: a node without mass has no u_i
+                const Vec<dim> u = momentum_[node] / mass_[node];
+                x_bar_[p] -= residual_bar_[p].dot(u) * grad;
+                v_star_bar[node] -= w * residual_bar_[p];
             });
         }
     }
 
     // P2G: v* = q / m + dt g on the nodes with mass.
-    std::vector<Vec<dim>> momentum_bar(storage, Vec<dim>::Zero());
-    for (std::int64_t i = 0; i < storage; ++i) {
-        if (dof[i] < 0 || !(mass[i] > 0.0)) continue;
-        momentum_bar[i] = v_star_bar[i] / mass[i];
-        mass_bar[i] -= v_star_bar[i].dot(momentum[i]) / (mass[i] * mass[i]);
+    std::vector<Vec<dim>> momentum_bar(storage_, Vec<dim>::Zero());
+    for (std::int64_t i = 0; i < storage_; ++i) {
+        if (dof_[i] < 0 || !(mass_[i] > 0.0)) continue;
+        momentum_bar[i] = v_star_bar[i] / mass_[i];
+        mass_bar[i] -= v_star_bar[i].dot(momentum_[i]) / (mass_[i] * mass_[i]);
     }
     std::vector<Vec<dim>> v_bar(n, Vec<dim>::Zero());
     std::vector<Mat<dim>> C_bar(n, Mat<dim>::Zero());
-    particles_to_grid_adjoint<dim>(grid, start, mass_bar, momentum_bar, x_bar, v_bar, C_bar);
-    if (alpha > 0.0)
-        for (std::size_t p = 0; p < n; ++p) v_bar[p] += residual_bar[p];
-    g.x = std::move(x_bar);
+    particles_to_grid_adjoint<dim>(grid_, start, mass_bar, momentum_bar, x_bar_, v_bar, C_bar);
+    if (alpha_ > 0.0)
+        for (std::size_t p = 0; p < n; ++p) v_bar[p] += residual_bar_[p];
+    g.x = std::move(x_bar_);
     g.v = std::move(v_bar);
     g.C = std::move(C_bar);
-    g.F = std::move(F_bar);
-    g.hardening = std::move(h_bar);
+    g.F = std::move(F_bar_);
+    g.hardening = std::move(h_bar_);
 }
 
+template <int dim>
+void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, int k,
+                                   MpmRolloutGradient<dim>& g) const {
+    MpmStepAdjoint<dim> step(system_, method_, start, v, dt_);
+    const VecX rhs = step.output_adjoint(g);
+    step.input_adjoint(step.solve(rhs, k), g);
+}
+
+template class MpmStepAdjoint<2>;
+template class MpmStepAdjoint<3>;
 template class MpmAdjoint<2>;
 template class MpmAdjoint<3>;
 

@@ -40,10 +40,13 @@
 // its friction in the one solve, floor_friction_solve "newton") adds the friction's Jacobian to J^T, with the
 // held normal rows of its contacts as unknowns that carry the floor impulse's cotangent, and the floor's
 // projection after the solve (docs/adjoint.md).
+#include <array>
 #include <functional>
 #include <map>
 #include <vector>
 
+#include "pnet/energy/particle_energy.hpp"
+#include "pnet/material/return_map_derivative.hpp"
 #include "pnet/mpm/implicit_integrator.hpp"
 
 namespace pnet {
@@ -57,6 +60,82 @@ struct MpmRolloutGradient {
     /// dL/dphi: every Drucker-Prager and Cam-Clay material's friction angle together (1/degree).
     double friction_angle = 0.0;
     double xi = 0.0, beta = 0.0;  // dL/dxi, dL/dbeta: every Cam-Clay material's together
+};
+
+/// A Coulomb floor's contact at the step's solution: its node's unknown, the floor's normal impulse J_k (the
+/// residual's held row (k, y) with v*_k,y as update_velocity left it; <= 0: the floor pulls, no friction), the
+/// friction's coefficient c = mu f1(|u|) u / |u| on the node's tangential velocity u (the force c J_k) and
+/// J_k dc/du.
+template <int dim>
+struct FloorContact {
+    using Tangent = Eigen::Matrix<double, dim - 1, 1>;
+    using TangentMatrix = Eigen::Matrix<double, dim - 1, dim - 1>;
+    int dof;
+    double impulse = 0.0;
+    Tangent c = Tangent::Zero();
+    TangentMatrix dc = TangentMatrix::Zero();
+};
+
+/// One implicit MPM step's adjoint, in the parts MpmAdjoint and the coupled adjoint (coupling/coupled_adjoint.hpp)
+/// share: the step rebuilt from its start and its solution v (P2G, the potential, the projection after the solve,
+/// the stress and its exact tangent at v); G2P's adjoint, from the cotangents of the step's output to the
+/// right-hand side of J^T lambda = rhs on the step's unknowns; J^T (assembled) or the solve itself; and, from
+/// lambda, the cotangents of the step's start (through the solve's residual, AFLIP's residual and P2G).
+template <int dim>
+class MpmStepAdjoint {
+public:
+    using Parameters = std::array<double, kPlasticityParameters>;
+
+    /// start: the step's start (kept by reference); v: its solution on the unknowns (before the projection).
+    MpmStepAdjoint(const MpmSystem<dim>& system, Method method, const Particles<dim>& start, const VecX& v, double dt);
+    MpmStepAdjoint(const MpmStepAdjoint&) = delete;  // its potential refers to its grid and energy
+    MpmStepAdjoint& operator=(const MpmStepAdjoint&) = delete;
+
+    /// The step's potential (its exact Hessian: no PSD projection), set up as the integrator's.
+    IncrementalPotential<dim>& potential() { return potential_; }
+    const Grid<dim>& grid() const { return grid_; }
+
+    /// G2P's adjoint from the cotangents of the step's output (g's x, v, C, F, hardening): the right-hand side of
+    /// J^T lambda = rhs (zero on the components the solve holds).
+    VecX output_adjoint(const MpmRolloutGradient<dim>& g);
+    /// Whether J is symmetric (an elastic stress in the solve, no Coulomb floor): the potential's own Hessian.
+    bool symmetric() const;
+    /// J^T's entries, rows and columns shifted by `offset` (the held components' rows and columns the identity's).
+    void jacobian_transpose(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset = 0) const;
+    /// lambda = J^-T rhs (PCG where symmetric, else sparse LU); `step` names the step in errors.
+    VecX solve(const VecX& rhs, int step);
+    /// From lambda (after output_adjoint): the cotangents of the step's start into g (x, v, C, F and hardening
+    /// replaced; E and the plasticity parameters added to).
+    void input_adjoint(const VecX& lambda, MpmRolloutGradient<dim>& g);
+
+private:
+    const MpmSystem<dim>& system_;
+    Method method_;
+    const Particles<dim>& start_;
+    VecX v_;
+    double dt_;
+    std::size_t n_;
+    Grid<dim> grid_;
+    std::int64_t storage_ = 0;
+    std::vector<double> mass_;
+    std::vector<Vec<dim>> momentum_, node_v_star_;
+    bool coulomb_ = false;
+    ElasticParticleEnergy<dim> energy_;
+    IncrementalPotential<dim> potential_;
+    std::vector<int> dof_;  // storage index -> unknown node (-1: none)
+    std::vector<Vec<dim>> grid_v_;
+    std::vector<Mat<dim>> projection_;
+    std::vector<Mat<dim>> F_, P_, dP_dh_;
+    std::vector<std::array<Mat<dim>, kPlasticityParameters>> dP_dparameter_;
+    std::vector<Tensor4<dim>> T_;
+    std::vector<FloorContact<dim>> contacts_;
+    std::vector<int> contact_of_;
+    // What output_adjoint leaves for input_adjoint.
+    std::vector<Vec<dim>> x_bar_, residual_bar_;
+    std::vector<Mat<dim>> F_bar_;
+    std::vector<double> h_bar_;
+    Parameters parameter_bar_{};
+    double alpha_ = 0.0;
 };
 
 template <int dim>
