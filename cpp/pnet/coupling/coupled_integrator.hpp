@@ -66,6 +66,8 @@ public:
     CoupledStepStats step(Particles<dim>& particles, FemState<dim>& state, double dt, long step_index);
 
     CoupledPotential<dim>& potential() { return coupled_; }
+    /// The last step's solution [grid velocities; node velocities] (before the slip walls' projection).
+    const VecX& solution() const { return v_; }
     const Grid<dim>& grid() const { return grid_; }
 
 private:

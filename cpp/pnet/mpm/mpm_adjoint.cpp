@@ -116,17 +116,10 @@ VecX solve_transposed(const SparseMatrix& transpose, const VecX& rhs, int step, 
 }  // namespace
 
 template <int dim>
-MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options,
-                            Method method)
-    : system_(system), options_(options), mpm_options_(mpm_options), method_(method) {
-    if (method != Method::Lagged && method != Method::ReturnMap)
-        throw std::invalid_argument(std::string("MpmAdjoint: integrator '") + to_string(method) +
-                                    "': the adjoint is of lagged and return_map (plasticitynet converges to "
-                                    "return_map's step)");
+void require_adjoint_materials(const MpmSystem<dim>& system, const std::string& who) {
     for (std::size_t k = 0; k < system.materials.size(); ++k) {
         const MaterialDescription& m = system.materials[k].description();
-        const std::string field = "MpmAdjoint: materials[" + std::to_string(k) + "].";
-        if (m.plasticity == PlasticityModel::CamClay && m.cam_clay.variant != CamClayVariant::Exact)
+        const std::string field = who + ": materials[" + std::to_string(k) + "].";        if (m.plasticity == PlasticityModel::CamClay && m.cam_clay.variant != CamClayVariant::Exact)
             throw std::invalid_argument(field + "plasticity.variant '" + to_string(m.cam_clay.variant) +
                                         "': the adjoint differentiates Cam-Clay's exact variant (J kept)");
         if (m.plasticity == PlasticityModel::VonMises && m.elasticity != ElasticityModel::StvkHencky)
@@ -134,6 +127,20 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
                                         "': the adjoint differentiates von Mises with stvk_hencky (its closed-form "
                                         "return mapping)");
     }
+}
+
+template void require_adjoint_materials<2>(const MpmSystem<2>&, const std::string&);
+template void require_adjoint_materials<3>(const MpmSystem<3>&, const std::string&);
+
+template <int dim>
+MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions& options, const MpmOptions& mpm_options,
+                            Method method)
+    : system_(system), options_(options), mpm_options_(mpm_options), method_(method) {
+    if (method != Method::Lagged && method != Method::ReturnMap)
+        throw std::invalid_argument(std::string("MpmAdjoint: integrator '") + to_string(method) +
+                                    "': the adjoint is of lagged and return_map (plasticitynet converges to "
+                                    "return_map's step)");
+    require_adjoint_materials<dim>(system, "MpmAdjoint");
     // A Coulomb floor's friction in the one solve's residual (FloorFrictionForm::begin_newton), without the
     // passes a failed one solve falls back to under "auto": the gradient is that of R(v) = 0 with the friction.
     // That solve is return_map's (under its work line search; lagged solves the floor in passes, whose fixed

@@ -43,6 +43,7 @@
 #include <array>
 #include <functional>
 #include <map>
+#include <string>
 #include <vector>
 
 #include "pnet/energy/particle_energy.hpp"
@@ -50,6 +51,11 @@
 #include "pnet/mpm/implicit_integrator.hpp"
 
 namespace pnet {
+
+/// Throws std::invalid_argument, prefixed by `who` and naming the field, for a particle material the MPM adjoint
+/// does not differentiate (Cam-Clay's paper variant, von Mises with another elasticity than stvk_hencky).
+template <int dim>
+void require_adjoint_materials(const MpmSystem<dim>& system, const std::string& who);
 
 template <int dim>
 struct MpmRolloutGradient {

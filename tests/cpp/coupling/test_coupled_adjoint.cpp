@@ -1,0 +1,299 @@
+// The adjoint of an implicit MPM-FEM coupled rollout (coupling/coupled_adjoint.hpp) against central differences
+// of the whole rollout: the tiny coupling scene's stiff disk pressed into its sand bed (within the barrier's
+// reach from the first step), a random linear loss of the last state's particle and node positions and
+// velocities, its gradient with respect to both Young's moduli and along random directions of the particles'
+// start velocities and positions and the nodes' start positions and velocities. The forward solves are
+// tightened (Newton to 1e-10 m/s, the assembled coupled solve) for the check.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <functional>
+
+#include <nlohmann/json.hpp>
+
+#include "pnet/contact/collisions/contact.hpp"
+#include "pnet/coupling/coupled_adjoint.hpp"
+#include "pnet/scene/sampler.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
+#include "support/random.hpp"
+
+namespace pnet {
+namespace {
+
+const char* const kTiny = PNET_SCENES_DIR "/tiny/sand_fem_coupling_2d.json";
+constexpr double kBedTop = 0.09765625;  // the tiny bed's top particle row
+
+/// The tiny scene, its disk 4 mm above the bed (within dhat = dx / 2 of its top row) and falling at vy, the
+/// particles' material `plasticity` ("none": elastic sand) and the disk's E.
+Scene pressed_scene(double vy, const char* plasticity, double sand_E = 3.537e5, double disk_E = 1e7) {
+    nlohmann::json j = scene_to_json(load_scene(kTiny));
+    j["meshes"][0]["center"][1] = kBedTop + 0.05 + 0.004;
+    j["meshes"][0]["velocity"] = {0.1, vy};
+    j["meshes"][0]["material"]["elasticity"]["E"] = disk_E;
+    j["objects"][0]["material"]["elasticity"]["E"] = sand_E;
+    if (std::string(plasticity) == "none") j["objects"][0]["material"]["plasticity"] = {{"model", "none"}};
+    return scene_from_json(j, "pressed.json", PNET_SCENES_DIR "/tiny");
+}
+
+ImplicitOptions tight() {
+    ImplicitOptions o;
+    o.newton_tolerance = 1e-10;
+    o.newton_acceleration_tolerance = 0.0;
+    o.max_newton_iterations = 2000;
+    o.cg_tolerance = 1e-8;
+    return o;
+}
+
+/// What a coupled rollout needs, from a scene: the MPM and FEM systems and the particle / mesh barrier.
+struct Coupled {
+    Scene scene;
+    MpmSystem<2> mpm;
+    FemSceneSystem<2> fem;
+    Contact<2> contact;
+    CoupledState<2> start;
+
+    explicit Coupled(Scene s)
+        : scene(std::move(s)),
+          mpm(make_mpm_system<2>(scene)),
+          fem(make_fem_system<2>(scene)),
+          contact(fem.system.mesh.boundary, {}, 0.5 * scene.dx, 1e3,
+                  ContactPoints{static_cast<int>(fem.system.mesh.nodes()), true}) {
+        start.particles = sample_particles<2>(scene);
+        start.mesh = FemState<2>::at_rest(fem.system);
+        for (Vec<2>& v : start.mesh.v) v = scene.meshes[0].velocity.head<2>();
+    }
+
+    CoupledAdjoint<2> adjoint(Method method) const {
+        CouplingOptions coupling;
+        coupling.coupled_solver = "cholesky";
+        return CoupledAdjoint<2>(mpm, fem.system, nullptr, contact, tight(), MpmOptions{}, coupling, method);
+    }
+};
+
+/// L = sum_p a_p . x_p + b_p . v_p + sum_a c_a . x_a + d_a . v_a of a state.
+struct LinearLoss {
+    std::vector<Vec<2>> a, b, c, d;
+    LinearLoss(std::size_t particles, std::size_t nodes, test::Random& random) {
+        for (auto* w : {&a, &b}) {
+            w->resize(particles);
+            for (Vec<2>& e : *w) e = random.uniform_vec<2>(-1.0, 1.0);
+        }
+        for (auto* w : {&c, &d}) {
+            w->resize(nodes);
+            for (Vec<2>& e : *w) e = random.uniform_vec<2>(-1.0, 1.0);
+        }
+    }
+    double operator()(const CoupledState<2>& s) const {
+        double L = 0.0;
+        for (std::size_t p = 0; p < a.size(); ++p) L += a[p].dot(s.particles.x[p]) + b[p].dot(s.particles.v[p]);
+        for (std::size_t i = 0; i < c.size(); ++i) L += c[i].dot(s.mesh.x[i]) + d[i].dot(s.mesh.v[i]);
+        return L;
+    }
+};
+
+/// The rollout's gradient against central differences along random directions of the start and of both E.
+void check_coupled_gradient(const char* plasticity, Method method, int steps, double tolerance,
+                            double compression = 0.0, bool disk_E_check = true) {
+    const double dt = 1e-3, sand_E = 3.537e5, disk_E = 1e7;
+    Coupled base(pressed_scene(-0.5, plasticity, sand_E, disk_E));
+    // Sand at rest from F = I sits at Drucker-Prager's cone tip, where the return mapping has no derivative (a
+    // central difference there averages two one-sided ones: docs/adjoint.md): the bed starts compressed by
+    // `compression`, inside the cone.
+    for (Mat<2>& F : base.start.particles.F_elastic) F = (1.0 - compression) * Mat<2>::Identity();
+    const std::size_t n = base.start.particles.size(), nodes = base.start.mesh.x.size();
+    test::Random random(11);
+    const LinearLoss loss(n, nodes, random);
+    std::vector<Vec<2>> dv(n), dx(n), dxa(nodes), dva(nodes);
+    for (std::size_t p = 0; p < n; ++p) {
+        dv[p] = random.uniform_vec<2>(-1.0, 1.0);
+        dx[p] = random.uniform_vec<2>(-1.0, 1.0);
+    }
+    for (std::size_t i = 0; i < nodes; ++i) {
+        dxa[i] = random.uniform_vec<2>(-1.0, 1.0);
+        dva[i] = random.uniform_vec<2>(-1.0, 1.0);
+    }
+
+    CoupledAdjoint<2> adjoint = base.adjoint(method);
+    std::size_t pairs_seen = 0;
+    const CoupledState<2> last = adjoint.forward(base.start, dt, steps, [&](int, const CoupledState<2>& s) {
+        std::vector<Vec<2>> x;
+        CoupledVertices<2>::join(s.mesh.x, s.particles.x, x);
+        pairs_seen = std::max(pairs_seen, base.contact.active_pairs(x));
+    });
+    ASSERT_EQ(adjoint.unconverged_steps(), 0);
+    ASSERT_GT(pairs_seen, 0u) << "the disk never came within the barrier's reach of the bed";
+    std::vector<std::vector<Vec<2>>> px(steps + 1), pv(steps + 1), nx(steps + 1), nv(steps + 1);
+    px.back() = loss.a;
+    pv.back() = loss.b;
+    nx.back() = loss.c;
+    nv.back() = loss.d;
+    const CoupledRolloutGradient<2> g = adjoint.backward(px, pv, nx, nv);
+
+    auto rollout_loss = [&](const Coupled& system, const CoupledState<2>& start) {
+        CoupledAdjoint<2> a = system.adjoint(method);
+        return loss(a.forward(start, dt, steps));
+    };
+    auto along = [&](const std::function<void(CoupledState<2>&, double)>& move, double h) {
+        CoupledState<2> plus = base.start, minus = base.start;
+        move(plus, h);
+        move(minus, -h);
+        return (rollout_loss(base, plus) - rollout_loss(base, minus)) / (2.0 * h);
+    };
+    struct Check {
+        const char* name;
+        double adjoint, fd;
+    };
+    std::vector<Check> checks;
+    {
+        double a = 0.0;
+        for (std::size_t p = 0; p < n; ++p) a += g.particles.v[p].dot(dv[p]);
+        checks.push_back({"particle v0", a, along([&](CoupledState<2>& s, double h) {
+                              for (std::size_t p = 0; p < n; ++p) s.particles.v[p] += h * dv[p];
+                          }, 1e-5)});
+    }
+    {
+        double a = 0.0;
+        for (std::size_t p = 0; p < n; ++p) a += g.particles.x[p].dot(dx[p]);
+        checks.push_back({"particle x0", a, along([&](CoupledState<2>& s, double h) {
+                              for (std::size_t p = 0; p < n; ++p) s.particles.x[p] += h * dx[p];
+                          }, 1e-8)});
+    }
+    {
+        double a = 0.0;
+        for (std::size_t i = 0; i < nodes; ++i) a += g.node_x[i].dot(dxa[i]);
+        checks.push_back({"node x0", a, along([&](CoupledState<2>& s, double h) {
+                              for (std::size_t i = 0; i < nodes; ++i) s.mesh.x[i] += h * dxa[i];
+                          }, 1e-8)});
+    }
+    {
+        double a = 0.0;
+        for (std::size_t i = 0; i < nodes; ++i) a += g.node_v[i].dot(dva[i]);
+        checks.push_back({"node v0", a, along([&](CoupledState<2>& s, double h) {
+                              for (std::size_t i = 0; i < nodes; ++i) s.mesh.v[i] += h * dva[i];
+                          }, 1e-5)});
+    }
+    {
+        const double h = 1e-4 * sand_E;
+        const Coupled plus(pressed_scene(-0.5, plasticity, sand_E + h, disk_E));
+        const Coupled minus(pressed_scene(-0.5, plasticity, sand_E - h, disk_E));
+        checks.push_back({"sand E", g.particles.youngs_modulus,
+                          (rollout_loss(plus, base.start) - rollout_loss(minus, base.start)) / (2.0 * h)});
+    }
+    if (disk_E_check) {
+        const double h = 1e-3 * disk_E;  // the disk barely deforms: a smaller h leaves the solves' noise
+        const Coupled plus(pressed_scene(-0.5, plasticity, sand_E, disk_E + h));
+        const Coupled minus(pressed_scene(-0.5, plasticity, sand_E, disk_E - h));
+        checks.push_back({"disk E", g.mesh_youngs_modulus,
+                          (rollout_loss(plus, base.start) - rollout_loss(minus, base.start)) / (2.0 * h)});
+    }
+    for (const Check& c : checks) {
+        const double relative = std::abs(c.adjoint - c.fd) / std::max(std::abs(c.fd), 1e-300);
+        std::printf("coupled adjoint (%s, %s, %d steps, %zu particles, %zu nodes, up to %zu pairs): dL/d%s %.10e, "
+                    "central differences %.10e, relative %.2e\n",
+                    plasticity, to_string(method), steps, n, nodes, pairs_seen, c.name, c.adjoint, c.fd,
+                    relative);
+        EXPECT_LT(relative, tolerance) << c.name;
+    }
+    (void)last;
+}
+
+TEST(CoupledAdjoint2d, ElasticSandUnderTheDiskMatchesCentralDifferences) {
+    check_coupled_gradient("none", Method::Lagged, 20, 1e-4);
+}
+
+// Drucker-Prager sand: lagged (the elastic solve, the return mapping in G2P) and return_map (the return-mapped
+// stress and its consistent tangent in the solve: J not symmetric).
+TEST(CoupledAdjoint2d, SandUnderTheDiskMatchesCentralDifferencesUnderLaggedAndReturnMap) {
+    check_coupled_gradient("drucker_prager", Method::Lagged, 20, 1e-4, 5e-3);
+    // Six steps: over longer ones the bed flows plastically under the disk and central differences along the
+    // start's positions straddle the cone's branches (they moved by 1e-3 relative between h = 1e-7 and 1e-8 at
+    // 12 steps, while dL/dE matched to 1e-6). Over six steps the disk has hardly deformed: dL/dE of the disk is
+    // 1e-13 per Pa, below what central differences of the solves resolve, and is not compared.
+    check_coupled_gradient("drucker_prager", Method::ReturnMap, 6, 1e-4, 5e-3, false);
+}
+
+
+// Every state kept (a checkpoint per step) and the default sqrt(N) checkpoints with the segments recomputed give
+// the same gradient to the last bit, at fewer states held.
+TEST(CoupledAdjoint2d, CheckpointedAndStoredTapeGradientsAreIdentical) {
+    const Coupled base(pressed_scene(-0.5, "none"));
+    const int steps = 9;
+    const std::size_t n = base.start.particles.size(), nodes = base.start.mesh.x.size();
+    test::Random random(3);
+    const LinearLoss loss(n, nodes, random);
+    std::vector<std::vector<Vec<2>>> px(steps + 1), pv(steps + 1), nx(steps + 1), nv(steps + 1);
+    px.back() = loss.a;
+    pv[4] = loss.b;  // a loss of an inner state too
+    nx.back() = loss.c;
+    nv[2] = loss.d;
+    CoupledAdjoint<2> stored = base.adjoint(Method::Lagged), checkpointed = base.adjoint(Method::Lagged);
+    stored.forward(base.start, 1e-3, steps, {}, 1);
+    checkpointed.forward(base.start, 1e-3, steps);
+    const CoupledRolloutGradient<2> a = stored.backward(px, pv, nx, nv), b = checkpointed.backward(px, pv, nx, nv);
+    EXPECT_LT(checkpointed.peak_states(), stored.peak_states());
+    for (std::size_t p = 0; p < n; ++p) {
+        EXPECT_EQ(a.particles.x[p], b.particles.x[p]);
+        EXPECT_EQ(a.particles.v[p], b.particles.v[p]);
+        EXPECT_EQ(a.particles.F[p], b.particles.F[p]);
+    }
+    for (std::size_t i = 0; i < nodes; ++i) {
+        EXPECT_EQ(a.node_x[i], b.node_x[i]);
+        EXPECT_EQ(a.node_v[i], b.node_v[i]);
+    }
+    EXPECT_EQ(a.particles.youngs_modulus, b.particles.youngs_modulus);
+    EXPECT_EQ(a.mesh_youngs_modulus, b.mesh_youngs_modulus);
+}
+
+/// The message of the std::invalid_argument that f throws ("" if none).
+template <typename F>
+std::string refusal(F&& f) {
+    try {
+        f();
+    } catch (const std::invalid_argument& e) {
+        return e.what();
+    }
+    return "";
+}
+
+TEST(CoupledAdjoint2d, RefusesWhatItDoesNotCover) {
+    Coupled base(pressed_scene(-0.5, "none"));
+    const CouplingOptions coupling;
+    auto make = [&](const MpmSystem<2>& mpm, const FemSystem<2>& fem, Method method,
+                    const ImplicitOptions& options = ImplicitOptions{}) {
+        return [&, method, options] { CoupledAdjoint<2>(mpm, fem, nullptr, base.contact, options, MpmOptions{}, coupling, method); };
+    };
+    EXPECT_NE(refusal(make(base.mpm, base.fem.system, Method::PlasticityNet)).find("integrator 'plasticitynet'"),
+              std::string::npos);
+    MpmSystem<2> coulomb = base.mpm;
+    coulomb.boundary.floor_friction = 0.5;
+    EXPECT_NE(refusal(make(coulomb, base.fem.system, Method::ReturnMap)).find("boundary.floor_friction"),
+              std::string::npos);
+    FemSystem<2> plastic = base.fem.system;
+    MaterialDescription metal = plastic.materials[0].description();
+    metal.plasticity = PlasticityModel::VonMises;
+    metal.elasticity = ElasticityModel::StvkHencky;
+    plastic.materials[0] = Material<2>(metal);
+    EXPECT_NE(refusal(make(base.mpm, plastic, Method::Lagged)).find("meshes[0].material.plasticity 'von_mises'"),
+              std::string::npos);
+    FemSystem<2> kinematic = base.fem.system;
+    kinematic.fixed_node.assign(kinematic.mesh.nodes(), 0);
+    kinematic.fixed_node[0] = 1;
+    EXPECT_NE(refusal(make(base.mpm, kinematic, Method::Lagged)).find("kinematic"), std::string::npos);
+    ImplicitOptions bdf2;
+    bdf2.time_integrator = "bdf2";
+    EXPECT_NE(refusal(make(base.mpm, base.fem.system, Method::Lagged, bdf2)).find("time_integrator 'bdf2'"),
+              std::string::npos);
+    // A loss with the wrong number of entries names what it needs.
+    CoupledAdjoint<2> adjoint = base.adjoint(Method::Lagged);
+    adjoint.forward(base.start, 1e-3, 2);
+    std::vector<std::vector<Vec<2>>> empty(3), wrong(3);
+    wrong[2].resize(5);
+    EXPECT_NE(refusal([&] { adjoint.backward(empty, empty, wrong, empty); }).find("one entry per mesh node"),
+              std::string::npos);
+    EXPECT_NE(refusal([&] { adjoint.backward(empty, empty, empty, std::vector<std::vector<Vec<2>>>(2)); })
+                  .find("one entry per state (3)"),
+              std::string::npos);
+}
+
+}  // namespace
+}  // namespace pnet
