@@ -1,12 +1,15 @@
-// Gradients of simulated outcomes (issue 57; docs/adjoint.md): FemRollout and MpmRollout, the adjoints of
-// implicit FEM and MPM rollouts (cpp/pnet/fem/fem_adjoint.hpp, cpp/pnet/mpm/mpm_adjoint.hpp) as numpy calls.
+// Gradients of simulated outcomes (issue 57; docs/adjoint.md): FemRollout, MpmRollout and CoupledRollout, the
+// adjoints of implicit FEM, MPM and MPM-FEM coupled rollouts (cpp/pnet/fem/fem_adjoint.hpp,
+// cpp/pnet/mpm/mpm_adjoint.hpp, cpp/pnet/coupling/coupled_adjoint.hpp) as numpy calls.
 // plasticitynet.adjoint wraps it as a torch.autograd.Function.
 #include <memory>
 
 #include "common.hpp"
+#include "pnet/coupling/coupled_adjoint.hpp"
 #include "pnet/fem/fem_adjoint.hpp"
 #include "pnet/mpm/mpm_adjoint.hpp"
 #include "pnet/scene/sampler.hpp"
+#include "pnet/sim/coupled_simulation.hpp"
 #include "pnet/sim/fem_simulation.hpp"
 #include "pnet/sim/mpm_simulation.hpp"
 
@@ -76,6 +79,21 @@ void add_hardening(const std::vector<double>& hardening, py::dict& d) {
     for (std::size_t k = 0; k < hardening.size(); ++k) total += h.mutable_data()[k] = hardening[k];
     d["hardening"] = h;
     d["initial_hardening"] = total;
+}
+
+/// An MPM rollout's gradient into d: "x0", "v0", "C0", "F0", the hardening's, "youngs_modulus", "friction_angle",
+/// "xi", "beta".
+template <int dim>
+void add_particle_gradient(const MpmRolloutGradient<dim>& g, py::dict& d) {
+    d["x0"] = rows<dim>(g.x);
+    d["v0"] = rows<dim>(g.v);
+    d["C0"] = from_matrices<dim>(g.C);
+    d["F0"] = from_matrices<dim>(g.F);
+    d["youngs_modulus"] = g.youngs_modulus;
+    d["friction_angle"] = g.friction_angle;
+    d["xi"] = g.xi;
+    d["beta"] = g.beta;
+    add_hardening(g.hardening, d);
 }
 
 struct Rollout {
@@ -231,15 +249,117 @@ struct MpmRolloutOf final : MpmRolloutBase {
             g = adjoint.backward(xs, vs);
         }
         py::dict d;
-        d["x0"] = rows<dim>(g.x);
-        d["v0"] = rows<dim>(g.v);
-        d["C0"] = from_matrices<dim>(g.C);
-        d["F0"] = from_matrices<dim>(g.F);
-        d["youngs_modulus"] = g.youngs_modulus;
-        d["friction_angle"] = g.friction_angle;
-        d["xi"] = g.xi;
-        d["beta"] = g.beta;
-        add_hardening(g.hardening, d);
+        add_particle_gradient<dim>(g, d);
+        return d;
+    }
+};
+
+struct CoupledRolloutBase {
+    virtual ~CoupledRolloutBase() = default;
+    virtual py::dict start() const = 0;
+    virtual py::dict forward(int steps, double dt, const py::object& v0, const py::object& mesh_v0,
+                             const py::object& states, int checkpoint_every) = 0;
+    virtual py::dict backward(const py::object& dL_dx, const py::object& dL_dv, const py::object& dL_dmesh_x,
+                              const py::object& dL_dmesh_v) const = 0;
+    virtual int particles() const = 0;
+    virtual int nodes() const = 0;
+    virtual std::size_t peak_states() const = 0;
+    virtual int unconverged_steps() const = 0;
+};
+
+template <int dim>
+struct CoupledRolloutOf final : CoupledRolloutBase {
+    Scene scene;
+    MpmSystem<dim> mpm;
+    FemSceneSystem<dim> fem;
+    CoupledState<dim> initial;
+    std::unique_ptr<ContactPotential<dim>> mesh_contact;
+    std::unique_ptr<Contact<dim>> contact;
+    CoupledAdjoint<dim> adjoint;
+
+    CoupledRolloutOf(Scene s, const ImplicitOptions& options, Method method)
+        : scene(std::move(s)),
+          mpm(make_mpm_system<dim>(scene)),
+          fem(make_fem_system<dim>(scene)),
+          initial{sample_particles<dim>(scene), FemState<dim>::at_rest(fem.system)},
+          mesh_contact(make_fem_contact<dim>(scene, fem)),
+          contact(make_particle_contact<dim>(scene, fem.system, initial.particles)),
+          adjoint(mpm, fem.system, mesh_contact.get(), *contact, options, MpmOptions{},
+                  coupling_options(scene), method) {
+        for (std::size_t k = 0; k < scene.meshes.size(); ++k)
+            for (int i = fem.first_node[k]; i < fem.first_node[k + 1]; ++i)
+                initial.mesh.v[i] = scene.meshes[k].velocity.template head<dim>();
+    }
+    /// The scene's coupled solver; friction is refused (the adjoint holds none).
+    static CouplingOptions coupling_options(const Scene& scene) {
+        if (scene.contact.friction > 0.0)
+            throw std::invalid_argument(scene.file + ": contact.friction " + std::to_string(scene.contact.friction) +
+                                        ": the coupled adjoint differentiates frictionless contact (set it to 0)");
+        CouplingOptions o;
+        o.coupled_solver = "cholesky";
+        return o;
+    }
+    int particles() const override { return static_cast<int>(initial.particles.size()); }
+    int nodes() const override { return static_cast<int>(fem.system.mesh.nodes()); }
+    std::size_t peak_states() const override { return adjoint.peak_states(); }
+    int unconverged_steps() const override { return adjoint.unconverged_steps(); }
+    py::dict start() const override {
+        py::dict d;
+        d["x"] = rows<dim>(initial.particles.x);
+        d["v"] = rows<dim>(initial.particles.v);
+        d["mesh_x"] = rows<dim>(initial.mesh.x);
+        d["mesh_v"] = rows<dim>(initial.mesh.v);
+        return d;
+    }
+    py::dict forward(int steps, double dt, const py::object& v0, const py::object& mesh_v0, const py::object& states,
+                     int checkpoint_every) override {
+        if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
+        if (!(dt > 0.0)) throw py::value_error("dt: expected a positive number (s)");
+        if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
+        const std::vector<char> wanted = wanted_states(states, steps);
+        CoupledState<dim> s = initial;
+        if (!v0.is_none()) s.particles.v = to_points<dim>(v0, "v0", particles());
+        if (!mesh_v0.is_none()) s.mesh.v = to_points<dim>(mesh_v0, "mesh_v0", nodes());
+        std::vector<int> index;
+        std::vector<std::vector<Vec<dim>>> xs, vs, mesh_xs, mesh_vs;
+        {
+            py::gil_scoped_release release;
+            adjoint.forward(
+                s, dt, steps,
+                [&](int k, const CoupledState<dim>& state) {
+                    if (!wanted[static_cast<std::size_t>(k)]) return;
+                    index.push_back(k);
+                    xs.push_back(state.particles.x);
+                    vs.push_back(state.particles.v);
+                    mesh_xs.push_back(state.mesh.x);
+                    mesh_vs.push_back(state.mesh.v);
+                },
+                checkpoint_every);
+        }
+        py::dict d = kept_states<dim>(index, xs, vs), mesh = kept_states<dim>(index, mesh_xs, mesh_vs);
+        d["mesh_x"] = mesh["x"];
+        d["mesh_v"] = mesh["v"];
+        return d;
+    }
+    py::dict backward(const py::object& dL_dx, const py::object& dL_dv, const py::object& dL_dmesh_x,
+                      const py::object& dL_dmesh_v) const override {
+        if (adjoint.steps() < 0) throw py::value_error("backward: run forward() first");
+        const std::size_t states = static_cast<std::size_t>(adjoint.steps()) + 1;
+        std::vector<std::vector<Vec<dim>>> xs, vs, mesh_xs, mesh_vs;
+        read_cotangents<dim>(dL_dx, "dL_dx", states, particles(), xs);
+        read_cotangents<dim>(dL_dv, "dL_dv", states, particles(), vs);
+        read_cotangents<dim>(dL_dmesh_x, "dL_dmesh_x", states, nodes(), mesh_xs);
+        read_cotangents<dim>(dL_dmesh_v, "dL_dmesh_v", states, nodes(), mesh_vs);
+        CoupledRolloutGradient<dim> g;
+        {
+            py::gil_scoped_release release;
+            g = adjoint.backward(xs, vs, mesh_xs, mesh_vs);
+        }
+        py::dict d;
+        add_particle_gradient<dim>(g.particles, d);
+        d["mesh_x0"] = rows<dim>(g.node_x);
+        d["mesh_v0"] = rows<dim>(g.node_v);
+        d["mesh_youngs_modulus"] = g.mesh_youngs_modulus;
         return d;
     }
 };
@@ -350,6 +470,53 @@ gradient is then that of the path taken).)doc")
         .def_property_readonly("peak_states", &MpmRolloutBase::peak_states)
         .def_property_readonly("unconverged_steps", &MpmRolloutBase::unconverged_steps)
         .def("backward", &MpmRolloutBase::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
+
+    py::class_<CoupledRolloutBase>(m, "CoupledRollout", R"doc(A rollout of an implicit MPM-FEM coupled scene and its adjoint.
+
+CoupledRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
+particle objects (the materials MpmRollout takes) and elastic meshes of one material, without friction
+(contact.friction 0) or a Coulomb floor; ValueError naming what otherwise. Steps are the coupled integrator's
+backward Euler at a fixed dt with the particle / mesh barrier, the particles' energy "lagged" (the elastic
+solve, then the return mapping) or "return_map" (the return-mapped stress within the solve), each solved to
+newton_tolerance (m/s) with the assembled coupled solve.
+
+forward(steps, dt, v0=None, mesh_v0=None, states=None, checkpoint_every=0) runs the rollout from the scene's
+particles and meshes (v0, mesh_v0: their start velocities instead, (particles, dim) and (nodes, dim) arrays)
+and returns {"x", "v", "mesh_x", "mesh_v": {k: array}} for the states k asked for (None: all). backward(dL_dx,
+dL_dv, dL_dmesh_x, dL_dmesh_v) takes dicts {state: array} of the loss's gradient with respect to those states
+and returns MpmRollout's gradient of the particles' start and material ("x0", "v0", "C0", "F0", "hardening",
+"youngs_modulus", "friction_angle", "xi", "beta", "initial_hardening") with "mesh_x0", "mesh_v0" ((nodes, dim))
+and "mesh_youngs_modulus" (dL/dE of the mesh's material) (docs/adjoint.md). peak_states and unconverged_steps
+as MpmRollout's.)doc")
+        .def(py::init([](const py::object& scene, double newton_tolerance,
+                         const std::string& integrator) -> std::unique_ptr<CoupledRolloutBase> {
+                 Scene s = scene_of(scene);
+                 if (!s.has_particles() || !s.has_meshes())
+                     throw py::value_error(s.file + ": CoupledRollout takes a scene of particle objects and meshes");
+                 if (!(newton_tolerance > 0.0)) throw py::value_error("newton_tolerance: expected a positive number");
+                 ImplicitOptions options;
+                 options.newton_tolerance = newton_tolerance;
+                 options.newton_acceleration_tolerance = 0.0;
+                 options.max_newton_iterations = 1000;
+                 try {
+                     const Method method = parse_integrator(integrator, "integrator");
+                     if (s.dim == 2) return std::make_unique<CoupledRolloutOf<2>>(std::move(s), options, method);
+                     return std::make_unique<CoupledRolloutOf<3>>(std::move(s), options, method);
+                 } catch (const std::invalid_argument& e) {
+                     throw py::value_error(std::string(e.what()));
+                 }
+             }),
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged")
+        .def_property_readonly("particles", &CoupledRolloutBase::particles)
+        .def_property_readonly("nodes", &CoupledRolloutBase::nodes)
+        .def("start", &CoupledRolloutBase::start,
+             "The scene's start: {\"x\", \"v\"} (particles, dim) and {\"mesh_x\", \"mesh_v\"} (nodes, dim) arrays.")
+        .def("forward", &CoupledRolloutBase::forward, py::arg("steps"), py::arg("dt"), py::arg("v0") = py::none(),
+             py::arg("mesh_v0") = py::none(), py::arg("states") = py::none(), py::arg("checkpoint_every") = 0)
+        .def_property_readonly("peak_states", &CoupledRolloutBase::peak_states)
+        .def_property_readonly("unconverged_steps", &CoupledRolloutBase::unconverged_steps)
+        .def("backward", &CoupledRolloutBase::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none(),
+             py::arg("dL_dmesh_x") = py::none(), py::arg("dL_dmesh_v") = py::none());
 }
 
 }  // namespace pnet::bindings

@@ -15,6 +15,10 @@ operations, so a torch optimizer can fit E or v0 to observed frames.
 elastic, sand, snow and metal particle bodies (plasticitynet_sim.MpmRollout): the particles' positions,
 differentiable in E, v0, the friction angle, Cam-Clay's xi and beta and the initial hardening.
 
+`coupled_positions(scene, E, mesh_E, v0, mesh_v0, steps, dt, states)` does it for an implicit MPM-FEM coupled
+rollout (plasticitynet_sim.CoupledRollout): the particles' and the mesh nodes' positions, differentiable in both
+Young's moduli, both start velocities and the particles' friction angle.
+
 Losses that need no particle correspondence: `grid_mass(x, mass, scene)` is the particles' mass on the
 scene's grid (Simulation.grid_mass(), the quadratic B-spline), differentiable in the positions, and
 `height_profile(x, mass, scene, density)` the deposit's height over each grid column (the mass above a
@@ -38,12 +42,13 @@ def _sim():
     return plasticitynet_sim
 
 
-def with_youngs_modulus(scene: dict, youngs_modulus: float, initial_hardening: float | None = None) -> dict:
-    """A copy of a scene dict whose meshes' and particle objects' materials have Young's modulus E (Pa) and, when given, the
-    initial hardening h0 (von Mises: tau_Y = 2 mu h0). The material must be written out in the scene (a
-    dict with an "elasticity" block), not a preset's name."""
+def with_youngs_modulus(scene: dict, youngs_modulus: float, initial_hardening: float | None = None,
+                        fields: Sequence[str] = ("meshes", "objects")) -> dict:
+    """A copy of a scene dict whose meshes' and particle objects' materials (those of `fields`) have Young's modulus E
+    (Pa) and, when given, the initial hardening h0 (von Mises: tau_Y = 2 mu h0). The material must be written out in
+    the scene (a dict with an "elasticity" block), not a preset's name."""
     out = copy.deepcopy(scene)
-    for field in ("meshes", "objects"):
+    for field in fields:
         for k, body in enumerate(out.get(field, [])):
             if body.get("kinematic"):
                 continue
@@ -184,6 +189,62 @@ def mpm_positions(scene: dict, youngs_modulus: torch.Tensor, v0: torch.Tensor | 
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
     return _MpmPositions.apply(youngs_modulus, v0, scene, steps, dt, [int(k) for k in states], newton_tolerance,
                                integrator, initial_hardening, friction_angle, xi, beta)
+
+
+class _CoupledPositions(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, youngs_modulus, mesh_youngs_modulus, v0, mesh_v0, friction_angle, scene, steps, dt, states,
+                newton_tolerance, integrator):
+        s = with_youngs_modulus(scene, float(youngs_modulus), fields=("objects",))
+        s = with_youngs_modulus(s, float(mesh_youngs_modulus), fields=("meshes",))
+        if friction_angle is not None:
+            name, field, models = _PLASTICITY_PARAMETERS[0]
+            try:
+                s = with_plasticity(s, field, float(friction_angle), models)
+            except ValueError as e:
+                raise ValueError(f"{name}: {e}") from None
+        rollout = _sim().CoupledRollout(s, newton_tolerance, integrator)
+        as_array = (lambda t: None if t is None else t.detach().cpu().numpy().astype(np.float64))
+        out = rollout.forward(int(steps), float(dt), v0=as_array(v0), mesh_v0=as_array(mesh_v0),
+                              states=sorted(set(states)))
+        if rollout.unconverged_steps:
+            warnings.warn(f"{rollout.unconverged_steps} of {steps} steps stopped short of newton_tolerance "
+                          f"({newton_tolerance:g} m/s): the gradient is that of the path taken, not of converged "
+                          "steps (docs/adjoint.md)", RuntimeWarning, stacklevel=2)
+        ctx.rollout, ctx.states = rollout, list(states)
+        ctx.given = (v0 is not None, mesh_v0 is not None, friction_angle is not None)
+        return (torch.from_numpy(np.stack([out["x"][k] for k in states])),
+                torch.from_numpy(np.stack([out["mesh_x"][k] for k in states])))
+
+    @staticmethod
+    def backward(ctx, grad_x, grad_mesh_x):
+        out = ctx.rollout.backward(_state_cotangents(grad_x, ctx.states), None,
+                                   _state_cotangents(grad_mesh_x, ctx.states), None)
+        has_v0, has_mesh_v0, has_angle = ctx.given
+        scalar = (lambda name: torch.tensor(out[name], dtype=torch.float64))
+        return (scalar("youngs_modulus"), scalar("mesh_youngs_modulus"),
+                torch.from_numpy(out["v0"]) if has_v0 else None,
+                torch.from_numpy(out["mesh_v0"]) if has_mesh_v0 else None,
+                scalar("friction_angle") if has_angle else None,
+                None, None, None, None, None, None)
+
+
+def coupled_positions(scene: dict, youngs_modulus: torch.Tensor, mesh_youngs_modulus: torch.Tensor,
+                      v0: torch.Tensor | None, mesh_v0: torch.Tensor | None, steps: int, dt: float,
+                      states: Sequence[int], newton_tolerance: float = 1e-10,
+                      friction_angle: torch.Tensor | None = None,
+                      integrator: str = "lagged") -> tuple[torch.Tensor, torch.Tensor]:
+    """The particles' and the mesh nodes' positions ((len(states), particles, dim), (len(states), nodes, dim)) at the
+    kept states of `steps` implicit MPM-FEM coupled steps of dt from the scene's start (v0, mesh_v0: the particles'
+    and the nodes' start velocities instead), differentiable in youngs_modulus (the particles' E, a 0-d tensor, Pa),
+    mesh_youngs_modulus (the mesh's), v0, mesh_v0 and, where given, friction_angle (degrees; every Drucker-Prager and
+    Cam-Clay object's): plasticitynet_sim.CoupledRollout, elastic meshes of one material meeting the particles through
+    the barrier, without friction, the particles' steps "lagged" or "return_map" (docs/adjoint.md)."""
+    for k in states:
+        if not 0 <= int(k) <= steps:
+            raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")
+    return _CoupledPositions.apply(youngs_modulus, mesh_youngs_modulus, v0, mesh_v0, friction_angle, scene, steps, dt,
+                                   [int(k) for k in states], newton_tolerance, integrator)
 
 
 def _grid_of(scene: dict) -> tuple[np.ndarray, list[int], float]:

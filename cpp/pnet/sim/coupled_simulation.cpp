@@ -22,6 +22,28 @@ constexpr double kKappaReferenceDt = 1e-3;  // s: the implicit MPM step of docs/
 }  // namespace
 
 template <int dim>
+std::unique_ptr<Contact<dim>> make_particle_contact(const Scene& scene, const FemSystem<dim>& fem,
+                                                   const Particles<dim>& particles) {
+    // dhat at most half a cell; kappa IPC's lower bound for the average particle mass at the implicit MPM step,
+    // unless the scene gives them.
+    const double dhat = scene.contact.particle_dhat > 0.0 ? scene.contact.particle_dhat : 0.5 * scene.dx;
+    double kappa = scene.contact.particle_kappa;
+    if (!(kappa > 0.0)) {
+        double mass = 0.0;
+        for (double m : particles.mass) mass += m;
+        const double diagonal = (scene.domain_max - scene.domain_min).norm();
+        kappa = initial_barrier_stiffness(diagonal, dhat, mass / particles.size(), kKappaReferenceDt,
+                                          Eigen::VectorXd::Zero(dim), Eigen::VectorXd::Zero(dim))
+                    .kappa;
+    }
+    return std::make_unique<Contact<dim>>(fem.mesh.boundary, std::vector<Vec<dim>>{}, dhat, kappa,
+                                          ContactPoints{static_cast<int>(fem.mesh.nodes()), true});
+}
+
+template std::unique_ptr<Contact<2>> make_particle_contact<2>(const Scene&, const FemSystem<2>&, const Particles<2>&);
+template std::unique_ptr<Contact<3>> make_particle_contact<3>(const Scene&, const FemSystem<3>&, const Particles<3>&);
+
+template <int dim>
 CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSettings& settings)
     : SimulationBase(scene, settings),
       mpm_(make_mpm_system<dim>(scene)),
@@ -35,20 +57,7 @@ CoupledSimulation<dim>::CoupledSimulation(const Scene& scene, const IntegratorSe
     fem_contact_ = make_fem_contact<dim>(scene, fem_);
     const CouplingFriction friction{scene.contact.friction, scene.contact.friction_eps_v};
 
-    // The particle / mesh barrier: dhat at most half a cell; kappa IPC's lower bound for the
-    // average particle mass at the implicit MPM step, unless the scene gives them.
-    const double dhat = scene.contact.particle_dhat > 0.0 ? scene.contact.particle_dhat : 0.5 * scene.dx;
-    double kappa = scene.contact.particle_kappa;
-    if (!(kappa > 0.0)) {
-        double mass = 0.0;
-        for (double m : particles_.mass) mass += m;
-        const double diagonal = (scene.domain_max - scene.domain_min).norm();
-        kappa = initial_barrier_stiffness(diagonal, dhat, mass / particles_.size(), kKappaReferenceDt,
-                                          Eigen::VectorXd::Zero(dim), Eigen::VectorXd::Zero(dim))
-                    .kappa;
-    }
-    coupling_ = std::make_unique<Contact<dim>>(s.mesh.boundary, std::vector<Vec<dim>>{}, dhat, kappa,
-                                               ContactPoints{static_cast<int>(s.mesh.nodes()), true});
+    coupling_ = make_particle_contact<dim>(scene, s, particles_);
     const std::string inside = first_inside<dim>(particles_.x, s.mesh.x, s.mesh.boundary, "particle");
     if (!inside.empty())
         throw SceneError(scene.file + ": objects and meshes overlap at the start: " + inside +

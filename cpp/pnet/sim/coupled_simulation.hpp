@@ -19,6 +19,13 @@
 
 namespace pnet {
 
+/// The particle / mesh barrier of a coupled scene (the mesh's boundary facets, the particles as stand-alone points
+/// after its nodes): contact.particle_dhat (default half a cell) and contact.particle_kappa (default IPC's lower
+/// bound for the particles' average mass at the implicit MPM step).
+template <int dim>
+std::unique_ptr<Contact<dim>> make_particle_contact(const Scene& scene, const FemSystem<dim>& fem,
+                                                   const Particles<dim>& particles);
+
 template <int dim>
 class CoupledSimulation : public SimulationBase, public WithParticles<dim>, public WithMesh<dim> {
 public:

@@ -25,7 +25,8 @@ namespace {
 /// (within the barrier's dhat = dx / 2) and moving at (0.1, vy), without friction, the particles' material
 /// `plasticity` ("none": elastic sand) and both E.
 template <int dim>
-Scene pressed_scene(double vy, const char* plasticity, double sand_E = 3.537e5, double mesh_E = 1e7) {
+Scene pressed_scene(double vy, const char* plasticity, double sand_E = 3.537e5, double mesh_E = 1e7,
+                    double friction_angle = 30.0) {
     const std::string file = std::string(PNET_SCENES_DIR "/tiny/sand_fem_coupling_") + (dim == 2 ? "2d" : "3d") + ".json";
     const Scene tiny = load_scene(file);
     double top = -1.0;
@@ -37,7 +38,10 @@ Scene pressed_scene(double vy, const char* plasticity, double sand_E = 3.537e5, 
     j["meshes"][0]["velocity"][1] = vy;
     j["meshes"][0]["material"]["elasticity"]["E"] = mesh_E;
     j["objects"][0]["material"]["elasticity"]["E"] = sand_E;
-    if (std::string(plasticity) == "none") j["objects"][0]["material"]["plasticity"] = {{"model", "none"}};
+    if (std::string(plasticity) == "none")
+        j["objects"][0]["material"]["plasticity"] = {{"model", "none"}};
+    else
+        j["objects"][0]["material"]["plasticity"]["friction_angle_deg"] = friction_angle;
     j["contact"]["friction"] = 0.0;
     return scene_from_json(j, "pressed.json", PNET_SCENES_DIR "/tiny");
 }
@@ -189,6 +193,13 @@ void check_coupled_gradient(const char* plasticity, Method method, int steps, do
         const Coupled<dim> plus(pressed_scene<dim>(-0.5, plasticity, sand_E + h, disk_E));
         const Coupled<dim> minus(pressed_scene<dim>(-0.5, plasticity, sand_E - h, disk_E));
         checks.push_back({"sand E", g.particles.youngs_modulus,
+                          (rollout_loss(plus, base.start) - rollout_loss(minus, base.start)) / (2.0 * h)});
+    }
+    if (std::string(plasticity) != "none") {
+        const double h = 1e-3;  // degrees: at 1e-2 the differences straddle particles' yield onsets (5e-3 apart)
+        Coupled<dim> plus(pressed_scene<dim>(-0.5, plasticity, sand_E, disk_E, 30.0 + h));
+        Coupled<dim> minus(pressed_scene<dim>(-0.5, plasticity, sand_E, disk_E, 30.0 - h));
+        checks.push_back({"friction angle", g.particles.friction_angle,
                           (rollout_loss(plus, base.start) - rollout_loss(minus, base.start)) / (2.0 * h)});
     }
     if (disk_E_check) {
