@@ -286,15 +286,13 @@ struct CoupledRolloutOf final : CoupledRolloutBase {
           contact(make_particle_contact<dim>(scene, fem.system, initial.particles)),
           adjoint(mpm, fem.system, mesh_contact.get(), *contact, options, MpmOptions{},
                   coupling_options(scene), method) {
+        if (scene.contact.friction > 0.0) adjoint.set_friction(scene.contact.friction, scene.contact.friction_eps_v);
         for (std::size_t k = 0; k < scene.meshes.size(); ++k)
             for (int i = fem.first_node[k]; i < fem.first_node[k + 1]; ++i)
                 initial.mesh.v[i] = scene.meshes[k].velocity.template head<dim>();
     }
-    /// The scene's coupled solver; friction is refused (the adjoint holds none).
-    static CouplingOptions coupling_options(const Scene& scene) {
-        if (scene.contact.friction > 0.0)
-            throw std::invalid_argument(scene.file + ": contact.friction " + std::to_string(scene.contact.friction) +
-                                        ": the coupled adjoint differentiates frictionless contact (set it to 0)");
+    /// The assembled coupled solve (the forward steps solved as exactly as asked).
+    static CouplingOptions coupling_options(const Scene&) {
         CouplingOptions o;
         o.coupled_solver = "cholesky";
         return o;
@@ -474,8 +472,9 @@ gradient is then that of the path taken).)doc")
     py::class_<CoupledRolloutBase>(m, "CoupledRollout", R"doc(A rollout of an implicit MPM-FEM coupled scene and its adjoint.
 
 CoupledRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
-particle objects (the materials MpmRollout takes) and elastic meshes of one material, without friction
-(contact.friction 0) or a Coulomb floor; ValueError naming what otherwise. Steps are the coupled integrator's
+particle objects (the materials MpmRollout takes) and elastic meshes of one material, without a Coulomb floor;
+ValueError naming what otherwise. The scene's friction is lagged and held at its lagged values in the gradient
+(exact for one step's start velocities and the moduli; docs/adjoint.md). Steps are the coupled integrator's
 backward Euler at a fixed dt with the particle / mesh barrier, the particles' energy "lagged" (the elastic
 solve, then the return mapping) or "return_map" (the return-mapped stress within the solve), each solved to
 newton_tolerance (m/s) with the assembled coupled solve.

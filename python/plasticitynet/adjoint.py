@@ -239,7 +239,8 @@ def coupled_positions(scene: dict, youngs_modulus: torch.Tensor, mesh_youngs_mod
     and the nodes' start velocities instead), differentiable in youngs_modulus (the particles' E, a 0-d tensor, Pa),
     mesh_youngs_modulus (the mesh's), v0, mesh_v0 and, where given, friction_angle (degrees; every Drucker-Prager and
     Cam-Clay object's): plasticitynet_sim.CoupledRollout, elastic meshes of one material meeting the particles through
-    the barrier, without friction, the particles' steps "lagged" or "return_map" (docs/adjoint.md)."""
+    the barrier and the scene's lagged friction (held at its lagged values in the gradient), the particles' steps
+    "lagged" or "return_map" (docs/adjoint.md)."""
     for k in states:
         if not 0 <= int(k) <= steps:
             raise ValueError(f"states: {k} is not a state of a {steps}-step rollout (0..{steps})")

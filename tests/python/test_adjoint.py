@@ -538,11 +538,35 @@ def test_coupled_rollout_gradient_matches_central_differences(plasticity):
             assert got == pytest.approx(fd, rel=1e-4), name
 
 
+def test_a_coupled_rollout_with_friction_has_the_one_steps_velocity_gradient():
+    """The scene's friction, lagged and held: over one step (whose lagged pairs depend on the start's positions alone)
+    the gradient along the start's velocities is exact; the friction changes the rollout."""
+    rng = np.random.default_rng(7)
+    scene = pressed_coupling_scene()
+    scene["contact"] = {"friction": 1.0, "friction_eps_v": 0.2, "particle_kappa": 1e6}
+    rollout = pns.CoupledRollout(scene)
+    out = rollout.forward(1, 1e-3)
+    w = rng.uniform(-1, 1, out["mesh_x"][1].shape)
+    g = rollout.backward(None, None, {1: w})
+    d = rng.uniform(-1, 1, out["mesh_v"][0].shape)
+
+    def loss(mesh_v):
+        return float((w * pns.CoupledRollout(scene).forward(1, 1e-3, mesh_v0=mesh_v, states=[1])["mesh_x"][1]).sum())
+
+    start = out["mesh_v"][0]
+    fd = (loss(start + 1e-4 * d) - loss(start - 1e-4 * d)) / 2e-4
+    assert float((g["mesh_v0"] * d).sum()) == pytest.approx(fd, rel=1e-5)
+    frictionless = copy.deepcopy(scene)
+    frictionless["contact"]["friction"] = 0
+    moved = pns.CoupledRollout(frictionless).forward(1, 1e-3, states=[1])["mesh_v"][1]
+    assert np.abs(moved - out["mesh_v"][1]).max() > 1e-4
+
+
 def test_coupled_rollouts_refuse_what_the_adjoint_does_not_cover():
-    frictional = pressed_coupling_scene()
-    frictional["contact"] = {"friction": 0.3}
-    with pytest.raises(ValueError, match="contact.friction 0.3"):
-        pns.CoupledRollout(frictional)
+    coulomb = pressed_coupling_scene()
+    coulomb["boundary"]["floor_friction"] = 0.5
+    with pytest.raises(ValueError, match="boundary.floor_friction"):
+        pns.CoupledRollout(coulomb)
     with pytest.raises(ValueError, match="integrator 'plasticitynet'"):
         pns.CoupledRollout(pressed_coupling_scene(), integrator="plasticitynet")
     with pytest.raises(ValueError, match="particle objects and meshes"):

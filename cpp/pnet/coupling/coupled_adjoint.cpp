@@ -7,6 +7,7 @@
 
 #include <Eigen/SparseLU>
 
+#include "pnet/contact/friction.hpp"
 #include "pnet/energy/return_mapping_energy.hpp"
 
 namespace pnet {
@@ -15,6 +16,14 @@ template <int dim>
 struct CoupledAdjoint<dim>::Stepper {
     std::unique_ptr<CoupledImplicitIntegrator<dim>> integrator;
 };
+
+template <int dim>
+void CoupledAdjoint<dim>::set_friction(double mu, double eps_v) {
+    if (!(mu >= 0.0) || !(eps_v > 0.0))
+        throw std::invalid_argument("CoupledAdjoint::set_friction: mu >= 0 and eps_v > 0 are needed");
+    mu_ = mu;
+    eps_v_ = eps_v;
+}
 
 template <int dim>
 CoupledAdjoint<dim>::CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem,
@@ -62,7 +71,7 @@ std::unique_ptr<typename CoupledAdjoint<dim>::Stepper> CoupledAdjoint<dim>::make
     auto stepper = std::make_unique<Stepper>();
     stepper->integrator = std::make_unique<CoupledImplicitIntegrator<dim>>(
         mpm_, fem_, method_, options_, mpm_options_, coupling_options_, std::move(energy),
-        std::vector<const LearnedReturnMap<dim>*>{}, mesh_contact_, contact_, CouplingFriction{});
+        std::vector<const LearnedReturnMap<dim>*>{}, mesh_contact_, contact_, CouplingFriction{mu_, eps_v_});
     return stepper;
 }
 
@@ -185,10 +194,20 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     // (unprojected), and the same without contact (its elasticity's gradient is dR/dE times E).
     VecX v_star(nf);
     for (std::size_t a = 0; a < nodes; ++a) v_star.template segment<dim>(dim * a) = start.mesh.v[a] + dt * fem_.gravity;
+    // With friction, the meshes' own lagged friction is in the solve's Hessian, and held: their x^n term takes the
+    // Hessian without it (frictionless).
     ElasticParticleEnergy<dim> fem_energy(fem_.materials);
-    FemPotential<dim> fem(fem_.mesh, fem_.rest, fem_energy), elastic(fem_.mesh, fem_.rest, fem_energy);
+    FemPotential<dim> fem(fem_.mesh, fem_.rest, fem_energy), elastic(fem_.mesh, fem_.rest, fem_energy),
+        frictionless(fem_.mesh, fem_.rest, fem_energy);
     fem.set_contact(mesh_contact_);
-    for (FemPotential<dim>* p : {&fem, &elastic}) {
+    frictionless.set_contact(mesh_contact_);
+    Friction<dim> mesh_friction(mu_, eps_v_);
+    const bool friction = mu_ > 0.0;
+    if (friction && mesh_contact_) {
+        mesh_friction.lag(*mesh_contact_, start.mesh.x);
+        fem.set_friction(&mesh_friction);
+    }
+    for (FemPotential<dim>* p : {&fem, &elastic, &frictionless}) {
         p->begin_step(start.mesh.x, v_star, dt, start.mesh.plastic_inverse, {});
         p->set_material_state(fem_.element_object, start.mesh.hardening);
         p->set_reference({});
@@ -213,13 +232,15 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     std::vector<Eigen::Triplet<double>> triplets;
     mpm.jacobian_transpose(triplets, 0);
     fem.add_hessian_triplets(triplets, ng);
+    // A vertex-space matrix A (dim per vertex: the mesh's nodes, then the particles) as W^T A W on the free
+    // components, times `scale`.
     const VecX& grid_free = grid_potential.free_components();
-    {
+    auto add_vertex_block = [&](const SparseMatrix& A, double scale) {
         Eigen::Index row_index[ContactVertices<dim>::kMaxUnknowns], column_index[ContactVertices<dim>::kMaxUnknowns];
         double row_weight[ContactVertices<dim>::kMaxUnknowns], column_weight[ContactVertices<dim>::kMaxUnknowns];
         auto free = [&](Eigen::Index i) { return i >= ng || grid_free[i] > 0.0; };
-        for (int k = 0; k < barrier_hessian.outerSize(); ++k)
-            for (SparseMatrix::InnerIterator it(barrier_hessian, k); it; ++it) {
+        for (int k = 0; k < A.outerSize(); ++k)
+            for (SparseMatrix::InnerIterator it(A, k); it; ++it) {
                 const int a = static_cast<int>(it.row() / dim), i = static_cast<int>(it.row() % dim);
                 const int b = static_cast<int>(it.col() / dim), j = static_cast<int>(it.col() % dim);
                 const int rows = vertices.unknowns(a, row_index, row_weight);
@@ -228,10 +249,41 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
                     for (int c = 0; c < columns; ++c) {
                         const Eigen::Index row = row_index[r] + i, column = column_index[c] + j;
                         if (free(row) && free(column))
-                            triplets.emplace_back(row, column, dt * dt * row_weight[r] * column_weight[c] * it.value());
+                            triplets.emplace_back(row, column, scale * row_weight[r] * column_weight[c] * it.value());
                     }
             }
+    };
+    add_vertex_block(barrier_hessian, dt * dt);  // y = x^n + dt W v
+    // The particle-mesh friction's Hessian in the vertices' velocities, dt mu lambda_k (c c^T) (x) T H(s) T^T per
+    // lagged pair (its pairs at the step's start), through the vertices' weights on the unknowns; and its gradient
+    // G_j = dt sum_k c_kj mu lambda_k f1(|s|) / |s| T s in vertex j's velocity.
+    std::vector<FrictionPair<dim>> pairs;
+    VecX friction_gradient = VecX::Zero(vertex_size);
+    std::vector<Eigen::Triplet<double>> friction_triplets;
+    if (friction) {
+        std::vector<Vec<dim>> y_start;
+        CoupledVertices<dim>::join(start.mesh.x, start.particles.x, y_start);
+        pairs = contact_.lagged_pairs(y_start);
+        for (const FrictionPair<dim>& fp : pairs) {
+            Vec<dim> relative = Vec<dim>::Zero();
+            for (int j = 0; j < fp.count; ++j) relative += fp.weight[j] * vertices.velocity(fp.node[j], solution);
+            const Eigen::Matrix<double, dim - 1, 1> s = fp.tangent.transpose() * relative;
+            const double scale = dt * mu_ * fp.normal_force;
+            const Vec<dim> f = scale * friction_f1_over_x(s.norm(), eps_v_) * (fp.tangent * s);
+            const Mat<dim> H = scale * fp.tangent * friction_slip_hessian<dim - 1>(s, eps_v_) * fp.tangent.transpose();
+            for (int i = 0; i < fp.count; ++i) {
+                friction_gradient.template segment<dim>(dim * fp.node[i]) += fp.weight[i] * f;
+                for (int j = 0; j < fp.count; ++j)
+                    for (int a = 0; a < dim; ++a)
+                        for (int b = 0; b < dim; ++b)
+                            friction_triplets.emplace_back(dim * fp.node[i] + a, dim * fp.node[j] + b,
+                                                           fp.weight[i] * fp.weight[j] * H(a, b));
+            }
+        }
     }
+    SparseMatrix friction_hessian(vertex_size, vertex_size);
+    friction_hessian.setFromTriplets(friction_triplets.begin(), friction_triplets.end());
+    add_vertex_block(friction_hessian, 1.0);
     SparseMatrix transpose(ng + nf, ng + nf);
     transpose.setFromTriplets(triplets.begin(), triplets.end());
 
@@ -258,8 +310,10 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     const VecX m_lambda = node_mass.cwiseProduct(lambda_f);
     VecX h_lambda = VecX::Zero(nf);
     {
+        FemPotential<dim>& held = friction && mesh_contact_ ? frictionless : fem;  // the lagged friction held
+        if (&held == &frictionless) frictionless.prepare_hessian(vf);
         std::vector<Eigen::Triplet<double>> fem_triplets;
-        fem.add_hessian_triplets(fem_triplets, 0);
+        held.add_hessian_triplets(fem_triplets, 0);
         SparseMatrix H(nf, nf);
         H.setFromTriplets(fem_triplets.begin(), fem_triplets.end());
         h_lambda = H * lambda_f;
@@ -278,17 +332,26 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     for (std::size_t k = 0; k < mu.size(); ++k) mu_flat.template segment<dim>(dim * k) = mu[k];
     const VecX h_mu = barrier_hessian * mu_flat;
     for (std::size_t a = 0; a < nodes; ++a) xb.template segment<dim>(dim * a) -= h_mu.template segment<dim>(dim * a);
+    // The friction's, through a particle's velocity u_p = sum_i w_ip v_i: nu = W lambda, Hess D nu.
+    VecX h_nu = VecX::Zero(vertex_size);
+    if (friction) {
+        VecX nu(vertex_size);
+        for (std::size_t k = 0; k < y.size(); ++k)
+            nu.template segment<dim>(dim * k) = vertices.velocity(static_cast<int>(k), lambda);
+        h_nu = friction_hessian * nu;
+    }
     for (std::size_t p = 0; p < n; ++p) {
         const Eigen::Index vertex = static_cast<Eigen::Index>(dim * (nodes + p));
         const Vec<dim> hp = h_mu.template segment<dim>(vertex), gb = barrier_gradient.template segment<dim>(vertex);
-        if (hp.isZero(0.0) && gb.isZero(0.0)) continue;  // not in an active pair
+        const Vec<dim> hf = h_nu.template segment<dim>(vertex), gf = friction_gradient.template segment<dim>(vertex);
+        if (hp.isZero(0.0) && gb.isZero(0.0) && hf.isZero(0.0) && gf.isZero(0.0)) continue;  // in no active pair
         const int* dofs = grid_potential.stencil_dofs(p);
         const Vec<dim>* grads = grid_potential.stencil_gradients(p);
         Vec<dim> xb_p = hp;
         for (int s = 0; s < kStencil; ++s) {
             const Vec<dim> vi = vg.template segment<dim>(dim * dofs[s]);
             const Vec<dim> li = lambda_g.template segment<dim>(dim * dofs[s]);
-            xb_p += dt * (vi.dot(hp) + li.dot(gb)) * grads[s];
+            xb_p += (dt * (vi.dot(hp) + li.dot(gb)) + li.dot(gf) + vi.dot(hf)) * grads[s];
         }
         g.particles.x[p] -= xb_p;
     }

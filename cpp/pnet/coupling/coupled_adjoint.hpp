@@ -22,8 +22,13 @@
 // Memory and recomputation as the MPM and FEM adjoints': a checkpoint every C steps (about sqrt(N)), each segment
 // recomputed from its checkpoint, the last first. The forward steps are the production coupled integrator's
 // (lagged or return_map for the particles), at a fixed dt, solved to the options' tolerance.
-// Refused, naming what: particle-mesh or mesh friction (contact.friction > 0), a Coulomb floor, plastic or
-// kinematic meshes, more than one mesh material, and what MpmAdjoint refuses of the particles' materials.
+// Friction (set_friction) is lagged: each step's pairs are held at their values of its start (their normal forces,
+// tangents and the closest points' weights), so the particle-mesh friction dt D(u(v)) adds its Hessian in the
+// vertices' velocities u = W v to J and, through a particle's u_p = sum_i w_ip(X^n) v_i, with G its gradient in u
+// and nu = W lambda:  Xb_p^n -= sum_i ((lambda_i . G_p) + (v_i . (Hess D nu)_p)) grad w_ip;  the meshes' own
+// friction is in H_fem, and their x^n term takes H_fem without it (FemAdjoint's).
+// Refused, naming what: a Coulomb floor, plastic or kinematic meshes, more than one mesh material, and what
+// MpmAdjoint refuses of the particles' materials.
 #include <functional>
 #include <map>
 #include <memory>
@@ -72,6 +77,12 @@ public:
                                          const std::vector<std::vector<Vec<dim>>>& node_x_bar,
                                          const std::vector<std::vector<Vec<dim>>>& node_v_bar) const;
 
+    /// Lagged friction (Coulomb coefficient mu > 0, smoothed below eps_v m/s), as the scene's contact.friction:
+    /// between the particles and the meshes and on the meshes' own contact. The adjoint holds each step's lagged
+    /// pairs (their normal forces, tangents and weights, taken at the step's start) fixed, so it is the gradient
+    /// of the rollout with those held: exact for one step's start velocities and the moduli (docs/adjoint.md).
+    void set_friction(double mu, double eps_v);
+
     int steps() const { return steps_; }
     /// Steps of the last forward pass whose solve did not reach the tolerance.
     int unconverged_steps() const { return unconverged_; }
@@ -93,6 +104,7 @@ private:
     MpmOptions mpm_options_;
     CouplingOptions coupling_options_;
     Method method_;
+    double mu_ = 0.0, eps_v_ = 1e-4;
     std::map<int, CoupledState<dim>> checkpoints_;
     double dt_ = 0.0;
     int steps_ = -1, unconverged_ = 0;
