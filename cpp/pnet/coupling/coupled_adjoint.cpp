@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include <Eigen/SparseCholesky>
 #include <Eigen/SparseLU>
 
 #include "pnet/contact/friction.hpp"
@@ -291,12 +292,24 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     VecX rhs(ng + nf);
     rhs.head(ng) = mpm.output_adjoint(g.particles);
     rhs.tail(nf) = vb + dt * xb;
-    Eigen::SparseLU<SparseMatrix> lu;
-    lu.compute(transpose);
-    if (lu.info() != Eigen::Success)
-        throw std::runtime_error("CoupledAdjoint: step " + std::to_string(step) +
-                                 ": the step's Jacobian is singular (" + lu.lastErrorMessage() + ")");
-    const VecX lambda = lu.solve(rhs);
+    // Symmetric where the MPM part is (the elastic stress of lagged; the barrier, the meshes and the friction are
+    // potentials): LDL^T, else sparse LU.
+    VecX lambda;
+    if (mpm.symmetric()) {
+        Eigen::SimplicialLDLT<SparseMatrix> ldlt;
+        ldlt.compute(transpose);
+        if (ldlt.info() != Eigen::Success)
+            throw std::runtime_error("CoupledAdjoint: step " + std::to_string(step) +
+                                     ": the step's Jacobian could not be factorized");
+        lambda = ldlt.solve(rhs);
+    } else {
+        Eigen::SparseLU<SparseMatrix> lu;
+        lu.compute(transpose);
+        if (lu.info() != Eigen::Success)
+            throw std::runtime_error("CoupledAdjoint: step " + std::to_string(step) +
+                                     ": the step's Jacobian is singular (" + lu.lastErrorMessage() + ")");
+        lambda = lu.solve(rhs);
+    }
     const double residual = (transpose * lambda - rhs).norm() / std::max(rhs.norm(), 1e-300);
     if (!(residual <= 1e-9))
         throw std::runtime_error("CoupledAdjoint: step " + std::to_string(step) +
