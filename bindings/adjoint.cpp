@@ -82,9 +82,12 @@ void add_hardening(const std::vector<double>& hardening, py::dict& d) {
 }
 
 /// An MPM rollout's gradient into d: "x0", "v0", "C0", "F0", the hardening's, "youngs_modulus", "friction_angle",
-/// "xi", "beta".
+/// "xi", "beta" and "fields" ({material field: dL/dp} of the fields asked for).
 template <int dim>
-void add_particle_gradient(const MpmRolloutGradient<dim>& g, py::dict& d) {
+void add_particle_gradient(const MpmRolloutGradient<dim>& g, py::dict& d, const std::vector<std::string>& fields = {}) {
+    py::dict by_field;
+    for (std::size_t f = 0; f < fields.size() && f < g.fields.size(); ++f) by_field[py::str(fields[f])] = g.fields[f];
+    d["fields"] = by_field;
     d["x0"] = rows<dim>(g.x);
     d["v0"] = rows<dim>(g.v);
     d["C0"] = from_matrices<dim>(g.C);
@@ -196,11 +199,16 @@ struct MpmRolloutOf final : MpmRolloutBase {
     Particles<dim> initial;
     MpmAdjoint<dim> adjoint;
 
-    MpmRolloutOf(Scene s, const ImplicitOptions& options, Method method)
+    std::vector<std::string> fields;
+
+    MpmRolloutOf(Scene s, const ImplicitOptions& options, Method method, std::vector<std::string> material_fields)
         : scene(std::move(s)),
           system(make_mpm_system<dim>(scene)),
           initial(sample_particles<dim>(scene)),
-          adjoint(system, options, MpmOptions{}, method) {}
+          adjoint(system, options, MpmOptions{}, method),
+          fields(std::move(material_fields)) {
+        adjoint.set_parameter_fields(fields);
+    }
     int particles() const override { return static_cast<int>(initial.size()); }
     std::size_t peak_states() const override { return adjoint.peak_states(); }
     int unconverged_steps() const override { return adjoint.unconverged_steps(); }
@@ -249,7 +257,7 @@ struct MpmRolloutOf final : MpmRolloutBase {
             g = adjoint.backward(xs, vs);
         }
         py::dict d;
-        add_particle_gradient<dim>(g, d);
+        add_particle_gradient<dim>(g, d, fields);
         return d;
     }
 };
@@ -277,7 +285,9 @@ struct CoupledRolloutOf final : CoupledRolloutBase {
     std::unique_ptr<Contact<dim>> contact;
     CoupledAdjoint<dim> adjoint;
 
-    CoupledRolloutOf(Scene s, const ImplicitOptions& options, Method method)
+    std::vector<std::string> fields;
+
+    CoupledRolloutOf(Scene s, const ImplicitOptions& options, Method method, std::vector<std::string> material_fields)
         : scene(std::move(s)),
           mpm(make_mpm_system<dim>(scene)),
           fem(make_fem_system<dim>(scene)),
@@ -285,7 +295,9 @@ struct CoupledRolloutOf final : CoupledRolloutBase {
           mesh_contact(make_fem_contact<dim>(scene, fem)),
           contact(make_particle_contact<dim>(scene, fem.system, initial.particles)),
           adjoint(mpm, fem.system, mesh_contact.get(), *contact, options, MpmOptions{},
-                  coupling_options(scene), method) {
+                  coupling_options(scene), method),
+          fields(std::move(material_fields)) {
+        adjoint.set_parameter_fields(fields);
         if (scene.contact.friction > 0.0) adjoint.set_friction(scene.contact.friction, scene.contact.friction_eps_v);
         for (std::size_t k = 0; k < scene.meshes.size(); ++k)
             for (int i = fem.first_node[k]; i < fem.first_node[k + 1]; ++i)
@@ -354,7 +366,7 @@ struct CoupledRolloutOf final : CoupledRolloutBase {
             g = adjoint.backward(xs, vs, mesh_xs, mesh_vs);
         }
         py::dict d;
-        add_particle_gradient<dim>(g.particles, d);
+        add_particle_gradient<dim>(g.particles, d, fields);
         d["mesh_x0"] = rows<dim>(g.node_x);
         d["mesh_v0"] = rows<dim>(g.node_v);
         d["mesh_youngs_modulus"] = g.mesh_youngs_modulus;
@@ -419,7 +431,7 @@ the most states held at once by the last forward and backward.)doc")
 
     py::class_<MpmRolloutBase>(m, "MpmRollout", R"doc(A rollout of an implicit MPM scene and its adjoint.
 
-MpmRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
+MpmRollout(scene, newton_tolerance=1e-10, integrator="lagged", fields=[]): scene as a path, a dict or a Scene with
 particle objects of elastic, Drucker-Prager (sand), Cam-Clay (snow, its exact variant) or von Mises
 (metal, StVK-Hencky) materials, APIC or AFLIP transfers, slip walls and a sticky or Coulomb floor (the
 Coulomb floor under "return_map": its friction within the one solve); ValueError naming what otherwise. Steps are backward Euler at a fixed dt (the advection limit is not applied) by "lagged" (the
@@ -436,12 +448,15 @@ arrays, "hardening": (particles,) array, "youngs_modulus", "friction_angle", "xi
 "initial_hardening": floats}: dL/d of the start's positions, velocities, APIC matrices, F and hardening
 (Cam-Clay's a, von Mises' h = tau_Y / (2 mu)), dL/dE (every material's E scaled together), dL/dphi (every
 Drucker-Prager and Cam-Clay material's friction angle, per degree), dL/dxi and dL/dbeta (Cam-Clay's) and
-dL/dh0 (every particle's start hardening together), by the adjoint of every step, recomputing the steps between
+dL/dh0 (every particle's start hardening together), and "fields": {field: dL/dp} for each material field asked
+for by fields=[...] ("elasticity.nu", "plasticity.hardening_coefficient", any field of docs/physics.md's material
+that has a number; every material with it moved together; by central differences of each particle's stress and
+return mapping), by the adjoint of every step, recomputing the steps between
 checkpoints (docs/adjoint.md). peak_states: the most states held at once by the last forward and
 backward; unconverged_steps: the last forward's steps whose solve stopped short of newton_tolerance (the
 gradient is then that of the path taken).)doc")
-        .def(py::init([](const py::object& scene, double newton_tolerance,
-                         const std::string& integrator) -> std::unique_ptr<MpmRolloutBase> {
+        .def(py::init([](const py::object& scene, double newton_tolerance, const std::string& integrator,
+                         const std::vector<std::string>& fields) -> std::unique_ptr<MpmRolloutBase> {
                  Scene s = scene_of(scene);
                  if (!s.has_particles() || s.has_meshes())
                      throw py::value_error(s.file + ": MpmRollout takes a scene of particle objects only");
@@ -452,13 +467,14 @@ gradient is then that of the path taken).)doc")
                  options.max_newton_iterations = 1000;
                  try {
                      const Method method = parse_integrator(integrator, "integrator");
-                     if (s.dim == 2) return std::make_unique<MpmRolloutOf<2>>(std::move(s), options, method);
-                     return std::make_unique<MpmRolloutOf<3>>(std::move(s), options, method);
+                     if (s.dim == 2) return std::make_unique<MpmRolloutOf<2>>(std::move(s), options, method, fields);
+                     return std::make_unique<MpmRolloutOf<3>>(std::move(s), options, method, fields);
                  } catch (const std::invalid_argument& e) {
                      throw py::value_error(std::string(e.what()));
                  }
              }),
-             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged")
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged",
+             py::arg("fields") = std::vector<std::string>{})
         .def_property_readonly("particles", &MpmRolloutBase::particles)
         .def("start", &MpmRolloutBase::start,
              "The scene's particles: {\"x\", \"v\"}, (particles, dim) arrays, and \"mass\", (particles,), kg (per "
@@ -471,7 +487,7 @@ gradient is then that of the path taken).)doc")
 
     py::class_<CoupledRolloutBase>(m, "CoupledRollout", R"doc(A rollout of an implicit MPM-FEM coupled scene and its adjoint.
 
-CoupledRollout(scene, newton_tolerance=1e-10, integrator="lagged"): scene as a path, a dict or a Scene with
+CoupledRollout(scene, newton_tolerance=1e-10, integrator="lagged", fields=[]): scene as a path, a dict or a Scene with
 particle objects (the materials MpmRollout takes) and elastic meshes of one material, without a Coulomb floor;
 ValueError naming what otherwise. The scene's friction is lagged and held at its lagged values in the gradient
 (exact for one step's start velocities and the moduli; docs/adjoint.md). Steps are the coupled integrator's
@@ -484,11 +500,12 @@ particles and meshes (v0, mesh_v0: their start velocities instead, (particles, d
 and returns {"x", "v", "mesh_x", "mesh_v": {k: array}} for the states k asked for (None: all). backward(dL_dx,
 dL_dv, dL_dmesh_x, dL_dmesh_v) takes dicts {state: array} of the loss's gradient with respect to those states
 and returns MpmRollout's gradient of the particles' start and material ("x0", "v0", "C0", "F0", "hardening",
-"youngs_modulus", "friction_angle", "xi", "beta", "initial_hardening") with "mesh_x0", "mesh_v0" ((nodes, dim))
+"youngs_modulus", "friction_angle", "xi", "beta", "initial_hardening", "fields": the particles' material fields
+asked for) with "mesh_x0", "mesh_v0" ((nodes, dim))
 and "mesh_youngs_modulus" (dL/dE of the mesh's material) (docs/adjoint.md). peak_states and unconverged_steps
 as MpmRollout's.)doc")
-        .def(py::init([](const py::object& scene, double newton_tolerance,
-                         const std::string& integrator) -> std::unique_ptr<CoupledRolloutBase> {
+        .def(py::init([](const py::object& scene, double newton_tolerance, const std::string& integrator,
+                         const std::vector<std::string>& fields) -> std::unique_ptr<CoupledRolloutBase> {
                  Scene s = scene_of(scene);
                  if (!s.has_particles() || !s.has_meshes())
                      throw py::value_error(s.file + ": CoupledRollout takes a scene of particle objects and meshes");
@@ -499,13 +516,15 @@ as MpmRollout's.)doc")
                  options.max_newton_iterations = 1000;
                  try {
                      const Method method = parse_integrator(integrator, "integrator");
-                     if (s.dim == 2) return std::make_unique<CoupledRolloutOf<2>>(std::move(s), options, method);
-                     return std::make_unique<CoupledRolloutOf<3>>(std::move(s), options, method);
+                     if (s.dim == 2)
+                         return std::make_unique<CoupledRolloutOf<2>>(std::move(s), options, method, fields);
+                     return std::make_unique<CoupledRolloutOf<3>>(std::move(s), options, method, fields);
                  } catch (const std::invalid_argument& e) {
                      throw py::value_error(std::string(e.what()));
                  }
              }),
-             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged")
+             py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged",
+             py::arg("fields") = std::vector<std::string>{})
         .def_property_readonly("particles", &CoupledRolloutBase::particles)
         .def_property_readonly("nodes", &CoupledRolloutBase::nodes)
         .def("start", &CoupledRolloutBase::start,

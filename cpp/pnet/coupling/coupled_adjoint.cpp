@@ -63,6 +63,13 @@ CoupledAdjoint<dim>::CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<d
 }
 
 template <int dim>
+void CoupledAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
+    std::vector<PerturbedMaterials<dim>> out;
+    for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(mpm_.materials, field, "CoupledAdjoint"));
+    fields_ = std::move(out);
+}
+
+template <int dim>
 std::unique_ptr<typename CoupledAdjoint<dim>::Stepper> CoupledAdjoint<dim>::make_stepper() const {
     std::unique_ptr<ParticleEnergy<dim>> energy;
     if (method_ == Method::ReturnMap)
@@ -129,6 +136,7 @@ CoupledRolloutGradient<dim> CoupledAdjoint<dim>::backward(const std::vector<std:
     }
     CoupledRolloutGradient<dim> g;
     MpmRolloutGradient<dim>& gp = g.particles;
+    gp.fields.assign(fields_.size(), 0.0);
     gp.x.assign(n, Vec<dim>::Zero());
     gp.v.assign(n, Vec<dim>::Zero());
     gp.C.assign(n, Mat<dim>::Zero());
@@ -185,7 +193,8 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     constexpr int kStencil = IncrementalPotential<dim>::kStencil;
 
     // The MPM part of the step, rebuilt from its start and the solution's grid velocities.
-    MpmStepAdjoint<dim> mpm(mpm_, method_, start.particles, solution.head(solution.size() - dim * nodes), dt);
+    MpmStepAdjoint<dim> mpm(mpm_, method_, start.particles, solution.head(solution.size() - dim * nodes), dt,
+                            &fields_);
     IncrementalPotential<dim>& grid_potential = mpm.potential();
     const Eigen::Index ng = grid_potential.size(), nf = static_cast<Eigen::Index>(dim * nodes);
     if (solution.size() != ng + nf) throw std::logic_error("CoupledAdjoint: the step's unknowns changed on replay");

@@ -83,6 +83,10 @@ public:
     /// of the rollout with those held: exact for one step's start velocities and the moduli (docs/adjoint.md).
     void set_friction(double mu, double eps_v);
 
+    /// The particles' material fields whose dL/dp the backward pass gathers too (g.particles.fields): as
+    /// MpmAdjoint::set_parameter_fields.
+    void set_parameter_fields(const std::vector<std::string>& fields);
+
     int steps() const { return steps_; }
     /// Steps of the last forward pass whose solve did not reach the tolerance.
     int unconverged_steps() const { return unconverged_; }
@@ -105,6 +109,7 @@ private:
     CouplingOptions coupling_options_;
     Method method_;
     double mu_ = 0.0, eps_v_ = 1e-4;
+    std::vector<PerturbedMaterials<dim>> fields_;
     std::map<int, CoupledState<dim>> checkpoints_;
     double dt_ = 0.0;
     int steps_ = -1, unconverged_ = 0;

@@ -159,6 +159,43 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
 }
 
 template <int dim>
+PerturbedMaterials<dim> perturbed_materials(const std::vector<Material<dim>>& materials, const std::string& field,
+                                            const std::string& who) {
+    PerturbedMaterials<dim> out;
+    out.field = field;
+    double scale = 0.0;
+    for (const Material<dim>& m : materials) {
+        const double* value = material_parameter(m.description(), field);
+        out.has.push_back(value != nullptr);
+        if (value) scale = std::max(scale, std::abs(*value));
+    }
+    if (std::none_of(out.has.begin(), out.has.end(), [](char has) { return has != 0; }))
+        throw std::invalid_argument(who + ": parameter field '" + field +
+                                    "': no material has it (its gradient would be 0)");
+    out.delta = 1e-6 * std::max(scale, 1.0);
+    for (const Material<dim>& m : materials) {
+        MaterialDescription minus = m.description(), plus = m.description();
+        if (double* value = material_parameter(minus, field)) *value -= out.delta;
+        if (double* value = material_parameter(plus, field)) *value += out.delta;
+        out.minus.emplace_back(minus);
+        out.plus.emplace_back(plus);
+    }
+    return out;
+}
+
+template PerturbedMaterials<2> perturbed_materials<2>(const std::vector<Material<2>>&, const std::string&,
+                                                      const std::string&);
+template PerturbedMaterials<3> perturbed_materials<3>(const std::vector<Material<3>>&, const std::string&,
+                                                      const std::string&);
+
+template <int dim>
+void MpmAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
+    std::vector<PerturbedMaterials<dim>> out;
+    for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(system_.materials, field, "MpmAdjoint"));
+    fields_ = std::move(out);
+}
+
+template <int dim>
 std::unique_ptr<ImplicitIntegrator<dim>> MpmAdjoint<dim>::make_integrator() const {
     std::unique_ptr<ParticleEnergy<dim>> energy;
     if (method_ == Method::ReturnMap)
@@ -234,6 +271,7 @@ MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<
             throw std::invalid_argument("MpmAdjoint::backward: state " + std::to_string(k) +
                                         ": dL/dx and dL/dv need one entry per particle (" + std::to_string(n) + ")");
     MpmRolloutGradient<dim> g;
+    g.fields.assign(fields_.size(), 0.0);
     g.x.assign(n, Vec<dim>::Zero());
     g.v.assign(n, Vec<dim>::Zero());
     g.C.assign(n, Mat<dim>::Zero());
@@ -265,7 +303,7 @@ MpmRolloutGradient<dim> MpmAdjoint<dim>::backward(const std::vector<std::vector<
 
 template <int dim>
 MpmStepAdjoint<dim>::MpmStepAdjoint(const MpmSystem<dim>& system, Method method, const Particles<dim>& start,
-                                    const VecX& v, double dt)
+                                    const VecX& v, double dt, const std::vector<PerturbedMaterials<dim>>* fields)
     : system_(system),
       method_(method),
       start_(start),
@@ -274,7 +312,8 @@ MpmStepAdjoint<dim>::MpmStepAdjoint(const MpmSystem<dim>& system, Method method,
       n_(start.size()),
       grid_(system.origin, system.dx, system.cells),
       energy_(system.materials),
-      potential_(energy_) {
+      potential_(energy_),
+      fields_(fields ? *fields : no_fields_) {
     // The step's grid and potential, as the integrator set them up (the same deterministic P2G, so the
     // same unknowns as its solution's).
     particles_to_grid<dim>(grid_, start, nullptr);
@@ -319,6 +358,7 @@ MpmStepAdjoint<dim>::MpmStepAdjoint(const MpmSystem<dim>& system, Method method,
     const std::size_t n = n_;
     F_.resize(n);
     P_.resize(n);
+    dP_dfield_.assign(fields_.size(), std::vector<Mat<dim>>(n, Mat<dim>::Zero()));
     dP_dh_.assign(n, Mat<dim>::Zero());
     dP_dparameter_.resize(n);
     T_.resize(n);
@@ -344,6 +384,17 @@ MpmStepAdjoint<dim>::MpmStepAdjoint(const MpmSystem<dim>& system, Method method,
             const Elasticity<dim>& elasticity = material.elasticity();
             P_[p] = svd.compose(elasticity.tau(svd.Sigma).cwiseQuotient(svd.Sigma));
             T_[p] = elasticity.dPdF(svd, false);
+        }
+        // The solve's stress in each asked field, by central differences of the material.
+        for (std::size_t f = 0; f < fields_.size(); ++f) {
+            const PerturbedMaterials<dim>& field = fields_[f];
+            const int object = start.object[p];
+            if (!field.has[object]) continue;
+            auto stress = [&](const Material<dim>& m) -> Mat<dim> {
+                if (return_map) return m.elastoplastic_stress(svd, start.hardening[p]);
+                return svd.compose(m.elasticity().tau(svd.Sigma).cwiseQuotient(svd.Sigma));
+            };
+            dP_dfield_[f][p] = (stress(field.plus[object]) - stress(field.minus[object])) / (2.0 * field.delta);
         }
     }
     // The Coulomb floor's contacts (the nodes whose normal velocity the solve holds): the friction on node k's
@@ -380,6 +431,7 @@ VecX MpmStepAdjoint<dim>::output_adjoint(const MpmRolloutGradient<dim>& g) {
     std::vector<Mat<dim>> F_trial_bar = g.F;
     h_bar_ = g.hardening;
     std::vector<Parameters> mapped_parameter_bar(n, Parameters{});
+    field_bar_.assign(fields_.size(), std::vector<double>(n, 0.0));
     // AFLIP: v_p' = (G2P's v_p) + alpha r_p, r_p = v_p - sum_i w_ip u_i with u_i = q_i / m_i of P2G's grid
     // (transfer.hpp): r_p's cotangent alpha vb_p', taken before G2P's adjoint reads vb'.
     alpha_ = flip_fraction(dt, system_.flip_relaxation_time);
@@ -405,6 +457,17 @@ VecX MpmStepAdjoint<dim>::output_adjoint(const MpmRolloutGradient<dim>& g) {
         for (int q = 0; q < kPlasticityParameters; ++q)
             mapped_parameter_bar[p][q] =
                 g.F[p].cwiseProduct(d.dFE_dparameter[q]).sum() + d.dh_dparameter[q] * g.hardening[p];
+        // The asked fields' share, by central differences of the return mapping (F^E = U diag(Z) V^T, h').
+        const PolarSVD<dim> svd = clamped_svd<dim>(F_trial);
+        for (std::size_t f = 0; f < fields_.size(); ++f) {
+            const PerturbedMaterials<dim>& field = fields_[f];
+            if (!field.has[start.object[p]]) continue;
+            const ReturnResult<dim> plus = field.plus[start.object[p]].return_map(svd.Sigma, start.hardening[p]);
+            const ReturnResult<dim> minus = field.minus[start.object[p]].return_map(svd.Sigma, start.hardening[p]);
+            const Mat<dim> dFE = svd.compose((plus.Sigma - minus.Sigma) / (2.0 * field.delta));
+            const double dh = (plus.hardening - minus.hardening) / (2.0 * field.delta);
+            field_bar_[f][p] = g.F[p].cwiseProduct(dFE).sum() + dh * g.hardening[p];
+        }
     }
     parameter_bar_ = Parameters{};
     for (const Parameters& a : mapped_parameter_bar)
@@ -540,6 +603,8 @@ void MpmStepAdjoint<dim>::input_adjoint(const VecX& lambda, MpmRolloutGradient<d
         h_bar_[p] -= V * dt * dP_dh_[p].cwiseProduct(LF).sum();
         for (int q = 0; q < kPlasticityParameters; ++q)
             solve_parameter_bar[p][q] = -V * dt * dP_dparameter_[p][q].cwiseProduct(LF).sum();
+        for (std::size_t f = 0; f < fields_.size(); ++f)
+            field_bar_[f][p] -= V * dt * dP_dfield_[f][p].cwiseProduct(LF).sum();
         const StencilNodeDerivatives<dim> st(grid_, start.x[p]);
         int s = 0;
         Vec<dim> xb = Vec<dim>::Zero();
@@ -556,6 +621,9 @@ void MpmStepAdjoint<dim>::input_adjoint(const VecX& lambda, MpmRolloutGradient<d
         g.youngs_modulus += youngs_bar[p];
         for (int q = 0; q < kPlasticityParameters; ++q) parameter_bar[q] += solve_parameter_bar[p][q];
     }
+    g.fields.resize(fields_.size(), 0.0);
+    for (std::size_t f = 0; f < fields_.size(); ++f)
+        for (std::size_t p = 0; p < n; ++p) g.fields[f] += field_bar_[f][p];  // in particle order
     g.friction_angle += parameter_bar[static_cast<int>(PlasticityParameter::FrictionAngle)];
     g.xi += parameter_bar[static_cast<int>(PlasticityParameter::Xi)];
     g.beta += parameter_bar[static_cast<int>(PlasticityParameter::Beta)];
@@ -597,7 +665,7 @@ void MpmStepAdjoint<dim>::input_adjoint(const VecX& lambda, MpmRolloutGradient<d
 template <int dim>
 void MpmAdjoint<dim>::step_adjoint(const Particles<dim>& start, const VecX& v, int k,
                                    MpmRolloutGradient<dim>& g) const {
-    MpmStepAdjoint<dim> step(system_, method_, start, v, dt_);
+    MpmStepAdjoint<dim> step(system_, method_, start, v, dt_, &fields_);
     const VecX rhs = step.output_adjoint(g);
     step.input_adjoint(step.solve(rhs, k), g);
 }

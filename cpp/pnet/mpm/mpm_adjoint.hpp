@@ -66,6 +66,21 @@ struct MpmRolloutGradient {
     /// dL/dphi: every Drucker-Prager and Cam-Clay material's friction angle together (1/degree).
     double friction_angle = 0.0;
     double xi = 0.0, beta = 0.0;  // dL/dxi, dL/dbeta: every Cam-Clay material's together
+    /// dL/dp of each field MpmAdjoint::set_parameter_fields asked for, in its order: every material that has the
+    /// field moved together.
+    std::vector<double> fields;
+};
+
+/// The materials of a system with one material field (material_parameter's: "elasticity.nu",
+/// "plasticity.hardening_coefficient", ...) moved by -delta and +delta where they have it, and delta: for a
+/// parameter's derivative by central differences of the material's stress and return mapping (the adjoint of
+/// the parameters with no closed-form derivative written).
+template <int dim>
+struct PerturbedMaterials {
+    std::string field;
+    double delta = 0.0;
+    std::vector<Material<dim>> minus, plus;
+    std::vector<char> has;  // per material: whether it has the field
 };
 
 /// A Coulomb floor's contact at the step's solution: its node's unknown, the floor's normal impulse J_k (the
@@ -87,13 +102,21 @@ struct FloorContact {
 /// the stress and its exact tangent at v); G2P's adjoint, from the cotangents of the step's output to the
 /// right-hand side of J^T lambda = rhs on the step's unknowns; J^T (assembled) or the solve itself; and, from
 /// lambda, the cotangents of the step's start (through the solve's residual, AFLIP's residual and P2G).
+/// The materials with `field` moved by -+ 1e-6 max(|p|, 1) (the largest |p| of those that have it); `who` prefixes
+/// the std::invalid_argument thrown where none has it.
+template <int dim>
+PerturbedMaterials<dim> perturbed_materials(const std::vector<Material<dim>>& materials, const std::string& field,
+                                            const std::string& who);
+
 template <int dim>
 class MpmStepAdjoint {
 public:
     using Parameters = std::array<double, kPlasticityParameters>;
 
-    /// start: the step's start (kept by reference); v: its solution on the unknowns (before the projection).
-    MpmStepAdjoint(const MpmSystem<dim>& system, Method method, const Particles<dim>& start, const VecX& v, double dt);
+    /// start: the step's start (kept by reference); v: its solution on the unknowns (before the projection);
+    /// fields: the material fields whose gradients g.fields gathers (kept by pointer; null: none).
+    MpmStepAdjoint(const MpmSystem<dim>& system, Method method, const Particles<dim>& start, const VecX& v, double dt,
+                   const std::vector<PerturbedMaterials<dim>>* fields = nullptr);
     MpmStepAdjoint(const MpmStepAdjoint&) = delete;  // its potential refers to its grid and energy
     MpmStepAdjoint& operator=(const MpmStepAdjoint&) = delete;
 
@@ -136,6 +159,10 @@ private:
     std::vector<Tensor4<dim>> T_;
     std::vector<FloorContact<dim>> contacts_;
     std::vector<int> contact_of_;
+    std::vector<PerturbedMaterials<dim>> no_fields_;
+    const std::vector<PerturbedMaterials<dim>>& fields_;
+    std::vector<std::vector<Mat<dim>>> dP_dfield_;  // [field][particle]
+    std::vector<std::vector<double>> field_bar_;     // [field][particle]: G2P's share
     // What output_adjoint leaves for input_adjoint.
     std::vector<Vec<dim>> x_bar_, residual_bar_;
     std::vector<Mat<dim>> F_bar_;
@@ -166,6 +193,13 @@ public:
     /// read that state's positions or velocities).
     MpmRolloutGradient<dim> backward(const std::vector<std::vector<Vec<dim>>>& x_bar,
                                      const std::vector<std::vector<Vec<dim>>>& v_bar) const;
+    /// Material fields whose dL/dp the backward pass gathers too (MpmRolloutGradient::fields, in this order):
+    /// material_parameter's names ("elasticity.nu", "plasticity.hardening_coefficient", "plasticity.xi", ...),
+    /// every material that has a field moved together; their derivatives by central differences of each
+    /// particle's stress and return mapping at p -+ 1e-6 max(|p|, 1). Throws std::invalid_argument naming a field
+    /// no material has.
+    void set_parameter_fields(const std::vector<std::string>& fields);
+
     /// Steps of the last forward pass (-1: none).
     int steps() const { return steps_; }
     /// Its steps whose solve did not reach the tolerance (Newton's cap, a failed line search): the gradient
@@ -190,6 +224,7 @@ private:
     ImplicitOptions options_;
     MpmOptions mpm_options_;
     Method method_;
+    std::vector<PerturbedMaterials<dim>> fields_;
     std::map<int, Particles<dim>> checkpoints_;  // state k, every checkpoint_every steps and the last
     double dt_ = 0.0;
     int steps_ = -1, unconverged_ = 0;
