@@ -118,12 +118,16 @@ struct RolloutOf final : Rollout {
     FemAdjoint<dim> adjoint;
     FemState<dim> initial;
 
-    RolloutOf(Scene s, const ImplicitOptions& options, Method method)
+    std::vector<std::string> fields;
+
+    RolloutOf(Scene s, const ImplicitOptions& options, Method method, std::vector<std::string> material_fields)
         : scene(std::move(s)),
           fem(make_fem_system<dim>(scene)),
           contact(make_fem_contact<dim>(scene, fem)),
           adjoint(fem.system, contact.get(), options, method),
-          initial(FemState<dim>::at_rest(fem.system)) {
+          initial(FemState<dim>::at_rest(fem.system)),
+          fields(std::move(material_fields)) {
+        adjoint.set_parameter_fields(fields);
         if (scene.contact.friction > 0.0) adjoint.set_friction(scene.contact.friction, scene.contact.friction_eps_v);
         for (std::size_t k = 0; k < scene.meshes.size(); ++k)
             for (int i = fem.first_node[k]; i < fem.first_node[k + 1]; ++i)
@@ -177,6 +181,9 @@ struct RolloutOf final : Rollout {
         d["v0"] = rows<dim>(g.v);
         d["youngs_modulus"] = g.youngs_modulus;
         add_hardening(g.hardening, d);
+        py::dict by_field;
+        for (std::size_t f = 0; f < fields.size() && f < g.fields.size(); ++f) by_field[py::str(fields[f])] = g.fields[f];
+        d["fields"] = by_field;
         return d;
     }
 };
@@ -380,7 +387,7 @@ void define_adjoint(py::module_& m) {
     py::class_<Rollout>(m, "FemRollout", R"doc(A rollout of an implicit FEM scene of elastic bodies and its adjoint.
 
 FemRollout(scene, newton_tolerance=1e-10, integrator="lagged", time_integrator="backward_euler"; or
-"bdf2"): scene as a path, a dict or a Scene with
+"bdf2", fields=[]): scene as a path, a dict or a Scene with
 meshes of one material, elastic or von Mises with StVK-Hencky (the metal preset), no moving kinematic
 nodes (ValueError naming the field otherwise); the scene's friction is lagged and held at its lagged
 values in the gradient (docs/adjoint.md). Steps are the integrator's:
@@ -395,11 +402,13 @@ checkpoint every checkpoint_every steps (0: about sqrt(steps); 1: every state). 
 dL_dv) takes dicts {state: (nodes, dim) array} of the loss's gradient with respect to those states
 and returns {"x0", "v0": (nodes, dim) arrays, "youngs_modulus": float, "hardening": (elements,)
 array, "initial_hardening": float}: dL/dx0, dL/dv0, dL/dE, dL/dh0 per element and summed (the
-material's initial_hardening: von Mises' yield stress tau_Y = 2 mu h), by the adjoint of every step,
+material's initial_hardening: von Mises' yield stress tau_Y = 2 mu h) and "fields": {field: dL/dp} of the material
+fields asked for by fields=[...] ("elasticity.nu", "plasticity.hardening_coefficient"), by the adjoint of every step,
 recomputing the steps between checkpoints (docs/adjoint.md). peak_states:
 the most states held at once by the last forward and backward.)doc")
         .def(py::init([](const py::object& scene, double newton_tolerance, const std::string& integrator,
-                         const std::string& time_integrator) -> std::unique_ptr<Rollout> {
+                         const std::string& time_integrator,
+                         const std::vector<std::string>& fields) -> std::unique_ptr<Rollout> {
                  Scene s = scene_of(scene);
                  if (!s.has_meshes() || s.has_particles())
                      throw py::value_error(s.file + ": FemRollout takes a scene of meshes only");
@@ -413,14 +422,14 @@ the most states held at once by the last forward and backward.)doc")
                  options.time_integrator = time_integrator;
                  try {
                      const Method method = parse_integrator(integrator, "integrator");
-                     if (s.dim == 2) return std::make_unique<RolloutOf<2>>(std::move(s), options, method);
-                     return std::make_unique<RolloutOf<3>>(std::move(s), options, method);
+                     if (s.dim == 2) return std::make_unique<RolloutOf<2>>(std::move(s), options, method, fields);
+                     return std::make_unique<RolloutOf<3>>(std::move(s), options, method, fields);
                  } catch (const std::invalid_argument& e) {
                      throw py::value_error(std::string(e.what()));
                  }
              }),
              py::arg("scene"), py::arg("newton_tolerance") = 1e-10, py::arg("integrator") = "lagged",
-             py::arg("time_integrator") = "backward_euler")
+             py::arg("time_integrator") = "backward_euler", py::arg("fields") = std::vector<std::string>{})
         .def_property_readonly("nodes", &Rollout::nodes)
         .def_property_readonly("youngs_modulus", &Rollout::youngs_modulus, "The material's E, Pa.")
         .def("start", &Rollout::start, "The scene's start: {\"x\", \"v\"}, (nodes, dim) arrays.")

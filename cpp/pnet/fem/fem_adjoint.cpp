@@ -59,6 +59,13 @@ typename FemAdjoint<dim>::Stepper FemAdjoint<dim>::make_stepper() const {
 }
 
 template <int dim>
+void FemAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
+    std::vector<PerturbedMaterials<dim>> out;
+    for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(system_.materials, field, "FemAdjoint"));
+    fields_ = std::move(out);
+}
+
+template <int dim>
 std::unique_ptr<ParticleEnergy<dim>> FemAdjoint<dim>::make_energy() const {
     if (method_ == FemMethod::ReturnMap)
         return std::make_unique<ReturnMappingEnergy<dim>>(system_.materials, options_.tangent_damping);
@@ -146,6 +153,20 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     const std::unique_ptr<ParticleEnergy<dim>> energy = make_energy();
     FemPotential<dim> potential(system_.mesh, system_.rest, *energy);      // the step's R and H
     FemPotential<dim> material_only(system_.mesh, system_.rest, *energy);  // without contact (dR/dE)
+    // Each asked field's elastic force at p -+ delta (dR/dp by central differences): the energies and potentials of
+    // the perturbed materials, set up as material_only.
+    std::vector<std::unique_ptr<ParticleEnergy<dim>>> field_energies;
+    std::vector<std::unique_ptr<FemPotential<dim>>> field_potentials;  // [2 f]: minus, [2 f + 1]: plus
+    for (const PerturbedMaterials<dim>& field : fields_)
+        for (const std::vector<Material<dim>>* materials : {&field.minus, &field.plus}) {
+            if (method_ == FemMethod::ReturnMap)
+                field_energies.push_back(std::make_unique<ReturnMappingEnergy<dim>>(*materials, options_.tangent_damping));
+            else
+                field_energies.push_back(std::make_unique<ElasticParticleEnergy<dim>>(*materials));
+            field_potentials.push_back(std::make_unique<FemPotential<dim>>(system_.mesh, system_.rest, *field_energies.back()));
+            field_potentials.back()->set_project_psd(false);
+        }
+    std::vector<double> field_bar(fields_.size(), 0.0);
     const bool return_mapped = method_ == FemMethod::ReturnMap;
     std::vector<Mat<dim>> FE;
     potential.set_contact(contact_);
@@ -156,6 +177,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     FemPotential<dim> frictionless(system_.mesh, system_.rest, *energy);
     const bool frictional = mu_ > 0.0;
     std::vector<FemPotential<dim>*> potentials{&potential, &material_only};
+    for (const auto& p : field_potentials) potentials.push_back(p.get());
     if (frictional) {
         potentials.push_back(&frictionless);
         potential.set_friction(&friction);
@@ -203,6 +225,18 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                     const Mat<dim> F_inv_T = F.inverse().transpose();
                     const Mat<dim> FE_bar = F_inv_T * pb[e];
                     Mat<dim> F_bar = -F_inv_T * pb[e] * next.plastic_inverse[e].transpose();
+                    // The asked fields' share through the return mapping, by central differences in p.
+                    for (std::size_t f = 0; f < fields_.size(); ++f) {
+                        const PerturbedMaterials<dim>& field = fields_[f];
+                        const int object = system_.element_object[e];
+                        if (!field.has[object]) continue;
+                        const ReturnResult<dim> up = field.plus[object].return_map(svd_end[e].Sigma, start.hardening[e]);
+                        const ReturnResult<dim> down =
+                            field.minus[object].return_map(svd_end[e].Sigma, start.hardening[e]);
+                        const Mat<dim> dFE = svd_end[e].compose((up.Sigma - down.Sigma) / (2.0 * field.delta));
+                        field_bar[f] += FE_bar.cwiseProduct(dFE).sum() +
+                                        hb[e] * (up.hardening - down.hardening) / (2.0 * field.delta);
+                    }
                     const Mat<dim> Ft_bar =
                         unflatten<dim>(d.dFE_dF.transpose() * flatten<dim>(FE_bar)) + hb[e] * d.dh_dF;
                     hb[e] = d.dFE_dh.cwiseProduct(FE_bar).sum() + d.dh_dh * hb[e];
@@ -251,6 +285,12 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
             material_only.value_gradient(v, gradient);
             gradient -= mass.cwiseProduct(v - v_star);
             out.youngs_modulus -= lambda.dot(gradient) / E;
+            for (std::size_t f = 0; f < fields_.size(); ++f) {  // dR/dp = (g(p + delta) - g(p - delta)) / (2 delta)
+                VecX minus, plus;
+                field_potentials[2 * f]->value_gradient(v, minus);
+                field_potentials[2 * f + 1]->value_gradient(v, plus);
+                field_bar[f] -= lambda.dot(plus - minus) / (2.0 * fields_[f].delta);
+            }
             if (plastic) {
                 // The residual's dependence on the start's (F^P)^-1: -lambda . dR/d(F^P)^-1 with
                 // lambda . g_el = dt V P(F (F^P)^-1) : (G (F^P)^-1), G = sum_a lambda_a g_a^T.
@@ -305,6 +345,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     }
     out.hardening = hb;
     out.plastic_inverse = pb;
+    out.fields = field_bar;
     out.x.resize(nodes);
     out.v.resize(nodes);
     for (std::size_t i = 0; i < nodes; ++i) {

@@ -39,9 +39,11 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "pnet/fem/fem_integrator.hpp"
+#include "pnet/material/return_map_derivative.hpp"
 
 namespace pnet {
 
@@ -52,6 +54,7 @@ struct FemRolloutGradient {
     double youngs_modulus = 0.0;            // dL/dE (1/Pa times L's unit)
     std::vector<double> hardening;          // per element: dL/dh^0 (von Mises: h = tau_Y / (2 mu))
     std::vector<Mat<dim>> plastic_inverse;  // per element: dL/d(F^P)^-1 at the start
+    std::vector<double> fields;             // dL/dp of each field set_parameter_fields asked for, in its order
 };
 
 template <int dim>
@@ -71,6 +74,12 @@ public:
     /// forces, tangents and weights, taken at the step's start) fixed, so it is the gradient of the
     /// rollout with those held (exact for one step's start velocities and E; docs/adjoint.md).
     void set_friction(double mu, double eps_v);
+
+    /// Material fields whose dL/dp the backward pass gathers too (FemRolloutGradient::fields): material_parameter's
+    /// names ("elasticity.nu", "plasticity.hardening_coefficient"), by central differences of the step's elastic
+    /// force and each element's return mapping in p (material/return_map_derivative.hpp, PerturbedMaterials).
+    /// Throws std::invalid_argument naming a field the material does not have.
+    void set_parameter_fields(const std::vector<std::string>& fields);
 
     /// Runs `steps` steps of dt (backward Euler or BDF2, as the options say) from `start`, keeping a checkpoint every
     /// `checkpoint_every` steps (0: ceil(sqrt(steps)); 1: every state) and the last state, and calling
@@ -112,6 +121,7 @@ private:
     ImplicitOptions options_;
     FemMethod method_;
     double mu_ = 0.0, eps_v_ = 1e-4;
+    std::vector<PerturbedMaterials<dim>> fields_;
     std::map<int, FemState<dim>> checkpoints_;
     int steps_ = -1;
     double dt_ = 0.0;

@@ -3,6 +3,7 @@
 #include "pnet/material/elastoplastic_tangent.hpp"
 #include "pnet/math/dual2.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -297,6 +298,36 @@ Tensor4<dim> return_map_tangent(const Material<dim>& material, const PolarSVD<di
     const Mat<dim> quotient = deviatoric_scale_quotients<dim>(material.elasticity(), svd.Sigma, duals.k_tau.value);
     return elastoplastic_tangent_of_derivative<dim>(svd, tau, dtau_deps, false, true, &quotient);
 }
+
+template <int dim>
+PerturbedMaterials<dim> perturbed_materials(const std::vector<Material<dim>>& materials, const std::string& field,
+                                            const std::string& who) {
+    PerturbedMaterials<dim> out;
+    out.field = field;
+    double scale = 0.0;
+    for (const Material<dim>& m : materials) {
+        const double* value = material_parameter(m.description(), field);
+        out.has.push_back(value != nullptr);
+        if (value) scale = std::max(scale, std::abs(*value));
+    }
+    if (std::none_of(out.has.begin(), out.has.end(), [](char has) { return has != 0; }))
+        throw std::invalid_argument(who + ": parameter field '" + field +
+                                    "': no material has it (its gradient would be 0)");
+    out.delta = 1e-6 * std::max(scale, 1.0);
+    for (const Material<dim>& m : materials) {
+        MaterialDescription minus = m.description(), plus = m.description();
+        if (double* value = material_parameter(minus, field)) *value -= out.delta;
+        if (double* value = material_parameter(plus, field)) *value += out.delta;
+        out.minus.emplace_back(minus);
+        out.plus.emplace_back(plus);
+    }
+    return out;
+}
+
+template PerturbedMaterials<2> perturbed_materials<2>(const std::vector<Material<2>>&, const std::string&,
+                                                      const std::string&);
+template PerturbedMaterials<3> perturbed_materials<3>(const std::vector<Material<3>>&, const std::string&,
+                                                      const std::string&);
 
 template Tensor4<2> return_map_tangent<2>(const Material<2>&, const PolarSVD<2>&, double);
 template Tensor4<3> return_map_tangent<3>(const Material<3>&, const PolarSVD<3>&, double);

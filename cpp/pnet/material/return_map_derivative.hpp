@@ -20,6 +20,8 @@
 // and the parameters xi, beta and the friction angle (through M) too. Others (von Mises with another
 // elasticity) throw std::invalid_argument.
 #include <array>
+#include <string>
+#include <vector>
 
 #include "pnet/material/material.hpp"
 
@@ -63,5 +65,23 @@ Tensor4<dim> return_map_tangent(const Material<dim>& material, const PolarSVD<di
 template <int dim>
 ReturnMapDerivative<dim> return_map_derivative(const Material<dim>& material, const PolarSVD<dim>& svd, double h,
                                                bool update = true);
+
+/// The materials of a system with one material field (material_parameter's: "elasticity.nu",
+/// "plasticity.hardening_coefficient", ...) moved by -delta and +delta where they have it, and delta: for a
+/// parameter's derivative by central differences of the material's stress and return mapping (the adjoint of
+/// the parameters with no closed-form derivative written).
+template <int dim>
+struct PerturbedMaterials {
+    std::string field;
+    double delta = 0.0;
+    std::vector<Material<dim>> minus, plus;
+    std::vector<char> has;  // per material: whether it has the field
+};
+
+/// The materials with `field` moved by -+ 1e-6 max(|p|, 1) (the largest |p| of those that have it); `who` prefixes
+/// the std::invalid_argument thrown where none has it.
+template <int dim>
+PerturbedMaterials<dim> perturbed_materials(const std::vector<Material<dim>>& materials, const std::string& field,
+                                            const std::string& who);
 
 }  // namespace pnet

@@ -159,36 +159,6 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
 }
 
 template <int dim>
-PerturbedMaterials<dim> perturbed_materials(const std::vector<Material<dim>>& materials, const std::string& field,
-                                            const std::string& who) {
-    PerturbedMaterials<dim> out;
-    out.field = field;
-    double scale = 0.0;
-    for (const Material<dim>& m : materials) {
-        const double* value = material_parameter(m.description(), field);
-        out.has.push_back(value != nullptr);
-        if (value) scale = std::max(scale, std::abs(*value));
-    }
-    if (std::none_of(out.has.begin(), out.has.end(), [](char has) { return has != 0; }))
-        throw std::invalid_argument(who + ": parameter field '" + field +
-                                    "': no material has it (its gradient would be 0)");
-    out.delta = 1e-6 * std::max(scale, 1.0);
-    for (const Material<dim>& m : materials) {
-        MaterialDescription minus = m.description(), plus = m.description();
-        if (double* value = material_parameter(minus, field)) *value -= out.delta;
-        if (double* value = material_parameter(plus, field)) *value += out.delta;
-        out.minus.emplace_back(minus);
-        out.plus.emplace_back(plus);
-    }
-    return out;
-}
-
-template PerturbedMaterials<2> perturbed_materials<2>(const std::vector<Material<2>>&, const std::string&,
-                                                      const std::string&);
-template PerturbedMaterials<3> perturbed_materials<3>(const std::vector<Material<3>>&, const std::string&,
-                                                      const std::string&);
-
-template <int dim>
 void MpmAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
     std::vector<PerturbedMaterials<dim>> out;
     for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(system_.materials, field, "MpmAdjoint"));

@@ -71,17 +71,6 @@ struct MpmRolloutGradient {
     std::vector<double> fields;
 };
 
-/// The materials of a system with one material field (material_parameter's: "elasticity.nu",
-/// "plasticity.hardening_coefficient", ...) moved by -delta and +delta where they have it, and delta: for a
-/// parameter's derivative by central differences of the material's stress and return mapping (the adjoint of
-/// the parameters with no closed-form derivative written).
-template <int dim>
-struct PerturbedMaterials {
-    std::string field;
-    double delta = 0.0;
-    std::vector<Material<dim>> minus, plus;
-    std::vector<char> has;  // per material: whether it has the field
-};
 
 /// A Coulomb floor's contact at the step's solution: its node's unknown, the floor's normal impulse J_k (the
 /// residual's held row (k, y) with v*_k,y as update_velocity left it; <= 0: the floor pulls, no friction), the
@@ -102,11 +91,6 @@ struct FloorContact {
 /// the stress and its exact tangent at v); G2P's adjoint, from the cotangents of the step's output to the
 /// right-hand side of J^T lambda = rhs on the step's unknowns; J^T (assembled) or the solve itself; and, from
 /// lambda, the cotangents of the step's start (through the solve's residual, AFLIP's residual and P2G).
-/// The materials with `field` moved by -+ 1e-6 max(|p|, 1) (the largest |p| of those that have it); `who` prefixes
-/// the std::invalid_argument thrown where none has it.
-template <int dim>
-PerturbedMaterials<dim> perturbed_materials(const std::vector<Material<dim>>& materials, const std::string& field,
-                                            const std::string& who);
 
 template <int dim>
 class MpmStepAdjoint {

@@ -148,14 +148,18 @@ TEST(FemAdjoint3d, RolloutGradientMatchesFiniteDifferencesThroughAContact) {
 // to the initial hardening (the yield stress, tau_Y = 2 mu h), E and the start's velocities.
 template <int dim>
 void check_plastic_rollout_gradient(FemMethod method) {
-    auto make = [](double E, double h0) {
+    const MaterialDescription preset = material_preset("metal");
+    const double nu0 = preset.elastic.nu, xi0 = preset.von_mises.hardening_coefficient;
+    auto make = [&](double E, double h0, double nu = -1.0, double xi = -1.0) {
         Vec<dim> lo = Vec<dim>::Zero(), hi = Vec<dim>::Constant(0.03);
         hi[0] = 0.06;
         lo[1] = 0.002;
         hi[1] = 0.032;
-        MaterialDescription metal = material_preset("metal");
+        MaterialDescription metal = preset;
         metal.elastic.E = E;
         metal.initial_hardening = h0;
+        metal.elastic.nu = nu >= 0.0 ? nu : nu0;
+        metal.von_mises.hardening_coefficient = xi >= 0.0 ? xi : xi0;
         FemSystem<dim> system =
             test::falling_object<dim>(mesh_shape(test::box_shape<dim>(lo, hi, 0.015), "box"), metal);
         system.make_rest();
@@ -179,8 +183,9 @@ void check_plastic_rollout_gradient(FemMethod method) {
         d[i] = rng.template uniform_vec<dim>(-1.0, 1.0);
     }
     // L = a . x^N + b . v^N of a rollout of the system (E, h0) from v0 + eps d.
-    auto loss = [&](double E_, double h0_, double eps, FemState<dim>* last_state = nullptr) {
-        FemSystem<dim> s = make(E_, h0_);
+    auto loss = [&](double E_, double h0_, double eps, FemState<dim>* last_state = nullptr, double nu = -1.0,
+                    double xi = -1.0) {
+        FemSystem<dim> s = make(E_, h0_, nu, xi);
         Contact<dim> c(s.mesh.boundary, s.mesh.x, 1e-3, 1e10);
         c.add_half_space(HalfSpace<dim>{});
         FemAdjoint<dim> r(s, &c, options, method);
@@ -198,6 +203,7 @@ void check_plastic_rollout_gradient(FemMethod method) {
     double yielded = 0.0;
     for (double h : last.hardening) yielded = std::max(yielded, h - h0);
     ASSERT_GT(yielded, 1e-4) << "no element yielded";
+    adjoint.set_parameter_fields({"elasticity.nu", "plasticity.hardening_coefficient"});
     const FemRolloutGradient<dim> g = adjoint.backward(a, b);
     double g_h0 = 0.0;
     for (double h : g.hardening) g_h0 += h;
@@ -215,6 +221,18 @@ void check_plastic_rollout_gradient(FemMethod method) {
     EXPECT_NEAR(g_h0, fd_h0, 1e-4 * std::abs(fd_h0)) << "dL/dh0";
     EXPECT_NEAR(g.youngs_modulus, fd_E, 1e-4 * std::abs(fd_E)) << "dL/dE";
     EXPECT_NEAR(g_v, fd_v, 1e-4 * std::abs(fd_v)) << "dL/dv0";
+    // Poisson's ratio and the hardening coefficient (FemAdjoint::set_parameter_fields).
+    // 1e-3 relative: the loss moves by about 1e-4 there, against the solves' noise (1e-10 m/s), which made central
+    // differences at 1e-6 scatter by 1e-2.
+    const double h_nu = 1e-3 * nu0, h_xi = 1e-3 * xi0;
+    const double fd_nu = (loss(E, h0, 0.0, nullptr, nu0 + h_nu) - loss(E, h0, 0.0, nullptr, nu0 - h_nu)) / (2.0 * h_nu);
+    const double fd_xi = (loss(E, h0, 0.0, nullptr, -1.0, xi0 + h_xi) - loss(E, h0, 0.0, nullptr, -1.0, xi0 - h_xi)) /
+                         (2.0 * h_xi);
+    std::printf("  dL/dnu %.10g vs %.10g (%.2g), dL/d(hardening coefficient) %.10g vs %.10g (%.2g)\n", g.fields[0],
+                fd_nu, std::abs(g.fields[0] - fd_nu) / std::abs(fd_nu), g.fields[1], fd_xi,
+                std::abs(g.fields[1] - fd_xi) / std::abs(fd_xi));
+    EXPECT_NEAR(g.fields[0], fd_nu, 1e-4 * std::abs(fd_nu)) << "dL/dnu";
+    EXPECT_NEAR(g.fields[1], fd_xi, 1e-4 * std::abs(fd_xi)) << "dL/d(hardening coefficient)";
 }
 
 TEST(FemAdjoint2d, PlasticRolloutGradientMatchesFiniteDifferences) {
