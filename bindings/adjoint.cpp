@@ -71,6 +71,31 @@ void read_cotangents(const py::object& obj, const std::string& name, std::size_t
     }
 }
 
+/// A forward pass's steps, dt and checkpoint spacing, checked (ValueError naming the argument).
+void check_forward(int steps, double dt, int checkpoint_every) {
+    if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
+    if (!(dt > 0.0)) throw py::value_error("dt: expected a positive number (s)");
+    if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
+}
+
+/// The forward steps' solver of a particle rollout: Newton to newton_tolerance (m/s) on the velocity residual
+/// alone, at most 1000 iterations.
+ImplicitOptions particle_rollout_options(double newton_tolerance) {
+    if (!(newton_tolerance > 0.0)) throw py::value_error("newton_tolerance: expected a positive number");
+    ImplicitOptions options;
+    options.newton_tolerance = newton_tolerance;
+    options.newton_acceleration_tolerance = 0.0;
+    options.max_newton_iterations = 1000;
+    return options;
+}
+
+/// {field: dL/dp} of the material fields asked for.
+py::dict fields_dict(const std::vector<std::string>& fields, const std::vector<double>& values) {
+    py::dict d;
+    for (std::size_t f = 0; f < fields.size() && f < values.size(); ++f) d[py::str(fields[f])] = values[f];
+    return d;
+}
+
 /// d["hardening"]: dL/dh0 per element or particle, and d["initial_hardening"]: their sum (every one's start
 /// hardening moved together).
 void add_hardening(const std::vector<double>& hardening, py::dict& d) {
@@ -85,9 +110,7 @@ void add_hardening(const std::vector<double>& hardening, py::dict& d) {
 /// "xi", "beta" and "fields" ({material field: dL/dp} of the fields asked for).
 template <int dim>
 void add_particle_gradient(const MpmRolloutGradient<dim>& g, py::dict& d, const std::vector<std::string>& fields = {}) {
-    py::dict by_field;
-    for (std::size_t f = 0; f < fields.size() && f < g.fields.size(); ++f) by_field[py::str(fields[f])] = g.fields[f];
-    d["fields"] = by_field;
+    d["fields"] = fields_dict(fields, g.fields);
     d["x0"] = rows<dim>(g.x);
     d["v0"] = rows<dim>(g.v);
     d["C0"] = from_matrices<dim>(g.C);
@@ -181,9 +204,7 @@ struct RolloutOf final : Rollout {
         d["v0"] = rows<dim>(g.v);
         d["youngs_modulus"] = g.youngs_modulus;
         add_hardening(g.hardening, d);
-        py::dict by_field;
-        for (std::size_t f = 0; f < fields.size() && f < g.fields.size(); ++f) by_field[py::str(fields[f])] = g.fields[f];
-        d["fields"] = by_field;
+        d["fields"] = fields_dict(fields, g.fields);
         return d;
     }
 };
@@ -230,9 +251,7 @@ struct MpmRolloutOf final : MpmRolloutBase {
     }
     py::dict forward(int steps, double dt, const py::object& v0, const py::object& states,
                      int checkpoint_every) override {
-        if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
-        if (!(dt > 0.0)) throw py::value_error("dt: expected a positive number (s)");
-        if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
+        check_forward(steps, dt, checkpoint_every);
         const std::vector<char> wanted = wanted_states(states, steps);
         Particles<dim> s = initial;
         if (!v0.is_none()) s.v = to_points<dim>(v0, "v0", particles());
@@ -330,9 +349,7 @@ struct CoupledRolloutOf final : CoupledRolloutBase {
     }
     py::dict forward(int steps, double dt, const py::object& v0, const py::object& mesh_v0, const py::object& states,
                      int checkpoint_every) override {
-        if (steps < 0) throw py::value_error("steps: expected an integer >= 0");
-        if (!(dt > 0.0)) throw py::value_error("dt: expected a positive number (s)");
-        if (checkpoint_every < 0) throw py::value_error("checkpoint_every: expected an integer >= 0");
+        check_forward(steps, dt, checkpoint_every);
         const std::vector<char> wanted = wanted_states(states, steps);
         CoupledState<dim> s = initial;
         if (!v0.is_none()) s.particles.v = to_points<dim>(v0, "v0", particles());
@@ -469,11 +486,7 @@ gradient is then that of the path taken).)doc")
                  Scene s = scene_of(scene);
                  if (!s.has_particles() || s.has_meshes())
                      throw py::value_error(s.file + ": MpmRollout takes a scene of particle objects only");
-                 if (!(newton_tolerance > 0.0)) throw py::value_error("newton_tolerance: expected a positive number");
-                 ImplicitOptions options;
-                 options.newton_tolerance = newton_tolerance;
-                 options.newton_acceleration_tolerance = 0.0;
-                 options.max_newton_iterations = 1000;
+                 const ImplicitOptions options = particle_rollout_options(newton_tolerance);
                  try {
                      const Method method = parse_integrator(integrator, "integrator");
                      if (s.dim == 2) return std::make_unique<MpmRolloutOf<2>>(std::move(s), options, method, fields);
@@ -518,11 +531,7 @@ as MpmRollout's.)doc")
                  Scene s = scene_of(scene);
                  if (!s.has_particles() || !s.has_meshes())
                      throw py::value_error(s.file + ": CoupledRollout takes a scene of particle objects and meshes");
-                 if (!(newton_tolerance > 0.0)) throw py::value_error("newton_tolerance: expected a positive number");
-                 ImplicitOptions options;
-                 options.newton_tolerance = newton_tolerance;
-                 options.newton_acceleration_tolerance = 0.0;
-                 options.max_newton_iterations = 1000;
+                 const ImplicitOptions options = particle_rollout_options(newton_tolerance);
                  try {
                      const Method method = parse_integrator(integrator, "integrator");
                      if (s.dim == 2)
