@@ -320,8 +320,8 @@ struct CoupledRolloutOf final : CoupledRolloutBase {
           initial{sample_particles<dim>(scene), FemState<dim>::at_rest(fem.system)},
           mesh_contact(make_fem_contact<dim>(scene, fem)),
           contact(make_particle_contact<dim>(scene, fem.system, initial.particles)),
-          adjoint(mpm, fem.system, mesh_contact.get(), *contact, options, MpmOptions{},
-                  coupling_options(scene), method),
+          adjoint(mpm, fem.system, mesh_contact.get(), *contact, options, MpmOptions{}, coupling_options(scene),
+                  method),
           fields(std::move(material_fields)) {
         adjoint.set_parameter_fields(fields);
         if (scene.contact.friction > 0.0) adjoint.set_friction(scene.contact.friction, scene.contact.friction_eps_v);
@@ -507,7 +507,8 @@ gradient is then that of the path taken).)doc")
         .def_property_readonly("unconverged_steps", &MpmRolloutBase::unconverged_steps)
         .def("backward", &MpmRolloutBase::backward, py::arg("dL_dx") = py::none(), py::arg("dL_dv") = py::none());
 
-    py::class_<CoupledRolloutBase>(m, "CoupledRollout", R"doc(A rollout of an implicit MPM-FEM coupled scene and its adjoint.
+    py::class_<CoupledRolloutBase>(m, "CoupledRollout",
+                                   R"doc(A rollout of an implicit MPM-FEM coupled scene and its adjoint.
 
 CoupledRollout(scene, newton_tolerance=1e-10, integrator="lagged", fields=[]): scene as a path, a dict or a Scene with
 particle objects (the materials MpmRollout takes) and elastic meshes of one material, without a Coulomb floor;

@@ -604,7 +604,8 @@ def test_material_field_gradients_match_central_differences(integrator):
         s = copy.deepcopy(scene)
         block, name = field.split(".")
         s["objects"][0]["material"][block][name] = value
-        return float((w * pns.MpmRollout(s, integrator=integrator).forward(steps, dt, states=[steps])["x"][steps]).sum())
+        x = pns.MpmRollout(s, integrator=integrator).forward(steps, dt, states=[steps])["x"][steps]
+        return float((w * x).sum())
 
     for field, value in (("elasticity.nu", scene["objects"][0]["material"]["elasticity"]["nu"]),
                          ("plasticity.xi", scene["objects"][0]["material"]["plasticity"]["xi"])):

@@ -46,8 +46,9 @@ CoupledAdjoint<dim>::CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<d
                                     "return_map's step)");
     require_adjoint_materials<dim>(mpm, who);
     if (mpm.boundary.coulomb_floor() && mpm.boundary.sticky_floor_cells > 0)
-        throw std::invalid_argument(who + ": boundary.floor_friction: a Coulomb floor beside meshes is not "
-                                          "differentiated (its adjoint is MPM's alone)");
+        throw std::invalid_argument(who +
+                                    ": boundary.floor_friction: a Coulomb floor beside meshes is not "
+                                    "differentiated (its adjoint is MPM's alone)");
     if (fem.materials.size() != 1)
         throw std::invalid_argument(who + ": meshes: one mesh material is differentiated, got " +
                                     std::to_string(fem.materials.size()));
@@ -65,7 +66,8 @@ CoupledAdjoint<dim>::CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<d
 template <int dim>
 void CoupledAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
     std::vector<PerturbedMaterials<dim>> out;
-    for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(mpm_.materials, field, "CoupledAdjoint"));
+    for (const std::string& field : fields)
+        out.push_back(perturbed_materials<dim>(mpm_.materials, field, "CoupledAdjoint"));
     fields_ = std::move(out);
 }
 
@@ -90,8 +92,9 @@ CoupledState<dim> CoupledAdjoint<dim>::forward(const CoupledState<dim>& start, d
     if (!(dt > 0.0) || steps < 0 || checkpoint_every < 0)
         throw std::invalid_argument("CoupledAdjoint::forward: dt > 0, steps >= 0 and checkpoint_every >= 0 are needed");
     if (start.mesh.x.size() != fem_.mesh.nodes())
-        throw std::invalid_argument("CoupledAdjoint::forward: the mesh state has " + std::to_string(start.mesh.x.size()) +
-                                    " nodes, the mesh " + std::to_string(fem_.mesh.nodes()));
+        throw std::invalid_argument("CoupledAdjoint::forward: the mesh state has " +
+                                    std::to_string(start.mesh.x.size()) + " nodes, the mesh " +
+                                    std::to_string(fem_.mesh.nodes()));
     const int every =
         checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
     checkpoints_.clear();
@@ -121,7 +124,8 @@ CoupledRolloutGradient<dim> CoupledAdjoint<dim>::backward(const std::vector<std:
     const std::size_t states = static_cast<std::size_t>(steps_) + 1, n = particles_, nodes = fem_.mesh.nodes();
     for (const auto* bars : {&particle_x_bar, &particle_v_bar, &node_x_bar, &node_v_bar})
         if (bars->size() != states)
-            throw std::invalid_argument("CoupledAdjoint::backward: one entry per state (" + std::to_string(states) + ")");
+            throw std::invalid_argument("CoupledAdjoint::backward: one entry per state (" + std::to_string(states) +
+                                        ")");
     for (std::size_t k = 0; k < states; ++k) {
         if ((!particle_x_bar[k].empty() && particle_x_bar[k].size() != n) ||
             (!particle_v_bar[k].empty() && particle_v_bar[k].size() != n))
@@ -193,8 +197,7 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     constexpr int kStencil = IncrementalPotential<dim>::kStencil;
 
     // The MPM part of the step, rebuilt from its start and the solution's grid velocities.
-    MpmStepAdjoint<dim> mpm(mpm_, method_, start.particles, solution.head(solution.size() - dim * nodes), dt,
-                            &fields_);
+    MpmStepAdjoint<dim> mpm(mpm_, method_, start.particles, solution.head(solution.size() - dim * nodes), dt, &fields_);
     IncrementalPotential<dim>& grid_potential = mpm.potential();
     const Eigen::Index ng = grid_potential.size(), nf = static_cast<Eigen::Index>(dim * nodes);
     if (solution.size() != ng + nf) throw std::logic_error("CoupledAdjoint: the step's unknowns changed on replay");

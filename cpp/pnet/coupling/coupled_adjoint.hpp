@@ -49,9 +49,9 @@ struct CoupledState {
 
 template <int dim>
 struct CoupledRolloutGradient {
-    MpmRolloutGradient<dim> particles;       // dL/d(particle state), dL/dE of the particles, their plasticity's
-    std::vector<Vec<dim>> node_x, node_v;    // per mesh node: dL/dx^0 (1/m), dL/dv^0 (s/m)
-    double mesh_youngs_modulus = 0.0;        // dL/dE of the mesh's material (1/Pa)
+    MpmRolloutGradient<dim> particles;     // dL/d(particle state), dL/dE of the particles, their plasticity's
+    std::vector<Vec<dim>> node_x, node_v;  // per mesh node: dL/dx^0 (1/m), dL/dv^0 (s/m)
+    double mesh_youngs_modulus = 0.0;      // dL/dE of the mesh's material (1/Pa)
 };
 
 template <int dim>

@@ -61,7 +61,8 @@ typename FemAdjoint<dim>::Stepper FemAdjoint<dim>::make_stepper() const {
 template <int dim>
 void FemAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
     std::vector<PerturbedMaterials<dim>> out;
-    for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(system_.materials, field, "FemAdjoint"));
+    for (const std::string& field : fields)
+        out.push_back(perturbed_materials<dim>(system_.materials, field, "FemAdjoint"));
     fields_ = std::move(out);
 }
 
@@ -160,10 +161,12 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     for (const PerturbedMaterials<dim>& field : fields_)
         for (const std::vector<Material<dim>>* materials : {&field.minus, &field.plus}) {
             if (method_ == FemMethod::ReturnMap)
-                field_energies.push_back(std::make_unique<ReturnMappingEnergy<dim>>(*materials, options_.tangent_damping));
+                field_energies.push_back(
+                    std::make_unique<ReturnMappingEnergy<dim>>(*materials, options_.tangent_damping));
             else
                 field_energies.push_back(std::make_unique<ElasticParticleEnergy<dim>>(*materials));
-            field_potentials.push_back(std::make_unique<FemPotential<dim>>(system_.mesh, system_.rest, *field_energies.back()));
+            field_potentials.push_back(
+                std::make_unique<FemPotential<dim>>(system_.mesh, system_.rest, *field_energies.back()));
             field_potentials.back()->set_project_psd(false);
         }
     std::vector<double> field_bar(fields_.size(), 0.0);
@@ -230,7 +233,8 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
                         const PerturbedMaterials<dim>& field = fields_[f];
                         const int object = system_.element_object[e];
                         if (!field.has[object]) continue;
-                        const ReturnResult<dim> up = field.plus[object].return_map(svd_end[e].Sigma, start.hardening[e]);
+                        const ReturnResult<dim> up =
+                            field.plus[object].return_map(svd_end[e].Sigma, start.hardening[e]);
                         const ReturnResult<dim> down =
                             field.minus[object].return_map(svd_end[e].Sigma, start.hardening[e]);
                         const Mat<dim> dFE = svd_end[e].compose((up.Sigma - down.Sigma) / (2.0 * field.delta));

@@ -119,7 +119,8 @@ template <int dim>
 void require_adjoint_materials(const MpmSystem<dim>& system, const std::string& who) {
     for (std::size_t k = 0; k < system.materials.size(); ++k) {
         const MaterialDescription& m = system.materials[k].description();
-        const std::string field = who + ": materials[" + std::to_string(k) + "].";        if (m.plasticity == PlasticityModel::CamClay && m.cam_clay.variant != CamClayVariant::Exact)
+        const std::string field = who + ": materials[" + std::to_string(k) + "].";
+        if (m.plasticity == PlasticityModel::CamClay && m.cam_clay.variant != CamClayVariant::Exact)
             throw std::invalid_argument(field + "plasticity.variant '" + to_string(m.cam_clay.variant) +
                                         "': the adjoint differentiates Cam-Clay's exact variant (J kept)");
         if (m.plasticity == PlasticityModel::VonMises && m.elasticity != ElasticityModel::StvkHencky)
@@ -161,7 +162,8 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
 template <int dim>
 void MpmAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
     std::vector<PerturbedMaterials<dim>> out;
-    for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(system_.materials, field, "MpmAdjoint"));
+    for (const std::string& field : fields)
+        out.push_back(perturbed_materials<dim>(system_.materials, field, "MpmAdjoint"));
     fields_ = std::move(out);
 }
 
@@ -528,9 +530,9 @@ VecX MpmStepAdjoint<dim>::solve(const VecX& rhs, int step) {
         lambda = solve_transposed(transpose, rhs, step, solve);
     }
     if (!solve.converged)
-        throw std::runtime_error("MpmAdjoint: step " + std::to_string(step) +
-                                 ": the adjoint solve did not converge (" + std::to_string(solve.relative_residual) +
-                                 " after " + std::to_string(solve.iterations) + " products)");
+        throw std::runtime_error("MpmAdjoint: step " + std::to_string(step) + ": the adjoint solve did not converge (" +
+                                 std::to_string(solve.relative_residual) + " after " +
+                                 std::to_string(solve.iterations) + " products)");
     return lambda;
 }
 

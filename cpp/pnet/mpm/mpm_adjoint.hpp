@@ -71,7 +71,6 @@ struct MpmRolloutGradient {
     std::vector<double> fields;
 };
 
-
 /// A Coulomb floor's contact at the step's solution: its node's unknown, the floor's normal impulse J_k (the
 /// residual's held row (k, y) with v*_k,y as update_velocity left it; <= 0: the floor pulls, no friction), the
 /// friction's coefficient c = mu f1(|u|) u / |u| on the node's tangential velocity u (the force c J_k) and
@@ -146,7 +145,7 @@ private:
     std::vector<PerturbedMaterials<dim>> no_fields_;
     const std::vector<PerturbedMaterials<dim>>& fields_;
     std::vector<std::vector<Mat<dim>>> dP_dfield_;  // [field][particle]
-    std::vector<std::vector<double>> field_bar_;     // [field][particle]: G2P's share
+    std::vector<std::vector<double>> field_bar_;    // [field][particle]: G2P's share
     // What output_adjoint leaves for input_adjoint.
     std::vector<Vec<dim>> x_bar_, residual_bar_;
     std::vector<Mat<dim>> F_bar_;

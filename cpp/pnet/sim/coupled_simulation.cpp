@@ -23,7 +23,7 @@ constexpr double kKappaReferenceDt = 1e-3;  // s: the implicit MPM step of docs/
 
 template <int dim>
 std::unique_ptr<Contact<dim>> make_particle_contact(const Scene& scene, const FemSystem<dim>& fem,
-                                                   const Particles<dim>& particles) {
+                                                    const Particles<dim>& particles) {
     // dhat at most half a cell; kappa IPC's lower bound for the average particle mass at the implicit MPM step,
     // unless the scene gives them.
     const double dhat = scene.contact.particle_dhat > 0.0 ? scene.contact.particle_dhat : 0.5 * scene.dx;

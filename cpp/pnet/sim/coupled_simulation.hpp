@@ -24,7 +24,7 @@ namespace pnet {
 /// bound for the particles' average mass at the implicit MPM step).
 template <int dim>
 std::unique_ptr<Contact<dim>> make_particle_contact(const Scene& scene, const FemSystem<dim>& fem,
-                                                   const Particles<dim>& particles);
+                                                    const Particles<dim>& particles);
 
 template <int dim>
 class CoupledSimulation : public SimulationBase, public WithParticles<dim>, public WithMesh<dim> {

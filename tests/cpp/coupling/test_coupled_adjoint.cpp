@@ -27,7 +27,8 @@ namespace {
 template <int dim>
 Scene pressed_scene(double vy, const char* plasticity, double sand_E = 3.537e5, double mesh_E = 1e7,
                     double friction_angle = 30.0) {
-    const std::string file = std::string(PNET_SCENES_DIR "/tiny/sand_fem_coupling_") + (dim == 2 ? "2d" : "3d") + ".json";
+    const std::string file =
+        std::string(PNET_SCENES_DIR "/tiny/sand_fem_coupling_") + (dim == 2 ? "2d" : "3d") + ".json";
     const Scene tiny = load_scene(file);
     double top = -1.0;
     for (const Vec<dim>& x : sample_particles<dim>(tiny).x) top = std::max(top, x[1]);
@@ -165,34 +166,46 @@ void check_coupled_gradient(const char* plasticity, Method method, int steps, do
     {
         double a = 0.0;
         for (std::size_t p = 0; p < n; ++p) a += g.particles.v[p].dot(dv[p]);
-        checks.push_back({"particle v0", a, along([&](CoupledState<dim>& s, double h) {
-                              for (std::size_t p = 0; p < n; ++p) s.particles.v[p] += h * dv[p];
-                          }, 1e-5)});
+        checks.push_back({"particle v0", a,
+                          along(
+                              [&](CoupledState<dim>& s, double h) {
+                                  for (std::size_t p = 0; p < n; ++p) s.particles.v[p] += h * dv[p];
+                              },
+                              1e-5)});
     }
     // With friction the gradient holds each step's lagged pairs, which move with the start's positions: exact
     // along the velocities and the moduli over one step, not along the positions.
     if (mu == 0.0) {
         double a = 0.0;
         for (std::size_t p = 0; p < n; ++p) a += g.particles.x[p].dot(dx[p]);
-        checks.push_back({"particle x0", a, along([&](CoupledState<dim>& s, double h) {
-                              // Small: the quadratic B-splines' second derivative jumps between cells, so the
-                              // central difference's error is first order in h here.
-                              for (std::size_t p = 0; p < n; ++p) s.particles.x[p] += h * dx[p];
-                          }, 1e-8)});
+        checks.push_back({"particle x0", a,
+                          along(
+                              [&](CoupledState<dim>& s, double h) {
+                                  // Small: the quadratic B-splines' second derivative jumps between cells, so the
+                                  // central difference's error is first order in h here.
+                                  for (std::size_t p = 0; p < n; ++p) s.particles.x[p] += h * dx[p];
+                              },
+                              1e-8)});
     }
     if (mu == 0.0) {
         double a = 0.0;
         for (std::size_t i = 0; i < nodes; ++i) a += g.node_x[i].dot(dxa[i]);
-        checks.push_back({"node x0", a, along([&](CoupledState<dim>& s, double h) {
-                              for (std::size_t i = 0; i < nodes; ++i) s.mesh.x[i] += h * dxa[i];
-                          }, 1e-6)});
+        checks.push_back({"node x0", a,
+                          along(
+                              [&](CoupledState<dim>& s, double h) {
+                                  for (std::size_t i = 0; i < nodes; ++i) s.mesh.x[i] += h * dxa[i];
+                              },
+                              1e-6)});
     }
     {
         double a = 0.0;
         for (std::size_t i = 0; i < nodes; ++i) a += g.node_v[i].dot(dva[i]);
-        checks.push_back({"node v0", a, along([&](CoupledState<dim>& s, double h) {
-                              for (std::size_t i = 0; i < nodes; ++i) s.mesh.v[i] += h * dva[i];
-                          }, 1e-4)});
+        checks.push_back({"node v0", a,
+                          along(
+                              [&](CoupledState<dim>& s, double h) {
+                                  for (std::size_t i = 0; i < nodes; ++i) s.mesh.v[i] += h * dva[i];
+                              },
+                              1e-4)});
     }
     {
         const double h = 1e-4 * sand_E;
@@ -217,10 +230,10 @@ void check_coupled_gradient(const char* plasticity, Method method, int steps, do
     }
     for (const Check& c : checks) {
         const double relative = std::abs(c.adjoint - c.fd) / std::max(std::abs(c.fd), 1e-300);
-        std::printf("coupled adjoint (%dD, %s, %s, mu %g, %d steps, %zu particles, %zu nodes, up to %zu pairs): dL/d%s %.10e, "
-                    "central differences %.10e, relative %.2e\n",
-                    dim, plasticity, to_string(method), mu, steps, n, nodes, pairs_seen, c.name, c.adjoint, c.fd,
-                    relative);
+        std::printf(
+            "coupled adjoint (%dD, %s, %s, mu %g, %d steps, %zu particles, %zu nodes, up to %zu pairs): dL/d%s %.10e, "
+            "central differences %.10e, relative %.2e\n",
+            dim, plasticity, to_string(method), mu, steps, n, nodes, pairs_seen, c.name, c.adjoint, c.fd, relative);
         EXPECT_LT(relative, tolerance) << c.name;
     }
     (void)last;
@@ -262,7 +275,6 @@ TEST(CoupledAdjoint2d, WithLaggedFrictionOneStepsGradientMatchesCentralDifferenc
 TEST(CoupledAdjoint3d, ElasticSandUnderTheSphereMatchesCentralDifferences) {
     check_coupled_gradient<3>("none", Method::Lagged, 20, 1e-4);
 }
-
 
 // Every state kept (a checkpoint per step) and the default sqrt(N) checkpoints with the segments recomputed give
 // the same gradient to the last bit, at fewer states held.
@@ -311,7 +323,9 @@ TEST(CoupledAdjoint2d, RefusesWhatItDoesNotCover) {
     const CouplingOptions coupling;
     auto make = [&](const MpmSystem<2>& mpm, const FemSystem<2>& fem, Method method,
                     const ImplicitOptions& options = ImplicitOptions{}) {
-        return [&, method, options] { CoupledAdjoint<2>(mpm, fem, nullptr, base.contact, options, MpmOptions{}, coupling, method); };
+        return [&, method, options] {
+            CoupledAdjoint<2>(mpm, fem, nullptr, base.contact, options, MpmOptions{}, coupling, method);
+        };
     };
     EXPECT_NE(refusal(make(base.mpm, base.fem.system, Method::PlasticityNet)).find("integrator 'plasticitynet'"),
               std::string::npos);
@@ -341,8 +355,9 @@ TEST(CoupledAdjoint2d, RefusesWhatItDoesNotCover) {
     wrong[2].resize(5);
     EXPECT_NE(refusal([&] { adjoint.backward(empty, empty, wrong, empty); }).find("one entry per mesh node"),
               std::string::npos);
-    EXPECT_NE(refusal([&] { adjoint.backward(empty, empty, empty, std::vector<std::vector<Vec<2>>>(2)); })
-                  .find("one entry per state (3)"),
+    EXPECT_NE(refusal([&] {
+                  adjoint.backward(empty, empty, empty, std::vector<std::vector<Vec<2>>>(2));
+              }).find("one entry per state (3)"),
               std::string::npos);
 }
 

@@ -226,8 +226,8 @@ void check_plastic_rollout_gradient(FemMethod method) {
     // differences at 1e-6 scatter by 1e-2.
     const double h_nu = 1e-3 * nu0, h_xi = 1e-3 * xi0;
     const double fd_nu = (loss(E, h0, 0.0, nullptr, nu0 + h_nu) - loss(E, h0, 0.0, nullptr, nu0 - h_nu)) / (2.0 * h_nu);
-    const double fd_xi = (loss(E, h0, 0.0, nullptr, -1.0, xi0 + h_xi) - loss(E, h0, 0.0, nullptr, -1.0, xi0 - h_xi)) /
-                         (2.0 * h_xi);
+    const double fd_xi =
+        (loss(E, h0, 0.0, nullptr, -1.0, xi0 + h_xi) - loss(E, h0, 0.0, nullptr, -1.0, xi0 - h_xi)) / (2.0 * h_xi);
     std::printf("  dL/dnu %.10g vs %.10g (%.2g), dL/d(hardening coefficient) %.10g vs %.10g (%.2g)\n", g.fields[0],
                 fd_nu, std::abs(g.fields[0] - fd_nu) / std::abs(fd_nu), g.fields[1], fd_xi,
                 std::abs(g.fields[1] - fd_xi) / std::abs(fd_xi));

@@ -503,9 +503,12 @@ void check_hardening_rollout(const std::function<Scene(const MaterialDescription
             const std::size_t f = static_cast<std::size_t>(
                 std::find(material_fields.begin(), material_fields.end(), field) - material_fields.begin());
             adjoint_value = g.fields[f];
-            written = field == "plasticity.xi" || field == "plasticity.beta" || field == "plasticity.friction_angle_deg";
+            written =
+                field == "plasticity.xi" || field == "plasticity.beta" || field == "plasticity.friction_angle_deg";
             if (written) {
-                const double closed = field == "plasticity.xi" ? g.xi : field == "plasticity.beta" ? g.beta : g.friction_angle;
+                const double closed = field == "plasticity.xi"     ? g.xi
+                                      : field == "plasticity.beta" ? g.beta
+                                                                   : g.friction_angle;
                 std::printf("  dL/d%s written out %.10g, by the material's differences %.10g\n", field.c_str(), closed,
                             adjoint_value);
                 // Within the differences' error: Cam-Clay's projection solves for its scale iteratively, and its
