@@ -125,6 +125,12 @@ public:
     /// Project the particles' Hessians to PSD (default; false gives the exact
     /// Hessian of E, for derivative checks).
     void set_project_psd(bool project) { particle_energy_.set_project_psd(project); }
+    /// The particles' energy Hessians d^2 psi / dF^2 given (ParticleEnergyForm::set_hessians) instead of a Hessian
+    /// pass at v: the products and diagonal of the Hessian there (the inertia's prepared as a pass would).
+    void set_particle_hessians(const VecX& v, const std::vector<Tensor4<dim>>& hessians) {
+        inertia_.prepare_hessian(v);
+        particle_energy_.set_hessians(hessians);
+    }
 
     /// The linear solve's preconditioner: Galerkin multigrid on the grid's nodes (solver/multigrid.hpp)
     /// built from the Hessian assembled when a step's first linear solve applies it (the Hessian

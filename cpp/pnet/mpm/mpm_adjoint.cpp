@@ -516,7 +516,10 @@ VecX MpmStepAdjoint<dim>::solve(const VecX& rhs, int step) {
     PcgResult solve;
     if (symmetric()) {
         VecX residual, diagonal;
-        potential_.value_gradient_hessian(v_, residual);
+        if (method_ == Method::Lagged)
+            potential_.set_particle_hessians(v_, T_);  // the elastic dP/dF at the solution: the energy's own Hessian
+        else
+            potential_.value_gradient_hessian(v_, residual);
         potential_.hessian_diagonal(diagonal);
         solve = solve_pcg(potential_, rhs, Preconditioner::jacobi(diagonal), lambda, 1e-11, 100000);
     } else {

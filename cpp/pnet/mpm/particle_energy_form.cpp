@@ -1,5 +1,6 @@
 #include "pnet/mpm/particle_energy_form.hpp"
 
+#include <stdexcept>
 #include <chrono>
 
 #include "pnet/math/clock.hpp"
@@ -81,6 +82,14 @@ void ParticleEnergyForm<dim>::transform_hessians() {
                 K.template block<dim, dim>(a * dim, b * dim) = block;
             }
     }
+}
+
+template <int dim>
+void ParticleEnergyForm<dim>::set_hessians(const std::vector<Tensor4<dim>>& hessians) {
+    if (hessians.size() != K_.size())
+        throw std::invalid_argument("ParticleEnergyForm::set_hessians: one Hessian per particle is needed");
+    K_ = hessians;
+    transform_hessians();
 }
 
 template <int dim>

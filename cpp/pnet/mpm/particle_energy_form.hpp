@@ -39,6 +39,10 @@ public:
 
     double value(const VecX& v) override;
     double add_gradient(const VecX& v, VecX& g) override;
+    /// The particles' Hessians d^2 psi / dF^2 given (one per particle, F-space, row-major: what the energy's
+    /// Hessian pass leaves), instead of that pass: the Hessian products and diagonal at the iterate they were taken
+    /// at (the MPM adjoint's solve, which has them).
+    void set_hessians(const std::vector<Tensor4<dim>>& hessians);
     void prepare_hessian(const VecX& v) override;
     double add_gradient_hessian(const VecX& v, VecX& g) override;
     void add_hessian_multiply(const VecX& d, VecX& out) const override;
