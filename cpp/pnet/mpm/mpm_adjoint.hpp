@@ -90,7 +90,6 @@ struct FloorContact {
 /// the stress and its exact tangent at v); G2P's adjoint, from the cotangents of the step's output to the
 /// right-hand side of J^T lambda = rhs on the step's unknowns; J^T (assembled) or the solve itself; and, from
 /// lambda, the cotangents of the step's start (through the solve's residual, AFLIP's residual and P2G).
-
 template <int dim>
 class MpmStepAdjoint {
 public:
