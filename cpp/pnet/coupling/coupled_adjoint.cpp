@@ -19,6 +19,17 @@ struct CoupledAdjoint<dim>::Stepper {
 };
 
 template <int dim>
+struct CoupledAdjoint<dim>::Factor {
+    Eigen::SimplicialLDLT<SparseMatrix> ldlt;
+    SparseMatrix pattern;  // the last analyzed J's (its values unused)
+};
+
+template <int dim>
+CoupledAdjoint<dim>::~CoupledAdjoint() = default;
+template <int dim>
+CoupledAdjoint<dim>::CoupledAdjoint(CoupledAdjoint&&) noexcept = default;
+
+template <int dim>
 void CoupledAdjoint<dim>::set_friction(double mu, double eps_v) {
     if (!(mu >= 0.0) || !(eps_v > 0.0))
         throw std::invalid_argument("CoupledAdjoint::set_friction: mu >= 0 and eps_v > 0 are needed");
@@ -38,7 +49,8 @@ CoupledAdjoint<dim>::CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<d
       options_(options),
       mpm_options_(mpm_options),
       coupling_options_(coupling_options),
-      method_(method) {
+      method_(method),
+      factor_(std::make_unique<Factor>()) {
     const std::string who = "CoupledAdjoint";
     if (method != Method::Lagged && method != Method::ReturnMap)
         throw std::invalid_argument(who + ": integrator '" + to_string(method) +
@@ -308,8 +320,21 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     // potentials): LDL^T, else sparse LU.
     VecX lambda;
     if (mpm.symmetric()) {
-        Eigen::SimplicialLDLT<SparseMatrix> ldlt;
-        ldlt.compute(transpose);
+        // The ordering and symbolic analysis are kept while the pattern is the last step's (the same active grid
+        // and contact pairs: most consecutive steps).
+        transpose.makeCompressed();
+        const bool same_pattern =
+            transpose.rows() == factor_->pattern.rows() && transpose.nonZeros() == factor_->pattern.nonZeros() &&
+            std::equal(transpose.outerIndexPtr(), transpose.outerIndexPtr() + transpose.outerSize() + 1,
+                       factor_->pattern.outerIndexPtr()) &&
+            std::equal(transpose.innerIndexPtr(), transpose.innerIndexPtr() + transpose.nonZeros(),
+                       factor_->pattern.innerIndexPtr());
+        Eigen::SimplicialLDLT<SparseMatrix>& ldlt = factor_->ldlt;
+        if (!same_pattern) {
+            ldlt.analyzePattern(transpose);
+            factor_->pattern = transpose;
+        }
+        ldlt.factorize(transpose);
         if (ldlt.info() != Eigen::Success)
             throw std::runtime_error("CoupledAdjoint: step " + std::to_string(step) +
                                      ": the step's Jacobian could not be factorized");

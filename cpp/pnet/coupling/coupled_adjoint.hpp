@@ -63,6 +63,8 @@ public:
     CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<dim>& fem, const ContactPotential<dim>* mesh_contact,
                    const ContactPotential<dim>& contact, const ImplicitOptions& options, const MpmOptions& mpm_options,
                    const CouplingOptions& coupling_options, Method method = Method::Lagged);
+    ~CoupledAdjoint();
+    CoupledAdjoint(CoupledAdjoint&&) noexcept;
 
     /// `steps` steps of dt from `start`, a checkpoint every `checkpoint_every` steps (0: ceil(sqrt(steps)); 1:
     /// every state), observe(k, state) at each state k = 0..steps; returns the last state.
@@ -96,6 +98,8 @@ public:
 private:
     struct Stepper;
     std::unique_ptr<Stepper> make_stepper() const;
+    /// A symmetric step's LDL^T, its analysis kept from step to step while J's pattern is the same.
+    struct Factor;
     /// One step's adjoint: from the cotangents of its output (g, xb, vb: overwritten) to those of its start.
     void step_adjoint(const CoupledState<dim>& start, const VecX& solution, int step, CoupledRolloutGradient<dim>& g,
                       VecX& node_x_bar, VecX& node_v_bar) const;
@@ -115,6 +119,7 @@ private:
     int steps_ = -1, unconverged_ = 0;
     std::size_t particles_ = 0;
     mutable std::size_t peak_states_ = 0;
+    std::unique_ptr<Factor> factor_;
 };
 
 }  // namespace pnet

@@ -131,6 +131,14 @@ public:
         inertia_.prepare_hessian(v);
         particle_energy_.set_hessians(hessians);
     }
+    /// The particles' term of the Hessian prepared last, as node-pair block entries on the free components, rows and
+    /// columns shifted by `offset` (without the inertia).
+    void add_particle_hessian_triplets(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset) const {
+        const std::size_t first = triplets.size();
+        particle_energy_.add_hessian_triplets(triplets);
+        for (std::size_t k = first; k < triplets.size(); ++k)
+            triplets[k] = Eigen::Triplet<double>(offset + triplets[k].row(), offset + triplets[k].col(), triplets[k].value());
+    }
 
     /// The linear solve's preconditioner: Galerkin multigrid on the grid's nodes (solver/multigrid.hpp)
     /// built from the Hessian assembled when a step's first linear solve applies it (the Hessian

@@ -460,11 +460,21 @@ VecX MpmStepAdjoint<dim>::output_adjoint(const MpmRolloutGradient<dim>& g) {
 }
 
 template <int dim>
-void MpmStepAdjoint<dim>::jacobian_transpose(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset) const {
+void MpmStepAdjoint<dim>::jacobian_transpose(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset) {
     constexpr int kStencil = IncrementalPotential<dim>::kStencil;
     const double dt = dt_;
     const Particles<dim>& start = start_;
     const VecX& free = potential_.free_components();
+    if (method_ == Method::Lagged && symmetric()) {
+        // J = J^T = M + the elastic term, whose node-pair blocks the potential sums from the tangents at v (far fewer
+        // entries than a particle's 9 x 9 blocks each); the held components' rows and columns the identity's.
+        potential_.set_particle_hessians(v_, T_);
+        const VecX& node_mass = potential_.residual_mass();
+        for (Eigen::Index i = 0; i < potential_.size(); ++i)
+            triplets.emplace_back(offset + i, offset + i, free[i] > 0.0 ? node_mass[i] : 1.0);
+        potential_.add_particle_hessian_triplets(triplets, offset);
+        return;
+    }
     auto contact_normal = [&](Eigen::Index i) {  // a held normal row of a contact
         return coulomb_ && i % dim == 1 && contact_of_[i / dim] >= 0;
     };

@@ -112,7 +112,7 @@ public:
     /// Whether J is symmetric (an elastic stress in the solve, no Coulomb floor): the potential's own Hessian.
     bool symmetric() const;
     /// J^T's entries, rows and columns shifted by `offset` (the held components' rows and columns the identity's).
-    void jacobian_transpose(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset = 0) const;
+    void jacobian_transpose(std::vector<Eigen::Triplet<double>>& triplets, Eigen::Index offset = 0);
     /// lambda = J^-T rhs (PCG where symmetric, else sparse LU); `step` names the step in errors.
     VecX solve(const VecX& rhs, int step);
     /// From lambda (after output_adjoint): the cotangents of the step's start into g (x, v, C, F and hardening
