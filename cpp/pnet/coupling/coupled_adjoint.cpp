@@ -77,10 +77,7 @@ CoupledAdjoint<dim>::CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<d
 
 template <int dim>
 void CoupledAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
-    std::vector<PerturbedMaterials<dim>> out;
-    for (const std::string& field : fields)
-        out.push_back(perturbed_materials<dim>(mpm_.materials, field, "CoupledAdjoint"));
-    fields_ = std::move(out);
+    fields_ = perturbed_fields<dim>(mpm_.materials, fields, "CoupledAdjoint");
 }
 
 template <int dim>

@@ -60,10 +60,7 @@ typename FemAdjoint<dim>::Stepper FemAdjoint<dim>::make_stepper() const {
 
 template <int dim>
 void FemAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
-    std::vector<PerturbedMaterials<dim>> out;
-    for (const std::string& field : fields)
-        out.push_back(perturbed_materials<dim>(system_.materials, field, "FemAdjoint"));
-    fields_ = std::move(out);
+    fields_ = perturbed_fields<dim>(system_.materials, fields, "FemAdjoint");
 }
 
 template <int dim>

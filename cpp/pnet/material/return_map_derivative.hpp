@@ -83,5 +83,13 @@ struct PerturbedMaterials {
 template <int dim>
 PerturbedMaterials<dim> perturbed_materials(const std::vector<Material<dim>>& materials, const std::string& field,
                                             const std::string& who);
+/// perturbed_materials of each field, in order.
+template <int dim>
+std::vector<PerturbedMaterials<dim>> perturbed_fields(const std::vector<Material<dim>>& materials,
+                                                      const std::vector<std::string>& fields, const std::string& who) {
+    std::vector<PerturbedMaterials<dim>> out;
+    for (const std::string& field : fields) out.push_back(perturbed_materials<dim>(materials, field, who));
+    return out;
+}
 
 }  // namespace pnet

@@ -161,10 +161,7 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
 
 template <int dim>
 void MpmAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& fields) {
-    std::vector<PerturbedMaterials<dim>> out;
-    for (const std::string& field : fields)
-        out.push_back(perturbed_materials<dim>(system_.materials, field, "MpmAdjoint"));
-    fields_ = std::move(out);
+    fields_ = perturbed_fields<dim>(system_.materials, fields, "MpmAdjoint");
 }
 
 template <int dim>
