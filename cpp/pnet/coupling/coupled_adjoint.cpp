@@ -9,7 +9,8 @@
 #include <Eigen/SparseLU>
 
 #include "pnet/contact/friction.hpp"
-#include "pnet/energy/return_mapping_energy.hpp"
+#include "pnet/solver/method_energy.hpp"
+#include "pnet/solver/rollout_checkpoints.hpp"
 
 namespace pnet {
 
@@ -82,15 +83,11 @@ void CoupledAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& f
 
 template <int dim>
 std::unique_ptr<typename CoupledAdjoint<dim>::Stepper> CoupledAdjoint<dim>::make_stepper() const {
-    std::unique_ptr<ParticleEnergy<dim>> energy;
-    if (method_ == Method::ReturnMap)
-        energy = std::make_unique<ReturnMappingEnergy<dim>>(mpm_.materials, options_.tangent_damping);
-    else
-        energy = std::make_unique<ElasticParticleEnergy<dim>>(mpm_.materials);
     auto stepper = std::make_unique<Stepper>();
     stepper->integrator = std::make_unique<CoupledImplicitIntegrator<dim>>(
-        mpm_, fem_, method_, options_, mpm_options_, coupling_options_, std::move(energy),
-        std::vector<const LearnedReturnMap<dim>*>{}, mesh_contact_, contact_, CouplingFriction{mu_, eps_v_});
+        mpm_, fem_, method_, options_, mpm_options_, coupling_options_,
+        model_free_energy<dim>(method_, options_, mpm_.materials), std::vector<const LearnedReturnMap<dim>*>{},
+        mesh_contact_, contact_, CouplingFriction{mu_, eps_v_});
     return stepper;
 }
 
@@ -104,8 +101,7 @@ CoupledState<dim> CoupledAdjoint<dim>::forward(const CoupledState<dim>& start, d
         throw std::invalid_argument("CoupledAdjoint::forward: the mesh state has " +
                                     std::to_string(start.mesh.x.size()) + " nodes, the mesh " +
                                     std::to_string(fem_.mesh.nodes()));
-    const int every =
-        checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
+    const int every = checkpoint_spacing(steps, checkpoint_every);
     checkpoints_.clear();
     unconverged_ = 0;
     const std::unique_ptr<Stepper> stepper = make_stepper();
@@ -229,7 +225,9 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
         mesh_friction.lag(*mesh_contact_, start.mesh.x);
         fem.set_friction(&mesh_friction);
     }
+    const bool held_friction = friction && mesh_contact_;  // the meshes' own lagged friction, held below
     for (FemPotential<dim>* p : {&fem, &elastic, &frictionless}) {
+        if (p == &frictionless && !held_friction) continue;
         p->begin_step(start.mesh.x, v_star, dt, start.mesh.plastic_inverse, {});
         p->set_material_state(fem_.element_object, start.mesh.hardening);
         p->set_reference({});
@@ -357,8 +355,8 @@ void CoupledAdjoint<dim>::step_adjoint(const CoupledState<dim>& start, const Vec
     const VecX m_lambda = node_mass.cwiseProduct(lambda_f);
     VecX h_lambda = VecX::Zero(nf);
     {
-        FemPotential<dim>& held = friction && mesh_contact_ ? frictionless : fem;  // the lagged friction held
-        if (&held == &frictionless) frictionless.prepare_hessian(vf);
+        FemPotential<dim>& held = held_friction ? frictionless : fem;
+        if (held_friction) frictionless.prepare_hessian(vf);
         std::vector<Eigen::Triplet<double>> fem_triplets;
         held.add_hessian_triplets(fem_triplets, 0);
         SparseMatrix H(nf, nf);

@@ -8,9 +8,10 @@
 #include <Eigen/SparseCholesky>
 
 #include "pnet/energy/particle_energy.hpp"
-#include "pnet/energy/return_mapping_energy.hpp"
 #include "pnet/material/return_map_derivative.hpp"
 #include "pnet/solver/bdf2.hpp"
+#include "pnet/solver/method_energy.hpp"
+#include "pnet/solver/rollout_checkpoints.hpp"
 
 namespace pnet {
 
@@ -65,9 +66,7 @@ void FemAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& field
 
 template <int dim>
 std::unique_ptr<ParticleEnergy<dim>> FemAdjoint<dim>::make_energy() const {
-    if (method_ == FemMethod::ReturnMap)
-        return std::make_unique<ReturnMappingEnergy<dim>>(system_.materials, options_.tangent_damping);
-    return std::make_unique<ElasticParticleEnergy<dim>>(system_.materials);
+    return model_free_energy<dim>(method_, options_, system_.materials);
 }
 
 template <int dim>
@@ -75,8 +74,7 @@ FemState<dim> FemAdjoint<dim>::forward(const FemState<dim>& start, double dt, in
                                        const std::function<void(int, const FemState<dim>&)>& observe) {
     if (!(dt > 0.0) || steps < 0 || checkpoint_every < 0)
         throw std::invalid_argument("FemAdjoint::forward: dt > 0, steps >= 0 and checkpoint_every >= 0 are needed");
-    const int every =
-        checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
+    const int every = checkpoint_spacing(steps, checkpoint_every);
     const Stepper stepper = make_stepper();
     dt_ = dt;
     steps_ = steps;
@@ -157,11 +155,7 @@ FemRolloutGradient<dim> FemAdjoint<dim>::backward(const std::vector<std::vector<
     std::vector<std::unique_ptr<FemPotential<dim>>> field_potentials;  // [2 f]: minus, [2 f + 1]: plus
     for (const PerturbedMaterials<dim>& field : fields_)
         for (const std::vector<Material<dim>>* materials : {&field.minus, &field.plus}) {
-            if (method_ == FemMethod::ReturnMap)
-                field_energies.push_back(
-                    std::make_unique<ReturnMappingEnergy<dim>>(*materials, options_.tangent_damping));
-            else
-                field_energies.push_back(std::make_unique<ElasticParticleEnergy<dim>>(*materials));
+            field_energies.push_back(model_free_energy<dim>(method_, options_, *materials));
             field_potentials.push_back(
                 std::make_unique<FemPotential<dim>>(system_.mesh, system_.rest, *field_energies.back()));
             field_potentials.back()->set_project_psd(false);

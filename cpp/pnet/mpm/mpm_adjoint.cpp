@@ -9,11 +9,12 @@
 
 #include "pnet/contact/friction.hpp"
 #include "pnet/energy/particle_energy.hpp"
-#include "pnet/energy/return_mapping_energy.hpp"
 #include "pnet/material/return_map_derivative.hpp"
 #include "pnet/mpm/transfer.hpp"
 #include "pnet/mpm/transfer_adjoint.hpp"
+#include "pnet/solver/method_energy.hpp"
 #include "pnet/solver/pcg.hpp"
+#include "pnet/solver/rollout_checkpoints.hpp"
 
 namespace pnet {
 
@@ -166,12 +167,8 @@ void MpmAdjoint<dim>::set_parameter_fields(const std::vector<std::string>& field
 
 template <int dim>
 std::unique_ptr<ImplicitIntegrator<dim>> MpmAdjoint<dim>::make_integrator() const {
-    std::unique_ptr<ParticleEnergy<dim>> energy;
-    if (method_ == Method::ReturnMap)
-        energy = std::make_unique<ReturnMappingEnergy<dim>>(system_.materials, options_.tangent_damping);
-    else
-        energy = std::make_unique<ElasticParticleEnergy<dim>>(system_.materials);
-    return std::make_unique<ImplicitIntegrator<dim>>(system_, method_, options_, mpm_options_, std::move(energy));
+    return std::make_unique<ImplicitIntegrator<dim>>(system_, method_, options_, mpm_options_,
+                                                     model_free_energy<dim>(method_, options_, system_.materials));
 }
 
 template <int dim>
@@ -180,8 +177,7 @@ Particles<dim> MpmAdjoint<dim>::forward(const Particles<dim>& start, double dt, 
                                         int checkpoint_every) {
     if (!(dt > 0.0) || steps < 0 || checkpoint_every < 0)
         throw std::invalid_argument("MpmAdjoint::forward: dt > 0, steps >= 0 and checkpoint_every >= 0 are needed");
-    const int every =
-        checkpoint_every > 0 ? checkpoint_every : std::max(1, static_cast<int>(std::ceil(std::sqrt(steps))));
+    const int every = checkpoint_spacing(steps, checkpoint_every);
     checkpoints_.clear();
     unconverged_ = 0;
     const std::unique_ptr<ImplicitIntegrator<dim>> made = make_integrator();

@@ -44,4 +44,15 @@ struct EnergyRequest {
 template <int dim>
 MethodEnergy<dim> make_method_energy(Method method, const EnergyRequest<dim>& request);
 
+/// The energy of a method that reads no model (return_map, lagged, analytic) over `materials`: make_method_energy's,
+/// for what builds its own steps without a scene (the adjoints; plasticitynet throws, naming the missing model).
+template <int dim>
+std::unique_ptr<ParticleEnergy<dim>> model_free_energy(Method method, const ImplicitOptions& options,
+                                                       const std::vector<Material<dim>>& materials) {
+    const std::vector<std::shared_ptr<const ModelFile>> no_models(materials.size());
+    std::vector<std::string> where;
+    for (std::size_t k = 0; k < materials.size(); ++k) where.push_back("materials[" + std::to_string(k) + "]");
+    return make_method_energy<dim>(method, EnergyRequest<dim>{options, materials, no_models, where}).energy;
+}
+
 }  // namespace pnet
