@@ -20,7 +20,8 @@
 //
 //   bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] [--threads T]
 //                [--scenes DIR] [--only NAME] [--dt-implicit S] [--with-lagged] [--with-one-solve]
-//                [--with-fixed-point] [--with-last-velocity] [--with-uncapped] [--3d] [--no-fem] [--no-stiff]
+//                [--with-fixed-point] [--with-last-velocity] [--with-uncapped] [--with-v-star] [--3d] [--no-fem]
+//                [--no-stiff]
 //
 // The metal frames run --fem-frames frames (default: all 100 of the scene: the
 // plate's whole travel, since the plastic phase that costs the most solves
@@ -32,9 +33,10 @@
 // following every iterate; --with-last-velocity adds the metal frames' plasticitynet with
 // every step started from the last velocities with the plate on its target
 // (FemOptions::kinematic_start); --with-uncapped adds, on the MPM scenes, plasticitynet and
-// return_map with the advection limit (on by default, 0.2 cells per step) off. Implicit rows give the Newton solves, the updates of F0 to F(v)
-// (outer iterations) per step and the largest true residual |R(v)| at a step's
-// end (docs/solver.md).
+// return_map with the advection limit (on by default, 0.2 cells per step) off; --with-v-star adds, on the
+// MPM and coupling scenes, plasticitynet and return_map with every Newton solve started from v* instead
+// of the last step's velocity change (MpmOptions::newton_start). Implicit rows give the Newton solves, the updates of
+// F0 to F(v) (outer iterations) per step and the largest true residual |R(v)| at a step's end (docs/solver.md).
 //
 // Every integrator runs the same simulated interval, frames [0, N) from the
 // scene's initial state (default N = 10: 0.2 s, the sand column collapsing, the
@@ -146,8 +148,22 @@ Row outer_row(const pnet::Scene& scene, pnet::IntegratorSettings settings, int f
 /// What --with-* adds beside plasticitynet and return_map.
 struct Extras {
     bool lagged = false, one_solve = false, fixed_point = false, newton = false, last_velocity = false,
-         uncapped = false;
+         uncapped = false, v_star = false;
 };
+
+/// --with-v-star's rows: plasticitynet and return_map with each Newton solve started from v*.
+template <class Sim>
+void add_v_star_rows(std::vector<Row>& rows, const pnet::Scene& scene, const pnet::IntegratorSettings& base, int frames,
+                     const Extras& extras) {
+    if (!extras.v_star) return;
+    for (const char* name : {"plasticitynet", "return_map"}) {
+        pnet::IntegratorSettings s = base;
+        s.name = name;
+        s.mpm.newton_start = "v_star";
+        rows.push_back(measure<Sim>(scene, s, frames));
+        rows.back().integrator = std::string(name) + ", from v*";
+    }
+}
 
 /// plasticitynet's outer-iteration rows asked for.
 template <class Sim>
@@ -196,6 +212,7 @@ std::vector<Row> bench_scene(const pnet::Scene& scene, int frames, double dt_imp
             rows.back().integrator = std::string(name) + ", uncapped";
         }
     }
+    add_v_star_rows<Sim>(rows, scene, with_integrator(base, "plasticitynet", dt_implicit), frames, extras);
     if (extras.one_solve) {  // the paper's cheapest mode: one solve per step about F0 = F(v*), not converged
         pnet::IntegratorSettings one = with_integrator(base, "plasticitynet", dt_implicit);
         one.implicit.outer_iteration = "fixed_point";
@@ -222,6 +239,7 @@ std::vector<Row> bench_mesh_scene(const pnet::Scene& scene, int frames, const Ex
     rows.push_back(measure<Sim>(scene, base, frames));
     rows.push_back(measure<Sim>(scene, with_integrator(base, "return_map", base.dt), frames));
     add_outer_rows<Sim>(rows, scene, base, frames, extras);
+    if (!fem) add_v_star_rows<Sim>(rows, scene, base, frames, extras);
     if (fem && extras.last_velocity) {  // each step from the last velocities with the plate on its target
         pnet::IntegratorSettings last = base;
         last.fem.kinematic_start = "last_velocity";
@@ -285,6 +303,8 @@ int main(int argc, char** argv) {
             extras.last_velocity = true;
         else if (arg == "--with-uncapped")
             extras.uncapped = true;
+        else if (arg == "--with-v-star")
+            extras.v_star = true;
         else if (arg == "--3d")
             three_d = true;
         else {
@@ -292,7 +312,7 @@ int main(int argc, char** argv) {
                          "usage: bench_table1 [--frames N] [--fem-frames N] [--coupling-frames N] [--stiff-frames N] "
                          "[--threads T] [--dt-implicit S] [--scenes DIR] [--only NAME] [--with-lagged] "
                          "[--with-one-solve] [--with-fixed-point] [--with-newton-outer] [--with-last-velocity] "
-                         "[--with-uncapped] [--3d] "
+                         "[--with-uncapped] [--with-v-star] [--3d] "
                          "[--no-fem] "
                          "[--no-stiff]\n");
             return 2;

@@ -336,7 +336,8 @@ def test_implicit_integrators_run_every_tiny_scene(tmp_path, name, integrator):
     frames = (out / "stats.csv").read_text().splitlines()
     assert frames[0].endswith(",newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
                               "network_evaluations,network_points,max_residual_m_per_s,converged,unconverged_steps,"
-                              "hardening_clamped,advection_capped_steps,floor_friction_retried_steps")
+                              "hardening_clamped,advection_capped_steps,floor_friction_retried_steps,"
+                              "prediction_rejected_steps")
     frame_rows = [dict(zip(frames[0].split(","), row.split(","))) for row in frames[1:]]
     assert len(frames) == 3 and all(r["converged"] == "1" and r["unconverged_steps"] == "0" for r in frame_rows), \
         "every solve converged"

@@ -58,6 +58,8 @@ CoupledAdjoint<dim>::CoupledAdjoint(const MpmSystem<dim>& mpm, const FemSystem<d
                                     "': the adjoint is of lagged and return_map (plasticitynet converges to "
                                     "return_map's step)");
     require_adjoint_materials<dim>(mpm, who);
+    // Each step from v* (as MpmAdjoint's): the backward pass replays steps from stored states.
+    mpm_options_.newton_start = "v_star";
     if (mpm.boundary.coulomb_floor() && mpm.boundary.sticky_floor_cells > 0)
         throw std::invalid_argument(who +
                                     ": boundary.floor_friction: a Coulomb floor beside meshes is not "

@@ -48,20 +48,9 @@ CoupledImplicitIntegrator<dim>::CoupledImplicitIntegrator(
 }
 
 template <int dim>
-CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
-                                                      long step_index) {
-    const auto start = std::chrono::steady_clock::now();
-    CoupledStepStats stats;
-    stats.dt = dt;
-    const std::string context = "step " + std::to_string(step_index);
-
-    particles_to_grid<dim>(grid_, particles, nullptr);
-    const double flip_alpha = flip_fraction(dt, mpm_system_.flip_relaxation_time);
-    if (flip_alpha > 0.0) velocity_residual(grid_, particles, residual_);  // AFLIP (transfer.hpp)
-    const auto after_p2g = std::chrono::steady_clock::now();
-    BoundaryConditions solve_boundary = mpm_system_.boundary;
-    solve_boundary.slip_walls = false;  // slip walls act after the solve, as in ImplicitIntegrator
-    grid_.update_velocity(dt, mpm_system_.gravity, unprojected_floor(solve_boundary));
+void CoupledImplicitIntegrator<dim>::solve_step(const Particles<dim>& particles, const FemState<dim>& state, double dt,
+                                                const std::string& context, const BoundaryConditions& solve_boundary,
+                                                bool predicted, CoupledStepStats& stats) {
     mpm_.set_floor_friction_newton(floor_friction_in_one_solve(mpm_options_, dim, mpm_energy_->tangent_hessian()));
     mpm_.begin_step(grid_, particles, dt, solve_boundary);
     const bool floor_passes = mpm_system_.boundary.coulomb_floor() && !mpm_.floor_friction_newton();
@@ -94,12 +83,13 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     // An intersection-free start: v* as far as CCD allows from the start positions (v = 0). The
     // fixed components (the sticky floor, massless nodes) have v* = 0, so the scaling keeps them.
     v_ = coupled_.v_star();
+    if (predicted) predictor_.predict(mpm_, dt, v_);  // the grid's unknowns lead v_
     const double alpha = coupled_.max_step(VecX::Zero(v_.size()), v_);
     if (alpha < 1.0) v_ *= alpha;
+    stats.ccd_limited += alpha < 1.0;
 
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
     solve.work_line_search = mpm_energy_->tangent_hessian();
-    const long network_before = mpm_energy_->network_evaluations(), points_before = mpm_energy_->network_points();
     if (!solve.fixed_point) coupled_.set_reference(particles.F_elastic);
     // Under "auto" a failed one solve on the floor is solved again by the passes (ImplicitIntegrator).
     const bool one_solve = mpm_system_.boundary.coulomb_floor() && mpm_.floor_friction_newton();
@@ -121,14 +111,61 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
         },
         retry, [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, mpm_energy_->hardening_clamped()); },
         stats);
+}
+
+template <int dim>
+CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles, FemState<dim>& state, double dt,
+                                                      long step_index) {
+    const auto start = std::chrono::steady_clock::now();
+    CoupledStepStats stats;
+    stats.dt = dt;
+    const std::string context = "step " + std::to_string(step_index);
+
+    particles_to_grid<dim>(grid_, particles, nullptr);
+    const double flip_alpha = flip_fraction(dt, mpm_system_.flip_relaxation_time);
+    if (flip_alpha > 0.0) velocity_residual(grid_, particles, residual_);  // AFLIP (transfer.hpp)
+    const auto after_p2g = std::chrono::steady_clock::now();
+    BoundaryConditions solve_boundary = mpm_system_.boundary;
+    solve_boundary.slip_walls = false;  // slip walls act after the solve, as in ImplicitIntegrator
+    grid_.update_velocity(dt, mpm_system_.gravity, unprojected_floor(solve_boundary));
+    const long network_before = mpm_energy_->network_evaluations(), points_before = mpm_energy_->network_points();
+    const bool predicts = predicts_newton_start(mpm_options_.newton_start, method_);
+    const bool predicted = predicts && !predictor_.empty();
+    bool rejected = false;
+    try {
+        solve_step(particles, state, dt, context, solve_boundary, predicted, stats);
+        // As in ImplicitIntegrator: a solve from the prediction that ended far from converged is solved again.
+        rejected = predicted && !stats.converged &&
+                   !(stats.residual <= StepPredictor<dim>::kRejectedResidual * options_.newton_tolerance_at(dt));
+    } catch (const SimulationError&) {
+        if (!predicted) throw;
+        rejected = true;
+    }
+    if (rejected) {  // the step again from v*, its cost added to the failed solve's
+        CoupledStepStats again;
+        again.dt = dt;
+        solve_step(particles, state, dt, context, solve_boundary, false, again);
+        again.newton_iterations += stats.newton_iterations;
+        again.cg_iterations += stats.cg_iterations;
+        again.line_search_steps += stats.line_search_steps;
+        again.fixed_point_iterations += stats.fixed_point_iterations;
+        again.ccd_limited += stats.ccd_limited;
+        again.hardening_clamped = std::max(again.hardening_clamped, stats.hardening_clamped);
+        stats = again;
+        stats.prediction_rejected = true;
+    }
     stats.network_evaluations = mpm_energy_->network_evaluations() - network_before;
     stats.network_points = mpm_energy_->network_points() - points_before;
     stats.ccd_queries = coupled_.ccd_queries();
-    stats.ccd_limited = coupled_.ccd_limited() + (alpha < 1.0);
+    stats.ccd_limited += coupled_.ccd_limited();
     stats.energy_seconds = mpm_.energy_seconds();
     stats.cg_seconds = mpm_.multiply_seconds();  // the grid's Hessian-vector products (PCG)
     const auto after_solve = std::chrono::steady_clock::now();
 
+    if (predicts && stats.converged)
+        predictor_.record(mpm_, v_, dt);
+    else
+        predictor_.clear();
     // MPM: the grid velocities, slip walls, G2P.
     const Eigen::Index ng = coupled_.grid_size();
     mpm_.write_velocity(v_.head(ng), grid_);
@@ -148,7 +185,7 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     stats.clamped = clamp_implicit_step(particles, mpm_system_, grid_, step_index, dt, mpm_options_.advection_cfl);
 
     // FEM: positions and the return mapping (identity for elastic bodies).
-    for (std::size_t i = 0; i < nodes; ++i) {
+    for (std::size_t i = 0; i < fem_system_.mesh.nodes(); ++i) {
         state.v[i] = v_.template segment<dim>(ng + dim * i);
         state.x[i] += dt * state.v[i];
         if (!state.x[i].allFinite())

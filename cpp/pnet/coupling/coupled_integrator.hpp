@@ -68,9 +68,19 @@ public:
     CoupledPotential<dim>& potential() { return coupled_; }
     /// The last step's solution [grid velocities; node velocities] (before the slip walls' projection).
     const VecX& solution() const { return v_; }
+    /// The grid's Newton start predicted from the last step (MpmOptions::newton_start; the mesh's nodes
+    /// start at v*): empty before the first step or after one that did not converge. Checkpoints keep it.
+    const StepPredictor<dim>& predictor() const { return predictor_; }
+    StepPredictor<dim>& predictor() { return predictor_; }
     const Grid<dim>& grid() const { return grid_; }
 
 private:
+    /// The step's solve, from v* or (`predicted`) v* plus the grid's Newton start prediction (as far as
+    /// CCD allows), into v_ and `stats`: both potentials set up on grid_'s P2G and the state, then the
+    /// Newton solves (floor_friction_passes.hpp).
+    void solve_step(const Particles<dim>& particles, const FemState<dim>& state, double dt, const std::string& context,
+                    const BoundaryConditions& solve_boundary, bool predicted, CoupledStepStats& stats);
+
     const MpmSystem<dim>& mpm_system_;
     const FemSystem<dim>& fem_system_;
     ImplicitMethod method_;
@@ -91,6 +101,7 @@ private:
     CoupledPotential<dim> coupled_;
     ReferenceSolveWork<dim> work_;
     VecX v_;
+    StepPredictor<dim> predictor_;    // MpmOptions::newton_start "last_step", on the grid's unknowns
     std::vector<Vec<dim>> residual_;  // AFLIP's r_p (MpmSystem::flip_relaxation_time)
 };
 

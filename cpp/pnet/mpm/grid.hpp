@@ -95,6 +95,12 @@ public:
     const Node& node(std::int64_t index) const { return storage_[index]; }
     /// Number of storage slots (every node of every block; indices are below it).
     std::int64_t storage_size() const { return static_cast<std::int64_t>(storage_.size()); }
+    /// storage_size() of a grid of `cells` (without making one).
+    static std::int64_t storage_size(const std::array<int, dim>& cells) {
+        std::int64_t blocks = 1;
+        for (int a = 0; a < dim; ++a) blocks *= (cells[a] + 1 + kBlock - 1) / kBlock;
+        return blocks * kBlockNodes;
+    }
 
     /// Bins the particles by the block of their stencil base node (counting
     /// sort, stable), marks the blocks they write as active and zeroes them.

@@ -38,6 +38,7 @@ void ImplicitIntegrator<dim>::reset(const Particles<dim>&) {
     previous_C_.clear();
     rate_C_.clear();
     history_dt_ = 0.0;
+    predictor_.clear();
 }
 
 template <int dim>
@@ -84,19 +85,14 @@ void ImplicitIntegrator<dim>::restore_checkpoint_state(std::vector<Mat<dim>> sta
 }
 
 template <int dim>
-MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
-    const auto start = std::chrono::steady_clock::now();
-    MpmStepStats stats;
-    stats.dt = dt;
+void ImplicitIntegrator<dim>::restore_checkpoint_prediction(const std::vector<Mat<dim>>& state) {
+    predictor_.restore(state, grid_.storage_size(), "implicit integrator state");
+}
 
-    particles_to_grid<dim>(grid_, particles, nullptr);
-    const double alpha = flip_fraction(dt, system_.flip_relaxation_time);
-    if (alpha > 0.0) velocity_residual(grid_, particles, residual_);  // AFLIP (transfer.hpp)
-    const auto after_p2g = std::chrono::steady_clock::now();
-    // v* with the sticky floor applied; slip walls act after the solve (see the header).
-    BoundaryConditions solve_boundary = system_.boundary;
-    solve_boundary.slip_walls = false;
-    grid_.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
+template <int dim>
+void ImplicitIntegrator<dim>::solve_grid(const Particles<dim>& particles, double dt, long step_index,
+                                         const BoundaryConditions& solve_boundary, bool predicted,
+                                         MpmStepStats& stats) {
     potential_.set_floor_friction_newton(floor_friction_in_one_solve(mpm_options_, dim, energy_->tangent_hessian()));
     potential_.begin_step(grid_, particles, dt, solve_boundary);
     const bool bdf2 = options_.time_integrator == "bdf2";
@@ -127,7 +123,7 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     potential_.set_assemble(mpm_options_.linear_solver == "cholesky" || newton.incomplete_cholesky);
 
     v_ = potential_.v_star();
-    const long network_before = energy_->network_evaluations(), points_before = energy_->network_points();
+    if (predicted) predictor_.predict(potential_, dt, v_);
     ReferenceSolveOptions solve = options_.reference_solve_options(integrator_info(method_).references);
     solve.work_line_search = energy_->tangent_hessian();
     // The elastic energy has no reference state: lagged passes the particles' F^E.
@@ -148,6 +144,53 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
         potential_, v_, newton, solve, mpm_options_, "step " + std::to_string(step_index), work_, !floor_passes,
         [&](const VecX& v) { potential_.floor_friction_contacts(&v); }, retry,
         [&] { stats.hardening_clamped = std::max(stats.hardening_clamped, energy_->hardening_clamped()); }, stats);
+}
+
+template <int dim>
+MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt, long step_index) {
+    const auto start = std::chrono::steady_clock::now();
+    MpmStepStats stats;
+    stats.dt = dt;
+
+    particles_to_grid<dim>(grid_, particles, nullptr);
+    const double alpha = flip_fraction(dt, system_.flip_relaxation_time);
+    if (alpha > 0.0) velocity_residual(grid_, particles, residual_);  // AFLIP (transfer.hpp)
+    const auto after_p2g = std::chrono::steady_clock::now();
+    // v* with the sticky floor applied; slip walls act after the solve (see the header).
+    BoundaryConditions solve_boundary = system_.boundary;
+    solve_boundary.slip_walls = false;
+    grid_.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
+    const long network_before = energy_->network_evaluations(), points_before = energy_->network_points();
+    const bool predicts = predicts_newton_start(mpm_options_.newton_start, method_);
+    const bool predicted = predicts && !predictor_.empty();
+    bool rejected = false;
+    try {
+        solve_grid(particles, dt, step_index, solve_boundary, predicted, stats);
+        // A solve from the prediction that ended far from converged: the prediction is what failed (a node's
+        // rate recorded where its velocity was ill-determined, now pulling on stiff material), not the step.
+        rejected = predicted && !stats.converged &&
+                   !(stats.residual <= StepPredictor<dim>::kRejectedResidual * options_.newton_tolerance_at(dt));
+    } catch (const SimulationError&) {
+        if (!predicted) throw;
+        rejected = true;
+    }
+    if (rejected) {  // the step again from v*, its cost added to the failed solve's
+        MpmStepStats again;
+        again.dt = dt;
+        solve_grid(particles, dt, step_index, solve_boundary, false, again);
+        again.newton_iterations += stats.newton_iterations;
+        again.cg_iterations += stats.cg_iterations;
+        again.line_search_steps += stats.line_search_steps;
+        again.fixed_point_iterations += stats.fixed_point_iterations;
+        again.hardening_clamped = std::max(again.hardening_clamped, stats.hardening_clamped);
+        stats = again;
+        stats.prediction_rejected = true;
+    }
+    if (predicts && stats.converged)
+        predictor_.record(potential_, v_, dt);
+    else
+        predictor_.clear();
+    const bool bdf2 = options_.time_integrator == "bdf2";
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).
     potential_.write_velocity(potential_.displacement_rate(v_), grid_);
     grid_.project_velocity(system_.boundary);  // slip walls, as explicit MPM

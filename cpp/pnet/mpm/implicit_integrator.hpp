@@ -45,6 +45,7 @@
 #include "pnet/mpm/integrator.hpp"
 #include "pnet/mpm/mpm_options.hpp"
 #include "pnet/mpm/mpm_system.hpp"
+#include "pnet/mpm/step_predictor.hpp"
 #include "pnet/nn/learned_return_map.hpp"
 #include "pnet/solver/fixed_point.hpp"
 #include "pnet/solver/implicit_options.hpp"
@@ -74,13 +75,17 @@ public:
     /// were before the step) or a particle blows up after it.
     MpmStepStats step(Particles<dim>& particles, double dt, long step_index) override;
 
-    /// The history resets with the particles (the next step is backward Euler's start-up).
+    /// The history and the Newton start's prediction reset with the particles (the next step is
+    /// backward Euler's start-up, from v*).
     void reset(const Particles<dim>& particles) override;
     /// BDF2's history (empty before a BDF2 run's first step): 3 n + 1 matrices, the previous velocities'
     /// affine parts, the displacement rates' affine parts, (v^{n-1}_p, u_p) as the first two columns, and
     /// the last step's dt in (0, 0) (a state of 3 n matrices, written before it was kept, still loads).
     std::vector<Mat<dim>> checkpoint_state() const override;
     void restore_checkpoint_state(std::vector<Mat<dim>> state) override;
+    /// The Newton start's prediction (MpmOptions::newton_start; StepPredictor::state).
+    std::vector<Mat<dim>> checkpoint_prediction() const override { return predictor_.state(); }
+    void restore_checkpoint_prediction(const std::vector<Mat<dim>>& state) override;
 
     const ImplicitOptions& options() const { return options_; }
     const MpmOptions& mpm_options() const { return mpm_options_; }
@@ -91,6 +96,12 @@ public:
     const VecX& solution() const { return v_; }
 
 private:
+    /// The step's grid solve, from v* or (`predicted`) v* plus the Newton start's prediction, into v_
+    /// and `stats`: the potential set up on grid_'s P2G (BDF2's history, the Coulomb floor), then the
+    /// Newton solves (floor_friction_passes.hpp).
+    void solve_grid(const Particles<dim>& particles, double dt, long step_index, const BoundaryConditions& boundary,
+                    bool predicted, MpmStepStats& stats);
+
     const MpmSystem<dim>& system_;
     ImplicitMethod method_;
     ImplicitOptions options_;
@@ -101,6 +112,7 @@ private:
     IncrementalPotential<dim> potential_;
     ReferenceSolveWork<dim> work_;
     VecX v_;
+    StepPredictor<dim> predictor_;  // MpmOptions::newton_start "last_step"
     // BDF2's history per particle (time_integrator "bdf2"; empty before the first step): the velocity
     // and APIC matrix at the start of the last step (v^{n-1}), and that step's displacement rate
     // u = (x^n - x^{n-1}) / dt with its affine part, each transferred to the grid like the velocity.

@@ -92,6 +92,10 @@ public:
     std::size_t nodes() const { return dof_node_.size(); }
     /// The grid storage index of unknown node k (its components dim k + a).
     std::int64_t dof_node(std::size_t k) const { return dof_node_[k]; }
+    /// The unknown node at grid storage index `node`, or -1 (not an unknown this step, or off the grid).
+    int node_dof(std::int64_t node) const {
+        return node >= 0 && node < static_cast<std::int64_t>(node_dof_.size()) ? node_dof_[node] : -1;
+    }
 
     /// F_p(v) of every particle.
     void deformation(const VecX& v, std::vector<Mat<dim>>& F) const override;

@@ -31,6 +31,10 @@ public:
     /// the cached stresses), saved in checkpoints.
     virtual std::vector<Mat<dim>> checkpoint_state() const { return {}; }
     virtual void restore_checkpoint_state(std::vector<Mat<dim>> /*state*/) {}
+    /// What the next step's solve starts from beyond the particles (implicit MPM: the Newton start's
+    /// prediction, one matrix per grid node at most), kept by checkpoints beside checkpoint_state().
+    virtual std::vector<Mat<dim>> checkpoint_prediction() const { return {}; }
+    virtual void restore_checkpoint_prediction(const std::vector<Mat<dim>>& /*state*/) {}
 };
 
 }  // namespace pnet

@@ -155,6 +155,9 @@ MpmAdjoint<dim>::MpmAdjoint(const MpmSystem<dim>& system, const ImplicitOptions&
                                         "solve; lagged solves the floor in passes)");
         mpm_options_.floor_friction_solve = "newton";
     }
+    // Each step from v*: the backward pass replays steps from stored particle states (their start), and a
+    // start predicted from the step before would make a replayed step differ from the forward one.
+    mpm_options_.newton_start = "v_star";
     if (options.time_integrator != "backward_euler")
         throw std::invalid_argument("MpmAdjoint: time_integrator '" + options.time_integrator +
                                     "': backward Euler only");

@@ -32,6 +32,12 @@ struct MpmOptions {
     // The majorize-minimize passes (whole solves) of a step on a Coulomb floor under "passes", and of a
     // step whose one solve failed under "auto".
     int floor_friction_passes = 3;
+    // Where a step's Newton solve starts: "last_step", v* plus the last step's implicit velocity change
+    // (v - v*) scaled to this step, on the nodes both steps share (mpm/step_predictor.hpp: held nodes and
+    // light ones start at v*; a resumed run keeps it); "v_star", v* (free fall for one step); "auto" (the
+    // default): the integrator's entry (IntegratorInfo::predicts_newton_start: last_step under return_map
+    // and lagged, v_star under plasticitynet). Measured: docs/solver.md, "Where Newton starts".
+    std::string newton_start = "auto";
     // The linear solve of MPM's Newton iterations: "pcg" (matrix-free, with the solver's
     // preconditioner) or "cholesky" (CHOLMOD on the assembled grid Hessian, its symbolic analysis kept
     // while the active grid is the same).
@@ -73,6 +79,10 @@ inline const std::vector<OptionField<MpmOptions>>& mpm_option_fields() {
                       "(return_map; a step it fails solved again by passes), else passes"),
         integer_option("floor_friction_passes", "--floor-friction-passes", 1, 100, &O::floor_friction_passes,
                        "a Coulomb floor's passes per step (floor_friction_solve passes, or after a failed one solve)"),
+        choice_option("newton_start", "--newton-start", {"auto", "last_step", "v_star"}, &O::newton_start,
+                      "MPM, coupling: where a step's Newton solve starts: v* plus the last step's implicit velocity "
+                      "change (last_step), or v*; auto: last_step under return_map and lagged, v_star under "
+                      "plasticitynet"),
         choice_option("linear_solver", nullptr, {"pcg", "cholesky"}, &O::linear_solver,
                       "MPM's linear solve: matrix-free PCG or CHOLMOD on the assembled Hessian"),
     };

@@ -139,7 +139,10 @@ FrameStats CoupledSimulation<dim>::advance_frame(const std::function<void()>& af
 
 namespace {
 
-constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'P', 'L', '1'};
+// PNETCPL2 adds the implicit grid's Newton start prediction at the end (CoupledImplicitIntegrator::
+// predictor); a PNETCPL1 file loads without one (the next step starts at v*).
+constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'P', 'L', '2'};
+constexpr char kMagicWithoutPrediction[8] = {'P', 'N', 'E', 'T', 'C', 'P', 'L', '1'};
 
 }  // namespace
 
@@ -163,6 +166,10 @@ void CoupledSimulation<dim>::save_checkpoint(const std::string& path) const {
         write_array(out, state_.v);
         write_array(out, state_.plastic_inverse);
         write_array(out, state_.hardening);
+        const std::vector<Mat<dim>> prediction = implicit_ ? implicit_->predictor().state() : std::vector<Mat<dim>>{};
+        const std::int64_t prediction_size = static_cast<std::int64_t>(prediction.size());
+        out.write(reinterpret_cast<const char*>(&prediction_size), sizeof prediction_size);
+        write_array(out, prediction);
     });
 }
 
@@ -171,7 +178,8 @@ void CoupledSimulation<dim>::load_checkpoint(const std::string& path) {
     std::istringstream in = read_sealed_checkpoint(path);
     std::vector<std::int64_t> header(6);
     double time = 0.0;
-    read_checkpoint_preamble(in, path, {kMagic}, "MPM-FEM coupling", header, time, settings_.name);
+    const bool with_prediction = read_checkpoint_preamble(in, path, {kMagic, kMagicWithoutPrediction},
+                                                          "MPM-FEM coupling", header, time, settings_.name) == 0;
     const std::size_t n = particles_.size();
     const std::int64_t stress_expected = explicit_ ? static_cast<std::int64_t>(n) : 0;
     if (header[0] != static_cast<std::int64_t>(n) || header[1] != static_cast<std::int64_t>(state_.x.size()) ||
@@ -193,12 +201,26 @@ void CoupledSimulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, s.v, state_.v.size(), path);
     read_array(in, s.plastic_inverse, state_.plastic_inverse.size(), path);
     read_array(in, s.hardening, state_.hardening.size(), path);
+    StepPredictor<dim> prediction;
+    if (with_prediction) {
+        std::int64_t prediction_size = 0;
+        in.read(reinterpret_cast<char*>(&prediction_size), sizeof prediction_size);
+        const std::int64_t storage = Grid<dim>::storage_size(mpm_.cells);
+        if (!in || prediction_size < 0 || prediction_size > storage)
+            throw std::invalid_argument(path + ": the Newton start's prediction holds " +
+                                        std::to_string(prediction_size) + " nodes, at most " + std::to_string(storage) +
+                                        " (the grid's) expected (corrupt checkpoint)");
+        std::vector<Mat<dim>> entries;
+        read_array(in, entries, static_cast<std::size_t>(prediction_size), path);
+        prediction.restore(entries, storage, path);
+    }
     in.peek();
     if (!in.eof()) throw std::invalid_argument(path + ": longer than its header says (corrupt checkpoint)");
     restore_clock(path, header[4], header[5], time);
     particles_ = p;
     state_ = std::move(s);
     if (explicit_) explicit_->mpm().restore_checkpoint_state(std::move(stress));
+    if (implicit_) implicit_->predictor() = std::move(prediction);
 }
 
 template <int dim>

@@ -6,6 +6,7 @@
 
 #include "pnet/io/atomic_file.hpp"
 #include "pnet/io/checkpoint_arrays.hpp"
+#include "pnet/mpm/step_predictor.hpp"
 #include "pnet/scene/sampler.hpp"
 #include "pnet/sim/frame_files.hpp"
 #include "pnet/solver/method_energy.hpp"
@@ -91,7 +92,10 @@ FrameStats Simulation<dim>::advance_frame(const std::function<void()>& after_ste
 
 namespace {
 
-constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'K', 'P', '2'};
+// PNETCKP3 adds the Newton start's prediction after the integrator's state (MpmIntegrator::
+// checkpoint_prediction); a PNETCKP2 file loads without one (the next step starts at v*).
+constexpr char kMagic[8] = {'P', 'N', 'E', 'T', 'C', 'K', 'P', '3'};
+constexpr char kMagicWithoutPrediction[8] = {'P', 'N', 'E', 'T', 'C', 'K', 'P', '2'};
 
 }  // namespace
 
@@ -112,6 +116,10 @@ void Simulation<dim>::save_checkpoint(const std::string& path) const {
         write_array(out, particles_.rest_volume);
         write_array(out, particles_.object);
         write_array(out, state);
+        const std::vector<Mat<dim>> prediction = integrator_->checkpoint_prediction();
+        const std::int64_t prediction_size = static_cast<std::int64_t>(prediction.size());
+        out.write(reinterpret_cast<const char*>(&prediction_size), sizeof prediction_size);
+        write_array(out, prediction);
     });
 }
 
@@ -120,7 +128,8 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     std::istringstream in = read_sealed_checkpoint(path);
     std::vector<std::int64_t> header(4);
     double time = 0.0;
-    read_checkpoint_preamble(in, path, {kMagic}, "", header, time, integrator_->name());
+    const bool with_prediction = read_checkpoint_preamble(in, path, {kMagic, kMagicWithoutPrediction}, "", header, time,
+                                                          integrator_->name()) == 0;
     std::int64_t state_size = 0;
     in.read(reinterpret_cast<char*>(&state_size), sizeof state_size);
     if (!in) throw std::invalid_argument(path + ": not a PlasticityNet checkpoint");
@@ -162,9 +171,22 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     }
     for (const Mat<dim>& m : state)
         if (!m.allFinite()) throw std::invalid_argument(path + ": the integrator's state is not finite (corrupt checkpoint)");
+    std::vector<Mat<dim>> prediction;
+    if (with_prediction) {
+        std::int64_t prediction_size = 0;
+        in.read(reinterpret_cast<char*>(&prediction_size), sizeof prediction_size);
+        const std::int64_t storage = Grid<dim>::storage_size(system_.cells);
+        if (!in || prediction_size < 0 || prediction_size > storage)
+            throw std::invalid_argument(path + ": the Newton start's prediction holds " +
+                                        std::to_string(prediction_size) + " nodes, at most " + std::to_string(storage) +
+                                        " (the grid's) expected (corrupt checkpoint)");
+        read_array(in, prediction, static_cast<std::size_t>(prediction_size), path);
+        StepPredictor<dim>().restore(prediction, storage, path);  // refused before anything is restored
+    }
     restore_clock(path, header[2], header[3], time);
     particles_ = p;  // copy assignment keeps each array's storage (Python views of it stay valid)
     integrator_->restore_checkpoint_state(std::move(state));
+    integrator_->restore_checkpoint_prediction(prediction);
 }
 
 template MpmSystem<2> make_mpm_system<2>(const Scene&);

@@ -122,7 +122,7 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
     long run_steps = 0, run_unconverged = 0;
     double run_worst_residual = 0.0;
     std::size_t run_hardening_clamped = 0;
-    long run_fixed_point_capped = 0, run_floor_retried = 0;
+    long run_fixed_point_capped = 0, run_floor_retried = 0, run_prediction_rejected = 0;
     while (sim.frame() < frames) {
         FrameStats f;
         try {
@@ -141,6 +141,7 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
         run_hardening_clamped = std::max(run_hardening_clamped, f.hardening_clamped);
         run_fixed_point_capped += f.fixed_point_capped_steps;
         run_floor_retried += f.floor_friction_retried_steps;
+        run_prediction_rejected += f.prediction_rejected_steps;
         stats += stats_csv_row(f, columns);
         double t = f.time;  // the frame's start time, from its step sizes
         for (const StepRecord& s : sim.last_frame_steps()) t -= s.dt;
@@ -197,6 +198,12 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
                 "note: in %ld of %ld steps the Coulomb floor's one solve failed and its three passes solved the "
                 "step again (floor_friction_retried in steps.csv)\n",
                 run_floor_retried, run_steps);
+        if (run_prediction_rejected > 0)
+            std::printf(
+                "note: in %ld of %ld steps the solve from the last step's velocity change ended far from converged "
+                "and the step was solved again from v* (prediction_rejected in steps.csv; --newton-start v_star "
+                "starts every step there)\n",
+                run_prediction_rejected, run_steps);
         if (run_hardening_clamped > 0)
             std::printf(
                 "note: up to %zu particles in a step had a hardening state outside the range the model was "

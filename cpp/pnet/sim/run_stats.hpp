@@ -48,6 +48,8 @@ struct FrameStats {
     long advection_capped_steps = 0;     // implicit MPM, coupling: steps the advection limit cut below the scene's dt
     long floor_friction_retried_steps = 0;  // implicit MPM, coupling: steps whose one solve on the Coulomb floor failed
                                             // and the passes solved again (MpmStepFields::floor_friction_retried)
+    long prediction_rejected_steps = 0;     // implicit MPM, coupling: steps solved again from v* (MpmStepFields::
+                                            // prediction_rejected)
     std::size_t hardening_clamped = 0;   // most particles with a clamped hardening input in one step
     // FEM contact: the most contact pairs closer than dhat at the end of a step, the smallest pair
     // distance at the end of any step (m), and CCD queries / those that shortened a step.
@@ -75,6 +77,7 @@ struct FrameStats {
         fixed_point_capped_steps += !s.fixed_point_converged;
         advection_capped_steps += s.advection_capped;
         floor_friction_retried_steps += s.floor_friction_retried;
+        prediction_rejected_steps += s.prediction_rejected;
         hardening_clamped = std::max(hardening_clamped, s.hardening_clamped);
         contact_pairs = std::max(contact_pairs, s.contact_pairs);
         min_distance = std::min(min_distance, s.min_distance);
@@ -130,6 +133,8 @@ void for_each_frame_field(F&& f) {
       [](const FrameStats& s) { return s.advection_capped_steps; });
     f(FrameField{"floor_friction_retried_steps", "floor_friction_retried_steps", "%ld"},
       [](const FrameStats& s) { return s.floor_friction_retried_steps; });
+    f(FrameField{"prediction_rejected_steps", "prediction_rejected_steps", "%ld"},
+      [](const FrameStats& s) { return s.prediction_rejected_steps; });
     f(FrameField{"contact_pairs", "contact_pairs", "%zu", true}, [](const FrameStats& s) { return s.contact_pairs; });
     f(FrameField{"min_distance_m", "min_distance", "%.6g", true}, [](const FrameStats& s) { return s.min_distance; });
     f(FrameField{"ccd_queries", nullptr, "%ld", true}, [](const FrameStats& s) { return s.ccd_queries; });

@@ -65,25 +65,27 @@ const std::vector<IntegratorInfo>& integrators() {
         {Method::Explicit, "explicit",
          "symplectic Euler: the return mapping's stress as a force, at the CFL step (or a given dt); the ground "
          "truth",
-         /*implicit=*/false, /*reads_models=*/false, /*particles=*/true, /*meshes=*/true, /*references=*/false,
-         "cfl", 0.0},
+         /*implicit=*/false, /*reads_models=*/false, /*particles=*/true, /*meshes=*/true, /*references=*/false, "cfl",
+         0.0},
         {Method::PlasticityNet, "plasticitynet",
          "backward Euler on the learned energy (eqs. 8, 10, 11): the network's value judges the line search and its "
          "Hessian (+ w mu I, projected) is Newton's, at every iteration; the reference F0 follows F(v) (outer "
          "iteration newton) or is iterated by full solves (fixed_point)",
          true, true, true, true, true,
          "outer_iteration, hessian (auto = network), regularizer_weight, fixed_point_*, learned_return_map", 0.8,
-         plasticitynet_energy<2>, plasticitynet_energy<3>},
+         /*predicts_newton_start=*/false, plasticitynet_energy<2>, plasticitynet_energy<3>},
         {Method::ReturnMap, "return_map",
          "backward Euler with the return mapping's stress and its consistent tangent (skew part kept for "
          "non-associative flow), Newton with the work line search; the classical implicit solver, no model file",
-         true, false, true, true, true, "tangent_damping", 0.1, return_map_energy<2>, return_map_energy<3>},
+         true, false, true, true, true, "tangent_damping", 0.1, /*predicts_newton_start=*/true, return_map_energy<2>,
+         return_map_energy<3>},
         {Method::Lagged, "lagged",
          "backward Euler on the elastic energy alone; the return mapping after the step (Ziran, HOT)", true, false,
-         true, true, false, "", 0.5, lagged_energy<2>, lagged_energy<3>},
+         true, true, false, "", 0.5, /*predicts_newton_start=*/true, lagged_energy<2>, lagged_energy<3>},
         {Method::Analytic, "analytic",
          "FEM, StVK-Hencky + von Mises: backward Euler on the closed-form elastoplastic energy (ECI)", true, false,
-         false, true, false, "analytic_regularizer", 0.5, analytic_energy<2>, analytic_energy<3>},
+         false, true, false, "analytic_regularizer", 0.5, /*predicts_newton_start=*/false, analytic_energy<2>,
+         analytic_energy<3>},
     };
     return list;
 }

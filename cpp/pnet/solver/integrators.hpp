@@ -45,6 +45,13 @@ struct IntegratorInfo {
     /// tangent only after a near-quadratic step: docs/solver.md, "The work line search's Hessian,
     /// owed"); the others 0.5 (0 for explicit: no Newton).
     double lazy_hessian;
+    /// Whether "auto" starts an MPM or coupled step's Newton solve from the last step's velocity change
+    /// (MpmOptions::newton_start "last_step", mpm/step_predictor.hpp) rather than from v*, measured
+    /// (docs/solver.md, "Where Newton starts"): return_map and lagged take 26-40% fewer Newton
+    /// iterations from it; plasticitynet's learned step, whose curvature along plastic flow is the
+    /// network's smoothed one, converged far slower from it once the stiff column flowed (135 Newton
+    /// iterations per step against 37 from v*), so it starts from v*.
+    bool predicts_newton_start = false;
     /// The energy its steps sum, over MPM particles, FEM elements or both (null: explicit).
     EnergyFactory<2> energy_2d = nullptr;
     EnergyFactory<3> energy_3d = nullptr;

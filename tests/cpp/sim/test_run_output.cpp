@@ -30,21 +30,23 @@ TEST(RunOutput, HeadersAreTheDocumentedColumns) {
               "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
               "newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,network_evaluations,"
               "network_points,max_residual_m_per_s,converged,unconverged_steps,hardening_clamped,"
-              "advection_capped_steps,floor_friction_retried_steps\n");
+              "advection_capped_steps,floor_friction_retried_steps,prediction_rejected_steps\n");
     EXPECT_EQ(stats_csv_header({3, true, "lagged"}),
               "frame,time_s,steps,dt_min_s,dt_max_s,wall_s,clamped,kinetic_J,potential_J,momentum_x,momentum_y,"
               "momentum_z,newton_iterations,cg_iterations,line_search_steps,fixed_point_iterations,"
               "network_evaluations,network_points,max_residual_m_per_s,converged,unconverged_steps,"
-              "hardening_clamped,advection_capped_steps,floor_friction_retried_steps,contact_pairs,min_distance_m,"
+              "hardening_clamped,advection_capped_steps,floor_friction_retried_steps,prediction_rejected_steps,"
+              "contact_pairs,min_distance_m,"
               "ccd_queries,ccd_limited\n");
     // steps.csv: any step's columns (solver/step_stats.hpp), then MPM's, then FEM's and contact's (FEM and
     // coupled runs).
-    EXPECT_EQ(steps_csv_header({2, false, "lagged"}),
-              "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
-              "line_search_steps,network_evaluations,network_points,fixed_point_iterations,fixed_point_change,"
-              "initial_residual_m_per_s,residual_m_per_s,energy_J,converged,line_search_failed,"
-              "hardening_clamped,fixed_point_converged,reference_updates,true_residual_m_per_s,clamped,advection_capped,"
-              "floor_friction_retried,integrator\n");
+    EXPECT_EQ(
+        steps_csv_header({2, false, "lagged"}),
+        "frame,step,time_s,dt_s,wall_s,p2g_s,solve_s,g2p_s,energy_s,cg_s,newton_iterations,cg_iterations,"
+        "line_search_steps,network_evaluations,network_points,fixed_point_iterations,fixed_point_change,"
+        "initial_residual_m_per_s,residual_m_per_s,energy_J,converged,line_search_failed,"
+        "hardening_clamped,fixed_point_converged,reference_updates,true_residual_m_per_s,clamped,advection_capped,"
+        "floor_friction_retried,prediction_rejected,integrator\n");
     EXPECT_EQ(steps_csv_header({2, true, "lagged"}),
               steps_csv_header({2, false, "lagged"}).substr(0, steps_csv_header({2, false, "lagged"}).size() - 12) +
                   ",predictor_iterations,kinematic_stages,kinematic_reached,substeps,ccd_queries,ccd_limited,"

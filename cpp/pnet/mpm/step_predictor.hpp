@@ -1,0 +1,75 @@
+#pragma once
+// Where an implicit MPM step's Newton solve starts (MpmOptions::newton_start): v*, or v* plus the last
+// step's implicit velocity change scaled to this step,
+//
+//   v_0,i = v*_i + w_i dt (v_i - v*_i)^{last} / dt_last,   w_i = m_i / (m_i + kFade max_j m_j),
+//
+// m_i the lighter of node i's masses in the last step and in this one,
+//
+// on the grid nodes both steps share (the grid is Eulerian: a node keeps its place). (v - v*) / dt is
+// the acceleration the step's stress and contacts gave each node beyond gravity; where the material
+// moves smoothly it changes little from one step to the next, and most of it is the stress that holds
+// resting material against gravity, which a start at v* (free fall for one step) leaves to Newton.
+// On the sand column this start's residual is 5x smaller than v*'s and the step takes 37% fewer Newton
+// iterations and half the Krylov products (docs/solver.md, "Where Newton starts").
+//
+// Two kinds of node start at v*:
+// - nodes with a held component (the Coulomb or sticky floor's normal, fixed this step): the floor's
+//   friction switches between stick and slip from step to step, and started at the last step's slip,
+//   the one solve's semi-smooth Newton took 1.3x the iterations v* takes;
+// - light nodes are faded out by w_i: a node reached only by the tails of a few particles' stencils
+//   carries their stiffness and little mass, so its converged velocity holds the solve's error at full
+//   size; carried forward step after step, that error grew on the stiff column until steps ran into
+//   their iteration cap (kFade measured: docs/solver.md).
+//
+// A step that did not converge leaves no prediction (the next starts at v*). The prediction is state:
+// checkpoints keep it (ImplicitIntegrator::checkpoint_state), so a resumed run equals an uninterrupted one.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "pnet/mpm/incremental_potential.hpp"
+#include "pnet/solver/integrators.hpp"
+
+namespace pnet {
+
+/// Whether a step of `method` starts from the prediction: MpmOptions::newton_start "last_step", or
+/// "auto" where the integrator's entry says so (IntegratorInfo::predicts_newton_start).
+bool predicts_newton_start(const std::string& newton_start, Method method);
+
+template <int dim>
+class StepPredictor {
+public:
+    /// The fraction of the heaviest node's mass at which a node's prediction is halved.
+    static constexpr double kFade = 0.01;
+    /// A solve from the prediction that ends unconverged above this many Newton tolerances, or fails, is
+    /// solved again from v* (ImplicitIntegrator, CoupledImplicitIntegrator; steps.csv prediction_rejected).
+    static constexpr double kRejectedResidual = 10.0;
+
+    /// Adds the recorded prediction to `v` (v* on entry) on this step's unknowns: dt times each shared
+    /// node's last rate, faded by its mass, except on nodes with a held component. No-op when empty.
+    void predict(const IncrementalPotential<dim>& potential, double dt, VecX& v) const;
+    /// Records the step just solved: (v - v*) / dt on the potential's unknowns.
+    void record(const IncrementalPotential<dim>& potential, const VecX& v, double dt);
+    void clear() {
+        nodes_.clear();
+        rates_.clear();
+        masses_.clear();
+    }
+    bool empty() const { return nodes_.empty(); }
+
+    /// The recorded prediction as matrices for a checkpoint: per node, the rate in column 0, the node's
+    /// grid storage index in (0, 1) and its mass then in (1, 1).
+    std::vector<Mat<dim>> state() const;
+    /// Restores state(); `storage_size` bounds the node indices. Throws std::invalid_argument naming
+    /// `where`, the entry and the problem for an index off the grid or a rate that is not finite, and
+    /// then keeps what it held.
+    void restore(const std::vector<Mat<dim>>& state, std::int64_t storage_size, const std::string& where);
+
+private:
+    std::vector<std::int64_t> nodes_;  // grid storage indices
+    std::vector<Vec<dim>> rates_;      // (v - v*) / dt at each
+    std::vector<double> masses_;       // each node's mass then
+};
+
+}  // namespace pnet
