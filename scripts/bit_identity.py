@@ -5,7 +5,8 @@
 
 Runs every scene with both binaries (the scene's own integrator, one thread) and compares, frame by
 frame, the PLY files' data (the run id a newer build writes into the header aside; where they differ,
-the largest difference of a position), and stats.csv and steps.csv without their wall-clock columns.
+the largest difference of a position), and stats.csv and steps.csv without their wall-clock columns,
+on the columns both builds write (a column the new build adds is named, not counted as a difference).
 Prints one line per scene and exits 1 if any differs.
 """
 
@@ -68,7 +69,7 @@ def main() -> int:
         for pnet, out in ((args.old, old), (args.new, new)):
             run(pnet, scene, args.frames, out)
         frames = sorted(p.name for p in old.glob("frame_*.ply"))
-        problems = []
+        problems, notes = [], []  # a column only the new build writes is a note, not a difference
         if frames != sorted(p.name for p in new.glob("frame_*.ply")):
             problems.append("different frame files")
         differ = [name for name in frames if (new / name).exists() and frame_data(old / name) != frame_data(new / name)]
@@ -76,9 +77,15 @@ def main() -> int:
             move = max(largest_move(old / name, new / name) for name in differ)
             problems.append(f"{len(differ)} frame files differ, positions by at most {move:.3g} m")
         for name in ("stats.csv", "steps.csv"):
-            if table(old / name) != table(new / name):
+            a, b = table(old / name), table(new / name)
+            shared = [k for k in (a[0] if a else {}) if k in (b[0] if b else {})]
+            added = [k for k in (b[0] if b else {}) if k not in shared]
+            if added:
+                notes.append(f"{name} adds {', '.join(added)}")
+            if [{k: r[k] for k in shared} for r in a] != [{k: r[k] for k in shared} for r in b]:
                 problems.append(f"{name} differs")
-        print(f"{scene.stem:28s} {len(frames)} frames  " + ("identical" if not problems else "; ".join(problems)))
+        print(f"{scene.stem:28s} {len(frames)} frames  " + ("identical" if not problems else "; ".join(problems)) +
+              "".join(f" ({note})" for note in notes))
         differing += bool(problems)
     print(f"{len(args.scenes) - differing} of {len(args.scenes)} scenes bit-identical")
     return 1 if differing else 0
