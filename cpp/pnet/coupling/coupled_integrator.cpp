@@ -131,29 +131,10 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     const long network_before = mpm_energy_->network_evaluations(), points_before = mpm_energy_->network_points();
     const bool predicts = predicts_newton_start(mpm_options_.newton_start, method_);
     const bool predicted = predicts && !predictor_.empty();
-    bool rejected = false;
-    try {
-        solve_step(particles, state, dt, context, solve_boundary, predicted, stats);
-        // As in ImplicitIntegrator: a solve from the prediction that ended far from converged is solved again.
-        rejected = predicted && !stats.converged &&
-                   !(stats.residual <= StepPredictor<dim>::kRejectedResidual * options_.newton_tolerance_at(dt));
-    } catch (const SimulationError&) {
-        if (!predicted) throw;
-        rejected = true;
-    }
-    if (rejected) {  // the step again from v*, its cost added to the failed solve's
-        CoupledStepStats again;
-        again.dt = dt;
-        solve_step(particles, state, dt, context, solve_boundary, false, again);
-        again.newton_iterations += stats.newton_iterations;
-        again.cg_iterations += stats.cg_iterations;
-        again.line_search_steps += stats.line_search_steps;
-        again.fixed_point_iterations += stats.fixed_point_iterations;
-        again.ccd_limited += stats.ccd_limited;
-        again.hardening_clamped = std::max(again.hardening_clamped, stats.hardening_clamped);
-        stats = again;
-        stats.prediction_rejected = true;
-    }
+    solve_from_prediction(predicted, options_.newton_tolerance_at(dt), stats,
+                          [&](bool from_prediction, CoupledStepStats& into) {
+                              solve_step(particles, state, dt, context, solve_boundary, from_prediction, into);
+                          });
     stats.network_evaluations = mpm_energy_->network_evaluations() - network_before;
     stats.network_points = mpm_energy_->network_points() - points_before;
     stats.ccd_queries = coupled_.ccd_queries();

@@ -163,29 +163,10 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     const long network_before = energy_->network_evaluations(), points_before = energy_->network_points();
     const bool predicts = predicts_newton_start(mpm_options_.newton_start, method_);
     const bool predicted = predicts && !predictor_.empty();
-    bool rejected = false;
-    try {
-        solve_grid(particles, dt, step_index, solve_boundary, predicted, stats);
-        // A solve from the prediction that ended far from converged: the prediction is what failed (a node's
-        // rate recorded where its velocity was ill-determined, now pulling on stiff material), not the step.
-        rejected = predicted && !stats.converged &&
-                   !(stats.residual <= StepPredictor<dim>::kRejectedResidual * options_.newton_tolerance_at(dt));
-    } catch (const SimulationError&) {
-        if (!predicted) throw;
-        rejected = true;
-    }
-    if (rejected) {  // the step again from v*, its cost added to the failed solve's
-        MpmStepStats again;
-        again.dt = dt;
-        solve_grid(particles, dt, step_index, solve_boundary, false, again);
-        again.newton_iterations += stats.newton_iterations;
-        again.cg_iterations += stats.cg_iterations;
-        again.line_search_steps += stats.line_search_steps;
-        again.fixed_point_iterations += stats.fixed_point_iterations;
-        again.hardening_clamped = std::max(again.hardening_clamped, stats.hardening_clamped);
-        stats = again;
-        stats.prediction_rejected = true;
-    }
+    solve_from_prediction(predicted, options_.newton_tolerance_at(dt), stats,
+                          [&](bool from_prediction, MpmStepStats& into) {
+                              solve_grid(particles, dt, step_index, solve_boundary, from_prediction, into);
+                          });
     if (predicts && stats.converged)
         predictor_.record(potential_, v_, dt);
     else

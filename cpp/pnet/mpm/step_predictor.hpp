@@ -24,12 +24,14 @@
 //
 // A step that did not converge leaves no prediction (the next starts at v*). The prediction is state:
 // checkpoints keep it (ImplicitIntegrator::checkpoint_state), so a resumed run equals an uninterrupted one.
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "pnet/mpm/incremental_potential.hpp"
 #include "pnet/solver/integrators.hpp"
+#include "pnet/solver/step_stats.hpp"
 
 namespace pnet {
 
@@ -37,14 +39,44 @@ namespace pnet {
 /// "auto" where the integrator's entry says so (IntegratorInfo::predicts_newton_start).
 bool predicts_newton_start(const std::string& newton_start, Method method);
 
+/// A solve from the prediction that ends unconverged above this many Newton tolerances, or fails, is
+/// solved again from v* (solve_from_prediction).
+inline constexpr double kRejectedPredictionResidual = 10.0;
+
+/// A step's solve (ImplicitIntegrator, CoupledImplicitIntegrator): `solve(from_prediction, stats)` solves
+/// it from the prediction, or from v*, into `stats`. From the prediction (`predicted`), a solve that
+/// throws SimulationError or ends unconverged above kRejectedPredictionResidual x `tolerance` is what
+/// failed, not the step (a node's rate recorded where its velocity was ill-determined, now pulling on stiff
+/// material): the step is solved again from v*, both solves' Newton, Krylov, line-search and fixed-point
+/// counts summed, and marked prediction_rejected.
+template <typename Stats, typename Solve>
+void solve_from_prediction(bool predicted, double tolerance, Stats& stats, Solve&& solve) {
+    bool rejected = false;
+    try {
+        solve(predicted, stats);
+        rejected = predicted && !stats.converged && !(stats.residual <= kRejectedPredictionResidual * tolerance);
+    } catch (const SimulationError&) {
+        if (!predicted) throw;
+        rejected = true;
+    }
+    if (!rejected) return;
+    Stats again;
+    again.dt = stats.dt;
+    solve(false, again);
+    again.newton_iterations += stats.newton_iterations;
+    again.cg_iterations += stats.cg_iterations;
+    again.line_search_steps += stats.line_search_steps;
+    again.fixed_point_iterations += stats.fixed_point_iterations;
+    again.hardening_clamped = std::max(again.hardening_clamped, stats.hardening_clamped);
+    stats = again;
+    stats.prediction_rejected = true;
+}
+
 template <int dim>
 class StepPredictor {
 public:
     /// The fraction of the heaviest node's mass at which a node's prediction is halved.
     static constexpr double kFade = 0.01;
-    /// A solve from the prediction that ends unconverged above this many Newton tolerances, or fails, is
-    /// solved again from v* (ImplicitIntegrator, CoupledImplicitIntegrator; steps.csv prediction_rejected).
-    static constexpr double kRejectedResidual = 10.0;
 
     /// Adds the recorded prediction to `v` (v* on entry) on this step's unknowns: dt times each shared
     /// node's last rate, faded by its mass, except on nodes with a held component. No-op when empty.

@@ -166,10 +166,7 @@ void CoupledSimulation<dim>::save_checkpoint(const std::string& path) const {
         write_array(out, state_.v);
         write_array(out, state_.plastic_inverse);
         write_array(out, state_.hardening);
-        const std::vector<Mat<dim>> prediction = implicit_ ? implicit_->predictor().state() : std::vector<Mat<dim>>{};
-        const std::int64_t prediction_size = static_cast<std::int64_t>(prediction.size());
-        out.write(reinterpret_cast<const char*>(&prediction_size), sizeof prediction_size);
-        write_array(out, prediction);
+        write_sized_array(out, implicit_ ? implicit_->predictor().state() : std::vector<Mat<dim>>{});
     });
 }
 
@@ -203,15 +200,9 @@ void CoupledSimulation<dim>::load_checkpoint(const std::string& path) {
     read_array(in, s.hardening, state_.hardening.size(), path);
     StepPredictor<dim> prediction;
     if (with_prediction) {
-        std::int64_t prediction_size = 0;
-        in.read(reinterpret_cast<char*>(&prediction_size), sizeof prediction_size);
         const std::int64_t storage = Grid<dim>::storage_size(mpm_.cells);
-        if (!in || prediction_size < 0 || prediction_size > storage)
-            throw std::invalid_argument(path + ": the Newton start's prediction holds " +
-                                        std::to_string(prediction_size) + " nodes, at most " + std::to_string(storage) +
-                                        " (the grid's) expected (corrupt checkpoint)");
         std::vector<Mat<dim>> entries;
-        read_array(in, entries, static_cast<std::size_t>(prediction_size), path);
+        read_sized_array(in, entries, storage, path, "the Newton start's prediction");
         prediction.restore(entries, storage, path);
     }
     in.peek();

@@ -116,10 +116,7 @@ void Simulation<dim>::save_checkpoint(const std::string& path) const {
         write_array(out, particles_.rest_volume);
         write_array(out, particles_.object);
         write_array(out, state);
-        const std::vector<Mat<dim>> prediction = integrator_->checkpoint_prediction();
-        const std::int64_t prediction_size = static_cast<std::int64_t>(prediction.size());
-        out.write(reinterpret_cast<const char*>(&prediction_size), sizeof prediction_size);
-        write_array(out, prediction);
+        write_sized_array(out, integrator_->checkpoint_prediction());
     });
 }
 
@@ -172,16 +169,10 @@ void Simulation<dim>::load_checkpoint(const std::string& path) {
     for (const Mat<dim>& m : state)
         if (!m.allFinite()) throw std::invalid_argument(path + ": the integrator's state is not finite (corrupt checkpoint)");
     std::vector<Mat<dim>> prediction;
-    if (with_prediction) {
-        std::int64_t prediction_size = 0;
-        in.read(reinterpret_cast<char*>(&prediction_size), sizeof prediction_size);
+    if (with_prediction) {  // refused before anything is restored
         const std::int64_t storage = Grid<dim>::storage_size(system_.cells);
-        if (!in || prediction_size < 0 || prediction_size > storage)
-            throw std::invalid_argument(path + ": the Newton start's prediction holds " +
-                                        std::to_string(prediction_size) + " nodes, at most " + std::to_string(storage) +
-                                        " (the grid's) expected (corrupt checkpoint)");
-        read_array(in, prediction, static_cast<std::size_t>(prediction_size), path);
-        StepPredictor<dim>().restore(prediction, storage, path);  // refused before anything is restored
+        read_sized_array(in, prediction, storage, path, "the Newton start's prediction");
+        StepPredictor<dim>().restore(prediction, storage, path);
     }
     restore_clock(path, header[2], header[3], time);
     particles_ = p;  // copy assignment keeps each array's storage (Python views of it stay valid)
