@@ -81,7 +81,7 @@ public:
     void floor_friction_to_passes();
     bool floor_friction_newton() const { return floor_friction_newton_; }
 
-    /// v* on the unknowns: the starting point of the solve.
+    /// v* on the unknowns: where the solve starts (plus the last step's velocity change: step_predictor.hpp).
     const VecX& v_star() const { return inertia_.target(); }
     /// 1 / m_i on free components, 0 on fixed ones.
     const VecX& residual_scale() const { return residual_scale_; }
