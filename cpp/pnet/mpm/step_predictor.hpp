@@ -10,20 +10,22 @@
 // the acceleration the step's stress and contacts gave each node beyond gravity; where the material
 // moves smoothly it changes little from one step to the next, and most of it is the stress that holds
 // resting material against gravity, which a start at v* (free fall for one step) leaves to Newton.
-// On the sand column this start's residual is 5x smaller than v*'s and the step takes 37% fewer Newton
-// iterations and half the Krylov products (docs/solver.md, "Where Newton starts").
+// On the sand column (return_map) this start's residual is 5x smaller than v*'s and the step takes 28%
+// fewer Newton iterations and half the Krylov products (docs/solver.md, "Where Newton starts").
 //
-// Two kinds of node start at v*:
-// - nodes with a held component (the Coulomb or sticky floor's normal, fixed this step): the floor's
-//   friction switches between stick and slip from step to step, and started at the last step's slip,
-//   the one solve's semi-smooth Newton took 1.3x the iterations v* takes;
-// - light nodes are faded out by w_i: a node reached only by the tails of a few particles' stencils
-//   carries their stiffness and little mass, so its converged velocity holds the solve's error at full
-//   size; carried forward step after step, that error grew on the stiff column until steps ran into
-//   their iteration cap (kFade measured: docs/solver.md).
+// Two kinds of node take less of it:
+// - nodes with a held component (the Coulomb or sticky floor's normal, fixed this step) start at v*: the
+//   floor's friction switches between stick and slip from step to step, and started at the last step's
+//   slip the one solve's semi-smooth Newton took 15% more iterations (2.31 against 2.01 per step);
+// - light nodes are faded by w_i: a node reached only by the tails of a few particles' stencils carries
+//   their stiffness and little mass, so its converged velocity holds the solve's error at full size;
+//   carried forward step after step, that error grew on the stiff column until steps ran into their
+//   iteration cap (kFade measured: docs/solver.md).
 //
-// A step that did not converge leaves no prediction (the next starts at v*). The prediction is state:
-// checkpoints keep it (ImplicitIntegrator::checkpoint_state), so a resumed run equals an uninterrupted one.
+// A solve from the prediction that fails is solved again from v* (solve_from_prediction), and a step
+// that did not converge leaves no prediction. The prediction is state: checkpoints keep it
+// (MpmIntegrator::checkpoint_prediction, CoupledImplicitIntegrator::predictor), so a resumed run equals
+// an uninterrupted one.
 #include <algorithm>
 #include <cstdint>
 #include <string>
