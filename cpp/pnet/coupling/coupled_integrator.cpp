@@ -129,12 +129,10 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     solve_boundary.slip_walls = false;  // slip walls act after the solve, as in ImplicitIntegrator
     grid_.update_velocity(dt, mpm_system_.gravity, unprojected_floor(solve_boundary));
     const long network_before = mpm_energy_->network_evaluations(), points_before = mpm_energy_->network_points();
-    const bool predicts = predicts_newton_start(mpm_options_.newton_start, method_);
-    const bool predicted = predicts && !predictor_.empty();
-    solve_from_prediction(predicted, options_.newton_tolerance_at(dt), stats,
-                          [&](bool from_prediction, CoupledStepStats& into) {
-                              solve_step(particles, state, dt, context, solve_boundary, from_prediction, into);
-                          });
+    predictor_.solve(predicts_newton_start(mpm_options_.newton_start, method_), options_.newton_tolerance_at(dt), mpm_,
+                     v_, dt, stats, [&](bool from_prediction, CoupledStepStats& into) {
+                         solve_step(particles, state, dt, context, solve_boundary, from_prediction, into);
+                     });
     stats.network_evaluations = mpm_energy_->network_evaluations() - network_before;
     stats.network_points = mpm_energy_->network_points() - points_before;
     stats.ccd_queries = coupled_.ccd_queries();
@@ -143,10 +141,6 @@ CoupledStepStats CoupledImplicitIntegrator<dim>::step(Particles<dim>& particles,
     stats.cg_seconds = mpm_.multiply_seconds();  // the grid's Hessian-vector products (PCG)
     const auto after_solve = std::chrono::steady_clock::now();
 
-    if (predicts && stats.converged)
-        predictor_.record(mpm_, v_, dt);
-    else
-        predictor_.clear();
     // MPM: the grid velocities, slip walls, G2P.
     const Eigen::Index ng = coupled_.grid_size();
     mpm_.write_velocity(v_.head(ng), grid_);

@@ -161,16 +161,10 @@ MpmStepStats ImplicitIntegrator<dim>::step(Particles<dim>& particles, double dt,
     solve_boundary.slip_walls = false;
     grid_.update_velocity(dt, system_.gravity, unprojected_floor(solve_boundary));
     const long network_before = energy_->network_evaluations(), points_before = energy_->network_points();
-    const bool predicts = predicts_newton_start(mpm_options_.newton_start, method_);
-    const bool predicted = predicts && !predictor_.empty();
-    solve_from_prediction(predicted, options_.newton_tolerance_at(dt), stats,
-                          [&](bool from_prediction, MpmStepStats& into) {
-                              solve_grid(particles, dt, step_index, solve_boundary, from_prediction, into);
-                          });
-    if (predicts && stats.converged)
-        predictor_.record(potential_, v_, dt);
-    else
-        predictor_.clear();
+    predictor_.solve(predicts_newton_start(mpm_options_.newton_start, method_), options_.newton_tolerance_at(dt),
+                     potential_, v_, dt, stats, [&](bool from_prediction, MpmStepStats& into) {
+                         solve_grid(particles, dt, step_index, solve_boundary, from_prediction, into);
+                     });
     const bool bdf2 = options_.time_integrator == "bdf2";
     // G2P moves the particles and their F by the displacement rate (v itself for backward Euler).
     potential_.write_velocity(potential_.displacement_rate(v_), grid_);

@@ -22,7 +22,7 @@
 //   carried forward step after step, that error grew on the stiff column until steps ran into their
 //   iteration cap (kFade measured: docs/solver.md).
 //
-// A solve from the prediction that fails is solved again from v* (solve_from_prediction), and a step
+// A solve from the prediction that fails is solved again from v* (StepPredictor::solve), and a step
 // that did not converge leaves no prediction. The prediction is state: checkpoints keep it
 // (MpmIntegrator::checkpoint_prediction, CoupledImplicitIntegrator::predictor), so a resumed run equals
 // an uninterrupted one.
@@ -42,37 +42,8 @@ namespace pnet {
 bool predicts_newton_start(const std::string& newton_start, Method method);
 
 /// A solve from the prediction that ends unconverged above this many Newton tolerances, or fails, is
-/// solved again from v* (solve_from_prediction).
+/// solved again from v* (StepPredictor::solve).
 inline constexpr double kRejectedPredictionResidual = 10.0;
-
-/// A step's solve (ImplicitIntegrator, CoupledImplicitIntegrator): `solve(from_prediction, stats)` solves
-/// it from the prediction, or from v*, into `stats`. From the prediction (`predicted`), a solve that
-/// throws SimulationError or ends unconverged above kRejectedPredictionResidual x `tolerance` is what
-/// failed, not the step (a node's rate recorded where its velocity was ill-determined, now pulling on stiff
-/// material): the step is solved again from v*, both solves' Newton, Krylov, line-search and fixed-point
-/// counts summed, and marked prediction_rejected.
-template <typename Stats, typename Solve>
-void solve_from_prediction(bool predicted, double tolerance, Stats& stats, Solve&& solve) {
-    bool rejected = false;
-    try {
-        solve(predicted, stats);
-        rejected = predicted && !stats.converged && !(stats.residual <= kRejectedPredictionResidual * tolerance);
-    } catch (const SimulationError&) {
-        if (!predicted) throw;
-        rejected = true;
-    }
-    if (!rejected) return;
-    Stats again;
-    again.dt = stats.dt;
-    solve(false, again);
-    again.newton_iterations += stats.newton_iterations;
-    again.cg_iterations += stats.cg_iterations;
-    again.line_search_steps += stats.line_search_steps;
-    again.fixed_point_iterations += stats.fixed_point_iterations;
-    again.hardening_clamped = std::max(again.hardening_clamped, stats.hardening_clamped);
-    stats = again;
-    stats.prediction_rejected = true;
-}
 
 template <int dim>
 class StepPredictor {
@@ -92,6 +63,18 @@ public:
     }
     bool empty() const { return nodes_.empty(); }
 
+    /// A step's solve (ImplicitIntegrator, CoupledImplicitIntegrator): `solve(from_prediction, stats)` solves
+    /// it from the prediction, or from v*, into `stats` and `v`. `predicts`: whether the step's integrator
+    /// starts from the prediction (predicts_newton_start); it does once there is one. From the prediction,
+    /// a solve that throws SimulationError or ends unconverged above kRejectedPredictionResidual x
+    /// `tolerance` is what failed, not the step (a node's rate recorded where its velocity was
+    /// ill-determined, now pulling on stiff material): the step is solved again from v*, both solves'
+    /// Newton, Krylov, line-search and fixed-point counts summed, and marked prediction_rejected. Then a
+    /// converged step is recorded (the next step's prediction); otherwise the prediction is dropped.
+    template <typename Stats, typename Solve>
+    void solve(bool predicts, double tolerance, const IncrementalPotential<dim>& potential, const VecX& v, double dt,
+               Stats& stats, Solve&& solve_from);
+
     /// The recorded prediction as matrices for a checkpoint: per node, the rate in column 0, the node's
     /// grid storage index in (0, 1) and its mass then in (1, 1).
     std::vector<Mat<dim>> state() const;
@@ -105,5 +88,36 @@ private:
     std::vector<Vec<dim>> rates_;      // (v - v*) / dt at each
     std::vector<double> masses_;       // each node's mass then
 };
+
+template <int dim>
+template <typename Stats, typename Solve>
+void StepPredictor<dim>::solve(bool predicts, double tolerance, const IncrementalPotential<dim>& potential,
+                               const VecX& v, double dt, Stats& stats, Solve&& solve_from) {
+    const bool predicted = predicts && !empty();
+    bool rejected = false;
+    try {
+        solve_from(predicted, stats);
+        rejected = predicted && !stats.converged && !(stats.residual <= kRejectedPredictionResidual * tolerance);
+    } catch (const SimulationError&) {
+        if (!predicted) throw;
+        rejected = true;
+    }
+    if (rejected) {
+        Stats again;
+        again.dt = stats.dt;
+        solve_from(false, again);
+        again.newton_iterations += stats.newton_iterations;
+        again.cg_iterations += stats.cg_iterations;
+        again.line_search_steps += stats.line_search_steps;
+        again.fixed_point_iterations += stats.fixed_point_iterations;
+        again.hardening_clamped = std::max(again.hardening_clamped, stats.hardening_clamped);
+        stats = again;
+        stats.prediction_rejected = true;
+    }
+    if (predicts && stats.converged)
+        record(potential, v, dt);
+    else
+        clear();
+}
 
 }  // namespace pnet
