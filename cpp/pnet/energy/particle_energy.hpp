@@ -63,7 +63,7 @@ public:
     /// Whether evaluate()'s Hessians are symmetric. The learned energies' tangent keeps its skew part
     /// for non-associative flow (NeuralElastoplasticEnergy::Options::nonsymmetric_tangent), so that
     /// Newton steps with the residual's Jacobian: the forms that sum these Hessians report it
-    /// (Form::symmetric_hessian()), and Newton then solves with BiCGSTAB.
+    /// (Form::symmetric_hessian()), and Newton then solves with GMRES (or BiCGSTAB).
     virtual bool symmetric_hessian() const { return true; }
 
     /// Passes of a learned energy's network over the points since construction (0 for energies

@@ -11,7 +11,7 @@
 // which is where the rebased Newton with the work line search evaluates every point (it only reports
 // it). There is no potential behind P for non-associative flow (Drucker-Prager, Cam-Clay); the tangent
 // then keeps its skew part (H = S + K, S projected to PSD plus w mu I with w = tangent_damping, K
-// unprojected) and Newton solves it by BiCGSTAB. For von Mises (associative) w = 0 and H is symmetric.
+// unprojected) and Newton solves it by GMRES. For von Mises (associative) w = 0 and H is symmetric.
 #include <vector>
 
 #include "pnet/energy/particle_energy.hpp"

@@ -44,6 +44,8 @@ NewtonOptions ImplicitOptions::newton_options(double dt, Method method) const {
     newton.max_iterations = max_newton_iterations;
     newton.max_cg_iterations = max_cg_iterations;
     newton.cg_tolerance = cg_tolerance;
+    newton.nonsymmetric_solver = nonsymmetric_solver == "bicgstab" ? NewtonOptions::NonsymmetricSolver::Bicgstab
+                                                                   : NewtonOptions::NonsymmetricSolver::Gmres;
     newton.lazy_hessian = lazy_hessian >= 0.0 ? lazy_hessian : integrator_info(method).lazy_hessian;
     return newton;
 }

@@ -1,6 +1,6 @@
 #pragma once
 // Galerkin geometric multigrid for the unknowns of a structured grid's nodes (the implicit MPM
-// step's grid velocities; docs/solver.md, "Multigrid"), as a preconditioner of CG and BiCGSTAB.
+// step's grid velocities; docs/solver.md, "Multigrid"), as a preconditioner of CG, GMRES and BiCGSTAB.
 // After Wang et al. 2020 (HOT):
 //
 //   levels    the nodes of spacing dx, 2dx, 4dx, ...: P is the refinement relation of the quadratic

@@ -93,6 +93,8 @@ private:
 // the first weight, and the largest (the paper's regularizer w = 1, whose iteration always contracts).
 constexpr double kFirstDamping = 1e-2;
 constexpr double kMaxDamping = 1.0;
+// GMRES's restart (NewtonOptions::nonsymmetric_solver): the MPM solves take 2-20 products per Newton iteration.
+constexpr int kGmresRestart = 30;
 
 std::string where(const std::string& context, int iteration, double residual) {
     char text[160];
@@ -124,6 +126,7 @@ double newton_residual(const Objective& objective, const VecX& g, const NewtonOp
 
 struct NewtonWorkspace::Impl {
     DirectSolver direct;
+    GmresWorkspace gmres;  // its Krylov basis, n x 31
 };
 NewtonWorkspace::NewtonWorkspace() : impl_(std::make_unique<Impl>()) {}
 NewtonWorkspace::~NewtonWorkspace() = default;
@@ -143,10 +146,13 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
     VecX g(n), g_trial(n), d(n), diagonal(n), x_trial(n), blocks;
     PcgWorkspace pcg;
     BicgstabWorkspace bicgstab;
+    const bool use_gmres = options.nonsymmetric_solver == NewtonOptions::NonsymmetricSolver::Gmres;
     Preconditioner preconditioner;
     std::unique_ptr<NewtonWorkspace> local;
     if (!workspace) workspace = (local = std::make_unique<NewtonWorkspace>()).get();
     DirectSolver& direct = workspace->impl().direct;
+    GmresWorkspace& gmres = workspace->impl().gmres;
+    VecX gmres_weight;
     const int block = options.block_preconditioner ? objective.hessian_block_size() : 1;
     const bool lazy = options.lazy_hessian > 0.0;
     const bool symmetric = objective.hessian_symmetric();
@@ -219,10 +225,15 @@ NewtonStats minimize(Objective& objective, VecX& x, const NewtonOptions& options
                 preconditioner.set_jacobi(diagonal);
             }
             const double forcing = std::min(options.cg_tolerance, std::sqrt(g.norm() / g0));
+            // GMRES judges its residual in Newton's own norm, g . diag(H)^-1 g (residual_of).
+            if (!symmetric && use_gmres)
+                gmres_weight = diagonal.unaryExpr([](double h) { return h > 0.0 ? 1.0 / h : 1.0; });
             const PcgResult cg =
                 symmetric ? solve_pcg(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, pcg)
-                          : solve_bicgstab(objective, -g, preconditioner, d, forcing, options.max_cg_iterations,
-                                           bicgstab);
+                : use_gmres
+                    ? solve_gmres(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, gmres,
+                                  kGmresRestart, &gmres_weight)
+                    : solve_bicgstab(objective, -g, preconditioner, d, forcing, options.max_cg_iterations, bicgstab);
             stats.cg_iterations += cg.iterations;
             if (!symmetric && !(g.dot(d) < 0.0)) {
                 // The exact solution descends (Objective::hessian_symmetric); an inexact one may not:

@@ -61,6 +61,9 @@ struct NewtonOptions {
     /// matrix, or a factorization that fails (H not positive definite), falls
     /// back to PCG for that iteration.
     enum class LinearSolver { Pcg, Cholesky } linear_solver = LinearSolver::Pcg;
+    /// The Krylov method for a Hessian that is not symmetric (Objective::hessian_symmetric): restarted
+    /// GMRES (solve_gmres) or BiCGSTAB (solve_bicgstab), with PCG's preconditioner.
+    enum class NonsymmetricSolver { Gmres, Bicgstab } nonsymmetric_solver = NonsymmetricSolver::Gmres;
     /// Lazy Hessian: > 0 lets an iterate reached by a full step that cut the
     /// residual by at least this factor keep the previous Hessian; every other
     /// iterate gets a fresh one. 0: a fresh Hessian at every iterate (Newton).

@@ -46,8 +46,8 @@ public:
 
     /// Whether H is symmetric. An objective whose H keeps a skew part (the Jacobian of a residual
     /// that is not a gradient: non-associative plastic flow) says false; Newton then solves H d = -g
-    /// with BiCGSTAB instead of PCG or Cholesky. d . H d = d . S d >= 0 still, so the exact solution
-    /// is a descent direction (g . d = -y . S y with y = H^-1 g).
+    /// with GMRES or BiCGSTAB (NewtonOptions::nonsymmetric_solver) instead of PCG or Cholesky. d . H d = d . S d >= 0
+    /// still, so the exact solution is a descent direction (g . d = -y . S y with y = H^-1 g).
     virtual bool hessian_symmetric() const { return true; }
 
     /// diag(H), for the Jacobi preconditioner; entries must be > 0.

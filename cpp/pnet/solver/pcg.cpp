@@ -219,4 +219,86 @@ PcgResult solve_bicgstab(const Objective& objective, const VecX& b, const Precon
     return result;
 }
 
+PcgResult solve_gmres(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
+                      double relative_tolerance, int max_iterations, GmresWorkspace& work, int restart,
+                      const VecX* weight) {
+    PcgResult result;
+    const Eigen::Index n = b.size();
+    double b_norm = 0.0;
+    if (nothing_to_solve(b, d, result, b_norm)) return result;
+    // <u, v> = u . W v: Arnoldi orthonormalizes in it, and the iterate minimizes |b - H d|_W.
+    auto dot = [&](const VecX& u, const auto& v) { return weight ? u.dot(weight->cwiseProduct(v)) : u.dot(v); };
+    const double b_size = std::sqrt(dot(b, b));
+    max_iterations = std::max(max_iterations, 1);
+    const int m = std::max(1, std::min(restart, max_iterations));
+    work.basis.resize(n, m + 1);
+    work.hessenberg.setZero(m + 1, m);
+    work.cosines.resize(m);
+    work.sines.resize(m);
+    work.rhs.resize(m + 1);
+    VecX &w = work.w, &z = work.z;
+    w = b;  // the residual of d = 0
+    int products = 0;
+    double residual = b_size;
+    while (products < max_iterations) {
+        work.basis.col(0) = w / residual;
+        work.rhs.setZero();
+        work.rhs[0] = residual;
+        int k = 0;  // the basis's size less one at the end of this cycle
+        for (; k < m && products < max_iterations; ++k) {
+            preconditioner.apply(work.basis.col(k), z);
+            objective.hessian_multiply(z, w);
+            ++products;
+            for (int i = 0; i <= k; ++i) {  // modified Gram-Schmidt
+                const double h = dot(w, work.basis.col(i));
+                work.hessenberg(i, k) = h;
+                w -= h * work.basis.col(i);
+            }
+            const double h_next = std::sqrt(dot(w, w));
+            for (int i = 0; i < k; ++i) {  // the earlier rotations on the new column
+                const double a = work.hessenberg(i, k), c = work.hessenberg(i + 1, k);
+                work.hessenberg(i, k) = work.cosines[i] * a + work.sines[i] * c;
+                work.hessenberg(i + 1, k) = -work.sines[i] * a + work.cosines[i] * c;
+            }
+            const double a = work.hessenberg(k, k), rr = std::hypot(a, h_next);
+            work.cosines[k] = rr > 0.0 ? a / rr : 1.0;
+            work.sines[k] = rr > 0.0 ? h_next / rr : 0.0;
+            work.hessenberg(k, k) = rr;
+            work.rhs[k + 1] = -work.sines[k] * work.rhs[k];
+            work.rhs[k] *= work.cosines[k];
+            residual = std::abs(work.rhs[k + 1]);
+            if (!(h_next > 0.0) || residual <= relative_tolerance * b_size) {
+                ++k;
+                break;
+            }
+            work.basis.col(k + 1) = w / h_next;
+        }
+        // d += M^-1 V y with R y = the rotated right-hand side.
+        const Eigen::VectorXd y =
+            work.hessenberg.topLeftCorner(k, k).triangularView<Eigen::Upper>().solve(work.rhs.head(k));
+        w = work.basis.leftCols(k) * y;
+        preconditioner.apply(w, z);
+        d += z;
+        if (!std::isfinite(residual) || !d.allFinite()) {
+            d.setZero(n);
+            break;
+        }
+        if (residual <= relative_tolerance * b_size || products >= max_iterations) break;
+        // Restart from the true residual.
+        objective.hessian_multiply(d, w);
+        ++products;
+        w = b - w;
+        residual = std::sqrt(dot(w, w));
+        if (residual <= relative_tolerance * b_size) break;
+    }
+    result.iterations = products;
+    result.relative_residual = residual / b_size;
+    result.converged = result.relative_residual <= relative_tolerance;
+    if (d.squaredNorm() == 0.0) {  // never return a zero step
+        preconditioner.apply(b, z);
+        d = z * (b.dot(z) / std::max(z.squaredNorm(), 1e-300));
+    }
+    return result;
+}
+
 }  // namespace pnet

@@ -1,6 +1,6 @@
 #pragma once
 // Matrix-free preconditioned conjugate gradients for H d = b with H symmetric
-// positive semi-definite (Objective::hessian_multiply), and BiCGSTAB for an H with a
+// positive semi-definite (Objective::hessian_multiply), and GMRES or BiCGSTAB for an H with a
 // skew part (Objective::hessian_symmetric()), preconditioned by the
 // inverse of diag(H) (Jacobi) or of its b x b diagonal blocks (block Jacobi:
 // for MPM the d x d coupling of a node's velocity components), or an
@@ -82,5 +82,24 @@ struct BicgstabWorkspace {
 /// preconditioned residual step M^-1 b scaled as PCG's first one).
 PcgResult solve_bicgstab(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
                          double relative_tolerance, int max_iterations, BicgstabWorkspace& work);
+
+/// GMRES's work: the Krylov basis and the Hessenberg least-squares problem, kept between solves.
+struct GmresWorkspace {
+    Eigen::MatrixXd basis;       // n x (m + 1), the orthonormal Arnoldi vectors
+    Eigen::MatrixXd hessenberg;  // (m + 1) x m, rotated to upper triangular as it grows
+    Eigen::VectorXd cosines, sines, rhs;
+    VecX w, z;
+};
+
+/// Solves H d = b for any H by right-preconditioned GMRES(m) (Saad and Schultz 1986): each iteration
+/// one product with H and the Krylov iterate that minimizes |b - H d|_W over the basis built so far
+/// (modified Gram-Schmidt in the inner product u . W v, Givens rotations), restarted every `restart`
+/// products, from d = 0 until |b - H d|_W <= relative_tolerance |b|_W or max_iterations products.
+/// W = diag(`weight`), the identity when null; Newton passes 1 / diag(H), so that the linear solve is
+/// judged in the norm its own residual is (the mass-weighted residual, NewtonOptions::residual_mass).
+/// PcgResult::iterations counts the products, relative_residual is in the W norm.
+PcgResult solve_gmres(const Objective& objective, const VecX& b, const Preconditioner& preconditioner, VecX& d,
+                      double relative_tolerance, int max_iterations, GmresWorkspace& work, int restart = 30,
+                      const VecX* weight = nullptr);
 
 }  // namespace pnet

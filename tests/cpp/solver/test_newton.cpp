@@ -161,6 +161,78 @@ TEST(Bicgstab, SolvesAPositiveRealNonSymmetricSystem) {
     EXPECT_GT(b.dot(d), 0.0);
 }
 
+/// S + K with S symmetric positive definite and K skew (4 (N - N^T)): the shape of a tangent that
+/// keeps the skew part of non-associative flow.
+Eigen::MatrixXd positive_real_matrix(test::Random& rng, int n) {
+    const Eigen::MatrixXd M = rng.uniform_matrix(n, n, -1.0, 1.0), N = rng.uniform_matrix(n, n, -1.0, 1.0);
+    return M * M.transpose() + n * Eigen::MatrixXd::Identity(n, n) + 4.0 * (N - N.transpose());
+}
+
+// GMRES solves the same kind of system to round-off, through its restarts (40 unknowns, about 26
+// products unrestarted, restarted every 10), and counts one product per iteration plus one per
+// restart's true residual.
+TEST(Gmres, SolvesAPositiveRealNonSymmetricSystemThroughItsRestarts) {
+    test::Random rng(5);
+    const int n = 40;
+    const Eigen::MatrixXd A = positive_real_matrix(rng, n);
+    ASSERT_GT((A - A.transpose()).norm(), 0.5 * A.norm()) << "a strongly non-symmetric test matrix";
+    const VecX b = rng.uniform_vector(n, -1.0, 1.0);
+    Quadratic q(A, b);
+    VecX d;
+    GmresWorkspace work;
+    const PcgResult r = solve_gmres(q, b, Preconditioner::jacobi(A.diagonal()), d, 1e-12, 400, work, 10);
+    EXPECT_TRUE(r.converged);
+    EXPECT_GT(r.iterations, 22) << "restarted at least twice";
+    EXPECT_LT((A * d - b).norm(), 1e-11 * b.norm());
+    EXPECT_NEAR(r.relative_residual, (A * d - b).norm() / b.norm(), 1e-10);
+    // Unrestarted, GMRES ends within n products (the Krylov space is then the whole space).
+    VecX e;
+    const PcgResult full = solve_gmres(q, b, Preconditioner::jacobi(A.diagonal()), e, 1e-12, 400, work, 400);
+    EXPECT_TRUE(full.converged);
+    EXPECT_LE(full.iterations, n);
+    EXPECT_LT((A * e - b).norm(), 1e-11 * b.norm());
+}
+
+// GMRES's iterate after k products minimizes |b - A d|_W over the Krylov space that BiCGSTAB's iterate
+// after k products lies in (both right-preconditioned: d in M^-1 K_k(A M^-1, b)), so its residual is
+// never larger, and it never grows with k: in the Euclidean norm (W = I) and in a weighted one (what
+// Newton passes, 1 / diag(H)).
+TEST(Gmres, ItsResidualAfterKProductsIsAtMostBicgstabs) {
+    test::Random rng(7);
+    const int n = 60;
+    const Eigen::MatrixXd A = positive_real_matrix(rng, n);
+    const VecX b = rng.uniform_vector(n, -1.0, 1.0);
+    Quadratic q(A, b);
+    const Preconditioner m = Preconditioner::jacobi(A.diagonal());
+    GmresWorkspace gmres;
+    BicgstabWorkspace bicgstab;
+    const VecX weight = rng.uniform_vector(n, 0.1, 10.0);
+    for (const VecX* w : {static_cast<const VecX*>(nullptr), &weight}) {
+        const VecX W = w ? *w : VecX::Ones(n);
+        auto norm = [&](const VecX& r) { return std::sqrt(r.dot(W.cwiseProduct(r))); };
+        double last = norm(b);
+        for (int k : {2, 4, 6, 8, 12, 16}) {
+            VecX d, e;
+            const PcgResult g = solve_gmres(q, b, m, d, 0.0, k, gmres, 30, w);
+            const PcgResult s = solve_bicgstab(q, b, m, e, 0.0, k, bicgstab);
+            ASSERT_EQ(g.iterations, k);
+            ASSERT_EQ(s.iterations, k);
+            const double rg = norm(VecX(A * d - b)), rs = norm(VecX(A * e - b));
+            EXPECT_LE(rg, rs * (1.0 + 1e-10)) << k << " products, weighted " << (w != nullptr);
+            EXPECT_LE(rg, last * (1.0 + 1e-10)) << k << " products, weighted " << (w != nullptr);
+            EXPECT_NEAR(g.relative_residual, rg / norm(b), 1e-10);
+            last = rg;
+        }
+    }
+    // The weight changes the iterate: GMRES minimizes the norm it is given.
+    VecX plain, weighted;
+    solve_gmres(q, b, m, plain, 0.0, 6, gmres, 30);
+    solve_gmres(q, b, m, weighted, 0.0, 6, gmres, 30, &weight);
+    auto weighted_norm = [&](const VecX& r) { return std::sqrt(r.dot(weight.cwiseProduct(r))); };
+    EXPECT_LT(weighted_norm(VecX(A * weighted - b)), weighted_norm(VecX(A * plain - b)));
+    EXPECT_LT((A * plain - b).norm(), (A * weighted - b).norm());
+}
+
 TEST(Pcg, BlockJacobiSolvesABlockDiagonalSystemInOneIteration) {
     test::Random rng(5);
     const int n = 12;
