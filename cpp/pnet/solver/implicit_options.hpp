@@ -109,10 +109,10 @@ struct ImplicitOptions {
     // The Krylov method for a Hessian with a skew part (Objective::hessian_symmetric() false: the
     // consistent tangent of non-associative flow, the Coulomb floor's friction in the one solve):
     // "gmres" (the default: restarted GMRES, one product per iteration and the least residual over the
-    // Krylov space built so far) or "bicgstab" (two products per iteration). Measured 2026-11-30
-    // (docs/solver.md, "GMRES for the tangent's skew part"): GMRES takes 17-24% fewer Hessian products
-    // per Newton iteration on the sand columns at dx to dx/4, the stiff column and the 3D column. A
-    // symmetric Hessian is solved by PCG either way.
+    // Krylov space built so far, in Newton's norm) or "bicgstab" (two products per iteration). Measured
+    // 2026-11-30 (docs/solver.md, "GMRES for the tangent's skew part"): GMRES takes 24-36% fewer Hessian
+    // products per Newton iteration on every MPM scene measured, and as many Newton iterations on the sand
+    // (5% and 27% more on the snowball and the stiff snowball). A symmetric Hessian is solved by PCG either way.
     std::string nonsymmetric_solver = "gmres";
     // Newton keeps the last Hessian while each iteration cuts the residual by
     // this factor (NewtonOptions::lazy_hessian; 0: a fresh one every
