@@ -231,6 +231,14 @@ TEST(Gmres, ItsResidualAfterKProductsIsAtMostBicgstabs) {
     auto weighted_norm = [&](const VecX& r) { return std::sqrt(r.dot(weight.cwiseProduct(r))); };
     EXPECT_LT(weighted_norm(VecX(A * weighted - b)), weighted_norm(VecX(A * plain - b)));
     EXPECT_LT((A * plain - b).norm(), (A * weighted - b).norm());
+    // A weight that is no norm (zero, non-finite) is not used: the Euclidean solve, not NaN.
+    for (const double bad : {0.0, std::numeric_limits<double>::quiet_NaN()}) {
+        const VecX no_norm = VecX::Constant(n, bad);
+        VecX e;
+        const PcgResult r = solve_gmres(q, b, m, e, 1e-10, 200, gmres, 30, &no_norm);
+        EXPECT_TRUE(r.converged) << bad;
+        EXPECT_LT((A * e - b).norm(), 1e-9 * b.norm()) << bad;
+    }
 }
 
 TEST(Pcg, BlockJacobiSolvesABlockDiagonalSystemInOneIteration) {
