@@ -228,9 +228,10 @@ PcgResult solve_gmres(const Objective& objective, const VecX& b, const Precondit
     if (nothing_to_solve(b, d, result, b_norm)) return result;
     // <u, v> = u . W v: Arnoldi orthonormalizes in it, and the iterate minimizes |b - H d|_W. A weight that
     // is not a norm on b (zero or non-finite where b is not zero) falls back to the Euclidean one.
-    if (weight && !(std::sqrt(b.dot(weight->cwiseProduct(b))) > 0.0 && std::isfinite(b.dot(weight->cwiseProduct(b))) &&
-                    weight->minCoeff() >= 0.0))
-        weight = nullptr;
+    if (weight) {
+        const double weighted = b.dot(weight->cwiseProduct(b));
+        if (!(weighted > 0.0 && std::isfinite(weighted) && weight->minCoeff() >= 0.0)) weight = nullptr;
+    }
     auto dot = [&](const VecX& u, const auto& v) { return weight ? u.dot(weight->cwiseProduct(v)) : u.dot(v); };
     const double b_size = std::sqrt(dot(b, b));
     max_iterations = std::max(max_iterations, 1);
