@@ -1,5 +1,6 @@
 #include "pnet/material/drucker_prager.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -49,6 +50,35 @@ Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, ReturnBranch* b
     }
     if (branch) *branch = taken;
     return eps_Z;
+}
+
+template <int dim>
+Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, Mat<dim>& jacobian, double& deviatoric_scale,
+                                            double& margin) const {
+    const double tr_eps = eps.sum();
+    if (tr_eps > 0.0) {  // the apex: a change of one principal strain by x moves tr by x
+        jacobian.setZero();
+        deviatoric_scale = 0.0;
+        margin = tr_eps;
+        return Vec<dim>::Zero();
+    }
+    const Vec<dim> eps_hat = eps - tr_eps / dim * Vec<dim>::Ones();
+    const double L = eps_hat.norm();
+    const double c = alpha_ * (dim * lambda_ + 2.0 * mu_) / (2.0 * mu_);
+    const double dgamma = L + c * tr_eps;
+    // x in one principal strain moves tr by x and ||dev eps|| by at most x, so dgamma by at most (1 + c) x.
+    margin = std::min(-tr_eps, std::abs(dgamma) / (1.0 + c));
+    if (!(dgamma > 0.0)) {  // inside the cone (and on its surface: the mapping's branch there)
+        jacobian.setIdentity();
+        deviatoric_scale = 1.0;
+        return eps;
+    }
+    const Vec<dim> n = eps_hat / L;
+    const double k = -c * tr_eps / L;
+    const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
+    jacobian = mean - c * n * Vec<dim>::Ones().transpose() + k * (Mat<dim>::Identity() - mean - n * n.transpose());
+    deviatoric_scale = k;
+    return tr_eps / dim * Vec<dim>::Ones() - c * tr_eps * n;
 }
 
 template <int dim>

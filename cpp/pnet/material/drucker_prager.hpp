@@ -33,6 +33,14 @@ public:
     /// ||dev eps|| on it, 0 at the apex. So tau_i - tau_j = k 2 mu (eps_i - eps_j), the rotational part of the
     /// consistent tangent without cancellation where principal strains nearly coincide.
     double deviatoric_scale(const Vec<dim>& eps) const;
+    /// project_strain with its Jacobian d log Z / d eps on the branch it takes, that branch's
+    /// deviatoric_scale, and `margin`: how far eps is from the branches' boundaries (tr eps = 0, the
+    /// apex's; ||dev eps|| + c tr eps = 0, the cone's surface) in the largest change of one principal
+    /// strain that could cross one, so that every point within `margin` of eps in each principal strain
+    /// takes the same branch. On the cone, with n = dev(eps) / ||dev eps||, c = alpha (d lambda + 2 mu) /
+    /// (2 mu) and k = -c tr(eps) / ||dev eps||,
+    ///   log Z = tr(eps) / d 1 - c tr(eps) n,   d log Z / d eps = 1 1^T / d - c n 1^T + k (I - 1 1^T / d - n n^T).
+    Vec<dim> project_strain(const Vec<dim>& eps, Mat<dim>& jacobian, double& deviatoric_scale, double& margin) const;
 
     /// y(tau) = ||dev tau|| + alpha tr(tau), Pa; <= 0 inside the elastic cone.
     double yield_function(const Vec<dim>& tau) const;

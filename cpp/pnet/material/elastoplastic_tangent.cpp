@@ -7,10 +7,7 @@ namespace pnet {
 
 namespace {
 
-// Central-difference step in log-strain: the truncation error (~delta^2 tau''') and the round-off
-// (~1e-16 |tau| / delta) balance near 1e-5; a return mapping's kink (the yield surface) within
-// delta of eps averages the two one-sided tangents.
-constexpr double kDelta = 1e-5;
+constexpr double kDelta = kTangentStencilStep;
 // Singular values closer than this (in log) take the limit of the difference quotient.
 constexpr double kCloseLog = 1e-4;
 

@@ -47,6 +47,10 @@ Tensor4<dim> elastoplastic_tangent(const PolarSVD<dim>& svd, const Elasticity<di
 /// axis), and the tangent from the returned ones, Z[k] = Z(stencil[k]).
 template <int dim>
 constexpr int kTangentStencil = 2 * dim + 1;
+/// The stencil's central-difference step in log-strain: the truncation error (~delta^2 tau''') and the
+/// round-off (~1e-16 |tau| / delta) balance near 1e-5; a return mapping's kink (the yield surface)
+/// within delta of eps averages the two one-sided tangents.
+inline constexpr double kTangentStencilStep = 1e-5;
 template <int dim>
 void tangent_stencil(const Vec<dim>& Sigma, Vec<dim>* stencil);
 template <int dim>

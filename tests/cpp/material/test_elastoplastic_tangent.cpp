@@ -181,6 +181,64 @@ TYPED_TEST(ElastoplasticTangentTest, MaterialTangentInStrainMatchesTheGenericOne
     }
 }
 
+// Drucker-Prager's tangent (Material::elastoplastic_tangent): where every point of the strain stencil lies
+// on the center's branch it is the branch's derivative in closed form, the stencil's tangent to the
+// stencil's truncation error but not bit for bit (so the closed form is what ran); within twice its step of
+// the cone's surface or the apex it is the stencil's, bit for bit (the average of the two sides there).
+TYPED_TEST(ElastoplasticTangentTest, DruckerPragerTangentIsInClosedFormAwayFromItsBranchesBoundaries) {
+    constexpr int dim = TypeParam::value;
+    const Material<dim> sand(material_preset("sand"));
+    const DruckerPrager<dim>& model = *sand.template plasticity_model<DruckerPrager<dim>>();
+    const double mu = sand.elasticity().mu(), lambda = sand.elasticity().lambda();
+    const double c = DruckerPragerParams{sand.description().drucker_prager.friction_angle_deg}.alpha() *
+                     (dim * lambda + 2.0 * mu) / (2.0 * mu);
+    auto stencil = [&](const PolarSVD<dim>& svd, bool project) {  // the strain stencil, as before the closed form
+        constexpr int k = kTangentStencil<dim>;
+        Vec<dim> strain[k], tau[k];
+        tangent_strain_stencil<dim>(svd.Sigma.array().log().matrix(), strain);
+        for (int j = 0; j < k; ++j) tau[j] = sand.elasticity().tau_of_strain(model.project_strain(strain[j]));
+        const Mat<dim> quotient =
+            deviatoric_scale_quotients<dim>(sand.elasticity(), svd.Sigma, model.deviatoric_scale(strain[0]));
+        return elastoplastic_tangent_of_stress<dim>(svd, tau, project, true, &quotient);
+    };
+    test::Random random(53);
+    int far = 0, near = 0, differ = 0;
+    for (int k = 0; k < 48; ++k) {
+        // A strain at a chosen distance s from the cone's surface (dgamma = ||dev eps|| + c tr eps = s), or
+        // from the apex (tr eps = s).
+        const double s = (k % 2 ? 1.0 : -1.0) * (k % 4 < 2 ? 1e-6 : 1e-2);
+        const double tr = k % 8 < 4 ? -random.uniform(0.005, 0.05) : s;
+        Vec<dim> n = random.uniform_vector(dim, -1.0, 1.0);
+        n -= n.sum() / dim * Vec<dim>::Ones();
+        n.normalize();
+        const double L = k % 8 < 4 ? std::max(s - c * tr, 1e-3) : random.uniform(0.001, 0.02);
+        const Vec<dim> eps = tr / dim * Vec<dim>::Ones() + L * n;
+        const Mat<dim> F =
+            random.template rotation<dim>() * eps.array().exp().matrix().asDiagonal() * random.template rotation<dim>();
+        const PolarSVD<dim> svd = clamped_svd<dim>(F);
+        Mat<dim> jacobian;
+        double scale = 0.0, margin = 0.0;
+        model.project_strain(svd.Sigma.array().log().matrix(), jacobian, scale, margin);
+        for (bool project : {false, true}) {
+            const Tensor4<dim> K = sand.elastoplastic_tangent(svd, 0.0, project, true),
+                               expected = stencil(svd, project);
+            if (margin > 2.0 * kTangentStencilStep) {
+                // The stencil's truncation error, delta^2 / ||dev eps||^2 relative on the cone (up to 1e-7 here).
+                EXPECT_LE((K - expected).cwiseAbs().maxCoeff(), 1e-6 * expected.cwiseAbs().maxCoeff())
+                    << "sample " << k << " margin " << margin;
+                differ += K != expected;
+                far += 1;
+            } else {
+                EXPECT_EQ(K, expected) << "sample " << k << " margin " << margin;
+                near += 1;
+            }
+        }
+    }
+    EXPECT_GE(near, 10);
+    EXPECT_GE(far, 10);
+    EXPECT_GE(differ, far / 2) << "away from the boundaries the closed form, not the stencil, ran";
+}
+
 // Cam-Clay's tangent inside the yield surface is the snow elasticity's, in closed form (not the
 // 2d + 1 projections of the stencil): exactly Elasticity::dPdF there, and the stencil's elsewhere.
 TYPED_TEST(ElastoplasticTangentTest, CamClayTangentInsideTheYieldSurfaceIsTheElasticOne) {
