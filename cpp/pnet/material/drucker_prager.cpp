@@ -54,9 +54,10 @@ Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, ReturnBranch* b
 
 template <int dim>
 Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, Mat<dim>& jacobian, double& deviatoric_scale,
-                                            double& margin) const {
+                                            double& margin, ReturnBranch* branch) const {
     const double tr_eps = eps.sum();
     if (tr_eps > 0.0) {  // the apex: a change of one principal strain by x moves tr by x
+        if (branch) *branch = ReturnBranch::Apex;
         jacobian.setZero();
         deviatoric_scale = 0.0;
         margin = tr_eps;
@@ -69,10 +70,12 @@ Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, Mat<dim>& jacob
     // x in one principal strain moves tr by x and ||dev eps|| by at most x, so dgamma by at most (1 + c) x.
     margin = std::min(-tr_eps, std::abs(dgamma) / (1.0 + c));
     if (!(dgamma > 0.0)) {  // inside the cone (and on its surface: the mapping's branch there)
+        if (branch) *branch = ReturnBranch::Elastic;
         jacobian.setIdentity();
         deviatoric_scale = 1.0;
         return eps;
     }
+    if (branch) *branch = ReturnBranch::Cone;
     const Vec<dim> n = eps_hat / L;
     const double k = -c * tr_eps / L;
     const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);

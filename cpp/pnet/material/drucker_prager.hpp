@@ -40,7 +40,8 @@ public:
     /// takes the same branch. On the cone, with n = dev(eps) / ||dev eps||, c = alpha (d lambda + 2 mu) /
     /// (2 mu) and k = -c tr(eps) / ||dev eps||,
     ///   log Z = tr(eps) / d 1 - c tr(eps) n,   d log Z / d eps = 1 1^T / d - c n 1^T + k (I - 1 1^T / d - n n^T).
-    Vec<dim> project_strain(const Vec<dim>& eps, Mat<dim>& jacobian, double& deviatoric_scale, double& margin) const;
+    Vec<dim> project_strain(const Vec<dim>& eps, Mat<dim>& jacobian, double& deviatoric_scale, double& margin,
+                            ReturnBranch* branch = nullptr) const;
 
     /// y(tau) = ||dev tau|| + alpha tr(tau), Pa; <= 0 inside the elastic cone.
     double yield_function(const Vec<dim>& tau) const;

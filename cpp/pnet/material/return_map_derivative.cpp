@@ -35,10 +35,11 @@ Tensor4<dim> principal_derivative(const Vec<dim>& S, const Vec<dim>& Z, const Ma
     return A;
 }
 
-/// Drucker-Prager's projection in Hencky strain with its Jacobian, on the branch the mapping takes (one-sided
-/// at the boundaries): log Z = eps inside the cone, 0 at the apex (tr > 0), and on the cone log Z = tr/d 1 -
-/// c tr n with d log Z / d eps = 1 1^T / d - c n 1^T + k (I - 1 1^T / d - n n^T), k = -c tr / ||dev eps||
-/// (so log Z_i - log Z_j = k (eps_i - eps_j)); c = alpha(phi) stiffness, stiffness = (d lambda + 2 mu) / (2 mu).
+/// Drucker-Prager's projection in Hencky strain with its Jacobian (DruckerPrager::project_strain), on the branch
+/// the mapping takes (one-sided at the boundaries), and what the friction angle's derivative needs (n, tr,
+/// stiffness): log Z = eps inside the cone, 0 at the apex (tr > 0), and on the cone log Z = tr/d 1 - c tr n with
+/// d log Z / d eps = 1 1^T / d - c n 1^T + k (I - 1 1^T / d - n n^T), k = -c tr / ||dev eps|| (so log Z_i -
+/// log Z_j = k (eps_i - eps_j)); c = alpha(phi) stiffness, stiffness = (d lambda + 2 mu) / (2 mu).
 template <int dim>
 struct DruckerPragerStrain {
     ReturnBranch branch = ReturnBranch::Elastic;
@@ -49,32 +50,14 @@ struct DruckerPragerStrain {
     DruckerPragerStrain(const Material<dim>& material, const Vec<dim>& Sigma) {
         const double mu = material.elasticity().mu(), lambda = material.elasticity().lambda();
         eps = Sigma.array().log().matrix();
-        logZ = eps;
         tr = eps.sum();
         stiffness = (dim * lambda + 2.0 * mu) / (2.0 * mu);
-        if (tr > 0.0) {
-            branch = ReturnBranch::Apex;
-            logZ.setZero();
-            dlogZ.setZero();
-            return;
-        }
-        const Vec<dim> eps_hat = eps - tr / dim * Vec<dim>::Ones();
-        const double L = eps_hat.norm();
-        const double c = alpha(material) * stiffness;
-        if (!(L + c * tr > 0.0)) return;  // inside the cone (the mapping's branch on its surface too)
-        branch = ReturnBranch::Cone;
-        n = eps_hat / L;
-        k = -c * tr / L;
-        const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
-        dlogZ = mean - c * n * Vec<dim>::Ones().transpose() + k * (Mat<dim>::Identity() - mean - n * n.transpose());
-        logZ = tr / dim * Vec<dim>::Ones() - c * tr * n;
+        double margin = 0.0;
+        logZ = material.template plasticity_model<DruckerPrager<dim>>()->project_strain(eps, dlogZ, k, margin, &branch);
+        if (branch == ReturnBranch::Cone) n = (eps - tr / dim * Vec<dim>::Ones()).normalized();
     }
     static double sine(const Material<dim>& material) {
         return std::sin(material.description().drucker_prager.friction_angle_deg * M_PI / 180.0);
-    }
-    static double alpha(const Material<dim>& material) {
-        const double s = sine(material);
-        return std::sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s);
     }
 };
 
