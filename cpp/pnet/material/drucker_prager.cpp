@@ -55,33 +55,32 @@ Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, ReturnBranch* b
 template <int dim>
 Vec<dim> DruckerPrager<dim>::project_strain(const Vec<dim>& eps, Mat<dim>& jacobian, double& deviatoric_scale,
                                             double& margin, ReturnBranch* branch) const {
+    ReturnBranch taken;
+    const Vec<dim> eps_Z = project_strain(eps, &taken);
+    if (branch) *branch = taken;
     const double tr_eps = eps.sum();
-    if (tr_eps > 0.0) {  // the apex: a change of one principal strain by x moves tr by x
-        if (branch) *branch = ReturnBranch::Apex;
+    if (taken == ReturnBranch::Apex) {  // a change of one principal strain by x moves tr by x
         jacobian.setZero();
         deviatoric_scale = 0.0;
         margin = tr_eps;
-        return Vec<dim>::Zero();
+        return eps_Z;
     }
     const Vec<dim> eps_hat = eps - tr_eps / dim * Vec<dim>::Ones();
     const double L = eps_hat.norm();
     const double c = alpha_ * (dim * lambda_ + 2.0 * mu_) / (2.0 * mu_);
-    const double dgamma = L + c * tr_eps;
     // x in one principal strain moves tr by x and ||dev eps|| by at most x, so dgamma by at most (1 + c) x.
-    margin = std::min(-tr_eps, std::abs(dgamma) / (1.0 + c));
-    if (!(dgamma > 0.0)) {  // inside the cone (and on its surface: the mapping's branch there)
-        if (branch) *branch = ReturnBranch::Elastic;
+    margin = std::min(-tr_eps, std::abs(L + c * tr_eps) / (1.0 + c));
+    if (taken == ReturnBranch::Elastic) {
         jacobian.setIdentity();
         deviatoric_scale = 1.0;
-        return eps;
+        return eps_Z;
     }
-    if (branch) *branch = ReturnBranch::Cone;
     const Vec<dim> n = eps_hat / L;
     const double k = -c * tr_eps / L;
     const Mat<dim> mean = Mat<dim>::Constant(1.0 / dim);
     jacobian = mean - c * n * Vec<dim>::Ones().transpose() + k * (Mat<dim>::Identity() - mean - n * n.transpose());
     deviatoric_scale = k;
-    return tr_eps / dim * Vec<dim>::Ones() - c * tr_eps * n;
+    return eps_Z;
 }
 
 template <int dim>
