@@ -259,6 +259,7 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
             return elastoplastic_tangent_of_stress<dim>(svd, tau, project_psd, keep_skew);
         }
     }
+    const Vec<dim> eps = svd.Sigma.array().log().matrix();
     if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_)) {
         // Where every point of the stencil lies on the branch of the center (beyond twice its step from the
         // apex and from the cone's surface), the stencil differences one smooth branch: its derivative
@@ -267,10 +268,11 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
         // with on a column whose particles cross the surface between iterates (docs/solver.md).
         Mat<dim> dlogZ;
         double scale = 1.0, margin = 0.0;
-        const Vec<dim> logZ = drucker_prager->project_strain(svd.Sigma.array().log().matrix(), dlogZ, scale, margin);
+        const Vec<dim> logZ = drucker_prager->project_strain(eps, dlogZ, scale, margin);
         if (margin > 2.0 * kTangentStencilStep) {
+            // StVK-Hencky (DruckerPrager requires it): dtau/deps = 2 mu I + lambda 1 1^T, times d log Z / d eps.
             const double lambda = elasticity_.lambda(), mu = elasticity_.mu();
-            const Vec<dim> tau = 2.0 * mu * logZ + lambda * logZ.sum() * Vec<dim>::Ones();  // StVK-Hencky
+            const Vec<dim> tau = elasticity_.tau_of_strain(logZ);
             const Mat<dim> dtau = 2.0 * mu * dlogZ + lambda * Vec<dim>::Ones() * dlogZ.colwise().sum();
             const Mat<dim> quotient = deviatoric_scale_quotients<dim>(elasticity_, svd.Sigma, scale);
             return elastoplastic_tangent_of_derivative<dim>(svd, tau, dtau, project_psd, keep_skew, &quotient);
@@ -278,7 +280,7 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
     }
     constexpr int k = kTangentStencil<dim>;
     Vec<dim> strain[k], tau[k];
-    tangent_strain_stencil<dim>(svd.Sigma.array().log().matrix(), strain);
+    tangent_strain_stencil<dim>(eps, strain);
     std::visit(
         [&](const auto& model) {
             using Model = std::decay_t<decltype(model)>;
