@@ -18,7 +18,8 @@ Eigen::Matrix<double, n, n> project_psd(const Eigen::Matrix<double, n, n>& A) {
         // clamp l1 v1 v1^T is l1 (S - l2 I) / (2 r).
         const double a = S(0, 0), b = S(0, 1), c = S(1, 1);
         if (a >= 0.0 && c >= 0.0 && a * c >= b * b) return S;
-        const double m = 0.5 * (a + c), r = std::hypot(0.5 * (a - c), b);
+        const double m = 0.5 * (a + c),
+                     r = std::sqrt(0.25 * (a - c) * (a - c) + b * b);  // no hypot: its overflow guard is slow here
         const double l1 = m + r, l2 = m - r;
         if (!(l1 > 0.0)) return Eigen::Matrix<double, 2, 2>::Zero();
         if (!(l2 < 0.0)) return S;

@@ -70,6 +70,13 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
         for (std::size_t e = 0; e < stencil_dof_.size(); ++e)
             node_entries_[next[stencil_dof_[e]]++] = static_cast<int>(e);
     }
+    node_entry_particle_.resize(node_entries_.size());
+    node_entry_grad_.resize(node_entries_.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t e = 0; e < static_cast<std::ptrdiff_t>(node_entries_.size()); ++e) {
+        node_entry_particle_[e] = node_entries_[e] / kStencil;
+        node_entry_grad_[e] = stencil_grad_[node_entries_[e]];
+    }
     VecX& mass = inertia_.mass();
     VecX& v_star = inertia_.target();
     VecX& free = this->free_;

@@ -121,6 +121,10 @@ public:
     /// order in which a node's terms are summed, the same for every thread count.
     const int* node_entry_start() const { return node_entry_start_.data(); }
     const int* node_entries() const { return node_entries_.data(); }
+    /// The same entries' particles p and weight gradients grad w_ip, in that order: what a node's
+    /// gather (the Hessian product, the gradient's scatter, the diagonal) reads in sequence.
+    const int* node_entry_particles() const { return node_entry_particle_.data(); }
+    const Vec<dim>* node_entry_gradients() const { return node_entry_grad_.data(); }
     /// The potential's step: dt (backward Euler), beta dt (BDF2; 2/3 dt at constant steps).
     double dt() const { return dt_; }
     const Grid<dim>& grid() const { return *grid_; }
@@ -189,6 +193,8 @@ private:
     std::vector<Vec<dim>> stencil_grad_;     // grad w_ip, 1/m
     std::vector<double> stencil_weight_;     // w_ip
     std::vector<int> node_entry_start_, node_entries_;
+    std::vector<int> node_entry_particle_;   // node_entries_[e] / kStencil
+    std::vector<Vec<dim>> node_entry_grad_;  // stencil_grad_[node_entries_[e]]
     double floor_friction_ = -1.0;           // the Coulomb floor's mu (< 0: none)
     std::vector<int> floor_dofs_;            // nodes held on the Coulomb floor (normal component)
     std::vector<double> floor_normal_velocity_;  // their v*_y before it was held at 0

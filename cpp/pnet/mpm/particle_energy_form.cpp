@@ -38,19 +38,31 @@ double ParticleEnergyForm<dim>::value(const VecX& v) {
 
 template <int dim>
 void ParticleEnergyForm<dim>::scatter_gradient(VecX& gradient) const {
+    // dpsi/dG = V0 dt P F^E^T per particle; per node, the sum over its stencil entries (p, s) of
+    // that times grad w_ip, in the entries' fixed order (two passes, one barrier, as the product).
     const Particles<dim>& particles = problem_.particles();
     const double dt = problem_.dt();
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(particles.size());
+    const std::ptrdiff_t nodes = static_cast<std::ptrdiff_t>(problem_.nodes());
+    const int* entry_start = problem_.node_entry_start();
+    const int* entry_particle = problem_.node_entry_particles();
+    const Vec<dim>* entry_grad = problem_.node_entry_gradients();
+    particle_force_.resize(n);
     double* g = gradient.data();
-    problem_.grid().for_each_particle_coloured([&](int p) {
-        // dpsi/dG = dt P F^E^T; its product with grad w is the node force.
-        const Mat<dim> Q = (particles.rest_volume[p] * dt) * (P_[p] * particles.F_elastic[p].transpose());
-        const int* dof = problem_.stencil_dofs(p);
-        const Vec<dim>* grad = problem_.stencil_gradients(p);
-        for (int s = 0; s < kStencil; ++s) {
-            Eigen::Map<Vec<dim>> gi(g + dim * dof[s]);
-            gi.noalias() += Q * grad[s];
+#pragma omp parallel
+    {
+#pragma omp for schedule(static)
+        for (std::ptrdiff_t p = 0; p < n; ++p)
+            particle_force_[p].noalias() =
+                (particles.rest_volume[p] * dt) * (P_[p] * particles.F_elastic[p].transpose());
+#pragma omp for schedule(static)
+        for (std::ptrdiff_t k = 0; k < nodes; ++k) {
+            Vec<dim> sum = Vec<dim>::Zero();
+            for (int e = entry_start[k]; e < entry_start[k + 1]; ++e)
+                sum.noalias() += particle_force_[entry_particle[e]] * entry_grad[e];
+            Eigen::Map<Vec<dim>>(g + dim * k) += sum;
         }
-    });
+    }
 }
 
 template <int dim>
@@ -110,24 +122,29 @@ double ParticleEnergyForm<dim>::add_gradient_hessian(const VecX& v, VecX& g) {
 
 template <int dim>
 void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) const {
-    // Two passes without write conflicts (one parallel region, one barrier; the colour passes of
-    // for_each_particle_coloured cost 2^d barriers): y_p = K_p dG_p per particle, with dG_p the
+    // Two passes without write conflicts (one parallel region, one barrier after the masking; the
+    // colour passes of for_each_particle_coloured cost 2^d barriers): y_p = K_p dG_p per particle, with dG_p the
     // velocity gradient of the masked d on p's stencil; then per node, sum over its stencil entries
     // (p, s) of the d rows of y_p dotted with grad w_ip, in a fixed order (node_entries()).
     const auto start = std::chrono::steady_clock::now();
     const VecX& free = problem_.free_components();
-    masked_ = d.cwiseProduct(free);
+    masked_.resize(d.size());
     if (held_product_.size() != d.size()) held_product_.setZero(d.size());
-    const double* dm = masked_.data();
+    double* dm = masked_.data();
+    const double* dd = d.data();
+    const double* fr = free.data();
+    const std::ptrdiff_t components = d.size();
     double* o = out.data();
     double* held = held_product_.data();
     const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(K_.size());
     const std::ptrdiff_t nodes = static_cast<std::ptrdiff_t>(problem_.nodes());
     const int* entry_start = problem_.node_entry_start();
-    const int* entries = problem_.node_entries();
-    const Vec<dim>* all_grad = problem_.stencil_gradients(0);
+    const int* entry_particle = problem_.node_entry_particles();
+    const Vec<dim>* entry_grad = problem_.node_entry_gradients();
 #pragma omp parallel
     {
+#pragma omp for schedule(static)
+        for (std::ptrdiff_t i = 0; i < components; ++i) dm[i] = dd[i] * fr[i];
 #pragma omp for schedule(static)
         for (std::ptrdiff_t p = 0; p < n; ++p) {
             Eigen::Matrix<double, kM, 1> dG = Eigen::Matrix<double, kM, 1>::Zero();
@@ -143,9 +160,8 @@ void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) con
         for (std::ptrdiff_t k = 0; k < nodes; ++k) {
             Vec<dim> sum = Vec<dim>::Zero();
             for (int e = entry_start[k]; e < entry_start[k + 1]; ++e) {
-                const int entry = entries[e];
-                const Eigen::Matrix<double, kM, 1>& y = particle_product_[entry / kStencil];
-                const Vec<dim>& g = all_grad[entry];
+                const Eigen::Matrix<double, kM, 1>& y = particle_product_[entry_particle[e]];
+                const Vec<dim>& g = entry_grad[e];
                 for (int a = 0; a < dim; ++a) sum[a] += y.template segment<dim>(a * dim).dot(g);
             }
             for (int a = 0; a < dim; ++a) {
@@ -163,21 +179,26 @@ template <bool kDiagonalOnly>
 void ParticleEnergyForm<dim>::node_entries(VecX& out) const {
     // Per node, its d x d block (row-major) or the block's diagonal alone (the same sums in the
     // same order): d = e_b at the node gives dG = e_b g^T, so entry (a, b) is g^T K[(a, .), (b, .)] g.
+    // A gather per node over its stencil entries in their fixed order (no write conflicts).
     constexpr int kPerNode = kDiagonalOnly ? dim : dim * dim;
-    out.setZero(problem_.size() / dim * kPerNode);
+    const std::ptrdiff_t nodes = static_cast<std::ptrdiff_t>(problem_.nodes());
+    out.resize(nodes * kPerNode);
     double* values = out.data();
-    problem_.grid().for_each_particle_coloured([&](int p) {
-        const Tensor4<dim>& K = K_[p];
-        const int* dof = problem_.stencil_dofs(p);
-        const Vec<dim>* grad = problem_.stencil_gradients(p);
-        for (int s = 0; s < kStencil; ++s) {
-            const Vec<dim>& g = grad[s];
-            double* B = values + kPerNode * dof[s];
+    const int* entry_start = problem_.node_entry_start();
+    const int* entry_particle = problem_.node_entry_particles();
+    const Vec<dim>* entry_grad = problem_.node_entry_gradients();
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t k = 0; k < nodes; ++k) {
+        double B[kPerNode] = {};
+        for (int e = entry_start[k]; e < entry_start[k + 1]; ++e) {
+            const Tensor4<dim>& K = K_[entry_particle[e]];
+            const Vec<dim>& g = entry_grad[e];
             for (int a = 0; a < dim; ++a)
                 for (int b = kDiagonalOnly ? a : 0; b < (kDiagonalOnly ? a + 1 : dim); ++b)
                     B[kDiagonalOnly ? a : a * dim + b] += g.dot(K.template block<dim, dim>(a * dim, b * dim) * g);
         }
-    });
+        for (int i = 0; i < kPerNode; ++i) values[kPerNode * k + i] = B[i];
+    }
 }
 
 template <int dim>

@@ -102,6 +102,7 @@ private:
     std::vector<Tensor4<dim>> K_;  // the Hessian of psi, then K_p (prepare_hessian)
     mutable VecX masked_, scratch_, held_product_;
     mutable std::vector<Eigen::Matrix<double, kM, 1>> particle_product_;  // K_p dG_p
+    mutable std::vector<Mat<dim>> particle_force_;                        // V0 dt P_p F^E_p^T
     // compute_pair_blocks(): per node and neighbour offset, the neighbour's dof and the d x d block.
     mutable std::vector<int> pair_dof_;
     mutable std::vector<double> pair_block_;
