@@ -158,16 +158,19 @@ void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) con
         }
 #pragma omp for schedule(static)
         for (std::ptrdiff_t k = 0; k < nodes; ++k) {
-            Vec<dim> sum = Vec<dim>::Zero();
-            for (int e = entry_start[k]; e < entry_start[k + 1]; ++e) {
-                const Eigen::Matrix<double, kM, 1>& y = particle_product_[entry_particle[e]];
-                const Vec<dim>& g = entry_grad[e];
-                for (int a = 0; a < dim; ++a) sum[a] += y.template segment<dim>(a * dim).dot(g);
-            }
+            // Row a of the sum is sum_e y_e[a d .. a d + d) . g_e: accumulated elementwise against g_e
+            // repeated d times (vertical adds only), reduced once per node.
+            Eigen::Matrix<double, kM, 1> terms = Eigen::Matrix<double, kM, 1>::Zero();
+            for (int e = entry_start[k]; e < entry_start[k + 1]; ++e)
+                terms.noalias() +=
+                    particle_product_[entry_particle[e]].cwiseProduct(entry_grad[e].template replicate<dim, 1>());
             for (int a = 0; a < dim; ++a) {
                 const Eigen::Index i = dim * k + a;
-                if (free[i] > 0.0) o[i] += sum[a];
-                else held[i] = sum[a];
+                const double sum = terms.template segment<dim>(a * dim).sum();
+                if (free[i] > 0.0)
+                    o[i] += sum;
+                else
+                    held[i] = sum;
             }
         }
     }
