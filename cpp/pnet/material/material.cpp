@@ -236,6 +236,11 @@ Mat<dim> Material<dim>::elastoplastic_stress(const PolarSVD<dim>& svd, double ha
         cam_clay && cam_clay->params().variant == CamClayVariant::Exact && std::isfinite(hardening))
         // The return-mapped stress without Z, its log or the snow elasticity's expm1 (CamClay::project_tau).
         return svd.compose(cam_clay->project_tau(svd.Sigma, cam_clay->p0(hardening)).cwiseQuotient(svd.Sigma));
+    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_);
+        drucker_prager && std::isfinite(hardening))
+        // The projected strain alone: the stress needs log Z, not Z (project() would exp it).
+        return svd.compose(elasticity_.tau_of_strain(drucker_prager->project_strain(svd.Sigma.array().log().matrix()))
+                               .cwiseQuotient(svd.Sigma));
     const ReturnResult<dim> Z = return_map(svd.Sigma, hardening);
     return svd.compose(elasticity_.tau_of_strain(Z.hencky_strain()).cwiseQuotient(svd.Sigma));
 }
@@ -260,7 +265,8 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
         }
     }
     const Vec<dim> eps = svd.Sigma.array().log().matrix();
-    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_)) {
+    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_);
+        drucker_prager && std::isfinite(hardening)) {
         // Where every point of the stencil lies on the branch of the center (beyond twice its step from the
         // apex and from the cone's surface), the stencil differences one smooth branch: its derivative
         // in closed form instead of 2d + 1 projections (the same tangent to the stencil's truncation error,
@@ -298,7 +304,8 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
             }
         },
         plasticity_);
-    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_)) {
+    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_);
+        drucker_prager && std::isfinite(hardening)) {
         // The rotational part where principal strains nearly coincide (a pile's free surface, near the
         // cone's tip): k 2 mu (eps_i - eps_j) / (Sigma_i - Sigma_j), not the limit from the stencil
         // (elastoplastic_tangent.hpp).
