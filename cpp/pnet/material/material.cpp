@@ -265,8 +265,7 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
         }
     }
     const Vec<dim> eps = svd.Sigma.array().log().matrix();
-    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_);
-        drucker_prager && std::isfinite(hardening)) {
+    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_)) {
         // Where every point of the stencil lies on the branch of the center (beyond twice its step from the
         // apex and from the cone's surface), the stencil differences one smooth branch: its derivative
         // in closed form instead of 2d + 1 projections (the same tangent to the stencil's truncation error,
@@ -304,8 +303,7 @@ Tensor4<dim> Material<dim>::elastoplastic_tangent(const PolarSVD<dim>& svd, doub
             }
         },
         plasticity_);
-    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_);
-        drucker_prager && std::isfinite(hardening)) {
+    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_)) {
         // The rotational part where principal strains nearly coincide (a pile's free surface, near the
         // cone's tip): k 2 mu (eps_i - eps_j) / (Sigma_i - Sigma_j), not the limit from the stencil
         // (elastoplastic_tangent.hpp).
