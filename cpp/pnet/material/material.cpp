@@ -236,13 +236,12 @@ Mat<dim> Material<dim>::elastoplastic_stress(const PolarSVD<dim>& svd, double ha
         cam_clay && cam_clay->params().variant == CamClayVariant::Exact && std::isfinite(hardening))
         // The return-mapped stress without Z, its log or the snow elasticity's expm1 (CamClay::project_tau).
         return svd.compose(cam_clay->project_tau(svd.Sigma, cam_clay->p0(hardening)).cwiseQuotient(svd.Sigma));
-    if (const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_);
-        drucker_prager && std::isfinite(hardening))
-        // The projected strain alone: the stress needs log Z, not Z (project() would exp it).
-        return svd.compose(elasticity_.tau_of_strain(drucker_prager->project_strain(svd.Sigma.array().log().matrix()))
-                               .cwiseQuotient(svd.Sigma));
-    const ReturnResult<dim> Z = return_map(svd.Sigma, hardening);
-    return svd.compose(elasticity_.tau_of_strain(Z.hencky_strain()).cwiseQuotient(svd.Sigma));
+    // Drucker-Prager: the projected strain alone (the stress needs log Z, which project() would exp into Z).
+    const auto* drucker_prager = std::get_if<DruckerPrager<dim>>(&plasticity_);
+    const Vec<dim> log_Z = drucker_prager && std::isfinite(hardening)
+                               ? drucker_prager->project_strain(svd.Sigma.array().log().matrix())
+                               : return_map(svd.Sigma, hardening).hencky_strain();
+    return svd.compose(elasticity_.tau_of_strain(log_Z).cwiseQuotient(svd.Sigma));
 }
 
 template <int dim>

@@ -59,23 +59,21 @@ void IncrementalPotential<dim>::begin_step(const Grid<dim>& grid, const Particle
     for (std::ptrdiff_t i = 0; i < n * kStencil; ++i) stencil_dof_[i] = node_dof_[stencil_dof_[i]];
 
     const std::ptrdiff_t dofs = static_cast<std::ptrdiff_t>(dof_node_.size());
-    // Stencil entries by node (a counting sort, stable in p * kStencil + s): the order in which
-    // hessian_multiply sums a node's terms, the same for every thread count.
+    // Stencil entries by node (a counting sort, stable in p * kStencil + s): the order in which a node's
+    // gathers sum its terms, the same for every thread count; each entry's particle and weight gradient
+    // stored in that order.
     node_entry_start_.assign(dofs + 1, 0);
     for (int k : stencil_dof_) ++node_entry_start_[k + 1];
     for (std::ptrdiff_t k = 0; k < dofs; ++k) node_entry_start_[k + 1] += node_entry_start_[k];
-    node_entries_.resize(stencil_dof_.size());
+    node_entry_particle_.resize(stencil_dof_.size());
+    node_entry_grad_.resize(stencil_dof_.size());
     {
         std::vector<int> next(node_entry_start_.begin(), node_entry_start_.end() - 1);
-        for (std::size_t e = 0; e < stencil_dof_.size(); ++e)
-            node_entries_[next[stencil_dof_[e]]++] = static_cast<int>(e);
-    }
-    node_entry_particle_.resize(node_entries_.size());
-    node_entry_grad_.resize(node_entries_.size());
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t e = 0; e < static_cast<std::ptrdiff_t>(node_entries_.size()); ++e) {
-        node_entry_particle_[e] = node_entries_[e] / kStencil;
-        node_entry_grad_[e] = stencil_grad_[node_entries_[e]];
+        for (std::size_t e = 0; e < stencil_dof_.size(); ++e) {
+            const int slot = next[stencil_dof_[e]]++;
+            node_entry_particle_[slot] = static_cast<int>(e / kStencil);
+            node_entry_grad_[slot] = stencil_grad_[e];
+        }
     }
     VecX& mass = inertia_.mass();
     VecX& v_star = inertia_.target();

@@ -116,13 +116,12 @@ public:
     const int* stencil_dofs(std::size_t p) const { return &stencil_dof_[p * kStencil]; }
     const double* stencil_weights(std::size_t p) const { return &stencil_weight_[p * kStencil]; }
     const Vec<dim>* stencil_gradients(std::size_t p) const { return &stencil_grad_[p * kStencil]; }
-    /// The stencil entries (p, s) of each unknown node, grouped by node (CSR: node_entries()[
-    /// node_entry_start()[k] .. node_entry_start()[k + 1]) = p * kStencil + s, increasing): the
-    /// order in which a node's terms are summed, the same for every thread count.
+    /// The stencil entries (p, s) of each unknown node, grouped by node (CSR: entries
+    /// node_entry_start()[k] .. node_entry_start()[k + 1], increasing in p * kStencil + s): the
+    /// order in which a node's gathers (the Hessian product, the gradient's scatter, the diagonal)
+    /// sum its terms, the same for every thread count. Each entry's particle p and weight gradient
+    /// grad w_ip, in that order, so that a node reads them in sequence.
     const int* node_entry_start() const { return node_entry_start_.data(); }
-    const int* node_entries() const { return node_entries_.data(); }
-    /// The same entries' particles p and weight gradients grad w_ip, in that order: what a node's
-    /// gather (the Hessian product, the gradient's scatter, the diagonal) reads in sequence.
     const int* node_entry_particles() const { return node_entry_particle_.data(); }
     const Vec<dim>* node_entry_gradients() const { return node_entry_grad_.data(); }
     /// The potential's step: dt (backward Euler), beta dt (BDF2; 2/3 dt at constant steps).
@@ -192,9 +191,9 @@ private:
     std::vector<int> stencil_dof_;           // particle p, node s: dof of node s of p's stencil
     std::vector<Vec<dim>> stencil_grad_;     // grad w_ip, 1/m
     std::vector<double> stencil_weight_;     // w_ip
-    std::vector<int> node_entry_start_, node_entries_;
-    std::vector<int> node_entry_particle_;   // node_entries_[e] / kStencil
-    std::vector<Vec<dim>> node_entry_grad_;  // stencil_grad_[node_entries_[e]]
+    std::vector<int> node_entry_start_;
+    std::vector<int> node_entry_particle_;   // entry (p, s) -> p, in node order
+    std::vector<Vec<dim>> node_entry_grad_;  // entry (p, s) -> grad w_ip, in node order
     double floor_friction_ = -1.0;           // the Coulomb floor's mu (< 0: none)
     std::vector<int> floor_dofs_;            // nodes held on the Coulomb floor (normal component)
     std::vector<double> floor_normal_velocity_;  // their v*_y before it was held at 0

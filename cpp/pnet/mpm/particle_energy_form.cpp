@@ -126,7 +126,7 @@ void ParticleEnergyForm<dim>::add_hessian_multiply(const VecX& d, VecX& out) con
     // after the particles; the colour passes of for_each_particle_coloured cost 2^d barriers):
     // y_p = K_p dG_p per particle, with dG_p the velocity gradient of the masked d on p's stencil; then
     // per node, sum over its stencil entries (p, s) of the d rows of y_p dotted with grad w_ip, in a
-    // fixed order (node_entries()).
+    // fixed order (IncrementalPotential::node_entry_start()).
     const auto start = std::chrono::steady_clock::now();
     const VecX& free = problem_.free_components();
     masked_.resize(d.size());
