@@ -133,6 +133,10 @@ def test_refinement_divides_the_grid_and_the_elements_and_refuses_a_scene_withou
     fine = refined(scene, 4, "x.json")
     assert fine["dx"] == pytest.approx(0.0025) and fine["meshes"][0]["element_size"] == pytest.approx(0.00075)
     assert scene["dx"] == 0.01, "the original is left alone"
+    # The floor layer keeps its thickness in metres (the column stands on it): k times the cells.
+    column = {"dx": 0.01, "boundary": {"walls": "slip", "sticky_floor_cells": 3, "floor_friction": 0.5}}
+    assert refined(column, 4, "x.json")["boundary"] == {"walls": "slip", "sticky_floor_cells": 12, "floor_friction": 0.5}
+    assert column["boundary"]["sticky_floor_cells"] == 3
     with pytest.raises(ValueError, match=r"x\.json: no dx and no meshes\[\]\.element_size"):
         refined({"meshes": [{"shape": "box"}]}, 2, "x.json")
 
@@ -203,6 +207,17 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     assert (results / "sweeps" / "sand_column_2d_dt" / "sand_column_2d_dt.png").stat().st_size > 10000
     refined = list(csv.DictReader(open(results / "sweeps" / "sand_column_2d_dx" / "summary.csv")))
     assert [float(r["dx_m"]) for r in refined if r["run"] == "explicit_cfl"] == [0.03125, 0.015625]
+    # The scale study: every integrator capped and uncapped at each resolution, each against that
+    # resolution's own ground truth, with its Krylov products and its speed against explicit at CFL.
+    assert [r["run"] for r in refined if r["refinement"] == "2"] == [
+        "explicit_cfl", "plasticitynet_1e-3", "plasticitynet_1e-3_uncapped", "return_map_1e-3",
+        "return_map_1e-3_uncapped", "lagged_1e-3", "lagged_1e-3_uncapped"]
+    assert all(0.0 < float(r["accuracy"]) <= 1.0 and r["spread_error"] and r["height_error"] for r in refined)
+    assert all(float(r["krylov_per_step"]) > 0 for r in refined if r["integrator"] != "explicit")
+    coarse, fine = (int(r["particles"]) for r in refined if r["run"] == "explicit_cfl")
+    assert 3.5 * coarse < fine < 4.5 * coarse, (coarse, fine)  # 2D: about four times the particles at dx/2
+    assert all(float(r["speedup_vs_explicit_cfl"]) > 0 for r in refined)
+    assert "| return_map_1e-3_uncapped | dx/2 |" in (results / "sweeps" / "sand_column_2d_dx" / "summary.md").read_text()
     assert "| sand_column_2d | plasticitynet |" in (results / "table1" / "mpm.md").read_text()
     for notebook in catalogue.TARGETS["all"].notebooks:
         assert (tmp_path / "local" / "work" / "notebooks" / f"{notebook}.executed").is_file(), notebook
@@ -220,9 +235,9 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     # Only the runs that read the model: not explicit, return_map or lagged (nor the ablation's own models).
     assert not any(run.startswith(("explicit", "return_map", "lagged", "form_")) for _, run in simulated), simulated
     assert {("sand_column_2d", "plasticitynet_1e-3"), ("sand_fem_coupling_2d", "plasticitynet_1e-3")} <= simulated
-    # One comparison per changed run (a resolution sweep's runs have no ground truth to compare with).
+    # One comparison per changed run (a refined run against its own resolution's ground truth).
     assert jobs["simulate"] == len(simulated), jobs
-    assert jobs["metric"] == len([run for _, run in simulated if not run.endswith("_dx2")]), jobs
+    assert jobs["metric"] == len(simulated), jobs
 
     # A fresh clone: the committed tables are there, the work folder is not; everything runs again.
     shutil.rmtree(tmp_path / "local" / "work")

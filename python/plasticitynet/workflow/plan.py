@@ -337,14 +337,25 @@ class Plan:
                                      "run_key": job.key,
                                      "metric_key": self.add_metric(family, scene, label, job.key, gt.key)})
         else:
+            # The scale study: at each resolution its own ground truth and explicit at its CFL step (the
+            # floor), and each implicit integrator at 1e-3 s as a user runs it (within the default
+            # advection limit, "capped") and as the step alone ("uncapped"; FEM has no advection limit).
             for k in self.config["sweep_refinements"]:
                 content = refined(base.content, int(k), f"{base.name}.json")
-                runs = {"explicit_cfl": table["explicit_cfl"],
-                        **{f"{i}_1e-3": Run(i, 1e-3, uncapped) for i in SWEEP_INTEGRATORS}}
+                gt = self.add_run(scene, "gt", table["gt"], frames, family, content=content, label=f"gt_dx{k}")
+                runs = {"explicit_cfl": table["explicit_cfl"]}
+                for i in SWEEP_INTEGRATORS:
+                    runs[f"{i}_1e-3"] = Run(i, 1e-3)
+                    if uncapped:
+                        runs[f"{i}_1e-3_uncapped"] = Run(i, 1e-3, uncapped)
                 for name, run in runs.items():
-                    job = self.add_run(scene, name, run, frames, family, content=content, label=f"{name}_dx{k}")
+                    label = f"{name}_dx{k}"
+                    job = self.add_run(scene, name, run, frames, family, content=content, label=label)
                     sweep.points.append({"label": name, "integrator": run.integrator, "dt": run.dt, "refinement": k,
-                                         "run_key": job.key, "metric_key": None})
+                                         "capped": bool(uncapped) and run.integrator != "explicit" and
+                                         "--advection-cfl" not in run.options,
+                                         "run_key": job.key,
+                                         "metric_key": self.add_metric(family, scene, label, job.key, gt.key)})
         return sweep
 
     # --- what a target needs -----------------------------------------------------------------------
@@ -398,7 +409,8 @@ def target_names() -> list[str]:
 
 
 def refined(content: dict, k: int, where: str) -> dict:
-    """The scene with its grid spacing (MPM, coupling) and element sizes (FEM) divided by k."""
+    """The scene with its grid spacing (MPM, coupling) and element sizes (FEM) divided by k (and the MPM
+    floor layer's cells multiplied by k, so that its thickness stays)."""
     content = copy.deepcopy(content)
     if k == 1:
         return content
@@ -406,6 +418,10 @@ def refined(content: dict, k: int, where: str) -> dict:
     if "dx" in content:
         content["dx"] = content["dx"] / k
         changed = True
+        # The floor layer keeps its thickness in metres: the material stands on it.
+        boundary = content.get("boundary", {})
+        if "sticky_floor_cells" in boundary:
+            boundary["sticky_floor_cells"] = int(boundary["sticky_floor_cells"]) * k
     for mesh in content.get("meshes", []):
         if "element_size" in mesh:
             mesh["element_size"] = mesh["element_size"] / k

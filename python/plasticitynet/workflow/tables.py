@@ -307,28 +307,65 @@ def write_sweep(plan: Plan, name: str) -> None:
     for p in sweep.points:
         run = plan.run_dir(p["run_key"])
         figures = run_figures(run)
+        info = json.loads((run / "frames" / "run.json").read_text()) if (run / "frames" / "run.json").exists() else {}
         row = {"scene": sweep.scene, "run": p["label"], "integrator": p["integrator"], "dt": p["dt"],
                "refinement": p["refinement"], "dx_m": plan.runs[p["run_key"]].scene_content.get("dx", ""),
+               "capped": p.get("capped", ""), "particles": info.get("particles", ""),
                "frames": figures["frames"], "failed": figures["failed"],
                "seconds_per_frame": figures["seconds_per_frame"], "steps_per_frame": figures["steps_per_frame"],
-               "newton_per_step": figures["newton_per_step"]}
+               "newton_per_step": figures["newton_per_step"], "krylov_per_step": figures["cg_per_step"],
+               "unconverged_steps": figures["unconverged_steps"]}
         if p["metric_key"]:
-            label, row["accuracy"] = accuracy_of(_metric(plan, p["metric_key"]))
+            metric = _metric(plan, p["metric_key"])
+            label, row["accuracy"] = accuracy_of(metric)
+            row["spread_error"] = metric.get("spread_error", "")
+            row["height_error"] = metric.get("height_error", "")
         rows.append(row)
-    keys = ["scene", "run", "integrator", "dt", "refinement", "dx_m", "frames", "failed", "seconds_per_frame",
-            "steps_per_frame", "newton_per_step"] + (["accuracy"] if label else [])
-    _write_csv(folder / "summary.csv", keys, rows)
-    head = f"| run | dt (s) | refinement | frames | s/frame | steps/frame | Newton/step |{f' {label} |' if label else ''}"
-    lines = [f"# {sweep.scene}: {'time-step' if sweep.kind == 'dt' else 'resolution'} sweep", "",
-             "Seconds per frame: each run's own wall clock (the workflow may run several at once; speed ratios "
-             "from one quiet run: bench_table1). A run marked (failed) stopped with a simulation error; its "
-             "accuracy is over the frames it has.", "", head,
-             "|---" * (head.count("|") - 1) + "|"]
+    # Speed against explicit at its CFL step on the same grid (the scale study's comparison).
+    cfl = {r["refinement"]: r["seconds_per_frame"] for r in rows if r["integrator"] == "explicit" and r["dt"] == 0}
     for r in rows:
-        acc = f" {r['accuracy']:.3f} |" if label else ""
-        lines.append(f"| {r['run']} | {_fmt_dt(r['dt'])} | dx/{r['refinement']} | {r['frames']}"
-                     f"{' (failed)' if r['failed'] else ''} | {r['seconds_per_frame']:.3f} | {r['steps_per_frame']:.1f} | "
-                     f"{r['newton_per_step']:.2f} |{acc}")
+        base = cfl.get(r["refinement"])
+        r["speedup_vs_explicit_cfl"] = base / r["seconds_per_frame"] if base and r["seconds_per_frame"] > 0 else ""
+    keys = ["scene", "run", "integrator", "dt", "refinement", "dx_m", "capped", "particles", "frames", "failed",
+            "seconds_per_frame", "speedup_vs_explicit_cfl", "steps_per_frame", "newton_per_step", "krylov_per_step",
+            "unconverged_steps"] + (["accuracy", "spread_error", "height_error"] if label else [])
+    _write_csv(folder / "summary.csv", keys, rows)
+    note = ("Seconds per frame: each run's own wall clock (the workflow may run several at once; speed ratios "
+            "from one quiet run: bench_table1, or this sweep run with --jobs 1). A run marked (failed) stopped with "
+            "a simulation error; its accuracy is over the frames it has.")
+    if sweep.kind == "dt":
+        head = f"| run | dt (s) | refinement | frames | s/frame | steps/frame | Newton/step |{f' {label} |' if label else ''}"
+        lines = [f"# {sweep.scene}: time-step sweep", "", note, "", head, "|---" * (head.count("|") - 1) + "|"]
+        for r in rows:
+            acc = f" {r['accuracy']:.3f} |" if label else ""
+            lines.append(f"| {r['run']} | {_fmt_dt(r['dt'])} | dx/{r['refinement']} | {r['frames']}"
+                         f"{' (failed)' if r['failed'] else ''} | {r['seconds_per_frame']:.3f} | "
+                         f"{r['steps_per_frame']:.1f} | {r['newton_per_step']:.2f} |{acc}")
+    else:
+        lines = [f"# {sweep.scene}: resolution sweep (the scale study)", "",
+                 "The scene with its grid spacing divided by k. At each resolution: its own ground truth (explicit "
+                 "at the ground-truth step), explicit at its CFL step (the noise floor, and the speed every ratio "
+                 "is taken against), and each implicit integrator at 1e-3 s within the default advection limit "
+                 "(capped: what a user's run does) and without it (uncapped: the step alone). Per step: Newton "
+                 "iterations and Krylov products (Hessian-vector products, `cg_iterations`). Accuracy against "
+                 f"the same resolution's ground truth ({label or 'none'}; spread and height of the deposit at the "
+                 "last frame).", "", note, "",
+                 f"| run | refinement | particles | frames | s/frame | x explicit at CFL | steps/frame | Newton/step | "
+                 f"Krylov/step | unconverged steps | {label or 'accuracy'} | spread | height |",
+                 "|---" * 13 + "|"]
+
+        def pct(v):
+            return f"{100 * v:+.1f}%" if isinstance(v, float) else "-"
+
+        for r in rows:
+            speed = r["speedup_vs_explicit_cfl"]
+            acc = r.get("accuracy")
+            lines.append(f"| {r['run']} | dx/{r['refinement']} | {r['particles']} | {r['frames']}"
+                         f"{' (failed)' if r['failed'] else ''} | {r['seconds_per_frame']:.3f} | "
+                         f"{f'{speed:.2f}x' if isinstance(speed, float) else '-'} | {r['steps_per_frame']:.1f} | "
+                         f"{r['newton_per_step']:.2f} | {r['krylov_per_step']:.1f} | {r['unconverged_steps']} | "
+                         f"{f'{acc:.4f}' if isinstance(acc, float) else '-'} | {pct(r.get('spread_error'))} | "
+                         f"{pct(r.get('height_error'))} |")
     (folder / "summary.md").write_text("\n".join(lines) + "\n")
     _plot_sweep(sweep, rows, label, folder / f"{name}.png")
     _record(plan.sweep_record(name), {"points": sweep.points})
@@ -336,22 +373,44 @@ def write_sweep(plan: Plan, name: str) -> None:
 
 def _plot_sweep(sweep: SweepJob, rows: list[dict], label: str | None, path: Path) -> None:
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), dpi=100)
+    dx = sweep.kind == "dx"
+    fig, axes = plt.subplots(1, 3 if dx else 2, figsize=(17 if dx else 12, 4.5), dpi=100)
     explicit = [r for r in rows if r["integrator"] == "explicit"]
-    for integrator in dict.fromkeys(r["integrator"] for r in rows if r["integrator"] != "explicit"):
-        mine = [r for r in rows if r["integrator"] == integrator and not r["failed"]]
-        x = [r["dt"] if sweep.kind == "dt" else r["refinement"] for r in mine]
-        if sweep.kind == "dx":  # no ground truth at every resolution: how the solver scales instead
-            axes[0].plot(x, [r["newton_per_step"] for r in mine], "o-", label=integrator)
-        elif label:
-            line, = axes[0].plot(x, [r["accuracy"] for r in mine], "o-", label=integrator)
-            failed = [r for r in rows if r["integrator"] == integrator and r["failed"]]
+
+    def series(r):  # one line per integrator, and per advection limit in the scale study
+        return r["integrator"] + (" (uncapped)" if dx and r["capped"] is False else "")
+
+    integrators = list(dict.fromkeys(r["integrator"] for r in rows if r["integrator"] != "explicit"))
+    for name in dict.fromkeys(series(r) for r in rows if r["integrator"] != "explicit"):
+        mine = [r for r in rows if series(r) == name and not r["failed"]]
+        x = [r["refinement"] if dx else r["dt"] for r in mine]
+        style = "o--" if name.endswith("(uncapped)") else "o-"
+        colour = f"C{integrators.index(name.split(' ')[0])}"  # one colour per integrator, capped or not
+        if label:
+            line, = axes[0].plot(x, [r["accuracy"] for r in mine], style, color=colour, label=name)
+            failed = [r for r in rows if series(r) == name and r["failed"]]
             if failed:  # a run that stopped with a simulation error: its frames until then, marked
-                axes[0].plot([r["dt"] if sweep.kind == "dt" else r["refinement"] for r in failed],
-                             [r["accuracy"] for r in failed], "x", color=line.get_color(), markersize=10,
-                             label=f"{integrator}, stopped early")
-        axes[1].plot(x, [r["seconds_per_frame"] for r in mine], "o-", label=integrator)
-    if sweep.kind == "dt":
+                axes[0].plot([r["refinement"] if dx else r["dt"] for r in failed], [r["accuracy"] for r in failed],
+                             "x", color=line.get_color(), markersize=10, label=f"{name}, stopped early")
+        if dx:
+            axes[1].plot(x, [r["newton_per_step"] for r in mine], style, color=colour, label=f"{name}: Newton")
+            axes[1].plot(x, [r["krylov_per_step"] for r in mine], style.replace("o", "^"), color=colour, alpha=0.5,
+                         label=f"{name}: Krylov")
+        axes[-1].plot(x, [r["seconds_per_frame"] for r in mine], style, color=colour, label=name)
+    if dx:
+        x = [r["refinement"] for r in explicit]
+        if label:
+            axes[0].plot(x, [r["accuracy"] for r in explicit], "s--", color="grey", label="explicit at CFL (floor)")
+        axes[-1].plot(x, [r["seconds_per_frame"] for r in explicit], "s--", color="grey", label="explicit at CFL")
+        ks = sorted({r["refinement"] for r in rows})
+        for ax in axes:
+            ax.set_xlabel("resolution")
+            ax.set_xscale("log", base=2)
+            ax.set_xticks(ks, [f"dx/{k}" if k != 1 else "dx" for k in ks])
+            ax.minorticks_off()
+        axes[1].set_ylabel("per step")
+        axes[1].set_yscale("log")
+    else:
         for r in explicit:
             if label:
                 axes[0].axhline(r["accuracy"], color="grey", linestyle="--", label="explicit at CFL")
@@ -359,18 +418,14 @@ def _plot_sweep(sweep: SweepJob, rows: list[dict], label: str | None, path: Path
         for ax in axes:
             ax.set_xscale("log")
             ax.set_xlabel("time step (s)")
-    else:
-        x = [r["refinement"] for r in explicit]
-        axes[1].plot(x, [r["seconds_per_frame"] for r in explicit], "s--", color="grey", label="explicit at CFL")
-        for ax in axes:
-            ax.set_xlabel("refinement k (dx / k)")
-    axes[0].set_ylabel(label if sweep.kind == "dt" else "Newton iterations per step")
-    axes[1].set_ylabel("seconds per frame")
-    axes[1].set_yscale("log")
+    axes[0].set_ylabel(label or "accuracy")
+    axes[-1].set_ylabel("seconds per frame")
+    axes[-1].set_yscale("log")
     for ax in axes:
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.suptitle(f"{sweep.scene}: {'accuracy and cost against the time step' if sweep.kind == 'dt' else 'cost against the resolution'}")
+    what = "accuracy, solver work and cost against the resolution" if dx else "accuracy and cost against the time step"
+    fig.suptitle(f"{sweep.scene}: {what}")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
