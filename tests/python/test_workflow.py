@@ -16,6 +16,7 @@ import pytest
 
 from plasticitynet.workflow import catalogue
 from plasticitynet.workflow.plan import Plan, refined, target_names
+from plasticitynet.workflow.tables import write_sweep
 
 ROOT = Path(__file__).resolve().parents[2]
 BUILD = ROOT / os.environ.get("PNET_BUILD_DIR", "build")
@@ -139,6 +140,18 @@ def test_refinement_divides_the_grid_and_the_elements_and_refuses_a_scene_withou
     assert column["boundary"]["sticky_floor_cells"] == 3
     with pytest.raises(ValueError, match=r"x\.json: no dx and no meshes\[\]\.element_size"):
         refined({"meshes": [{"shape": "box"}]}, 2, "x.json")
+
+
+def test_a_scale_study_written_before_its_runs_finished_lists_them_as_not_run(tmp_path, fake_pnet):
+    """`python -m plasticitynet.workflow sweep NAME` after a stopped workflow: no run of the sweep has
+    finished, so each is listed as not run (the sweep rule itself waits for all of them)."""
+    plan = plan_for(fake_pnet(), work=str(tmp_path / "work"), results=str(tmp_path / "results"),
+                    sweep_refinements=[1, 2])
+    write_sweep(plan, "sand_column_2d_dx")
+    table = (tmp_path / "results" / "sweeps" / "sand_column_2d_dx" / "summary.md").read_text()
+    assert "| return_map_1e-3_uncapped | dx/2 | - | not run |" in table
+    rows = list(csv.DictReader(open(tmp_path / "results" / "sweeps" / "sand_column_2d_dx" / "summary.csv")))
+    assert len(rows) == 14 and all(r["not_run"] == "True" for r in rows)
 
 
 def test_the_tiny_folder_finds_the_tiny_stiff_variants(fake_pnet):

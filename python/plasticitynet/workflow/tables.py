@@ -307,6 +307,9 @@ def write_sweep(plan: Plan, name: str) -> None:
     for p in sweep.points:
         run = plan.run_dir(p["run_key"])
         figures = run_figures(run)
+        # The sweep rule runs once every run has; written by hand (`python -m plasticitynet.workflow sweep
+        # NAME`) after stopping a workflow, a run that never finished is listed as not run.
+        finished = (run / "done.json").exists()
         info = json.loads((run / "frames" / "run.json").read_text()) if (run / "frames" / "run.json").exists() else {}
         row = {"scene": sweep.scene, "run": p["label"], "integrator": p["integrator"], "dt": p["dt"],
                "refinement": p["refinement"], "dx_m": plan.runs[p["run_key"]].scene_content.get("dx", ""),
@@ -314,8 +317,8 @@ def write_sweep(plan: Plan, name: str) -> None:
                "frames": figures["frames"], "failed": figures["failed"],
                "seconds_per_frame": figures["seconds_per_frame"], "steps_per_frame": figures["steps_per_frame"],
                "newton_per_step": figures["newton_per_step"], "krylov_per_step": figures["cg_per_step"],
-               "unconverged_steps": figures["unconverged_steps"]}
-        if p["metric_key"]:
+               "unconverged_steps": figures["unconverged_steps"], "not_run": not finished}
+        if p["metric_key"] and finished:
             metric = _metric(plan, p["metric_key"])
             label, row["accuracy"] = accuracy_of(metric)
             row["spread_error"] = metric.get("spread_error", "")
@@ -326,7 +329,7 @@ def write_sweep(plan: Plan, name: str) -> None:
     for r in rows:
         base = cfl.get(r["refinement"])
         r["speedup_vs_explicit_cfl"] = base / r["seconds_per_frame"] if base and r["seconds_per_frame"] > 0 else ""
-    keys = ["scene", "run", "integrator", "dt", "refinement", "dx_m", "capped", "particles", "frames", "failed",
+    keys = ["scene", "run", "integrator", "dt", "refinement", "dx_m", "capped", "particles", "frames", "failed", "not_run",
             "seconds_per_frame", "speedup_vs_explicit_cfl", "steps_per_frame", "newton_per_step", "krylov_per_step",
             "unconverged_steps"] + (["accuracy", "spread_error", "height_error"] if label else [])
     _write_csv(folder / "summary.csv", keys, rows)
@@ -358,6 +361,9 @@ def write_sweep(plan: Plan, name: str) -> None:
             return f"{100 * v:+.1f}%" if isinstance(v, float) else "-"
 
         for r in rows:
+            if r["not_run"]:
+                lines.append(f"| {r['run']} | dx/{r['refinement']} | - | not run |" + " - |" * 9)
+                continue
             speed = r["speedup_vs_explicit_cfl"]
             acc = r.get("accuracy")
             lines.append(f"| {r['run']} | dx/{r['refinement']} | {r['particles']} | {r['frames']}"
@@ -367,7 +373,9 @@ def write_sweep(plan: Plan, name: str) -> None:
                          f"{f'{acc:.4f}' if isinstance(acc, float) else '-'} | {pct(r.get('spread_error'))} | "
                          f"{pct(r.get('height_error'))} |")
     (folder / "summary.md").write_text("\n".join(lines) + "\n")
-    _plot_sweep(sweep, rows, label, folder / f"{name}.png")
+    plotted = [r for r in rows if not r["not_run"]]
+    if plotted:
+        _plot_sweep(sweep, plotted, label, folder / f"{name}.png")
     _record(plan.sweep_record(name), {"points": sweep.points})
 
 
