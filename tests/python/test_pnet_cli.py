@@ -481,6 +481,11 @@ def test_unconverged_steps_are_counted_reported_and_can_fail_the_run(tmp_path):
     assert row["converged"] == "0" and row["unconverged_steps"] == "20"
     steps = (out / "steps.csv").read_text().splitlines()
     assert all(dict(zip(steps[0].split(","), line.split(",")))["converged"] == "0" for line in steps[1:])
+    # The learned step's unconverged steps point to the classical solver of the same step; its own do not.
+    assert "--integrator return_map solves the same step" in r.stdout, r.stdout
+    r = pnet("simulate", path, "--frames", 1, "--integrator", "return_map", "--out", tmp_path / "classical")
+    assert r.returncode == 0 and "warning: 20 of 20 steps ended" in r.stdout, r.stdout + r.stderr
+    assert "--integrator return_map" not in r.stdout, r.stdout
 
     # A fixed point on F0 (the paper's outer iteration) stopped by its cap is reported too.
     r = pnet("simulate", TINY / "sand_column_2d.json", "--frames", 1, "--outer-iteration", "fixed_point",

@@ -178,14 +178,20 @@ void run(SimulationBase& sim, const Scene& scene, Output o, const IntegratorSett
                           o.newton_acceleration_tolerance);
         else
             std::snprintf(tolerance, sizeof tolerance, "%.3g m/s", o.newton_tolerance);
-        if (run_unconverged > 0)
+        if (run_unconverged > 0) {
             std::printf(
                 "warning: %ld of %ld steps ended with the Newton solve unconverged (largest residual %.3g m/s, "
                 "tolerance %s); they are marked converged = 0 in steps.csv "
                 "(--fail-on-unconverged stops at the first)\n",
                 run_unconverged, run_steps, run_worst_residual, tolerance);
-        else
+            if (settings.method() == Method::PlasticityNet)
+                std::printf(
+                    "note: the learned energy's Newton slows where its curvature along plastic flow exceeds the "
+                    "material's (stiff materials, grids finer than its scenes': docs/integrators.md, \"The stiff "
+                    "column\"); --integrator return_map solves the same step with the return mapping's tangent\n");
+        } else {
             std::printf("all %ld steps converged (Newton residual <= %s)\n", run_steps, tolerance);
+        }
         if (run_fixed_point_capped > 0)
             std::printf(
                 "note: in %ld of %ld steps the fixed point on F0 stopped above its tolerance %.3g "
