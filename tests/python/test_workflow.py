@@ -136,7 +136,8 @@ def test_refinement_divides_the_grid_and_the_elements_and_refuses_a_scene_withou
     assert scene["dx"] == 0.01, "the original is left alone"
     # The floor layer keeps its thickness in metres (the column stands on it): k times the cells.
     column = {"dx": 0.01, "boundary": {"walls": "slip", "sticky_floor_cells": 3, "floor_friction": 0.5}}
-    assert refined(column, 4, "x.json")["boundary"] == {"walls": "slip", "sticky_floor_cells": 12, "floor_friction": 0.5}
+    assert refined(column, 4, "x.json")["boundary"] == {"walls": "slip", "sticky_floor_cells": 12,
+                                                         "floor_friction": 0.5}
     assert column["boundary"]["sticky_floor_cells"] == 3
     with pytest.raises(ValueError, match=r"x\.json: no dx and no meshes\[\]\.element_size"):
         refined({"meshes": [{"shape": "box"}]}, 2, "x.json")
@@ -230,7 +231,8 @@ def test_the_tiny_pipeline_end_to_end_then_nothing_then_only_a_changed_models_de
     coarse, fine = (int(r["particles"]) for r in refined if r["run"] == "explicit_cfl")
     assert 3.5 * coarse < fine < 4.5 * coarse, (coarse, fine)  # 2D: about four times the particles at dx/2
     assert all(float(r["speedup_vs_explicit_cfl"]) > 0 for r in refined)
-    assert "| return_map_1e-3_uncapped | dx/2 |" in (results / "sweeps" / "sand_column_2d_dx" / "summary.md").read_text()
+    table = (results / "sweeps" / "sand_column_2d_dx" / "summary.md").read_text()
+    assert "| return_map_1e-3_uncapped | dx/2 |" in table
     assert "| sand_column_2d | plasticitynet |" in (results / "table1" / "mpm.md").read_text()
     for notebook in catalogue.TARGETS["all"].notebooks:
         assert (tmp_path / "local" / "work" / "notebooks" / f"{notebook}.executed").is_file(), notebook

@@ -329,15 +329,18 @@ def write_sweep(plan: Plan, name: str) -> None:
     for r in rows:
         base = cfl.get(r["refinement"])
         r["speedup_vs_explicit_cfl"] = base / r["seconds_per_frame"] if base and r["seconds_per_frame"] > 0 else ""
-    keys = ["scene", "run", "integrator", "dt", "refinement", "dx_m", "capped", "particles", "frames", "failed", "not_run",
-            "seconds_per_frame", "speedup_vs_explicit_cfl", "steps_per_frame", "newton_per_step", "krylov_per_step",
+    keys = ["scene", "run", "integrator", "dt", "refinement", "dx_m", "capped", "particles", "frames", "failed",
+            "not_run", "seconds_per_frame", "speedup_vs_explicit_cfl", "steps_per_frame", "newton_per_step",
+            "krylov_per_step",
             "unconverged_steps"] + (["accuracy", "spread_error", "height_error"] if label else [])
     _write_csv(folder / "summary.csv", keys, rows)
     note = ("Seconds per frame: each run's own wall clock (the workflow may run several at once; speed ratios "
-            "from one quiet run: bench_table1, or this sweep run with --jobs 1). A run marked (failed) stopped with "
+            "from one quiet run: bench_table1, or this sweep with --jobs equal to threads, one run at a time). A run "
+            "marked (failed) stopped with "
             "a simulation error; its accuracy is over the frames it has.")
     if sweep.kind == "dt":
-        head = f"| run | dt (s) | refinement | frames | s/frame | steps/frame | Newton/step |{f' {label} |' if label else ''}"
+        head = ("| run | dt (s) | refinement | frames | s/frame | steps/frame | Newton/step |"
+                + (f" {label} |" if label else ""))
         lines = [f"# {sweep.scene}: time-step sweep", "", note, "", head, "|---" * (head.count("|") - 1) + "|"]
         for r in rows:
             acc = f" {r['accuracy']:.3f} |" if label else ""
