@@ -310,7 +310,8 @@ def write_sweep(plan: Plan, name: str) -> None:
         # The sweep rule runs once every run has; written by hand (`python -m plasticitynet.workflow sweep
         # NAME`) after stopping a workflow, a run that never finished is listed as not run.
         finished = (run / "done.json").exists()
-        info = json.loads((run / "frames" / "run.json").read_text()) if (run / "frames" / "run.json").exists() else {}
+        run_json = run / "frames" / "run.json"
+        info = json.loads(run_json.read_text()) if run_json.exists() else {}
         row = {"scene": sweep.scene, "run": p["label"], "integrator": p["integrator"], "dt": p["dt"],
                "refinement": p["refinement"], "dx_m": plan.runs[p["run_key"]].scene_content.get("dx", ""),
                "capped": p.get("capped", ""), "particles": info.get("particles", ""),
@@ -331,18 +332,20 @@ def write_sweep(plan: Plan, name: str) -> None:
         r["speedup_vs_explicit_cfl"] = base / r["seconds_per_frame"] if base and r["seconds_per_frame"] > 0 else ""
     keys = ["scene", "run", "integrator", "dt", "refinement", "dx_m", "capped", "particles", "frames", "failed",
             "not_run", "seconds_per_frame", "speedup_vs_explicit_cfl", "steps_per_frame", "newton_per_step",
-            "krylov_per_step",
-            "unconverged_steps"] + (["accuracy", "spread_error", "height_error"] if label else [])
+            "krylov_per_step", "unconverged_steps"] + (["accuracy", "spread_error", "height_error"] if label else [])
     _write_csv(folder / "summary.csv", keys, rows)
     note = ("Seconds per frame: each run's own wall clock (the workflow may run several at once; speed ratios "
             "from one quiet run: bench_table1, or this sweep with --jobs equal to threads, one run at a time). A run "
-            "marked (failed) stopped with "
-            "a simulation error; its accuracy is over the frames it has.")
+            "marked (failed) stopped with a simulation error; its accuracy is over the frames it has.")
     if sweep.kind == "dt":
         head = ("| run | dt (s) | refinement | frames | s/frame | steps/frame | Newton/step |"
                 + (f" {label} |" if label else ""))
         lines = [f"# {sweep.scene}: time-step sweep", "", note, "", head, "|---" * (head.count("|") - 1) + "|"]
         for r in rows:
+            if r["not_run"]:
+                lines.append(f"| {r['run']} | {_fmt_dt(r['dt'])} | dx/{r['refinement']} | not run |" + " - |" * (
+                    4 if label else 3))
+                continue
             acc = f" {r['accuracy']:.3f} |" if label else ""
             lines.append(f"| {r['run']} | {_fmt_dt(r['dt'])} | dx/{r['refinement']} | {r['frames']}"
                          f"{' (failed)' if r['failed'] else ''} | {r['seconds_per_frame']:.3f} | "
